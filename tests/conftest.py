@@ -1,0 +1,28 @@
+"""Shared fixtures and hypothesis strategies."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import strategies as st
+
+from toggle.params import HalfDims, Mechanism, load_preset
+
+
+@pytest.fixture(scope="session")
+def chang() -> Mechanism:
+    return load_preset("chang2021")
+
+
+@st.composite
+def half_dims(draw: st.DrawFn) -> HalfDims:
+    """Geometries near the chang2021 half: every length within +-12 %, any offset sign."""
+    base = load_preset("chang2021").lower
+    f = lambda: draw(st.floats(0.88, 1.12))  # noqa: E731
+    r4a, r4b = base.r4a * f(), base.r4b * f()
+    # keep link 4 a proper triangle by drawing its angle rather than r4c
+    alpha = base.alpha4 * f()
+    r4c = math.sqrt(r4a**2 + r4b**2 - 2 * r4a * r4b * math.cos(alpha))
+    return HalfDims(r1=base.r1 * f(), r2=base.r2 * f(), r3=base.r3 * f(), r4a=r4a, r4b=r4b,
+                    r4c=r4c, r5=base.r5 * f(), e=draw(st.floats(-0.02, 0.02)))

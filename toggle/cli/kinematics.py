@@ -1,0 +1,107 @@
+"""``toggle kinematics``: stroke, toggle and open positions, L(x) of both halves."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from toggle.cli.common import (
+    MM,
+    add_json_argument,
+    add_preset_argument,
+    deg,
+    mechanism,
+    print_json,
+    table,
+)
+from toggle.kinematics import half_motion, half_pose, mirror_angles, stroke_limits
+from toggle.params import HALVES, Mechanism
+
+
+def summary(mech: Mechanism) -> dict:
+    """Stroke data of each half; top-level values are the lower half's (SI)."""
+    halves = {}
+    for h in HALVES:
+        dims = mech.half(h)
+        x_open, x_tp = stroke_limits(dims)
+        pose_tp, pose_open = half_pose(x_tp, dims), half_pose(x_open, dims)
+        theta_out = float(mirror_angles(pose_tp)[2]) if h == "upper" else float(pose_tp.theta5)
+        halves[h] = {
+            "x_open": x_open,
+            "x_toggle": x_tp,
+            "L_open": float(pose_open.L),
+            "L_toggle": float(pose_tp.L),
+            "stroke": float(pose_tp.L - pose_open.L),
+            # angle of the platen-side link at the toggle: theta5 (lower) or theta8 (upper)
+            "platen_link_angle_toggle": theta_out,
+        }
+    upper_tp = stroke_limits(mech.upper)[1]
+    theta8 = float(mirror_angles(half_pose(upper_tp, mech.upper))[2])
+    lower = halves["lower"]
+    return {
+        "preset": mech.name,
+        "x_open": lower["x_open"],
+        "x_toggle": lower["x_toggle"],
+        "stroke": lower["stroke"],
+        "theta8_toggle": theta8,
+        "halves": halves,
+    }
+
+
+def profile(mech: Mechanism, points: int) -> dict:
+    """L, dL/dx and mechanical advantage of both halves over the stroke."""
+    x_open, x_tp = stroke_limits(mech.lower)
+    xs = np.linspace(x_open, x_tp, points)
+    out = {"x": xs.tolist()}
+    for h in HALVES:
+        m = half_motion(xs, mech.half(h), label=f"{h} half")
+        out[h] = {"L": m.L.tolist(), "dL_dx": m.dL_dx.tolist(),
+                  "mechanical_advantage": m.mechanical_advantage.tolist()}
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    mech = mechanism(args)
+    data = summary(mech)
+    if args.points:
+        data["profile"] = profile(mech, args.points)
+    if args.json:
+        print_json(data)
+        return 0
+    print(f"preset {mech.name}: {mech.description}")
+    rows = [(h, v["x_open"] * MM, v["x_toggle"] * MM, v["stroke"] * MM,
+             deg(v["platen_link_angle_toggle"])) for h, v in data["halves"].items()]
+    print(table(("half", "x_open mm", "x_TP mm", "stroke mm", "th5/8 deg"), rows))
+    if args.points:
+        p = data["profile"]
+        rows = [(x * MM, p["lower"]["L"][i] * MM, p["upper"]["L"][i] * MM, p["lower"]["dL_dx"][i],
+                 p["lower"]["mechanical_advantage"][i]) for i, x in enumerate(p["x"])]
+        print()
+        print(table(("x mm", "L_L mm", "L_U mm", "dL/dx", "MA"), rows))
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("kinematics", help="stroke, open and toggle positions of both halves")
+    add_preset_argument(p)
+    add_json_argument(p)
+    p.add_argument("--points", type=int, default=0,
+                   help="also tabulate L(x), dL/dx and MA at this many points over the stroke")
+    p.set_defaults(handler=run)
+
+
+def plot(args: argparse.Namespace) -> int:
+    from toggle.plots import plot_kinematics
+
+    path = plot_kinematics(mechanism(args), args.out / "kinematics.png")
+    print(path)
+    return 0
+
+
+def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
+    p = kinds.add_parser("kinematics", help="L(x), dL/dx and MA of both halves (seed 000 Fig 6)")
+    add_preset_argument(p)
+    p.add_argument("--out", type=Path, default=Path("figures"), help="output folder")
+    p.set_defaults(handler=plot)

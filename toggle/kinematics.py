@@ -1,0 +1,277 @@
+"""Closed-form kinematics of one half of the nine-link double-toggle clamp.
+
+This module is the one source of the clamp's position equations (Chang, Lee &
+Hsu 2021, Eqs 2-17). They are written once, with numpy ufuncs, so the same
+function evaluates on floats, on numpy arrays (vectorised Monte Carlo) and on
+CasADi SX symbols (exact derivatives, optimisation, code generation):
+``casadi.GlobalOptions.setNumpyMode(True)`` makes numpy ufuncs dispatch on SX.
+
+Geometry of a half (the lower one; the upper half is its mirror image, so the
+same function serves it with the upper half's own dimensions): the fixed pivot
+of the triangular link 4 is the origin; the crosshead pin moves along a line at
+vertical distance d = r1 - r2 from it, at horizontal position x; link 3 (r3)
+joins the crosshead pin to the corner of link 4 at r4a from the pivot; link 5
+(r5) joins the corner at r4b to the platen joint, at vertical offset e from the
+pivot, whose horizontal position is the output L(x).
+
+Signs lost in the extracted text of the paper, reconstructed from Figure 4 and
+checked against its numbers (stroke 45.003 mm, theta8 = -2.729 deg at x_TP):
+
+* Eq 4:  theta4 = 90 deg - (alpha4 + gamma1 + gamma2)
+* Eq 14: theta3 = 270 deg - gamma1 + acos((l^2 + r3^2 - r4a^2) / (2 l r3))
+* Eq 15: theta5 = 360 deg - asin((r4b sin theta4 - e) / r5)
+* Eq 2:  L = r4b cos theta4 + sqrt(r5^2 - (r4b sin theta4 - e)^2)
+* Eqs 5, 16, 17 (upper half): theta7 = 360 deg - theta4, theta6 = 360 deg - theta3,
+  theta8 = -asin((r7b sin theta7 + eU) / r8) = 360 deg - theta5 (leading minus).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import casadi as ca
+import numpy as np
+from scipy.optimize import brentq
+
+from toggle.params import DIMENSIONS, HalfDims
+
+ca.GlobalOptions.setNumpyMode(True)
+
+_TWO_PI = 2.0 * math.pi
+#: Rounding slack on the arguments of acos/asin/sqrt before a geometry is
+#: declared unassemblable (values this close to the limit are clipped).
+_DOMAIN_SLACK = 1e-12
+
+
+class AssemblyError(ValueError):
+    """The mechanism cannot assemble at the requested input position."""
+
+
+class HalfPose(NamedTuple):
+    """Position of one half at input x (rad and m; seed 000's angle conventions)."""
+
+    L: Any
+    theta3: Any
+    theta4: Any
+    theta5: Any
+    gamma1: Any
+    gamma2: Any
+    alpha4: Any
+    l: Any
+
+
+class HalfMotion(NamedTuple):
+    """Position, velocity ratio and its derivative for one half (numeric)."""
+
+    L: np.ndarray
+    dL_dx: np.ndarray
+    d2L_dx2: np.ndarray
+    theta3: np.ndarray
+    theta4: np.ndarray
+    theta5: np.ndarray
+    mechanical_advantage: np.ndarray
+
+
+#: CasADi types, including the wrappers numpy mode returns from ufuncs.
+_SYMBOLIC_TYPES = (ca.SX, ca.MX, ca.casadi.ArrayInterface)
+
+
+def _is_symbolic(value: Any) -> bool:
+    return isinstance(value, _SYMBOLIC_TYPES)
+
+
+def _within(arg: Any, lo: float, hi: float, loop: str, x: Any, label: str) -> Any:
+    """Check a numeric acos/asin/sqrt argument; return it clipped to [lo, hi].
+
+    Symbolic arguments pass unchanged: an optimiser keeps them feasible
+    through its constraints, not through this check.
+    """
+    if isinstance(arg, float):  # scalar fast path (np.float64 is a float)
+        if lo - _DOMAIN_SLACK <= arg <= hi + _DOMAIN_SLACK:
+            return min(max(arg, lo), hi)
+        arg = np.asarray(arg)
+    elif _is_symbolic(arg):
+        return arg
+    arg = np.asarray(arg, dtype=float)
+    bad = ~((arg >= lo - _DOMAIN_SLACK) & (arg <= hi + _DOMAIN_SLACK))
+    if np.any(bad):
+        i = int(np.flatnonzero(bad.ravel())[0])
+        xi = float(np.broadcast_to(np.asarray(x, dtype=float), arg.shape).ravel()[i])
+        value = float(arg.ravel()[i])
+        raise AssemblyError(
+            f"{label} cannot assemble at x = {xi:.6g} m: {loop} "
+            f"(argument {value:.6g} outside [{lo:g}, {hi:g}])"
+        )
+    return np.clip(arg, lo, hi)
+
+
+def _values(dims: HalfDims | Sequence[Any]) -> tuple[Any, ...]:
+    if isinstance(dims, HalfDims):
+        return dims.as_tuple()
+    values = tuple(dims)
+    if len(values) != len(DIMENSIONS):
+        raise ValueError(f"expected {len(DIMENSIONS)} dimensions {DIMENSIONS}, got {len(values)}")
+    return values
+
+
+def _chain(x: Any, dims: HalfDims | Sequence[Any], check: bool, label: str) -> tuple[Any, ...]:
+    """The output chain of a half: (L, theta4, theta5, gamma1, gamma2, alpha4, l, domain)."""
+    r1, r2, r3, r4a, r4b, r4c, r5, e = _values(dims)
+
+    def domain(arg: Any, loop: str) -> Any:
+        return _within(arg, -1.0, 1.0, loop, x, label) if check else arg
+
+    d = r1 - r2
+    l = np.sqrt(x * x + d * d)  # Eq 12
+    gamma1 = np.arcsin(x / l)  # Eq 7
+    gamma2 = np.arccos(domain((l * l + r4a * r4a - r3 * r3) / (2 * l * r4a), _CROSSHEAD_LOOP))
+    alpha4 = np.arccos(domain((r4a * r4a + r4b * r4b - r4c * r4c) / (2 * r4a * r4b),
+                              "triangular link 4"))  # Eq 6
+    theta4 = math.pi / 2 - (alpha4 + gamma1 + gamma2)  # Eq 4
+    s5 = domain((r4b * np.sin(theta4) - e) / r5, "loop of link 5 and the platen joint")
+    theta5 = _TWO_PI - np.arcsin(s5)  # Eq 15
+    L = r4b * np.cos(theta4) + r5 * np.sqrt(1 - s5 * s5)  # Eq 2
+    return L, theta4, theta5, gamma1, gamma2, alpha4, l, domain
+
+
+_CROSSHEAD_LOOP = "loop of crosshead link 3 and link 4 (|r3 - r4a| <= l <= r3 + r4a)"
+
+
+def half_pose(
+    x: Any, dims: HalfDims | Sequence[Any], *, check: bool = True, label: str = "half"
+) -> HalfPose:
+    """Pose of one half at input position x (Eqs 2, 4, 6-8, 12, 14, 15).
+
+    ``dims`` is a :class:`HalfDims` or eight values in its field order (floats,
+    arrays broadcasting with x, or CasADi SX). With ``check`` a numeric input
+    where the half cannot assemble raises :class:`AssemblyError` naming the
+    loop and the input; without it such points come out as NaN (used only to
+    scan for the assemblable range).
+    """
+    L, theta4, theta5, gamma1, gamma2, alpha4, l, domain = _chain(x, dims, check, label)
+    r3, r4a = _values(dims)[2:4]
+    theta3 = 1.5 * math.pi - gamma1 + np.arccos(
+        domain((l * l + r3 * r3 - r4a * r4a) / (2 * l * r3), _CROSSHEAD_LOOP)
+    )  # Eq 14
+    return HalfPose(L, theta3, theta4, theta5, gamma1, gamma2, alpha4, l)
+
+
+def output_position(x: Any, dims: HalfDims | Sequence[Any], *, label: str = "half") -> Any:
+    """Output (platen joint) position L(x) of one half, m (the pose without theta3)."""
+    return _chain(x, dims, True, label)[0]
+
+
+def mirror_angles(pose: HalfPose) -> tuple[Any, Any, Any]:
+    """Upper-half angles (theta6, theta7, theta8) of a pose computed for the upper half.
+
+    The upper half is the lower half's mirror image: theta6 = 2 pi - theta3,
+    theta7 = 2 pi - theta4 and theta8 = 2 pi - theta5 (in (-pi/2, pi/2)).
+    """
+    return _TWO_PI - pose.theta3, _TWO_PI - pose.theta4, _TWO_PI - pose.theta5
+
+
+@functools.cache
+def _motion_function() -> ca.Function:
+    """CasADi function (x, p) -> (L, dL/dx, d2L/dx2, dL/dp) of one half."""
+    x = ca.SX.sym("x")
+    p = ca.SX.sym("p", len(DIMENSIONS))
+    L = ca.SX(half_pose(x, [p[i] for i in range(len(DIMENSIONS))]).L)
+    dL = ca.jacobian(L, x)
+    d2L = ca.jacobian(dL, x)
+    return ca.Function("half_motion", [x, p], [L, dL, d2L, ca.jacobian(L, p)],
+                       ["x", "p"], ["L", "dL_dx", "d2L_dx2", "dL_dp"])
+
+
+def _evaluate(x: Any, dims: HalfDims, label: str) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Check assembly with the numpy path, then evaluate the AD function."""
+    x_arr = np.asarray(x, dtype=float)
+    half_pose(x_arr, dims, label=label)  # raises AssemblyError where needed
+    out = _motion_function()(x_arr.reshape(1, -1), np.array(dims.as_tuple()))
+    return x_arr, [np.asarray(o) for o in out]
+
+
+def half_motion(x: Any, dims: HalfDims, *, label: str = "half") -> HalfMotion:
+    """L, dL/dx, d2L/dx2 (exact, by AD), angles and ideal mechanical advantage.
+
+    The ideal mechanical advantage of the whole clamp is output force over
+    input force without friction; by virtual work it is 1 / (dL/dx).
+    """
+    x_arr, (L, dL, d2L, _) = _evaluate(x, dims, label)
+    pose = half_pose(x_arr, dims, label=label)
+    shape = x_arr.shape
+    dL = dL.reshape(shape)
+    with np.errstate(divide="ignore"):
+        ma = np.where(dL != 0, 1.0 / np.where(dL != 0, dL, 1.0), np.inf)
+    return HalfMotion(L.reshape(shape), dL, d2L.reshape(shape), np.asarray(pose.theta3),
+                      np.asarray(pose.theta4), np.asarray(pose.theta5), ma)
+
+
+def sensitivities(x: Any, dims: HalfDims, *, label: str = "half") -> dict[str, np.ndarray]:
+    """Exact sensitivities dL/dp of the output to every dimension at fixed x."""
+    x_arr, (_, _, _, jac) = _evaluate(x, dims, label)
+    jac = jac.reshape(-1, len(DIMENSIONS))
+    return {name: jac[:, i].reshape(x_arr.shape) for i, name in enumerate(DIMENSIONS)}
+
+
+def _assemblable_grid(dims: HalfDims, n: int = 4001) -> tuple[np.ndarray, HalfPose]:
+    """Scan x over the geometric reach and return the points that assemble."""
+    reach = dims.r3 + dims.r4a
+    xs = np.linspace(-reach, reach, n)
+    with np.errstate(invalid="ignore"):
+        pose = half_pose(xs, dims, check=False)
+    ok = np.isfinite(pose.L) & np.isfinite(pose.theta3)
+    if not np.any(ok):
+        raise AssemblyError(f"the half {dims} cannot assemble at any input position")
+    return xs[ok], HalfPose(*(np.asarray(v)[ok] if np.ndim(v) else v for v in pose))
+
+
+def _roots(xs: np.ndarray, g: np.ndarray, f: Any) -> list[float]:
+    """All roots of f on the grid xs, where g = f(xs), refined by Brent's method."""
+    idx = np.flatnonzero(np.sign(g[:-1]) * np.sign(g[1:]) < 0)
+    tol = 4 * np.finfo(float).eps
+    return [float(brentq(f, xs[i], xs[i + 1], xtol=1e-15, rtol=tol)) for i in idx]
+
+
+def stroke_limits(dims: HalfDims) -> tuple[float, float]:
+    """Open and toggle input positions (x_open, x_TP) of one half, m.
+
+    x_TP is a maximum of L(x): there links 4b and 5 are collinear
+    (dL/dtheta4 = 0), i.e. sin(theta4) = e / (r4b + r5). theta4(x) is not
+    monotonic, so L(x) has a second equal maximum further on (about 70.5 mm
+    for chang2021); the toggle is the first one reached from the open
+    position, where link 3 is horizontal (theta3 = 360 deg). Both are roots
+    found on a scan of the assemblable range and refined by Brent's method.
+    """
+    xs, pose = _assemblable_grid(dims)
+    target = math.asin(dims.e / (dims.r4b + dims.r5))
+    collinear = _roots(xs, np.asarray(pose.theta4) - target,
+                       lambda x: float(half_pose(x, dims).theta4) - target)
+    horizontal = _roots(xs, np.asarray(pose.theta3) - _TWO_PI,
+                        lambda x: float(half_pose(x, dims).theta3) - _TWO_PI)
+    for x_tp in collinear:
+        below = [x for x in horizontal if x < x_tp]
+        if below:
+            return below[-1], x_tp
+    raise AssemblyError(
+        "no stroke: links 4b and 5 never become collinear after link 3 is horizontal "
+        f"(collinear at {collinear} m, link 3 horizontal at {horizontal} m)"
+    )
+
+
+def toggle_position(dims: HalfDims) -> float:
+    """Input position x_TP of the toggle (first maximum of L(x)), m."""
+    return stroke_limits(dims)[1]
+
+
+def open_position(dims: HalfDims) -> float:
+    """Input position x_open where link 3 is horizontal (theta3 = 360 deg), m."""
+    return stroke_limits(dims)[0]
+
+
+def stroke(dims: HalfDims) -> float:
+    """Output stroke L(x_TP) - L(x_open) of one half, m."""
+    x_open, x_tp = stroke_limits(dims)
+    return float(output_position(x_tp, dims) - output_position(x_open, dims))

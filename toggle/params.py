@@ -1,0 +1,425 @@
+"""Mechanism parameters: typed, immutable, SI units (m, rad).
+
+Each half of the nine-link clamp carries its own dimensions, so a mechanical
+error is just a different number in one half. Presets are TOML files shipped
+in ``toggle/presets``; a user's own file loads the same way.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import MISSING, dataclass, fields, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+HALVES = ("lower", "upper")
+
+#: Field order of :class:`HalfDims` (seed 000's lower-half names).
+DIMENSIONS = ("r1", "r2", "r3", "r4a", "r4b", "r4c", "r5", "e")
+
+#: Seed 000's names of each half's dimensions (Figure 4): the upper half's link 3,
+#: 4 and 5 are links 6, 7 and 8.
+PAPER_NAMES = {
+    "lower": dict(zip(DIMENSIONS, ("r1L", "r2L", "r3", "r4a", "r4b", "r4c", "r5", "eL"))),
+    "upper": dict(zip(DIMENSIONS, ("r1U", "r2U", "r6", "r7a", "r7b", "r7c", "r8", "eU"))),
+}
+
+
+class ParameterError(ValueError):
+    """A parameter file or value that does not describe a valid mechanism."""
+
+
+def paper_dimension(name: str) -> tuple[str, str]:
+    """Map a paper name such as ``"r8"`` or ``"eL"`` to ``(half, field)``."""
+    for half, names in PAPER_NAMES.items():
+        for field, paper in names.items():
+            if paper == name:
+                return half, field
+    known = ", ".join(n for names in PAPER_NAMES.values() for n in names.values())
+    raise ParameterError(f"unknown dimension {name!r}; known: {known}")
+
+
+@dataclass(frozen=True)
+class HalfDims:
+    """Dimensions of one half (a Watt-II six-link chain), metres.
+
+    r1, r2: vertical offsets of the link-4 fixed pivot and of the crosshead pin
+    from the clamp axis; r3: crosshead link; r4a, r4b, r4c: sides of the
+    triangular tailstock-side link (pivot to link-3 pin, pivot to link-5 pin,
+    between the two pins); r5: platen-side link; e: vertical offset of the
+    platen joint from the link-4 pivot.
+    """
+
+    r1: float
+    r2: float
+    r3: float
+    r4a: float
+    r4b: float
+    r4c: float
+    r5: float
+    e: float
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ParameterError(f"{f.name} must be a finite number, got {value!r}")
+        for name in ("r3", "r4a", "r4b", "r4c", "r5"):
+            if getattr(self, name) <= 0:
+                value = getattr(self, name)
+                raise ParameterError(f"link length {name} must be positive, got {value}")
+        a, b, c = self.r4a, self.r4b, self.r4c
+        if not (abs(a - b) < c < a + b):
+            raise ParameterError(
+                f"triangular link 4 cannot close: r4a={a}, r4b={b}, r4c={c} m "
+                "violate the triangle inequality"
+            )
+
+    @property
+    def alpha4(self) -> float:
+        """Angle of the triangular link at its fixed pivot, rad (Eq 6)."""
+        a, b, c = self.r4a, self.r4b, self.r4c
+        return math.acos((a * a + b * b - c * c) / (2 * a * b))
+
+    @property
+    def d(self) -> float:
+        """Vertical distance from the link-4 pivot to the crosshead pin line, m."""
+        return self.r1 - self.r2
+
+    def replace(self, **changes: float) -> HalfDims:
+        """A copy with some dimensions changed."""
+        return replace(self, **changes)
+
+    def as_tuple(self) -> tuple[float, ...]:
+        return tuple(getattr(self, n) for n in DIMENSIONS)
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """A double-toggle clamp: a named pair of halves."""
+
+    name: str
+    lower: HalfDims
+    upper: HalfDims
+    description: str = ""
+    #: Pins, sections, tie bars and clamping data (seed 001); None if the file has no [clamp].
+    clamp: ClampData | None = None
+    #: Ball-screw/belt drive (seed 001 Eqs 31-32); None if the file has no [drive].
+    drive: Drive | None = None
+
+    def half(self, half: str) -> HalfDims:
+        if half not in HALVES:
+            raise ParameterError(f"half must be 'lower' or 'upper', got {half!r}")
+        return getattr(self, half)
+
+    def with_error(self, half: str, dim: str, delta: float) -> Mechanism:
+        """The mechanism with ``dim`` of one half changed by ``delta`` (m)."""
+        if dim not in DIMENSIONS:
+            raise ParameterError(f"unknown dimension {dim!r}; known: {', '.join(DIMENSIONS)}")
+        h = self.half(half)
+        return replace(self, **{half: h.replace(**{dim: getattr(h, dim) + delta})})
+
+    @property
+    def symmetric(self) -> bool:
+        return self.lower == self.upper
+
+
+# --- Real-mold clamping data (seed 001, Lin & Hsiao 2003), all SI ---------------------------
+
+
+def _check_positive(obj: Any, optional: tuple[str, ...] = ()) -> None:
+    """Every field of a section must be a finite positive number (optional ones may be None)."""
+    for f in fields(obj):
+        value = getattr(obj, f.name)
+        if value is None and f.name in optional:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            math.isfinite(value) and value > 0
+        ):
+            raise ParameterError(
+                f"{type(obj).__name__}.{f.name} must be a finite positive number, got {value!r}"
+            )
+
+
+@dataclass(frozen=True)
+class PinRadii:
+    """Pin-joint radii, m (seed 001: joint A as B, joint E as D).
+
+    B joins link 5 (seed 001's link 1) to the triangular link, C is the
+    triangular link's pivot on the tailstock platen, D joins the crosshead link.
+    """
+
+    B: float
+    C: float
+    D: float
+
+    def __post_init__(self) -> None:
+        _check_positive(self)
+
+
+@dataclass(frozen=True)
+class MemberCounts:
+    """Members of the whole clamp (both halves): seed 001's n1..n4."""
+
+    n1: int  # platen-side links (seed 000's links 5 and 8)
+    n2: int  # triangular tailstock-side links (4 and 7)
+    n3: int  # crosshead links (3 and 6)
+    n4: int = 1  # crossheads
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ParameterError(f"member count {f.name} must be a positive integer, got {value!r}")
+
+
+@dataclass(frozen=True)
+class LinkSections:
+    """Cross-section areas (m^2) and Young's moduli (Pa) of the platen-side link (1)
+    and the triangular link (2), for their axial shortening (Eqs 22-23)."""
+
+    area1: float
+    modulus1: float
+    area2: float
+    modulus2: float
+
+    def __post_init__(self) -> None:
+        _check_positive(self)
+
+
+@dataclass(frozen=True)
+class TieBars:
+    """The tie bars: count, free length (m), section (m^2), Young's modulus (Pa) (Eq 24)."""
+
+    count: int
+    length: float
+    area: float
+    modulus: float
+
+    def __post_init__(self) -> None:
+        _check_positive(self)
+
+    @property
+    def stiffness(self) -> float:
+        """Total axial stiffness of all tie bars, N/m."""
+        return self.count * self.area * self.modulus / self.length
+
+
+@dataclass(frozen=True)
+class ClampData:
+    """What the real-mold clamping model needs beyond the link lengths.
+
+    final_tiebar_force: total tie-bar force at the final (toggle) position, N;
+    mu: kinetic friction coefficient at the pins; static_factor: mu_s / mu_d,
+    used once the final position is reached (the paper's 1.25); x_open:
+    crosshead position with the clamp open, m, for clamps whose crosshead link
+    never becomes horizontal (then the kinematic open position does not exist).
+    """
+
+    pins: PinRadii
+    counts: MemberCounts
+    links: LinkSections
+    tiebars: TieBars
+    final_tiebar_force: float
+    mu: float = 0.0
+    static_factor: float = 1.25
+    x_open: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.final_tiebar_force) and self.final_tiebar_force > 0):
+            raise ParameterError(
+                f"final_tiebar_force must be positive, got {self.final_tiebar_force!r} N"
+            )
+        if not (math.isfinite(self.mu) and self.mu >= 0):
+            raise ParameterError(f"friction coefficient mu must be >= 0, got {self.mu!r}")
+        if not (math.isfinite(self.static_factor) and self.static_factor >= 1):
+            raise ParameterError(f"static_factor (mu_s / mu_d) must be >= 1, got {self.static_factor!r}")
+
+
+@dataclass(frozen=True)
+class Drive:
+    """Servo motor, belt and ball screw driving the crosshead (Eqs 31-32).
+
+    ratio: R, the velocity ratio of driven to driver gear (motor turns x R =
+    screw turns); lead: ball-screw lead, m; efficiency: eta of belt and screw;
+    pulses_per_rev: encoder pulses per motor turn (N_s); rated_torque (N m) and
+    rated_speed (rad/s) of the motor, when known.
+    """
+
+    ratio: float
+    lead: float
+    efficiency: float
+    pulses_per_rev: int
+    rated_torque: float | None = None
+    rated_speed: float | None = None
+
+    def __post_init__(self) -> None:
+        _check_positive(self, optional=("rated_torque", "rated_speed"))
+        if self.efficiency > 1:
+            raise ParameterError(f"drive efficiency must be in (0, 1], got {self.efficiency}")
+
+
+def _section(cls: type, table: Any, origin: str, where: str) -> Any:
+    """Build one dataclass section from a TOML table, naming unknown/missing keys."""
+    if not isinstance(table, dict):
+        raise ParameterError(f"{origin}: [{where}] must be a table")
+    names = {f.name for f in fields(cls)}
+    required = {f.name for f in fields(cls) if f.default is MISSING}
+    unknown, missing = set(table) - names, required - set(table)
+    if unknown or missing:
+        raise ParameterError(
+            f"{origin}: [{where}]: unknown {sorted(unknown)}, missing {sorted(missing)}"
+        )
+    try:
+        return cls(**table)
+    except TypeError as exc:
+        raise ParameterError(f"{origin}: [{where}]: {exc}") from exc
+
+
+def _clamp_from_table(table: Any, origin: str) -> ClampData:
+    """[clamp] with sub-tables pins, counts, links, tiebars."""
+    if not isinstance(table, dict):
+        raise ParameterError(f"{origin}: [clamp] must be a table")
+    parts = {"pins": PinRadii, "counts": MemberCounts, "links": LinkSections, "tiebars": TieBars}
+    values = {k: v for k, v in table.items() if k not in parts}
+    for key, cls in parts.items():
+        if key not in table:
+            raise ParameterError(f"{origin}: [clamp.{key}] is missing")
+        values[key] = _section(cls, table[key], origin, f"clamp.{key}")
+    return _section(ClampData, values, origin, "clamp")
+
+
+def _halves_from_table(table: dict[str, Any], origin: str) -> tuple[HalfDims, HalfDims]:
+    common = table.get("half", {})
+    out = []
+    for half in HALVES:
+        values = {**common, **table.get(half, {})}
+        unknown = set(values) - set(DIMENSIONS)
+        missing = set(DIMENSIONS) - set(values)
+        if unknown or missing:
+            raise ParameterError(
+                f"{origin}: [{half}] dimensions: unknown {sorted(unknown)}, missing {sorted(missing)}"
+            )
+        out.append(HalfDims(**{k: float(v) for k, v in values.items()}))
+    return out[0], out[1]
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``over`` laid on top, sub-tables merged key by key."""
+    out = dict(base)
+    for key, value in over.items():
+        both = isinstance(value, dict) and isinstance(out.get(key), dict)
+        out[key] = _merge(out[key], value) if both else value
+    return out
+
+
+def group_names(table: dict[str, Any]) -> list[str]:
+    """Names of the groups of a preset family (``[groups.<name>]`` tables); [] for one mechanism."""
+    return list(table.get("groups", {}))
+
+
+def select_group(table: dict[str, Any], group: str | int | None, origin: str) -> dict[str, Any]:
+    """The table of one group of a preset family, merged over the family's shared tables.
+
+    A family holds several variants of one mechanism in one file: shared tables
+    at the top, and each group's differences in ``[groups.<name>]`` (with
+    sub-tables such as ``[groups.<name>.half]``). Without ``group`` a family
+    gives its ``default_group``; a file without groups is returned unchanged.
+    """
+    names = group_names(table)
+    if not names:
+        if group is not None:
+            raise ParameterError(f"{origin} has no groups; cannot select group {group!r}")
+        return table
+    key = str(group if group is not None else table.get("default_group", ""))
+    if key not in names:
+        raise ParameterError(
+            f"{origin}: unknown or missing group {key!r}; groups: {', '.join(names)}"
+        )
+    shared = {k: v for k, v in table.items() if k not in ("groups", "default_group")}
+    chosen = table["groups"][key]
+    merged = _merge(shared, {k: v for k, v in chosen.items() if k != "description"})
+    merged["name"] = f"{table.get('name', origin)}/{key}"
+    if "description" in chosen:
+        family = table.get("description", "")
+        merged["description"] = f"{family}, group {key}: {chosen['description']}"
+    return merged
+
+
+def mechanism_from_dict(
+    table: dict[str, Any], origin: str = "<dict>", group: str | int | None = None
+) -> Mechanism:
+    """Build a :class:`Mechanism` from a parsed TOML table (SI units).
+
+    For a preset family, ``group`` names the group (see :func:`select_group`).
+    """
+    table = select_group(table, group, origin)
+    lower, upper = _halves_from_table(table, origin)
+    return Mechanism(
+        name=str(table.get("name", origin)),
+        lower=lower,
+        upper=upper,
+        description=str(table.get("description", "")),
+        clamp=_clamp_from_table(table["clamp"], origin) if "clamp" in table else None,
+        drive=_section(Drive, table["drive"], origin, "drive") if "drive" in table else None,
+    )
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ParameterError(f"cannot read mechanism file {path}: {exc}") from exc
+
+
+def load_mechanism(path: str | Path, group: str | int | None = None) -> Mechanism:
+    """Load a mechanism (or one ``group`` of a family) from a TOML file (preset format, SI)."""
+    return mechanism_from_dict(_read_toml(Path(path)), str(path), group)
+
+
+def preset_names() -> list[str]:
+    """Names of the presets shipped with the package."""
+    folder = resources.files("toggle") / "presets"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def _split_group(name: str, group: str | int | None) -> tuple[str, str | int | None]:
+    """``"family/g"`` -> ``("family", "g")``; an existing file or a ``.toml`` name stays whole."""
+    if group is None and "/" in name and not name.endswith(".toml") and not Path(name).is_file():
+        base, _, group = name.rpartition("/")
+        return base, group
+    return name, group
+
+
+def _preset_table(name: str) -> tuple[dict[str, Any], str]:
+    """Parsed TOML of a shipped preset or of a file, and the origin used in messages."""
+    if name.endswith(".toml") or Path(name).is_file():
+        return _read_toml(Path(name)), name
+    resource = resources.files("toggle") / "presets" / f"{name}.toml"
+    if not resource.is_file():
+        raise ParameterError(f"unknown preset {name!r}; shipped: {', '.join(preset_names())}")
+    return tomllib.loads(resource.read_text(encoding="utf-8")), f"preset {name}"
+
+
+def load_preset(name: str, group: str | int | None = None) -> Mechanism:
+    """Load a shipped preset by name, or a TOML file if ``name`` is a path.
+
+    A preset family takes ``group`` or the name ``family/group``
+    (``load_preset("li_micro", group=6)`` is ``load_preset("li_micro/6")``);
+    without either it gives the family's default group.
+    """
+    name, group = _split_group(name, group)
+    table, origin = _preset_table(name)
+    return mechanism_from_dict(table, origin, group)
+
+
+def preset_groups(name: str) -> list[str]:
+    """Group names of a preset family (shipped name or file); [] for a single mechanism."""
+    return group_names(_preset_table(name)[0])
