@@ -1,0 +1,316 @@
+"""FMU tooling on a trivial slave: build, validation, simulation, state, errors, hosts."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import subprocess
+import sys
+import textwrap
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import extract, read_model_description, simulate_fmu
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2Discard, fmi2Error
+from fmpy.validation import validate_fmu
+
+from toggle.fmu_build import build_fmu, extend_model_description, fmu_module_name
+from toggle.fmu_host import release_native_runtime, start_slave
+from toggle.fmu_slave import Var
+
+SLAVE_FILE = Path(__file__).parent / "fmu_fixtures" / "trivial_slave.py"
+
+
+def _load_fixture_module():
+    spec = importlib.util.spec_from_file_location("trivial_slave_inproc", SLAVE_FILE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+TRIVIAL = _load_fixture_module()
+
+
+@pytest.fixture(scope="module")
+def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_fmu(tmp_path_factory.mktemp("fmu"), SLAVE_FILE)
+
+
+@pytest.fixture(scope="module")
+def unzipped(fmu: Path, tmp_path_factory: pytest.TempPathFactory):
+    """The FMU extracted once; its native runtime is released after the module's tests."""
+    directory = Path(extract(str(fmu), str(tmp_path_factory.mktemp("unzipped"))))
+    yield directory
+    release_native_runtime(directory)
+
+
+def _run(slave, refs, u_and_dt) -> list[tuple[float, float]]:
+    """Step the slave through (u, dt) pairs; return (y, x) after each step."""
+    out, t = [], 0.0
+    for u, dt in u_and_dt:
+        slave.setReal([refs["u"]], [u])
+        slave.doStep(t, dt)
+        t += dt
+        out.append(tuple(slave.getReal([refs["y"], refs["x"]])))
+    return out
+
+
+def _close(slave, *states) -> None:
+    for state in states:
+        slave.freeFMUstate(state)
+    slave.terminate()
+    slave.freeInstance()
+
+
+# ---- build and model description ---------------------------------------------------
+
+
+def test_module_name_is_project_unique():
+    assert fmu_module_name(SLAVE_FILE) == "toggle_fmu_trivial_slave"
+    assert fmu_module_name(Path("fmu_src/toggle_clamp_fmu.py")) == "toggle_clamp_fmu"
+
+
+def test_fmpy_validation_finds_no_problem(fmu: Path):
+    assert validate_fmu(str(fmu)) == []
+
+
+def test_fmutool_check_finds_no_problem(fmu: Path):
+    fmutool = Path(sys.executable).parent / "fmutool"
+    if not fmutool.exists():
+        pytest.skip("fmu-manipulation-toolbox is not installed")
+    run = subprocess.run(
+        [str(fmutool), "-input", str(fmu), "-check"], capture_output=True, text=True, timeout=60
+    )
+    log = run.stdout + run.stderr
+    assert run.returncode == 0, log
+    assert "ERROR" not in log and "No semantic error" in log, log
+
+
+def test_description_carries_units_limits_and_structure(fmu: Path):
+    md = read_model_description(str(fmu))
+    units = {u.name for u in md.unitDefinitions}
+    by_name = {v.name: v for v in md.modelVariables}
+    for spec in TRIVIAL.TrivialGain.VARIABLES:
+        v = by_name[spec.name]
+        assert (v.unit, v.description) == (spec.unit, spec.description)
+        assert v.unit in units
+    gain = by_name["gain"]
+    assert (gain.initial, float(gain.start), float(gain.min), float(gain.max)) == (
+        "exact",
+        2.0,
+        0.0,
+        1e3,
+    )
+    assert {by_name[n].initial for n in ("y", "x")} == {"calculated"}
+    outputs = {u.variable.name: u.dependencies for u in md.outputs}
+    assert outputs == {"y": [], "x": []}
+    assert {u.variable.name for u in md.initialUnknowns} == {"y", "x"}
+    assert md.defaultExperiment.stepSize == "0.001"
+    assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
+    with zipfile.ZipFile(fmu) as archive:
+        names = set(archive.namelist())
+    assert {
+        "resources/toggle/__init__.py",
+        "resources/toggle/fmu_slave.py",
+        "resources/toggle_fmu_trivial_slave.py",
+    } <= names
+
+
+def test_output_dependencies_are_written_as_indices():
+    class Feedthrough(TRIVIAL.TrivialGain):
+        VARIABLES = (
+            *TRIVIAL.TrivialGain.VARIABLES[:2],
+            Var("y", "output", "m/s", "gain * u", depends_on=("u",)),
+            TRIVIAL.TrivialGain.VARIABLES[3],
+        )
+
+    root = Feedthrough(instance_name="probe").to_xml()
+    deps = [u.get("dependencies") for u in root.find("ModelStructure/Outputs")]
+    assert deps == ["2", ""]  # u is variable 2 (1-based); x depends on no input
+
+
+@pytest.mark.parametrize(
+    ("row", "message"),
+    [
+        (Var("y", "output", "furlong", "bad unit"), "unit"),
+        (Var("y", "output", "m", "bad dep", depends_on=("gain",)), "non-inputs"),
+    ],
+)
+def test_extension_rejects_bad_tables(row: Var, message: str):
+    root = TRIVIAL.TrivialGain(instance_name="probe").to_xml()
+    table = (*TRIVIAL.TrivialGain.VARIABLES[:2], row, TRIVIAL.TrivialGain.VARIABLES[3])
+    with pytest.raises(ValueError, match=message):
+        extend_model_description(root, table)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(name="y", causality="output", unit="m", description="d", start=1.0),
+        dict(name="u", causality="input", unit="m", description="d"),
+        dict(name="p", causality="parameter", unit="m", description="", start=1.0),
+        dict(name="p", causality="parameter", unit="m", description="d", start=1.0, min=2, max=1),
+        dict(name="a.b", causality="parameter", unit="m", description="d", start=1.0),
+    ],
+)
+def test_var_rejects_inconsistent_rows(kwargs: dict):
+    with pytest.raises(ValueError):
+        Var(**kwargs)
+
+
+# ---- running the FMU -----------------------------------------------------------------
+
+
+def test_simulate_fmu_gives_gain_times_input(fmu: Path, unzipped: Path):
+    u = 0.25
+    signal = np.array([(0.0, u), (1.0, u)], dtype=[("time", float), ("u", float)])
+    result = simulate_fmu(
+        str(unzipped),
+        stop_time=0.2,
+        step_size=1e-3,
+        input=signal,
+        start_values={"gain": 3.0},
+        output=["y", "x"],
+    )
+    np.testing.assert_allclose(result["y"], 3.0 * u, rtol=1e-15)
+    np.testing.assert_allclose(result["x"], u * result["time"], rtol=1e-12, atol=1e-15)
+
+
+def test_variable_step_sizes_integrate_exactly(unzipped: Path):
+    slave, refs = start_slave(unzipped, "steps")
+    steps = [(0.5, 1e-3), (-0.2, 5e-3), (1.0, 2e-2), (0.1, 1e-4)]
+    out = _run(slave, refs, steps)
+    _close(slave)
+    assert out[-1][1] == pytest.approx(sum(u * dt for u, dt in steps), rel=1e-14)
+    assert [y for y, _ in out] == [2.0 * u for u, _ in steps]
+
+
+def test_state_rollback_reproduces_outputs(unzipped: Path):
+    slave, refs = start_slave(unzipped, "rollback")
+    _run(slave, refs, [(0.3, 1e-2)] * 3)
+    state = slave.getFMUstate()
+    serialized = slave.serializeFMUstate(state)
+    future = [(0.7, 1e-2), (-0.4, 3e-2), (0.9, 1e-3)]
+    first = _run(slave, refs, future)
+    slave.setFMUstate(state)
+    second = _run(slave, refs, future)
+    slave.setFMUstate(state)  # the same state can be restored twice
+    third = _run(slave, refs, future)
+    restored = slave.deSerializeFMUstate(serialized)
+    slave.setFMUstate(restored)
+    fourth = _run(slave, refs, future)
+    _close(slave, state, restored)
+    assert first == second == third == fourth
+    assert first[-1][1] != pytest.approx(0.09)  # the internal integral did advance
+
+
+def test_invalid_parameter_is_logged_and_every_step_discarded(unzipped: Path):
+    log: list[tuple[int, str]] = []
+    slave, refs = start_slave(unzipped, "bad", {"gain": -1.0}, log=lambda *entry: log.append(entry))
+    with pytest.raises(FMICallException) as failure:
+        slave.doStep(0.0, 1e-3)
+    values = slave.getReal([refs["y"], refs["x"]])
+    _close(slave)
+    assert failure.value.status == fmi2Discard
+    assert any(status == fmi2Error and "gain" in text for status, text in log), log
+    assert all(math.isfinite(v) for v in values)
+
+
+def test_out_of_range_input_discards_step_and_keeps_state(unzipped: Path):
+    log: list[tuple[int, str]] = []
+    slave, refs = start_slave(unzipped, "range", log=lambda *entry: log.append(entry))
+    before = _run(slave, refs, [(0.5, 0.1)])[-1]
+    slave.setReal([refs["u"]], [5.0])
+    with pytest.raises(FMICallException) as failure:
+        slave.doStep(0.1, 0.1)
+    after_discard = tuple(slave.getReal([refs["y"], refs["x"]]))
+    slave.setReal([refs["u"]], [0.5])
+    slave.doStep(0.1, 0.1)
+    recovered = slave.getReal([refs["x"]])[0]
+    _close(slave)
+    assert failure.value.status == fmi2Discard
+    assert any(status == fmi2Discard and "u = 5" in text for status, text in log), log
+    assert after_discard == before
+    assert recovered == pytest.approx(0.1)
+
+
+# ---- other processes and masters -----------------------------------------------------
+
+FRESH_PROCESS = textwrap.dedent(
+    """
+    import ctypes, json, sys
+    from pathlib import Path
+    import numpy as np
+    from fmpy import extract, simulate_fmu
+    fmu, unzip = sys.argv[1], Path(sys.argv[2])
+    extract(fmu, str(unzip))
+    signal = np.array([(0.0, 0.5), (1.0, 0.5)], dtype=[("time", float), ("u", float)])
+    res = simulate_fmu(str(unzip), stop_time=0.01, step_size=1e-3, input=signal,
+                       output=["y", "x"])
+    toggle_file = sys.modules["toggle"].__file__
+    lib = unzip / "binaries" / "linux64" / "TrivialGain.so"
+    ctypes.CDLL(str(lib)).finalizePythonInterpreter()  # pythonfmu 0.7 exit-time double free
+    print(json.dumps({"y": res["y"][-1], "x": res["x"][-1], "toggle": toggle_file}))
+    """
+)
+
+
+def test_fmu_runs_in_a_fresh_process_from_its_bundled_files(fmu: Path, tmp_path: Path):
+    unzip = tmp_path / "unzipped"
+    run = subprocess.run(
+        [sys.executable, "-c", FRESH_PROCESS, str(fmu), str(unzip)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
+    assert run.returncode == 0, run.stderr
+    result = json.loads(run.stdout.strip().splitlines()[-1])
+    assert result["y"] == 1.0 and result["x"] == pytest.approx(0.005, rel=1e-12)
+    assert Path(result["toggle"]).is_relative_to(unzip / "resources")  # not the dev tree
+
+
+LIBCOSIM_TWO_INSTANCES = textwrap.dedent(
+    """
+    import json, sys
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+    log_output_level(CosimLogLevel.WARNING)
+    execution = CosimExecution.from_step_size(1_000_000)  # ns: 1 ms
+    a = execution.add_local_slave(CosimLocalSlave(fmu_path=sys.argv[1], instance_name="a"))
+    b = execution.add_local_slave(CosimLocalSlave(fmu_path=sys.argv[1], instance_name="b"))
+    refs = {v.name.decode(): v.reference for v in execution.slave_variables(a)}
+    observer = CosimObserver.create_last_value()
+    execution.add_observer(observer)
+    execution.real_initial_value(a, refs["u"], 0.25)
+    execution.real_initial_value(b, refs["gain"], 3.0)
+    execution.connect_real_variables(a, refs["y"], b, refs["u"])
+    ok = execution.simulate_until(100_000_000)  # ns: 0.1 s
+    print(json.dumps({"ok": ok,
+                      "a": observer.last_real_values(a, [refs["y"], refs["x"]]),
+                      "b": observer.last_real_values(b, [refs["y"], refs["x"]])}))
+    """
+)
+
+
+def test_two_instances_run_in_libcosim(fmu: Path, tmp_path: Path):
+    pytest.importorskip("libcosimpy")
+    run = subprocess.run(
+        [sys.executable, "-c", LIBCOSIM_TWO_INSTANCES, str(fmu)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
+    assert run.returncode == 0, run.stderr
+    result = json.loads(run.stdout.strip().splitlines()[-1])
+    assert result["ok"]
+    assert result["a"] == pytest.approx([0.5, 0.025], rel=1e-12)  # y = 2 u, x = u t
+    # b.u = a.y = 0.5 from initialisation on (outputs are valid after init)
+    assert result["b"] == pytest.approx([1.5, 0.05], rel=1e-12)
