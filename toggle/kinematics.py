@@ -185,6 +185,16 @@ def _motion_function() -> ca.Function:
                        ["x", "p"], ["L", "dL_dx", "d2L_dx2", "dL_dp"])
 
 
+def motion_terms(x: Any, dims: HalfDims) -> tuple[Any, Any, Any]:
+    """(L, dL/dx, d2L/dx2) by the AD function, for numeric or symbolic x.
+
+    No assembly check: symbolic callers (the plant, the planner) keep x inside
+    :func:`assemblable_range` themselves.
+    """
+    L, dL, d2L, _ = _motion_function()(x, np.array(dims.as_tuple()))
+    return L, dL, d2L
+
+
 def _evaluate(x: Any, dims: HalfDims, label: str) -> tuple[np.ndarray, list[np.ndarray]]:
     """Check assembly with the numpy path, then evaluate the AD function."""
     x_arr = np.asarray(x, dtype=float)
@@ -226,6 +236,37 @@ def _assemblable_grid(dims: HalfDims, n: int = 4001) -> tuple[np.ndarray, HalfPo
     if not np.any(ok):
         raise AssemblyError(f"the half {dims} cannot assemble at any input position")
     return xs[ok], HalfPose(*(np.asarray(v)[ok] if np.ndim(v) else v for v in pose))
+
+
+def assemblable_range(dims: HalfDims) -> tuple[float, float]:
+    """The interval of input positions around the stroke where the half assembles, m.
+
+    The ends are found to 1e-12 m by bisection between the scan's last
+    assemblable point and the next one that is not.
+    """
+    reach = dims.r3 + dims.r4a
+    xs = np.linspace(-reach, reach, 4001)
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(half_pose(xs, dims, check=False).theta3)
+    x_open, x_tp = stroke_limits(dims)
+    i = int(np.searchsorted(xs, x_open))
+    lo, hi = i, i
+    while lo > 0 and ok[lo - 1]:
+        lo -= 1
+    while hi < xs.size - 1 and ok[hi + 1]:
+        hi += 1
+
+    def edge(good: float, bad: float) -> float:
+        while abs(bad - good) > 1e-12:
+            mid = 0.5 * (good + bad)
+            with np.errstate(invalid="ignore"):
+                fine = bool(np.isfinite(half_pose(mid, dims, check=False).theta3))
+            good, bad = (mid, bad) if fine else (good, mid)
+        return good
+
+    x_lo = edge(xs[lo], xs[lo - 1]) if lo > 0 else float(xs[0])
+    x_hi = edge(xs[hi], xs[hi + 1]) if hi < xs.size - 1 else float(xs[-1])
+    return float(x_lo), float(x_hi)
 
 
 def _roots(xs: np.ndarray, g: np.ndarray, f: Any) -> list[float]:

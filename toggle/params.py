@@ -113,6 +113,8 @@ class Mechanism:
     clamp: ClampData | None = None
     #: Ball-screw/belt drive (seed 001 Eqs 31-32); None if the file has no [drive].
     drive: Drive | None = None
+    #: Masses and guide damping of the dynamic plant; None if the file has no [dynamics].
+    dynamics: Dynamics | None = None
 
     def half(self, half: str) -> HalfDims:
         if half not in HALVES:
@@ -177,7 +179,9 @@ class MemberCounts:
         for f in fields(self):
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ParameterError(f"member count {f.name} must be a positive integer, got {value!r}")
+                raise ParameterError(
+                    f"member count {f.name} must be a positive integer, got {value!r}"
+                )
 
 
 @dataclass(frozen=True)
@@ -240,7 +244,9 @@ class ClampData:
         if not (math.isfinite(self.mu) and self.mu >= 0):
             raise ParameterError(f"friction coefficient mu must be >= 0, got {self.mu!r}")
         if not (math.isfinite(self.static_factor) and self.static_factor >= 1):
-            raise ParameterError(f"static_factor (mu_s / mu_d) must be >= 1, got {self.static_factor!r}")
+            raise ParameterError(
+                f"static_factor (mu_s / mu_d) must be >= 1, got {self.static_factor!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -264,6 +270,29 @@ class Drive:
         _check_positive(self, optional=("rated_torque", "rated_speed"))
         if self.efficiency > 1:
             raise ParameterError(f"drive efficiency must be in (0, 1], got {self.efficiency}")
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """Inertia and guide friction of the dynamic plant (:mod:`toggle.plant`).
+
+    crosshead: the input link with what moves rigidly with it (kg); links:
+    all toggle links together, lumped half at the crosshead and half at the
+    platen (kg); platen: the moving platen with its mold half (kg);
+    guide_damping: viscous friction of the crosshead and platen guides,
+    referred to the input link (N s/m).
+    """
+
+    crosshead: float
+    links: float
+    platen: float
+    guide_damping: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ParameterError(f"dynamics.{f.name} must be finite and >= 0, got {value!r}")
 
 
 def _section(cls: type, table: Any, origin: str, where: str) -> Any:
@@ -305,7 +334,8 @@ def _halves_from_table(table: dict[str, Any], origin: str) -> tuple[HalfDims, Ha
         missing = set(DIMENSIONS) - set(values)
         if unknown or missing:
             raise ParameterError(
-                f"{origin}: [{half}] dimensions: unknown {sorted(unknown)}, missing {sorted(missing)}"
+                f"{origin}: [{half}] dimensions: "
+                f"unknown {sorted(unknown)}, missing {sorted(missing)}"
             )
         out.append(HalfDims(**{k: float(v) for k, v in values.items()}))
     return out[0], out[1]
@@ -369,6 +399,8 @@ def mechanism_from_dict(
         description=str(table.get("description", "")),
         clamp=_clamp_from_table(table["clamp"], origin) if "clamp" in table else None,
         drive=_section(Drive, table["drive"], origin, "drive") if "drive" in table else None,
+        dynamics=(_section(Dynamics, table["dynamics"], origin, "dynamics")
+                  if "dynamics" in table else None),
     )
 
 
