@@ -136,3 +136,15 @@ def test_user_file_loads_like_a_preset_and_errors_are_per_half(tmp_path, chang):
     bad.write_text('[half]\nr1 = 0.1\n')
     with pytest.raises(ParameterError, match="missing"):
         load_mechanism(bad)
+
+
+def test_clamp_whose_crosshead_link_never_turns_horizontal_opens_at_its_nearest():
+    """SM-55 (seed 001): L4 < dE, so theta3 peaks below 360 deg; x_open is that peak."""
+    sm55 = load_preset("lin2003_sm55").lower
+    x_open, x_tp = stroke_limits(sm55)
+    theta3 = lambda x: float(half_pose(x, sm55).theta3)  # noqa: E731
+    assert theta3(x_open) < 2 * math.pi
+    assert theta3(x_open) >= max(theta3(x_open - 1e-4), theta3(x_open + 1e-4))
+    assert x_open < x_tp
+    pose = half_pose(x_tp, sm55)
+    assert math.degrees(2 * math.pi - float(pose.theta5)) == pytest.approx(-0.7253, abs=1e-4)

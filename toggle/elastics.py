@@ -131,29 +131,21 @@ def crosshead_travel(x: Any, x_contact: Any, dims: HalfDims) -> Any:
 def clamp_stroke(mech: Mechanism, half: str = "lower") -> tuple[float, float]:
     """(x_open, x_final) of the crosshead, m.
 
-    x_final is the toggle, where alpha = -beta (Eq 3): theta4 = asin(e / (r4b + r5)).
-    The kinematic open position (crosshead link horizontal) does not exist on
-    clamps such as the SM-55 (L4 < dE); their preset gives ``x_open`` and the
-    toggle is then the first root of Eq 3 beyond it.
+    x_final is the toggle, where alpha = -beta (Eq 3), from
+    :func:`toggle.kinematics.stroke_limits`; a preset's ``x_open`` (the
+    machine's actual open position) overrides the kinematic one.
     """
     dims = mech.half(half)
-    x_open = clamp_data(mech).x_open
-    if x_open is None:
-        return stroke_limits(dims)
-    half_pose(x_open, dims, label=f"{half} half at the preset's x_open")  # assembles?
-    target = math.asin(dims.e / (dims.r4b + dims.r5))
-    xs = np.linspace(x_open, x_open + dims.r3 + dims.r4a, 2001)
-    with np.errstate(invalid="ignore"):
-        g = np.asarray(half_pose(xs, dims, check=False).theta4) - target
-    below = np.flatnonzero(g <= 0)
-    if below.size == 0 or below[0] == 0 or not np.isfinite(g[below[0] - 1]):
+    x_open, x_final = stroke_limits(dims)
+    preset_open = clamp_data(mech).x_open
+    if preset_open is None:
+        return x_open, x_final
+    half_pose(preset_open, dims, label=f"{half} half at the preset's x_open")  # assembles?
+    if not preset_open < x_final:
         raise ClampingError(
-            f"no toggle position beyond x_open = {x_open} m in preset {mech.name!r}"
+            f"preset {mech.name!r}: x_open = {preset_open} m is not before the toggle {x_final} m"
         )
-    i = below[0]
-    x_final = brentq(lambda v: float(half_pose(v, dims).theta4) - target, xs[i - 1], xs[i],
-                     xtol=1e-15, rtol=4 * np.finfo(float).eps)
-    return x_open, float(x_final)
+    return preset_open, x_final
 
 
 def contact_position(

@@ -34,7 +34,7 @@ from typing import Any, NamedTuple
 
 import casadi as ca
 import numpy as np
-from scipy.optimize import brentq
+from scipy.optimize import brentq, minimize_scalar
 
 from toggle.params import DIMENSIONS, HalfDims
 
@@ -282,24 +282,34 @@ def stroke_limits(dims: HalfDims) -> tuple[float, float]:
     x_TP is a maximum of L(x): there links 4b and 5 are collinear
     (dL/dtheta4 = 0), i.e. sin(theta4) = e / (r4b + r5). theta4(x) is not
     monotonic, so L(x) has a second equal maximum further on (about 70.5 mm
-    for chang2021); the toggle is the first one reached from the open
-    position, where link 3 is horizontal (theta3 = 360 deg). Both are roots
-    found on a scan of the assemblable range and refined by Brent's method.
+    for chang2021); the toggle is the first one. The open position is where
+    link 3 is horizontal (theta3 = 360 deg), the last such root before the
+    toggle; a clamp whose link 3 never becomes horizontal (L4 < dE, as the
+    SM-55 of seed 001) opens where link 3 comes nearest to it (the maximum of
+    theta3 before the toggle). Roots come from a scan of the assemblable range,
+    refined by Brent's method.
     """
     xs, pose = _assemblable_grid(dims)
     target = math.asin(dims.e / (dims.r4b + dims.r5))
     collinear = _roots(xs, np.asarray(pose.theta4) - target,
                        lambda x: float(half_pose(x, dims).theta4) - target)
-    horizontal = _roots(xs, np.asarray(pose.theta3) - _TWO_PI,
-                        lambda x: float(half_pose(x, dims).theta3) - _TWO_PI)
-    for x_tp in collinear:
-        below = [x for x in horizontal if x < x_tp]
-        if below:
-            return below[-1], x_tp
-    raise AssemblyError(
-        "no stroke: links 4b and 5 never become collinear after link 3 is horizontal "
-        f"(collinear at {collinear} m, link 3 horizontal at {horizontal} m)"
-    )
+    if not collinear:
+        raise AssemblyError(
+            "no toggle: links 4b and 5 never become collinear in the assemblable range "
+            f"[{xs[0]:.6g}, {xs[-1]:.6g}] m"
+        )
+    x_tp = collinear[0]
+    horizontal = [x for x in _roots(xs, np.asarray(pose.theta3) - _TWO_PI,
+                                    lambda x: float(half_pose(x, dims).theta3) - _TWO_PI)
+                  if x < x_tp]
+    if horizontal:
+        return horizontal[-1], x_tp
+    before = xs < x_tp
+    i = int(np.argmax(np.where(before, np.asarray(pose.theta3), -np.inf)))
+    lo, hi = xs[max(i - 1, 0)], xs[min(i + 1, int(np.count_nonzero(before)) - 1)]
+    best = minimize_scalar(lambda x: -float(half_pose(x, dims).theta3), bounds=(lo, hi),
+                           method="bounded", options={"xatol": 1e-13})
+    return float(best.x), x_tp
 
 
 def toggle_position(dims: HalfDims) -> float:
