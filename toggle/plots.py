@@ -17,7 +17,7 @@ from toggle.tolerance import asymmetry, it_tolerances  # noqa: E402
 MM = 1e3
 
 
-def _save(fig: plt.Figure, path: Path) -> Path:
+def save_figure(fig: plt.Figure, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -43,7 +43,7 @@ def plot_kinematics(mech: Mechanism, path: Path, points: int = 400) -> Path:
         ax.grid(True, alpha=0.3)
         ax.legend()
     axes[0].set_title(f"{mech.name}: kinematics over the stroke")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_sensitivity(mech: Mechanism, grade: int, path: Path, points: int = 300) -> Path:
@@ -70,7 +70,7 @@ def plot_sensitivity(mech: Mechanism, grade: int, path: Path, points: int = 300)
         for ax in axes[:, col]:
             ax.grid(True, alpha=0.3)
             ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_it_grades(mech: Mechanism, path: Path, grades: range = range(6, 13)) -> Path:
@@ -85,4 +85,4 @@ def plot_it_grades(mech: Mechanism, path: Path, grades: range = range(6, 13)) ->
     ax.set_title(f"{mech.name}: asymmetry indices at the toggle position")
     ax.grid(True, alpha=0.3)
     ax.legend()
-    return _save(fig, path)
+    return save_figure(fig, path)
