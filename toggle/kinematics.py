@@ -191,8 +191,13 @@ def motion_terms(x: Any, dims: HalfDims) -> tuple[Any, Any, Any]:
     No assembly check: symbolic callers (the plant, the planner) keep x inside
     :func:`assemblable_range` themselves.
     """
-    L, dL, d2L, _ = _motion_function()(x, np.array(dims.as_tuple()))
-    return L, dL, d2L
+    p = np.array(dims.as_tuple())
+    if _is_symbolic(x):
+        L, dL, d2L, _ = _motion_function()(x, p)
+        return L, dL, d2L
+    x = np.asarray(x, dtype=float)
+    out = _motion_function()(x.reshape(1, -1), p)
+    return tuple(np.asarray(o).reshape(x.shape) for o in out[:3])
 
 
 def _evaluate(x: Any, dims: HalfDims, label: str) -> tuple[np.ndarray, list[np.ndarray]]:
