@@ -37,7 +37,7 @@ class ToggleClamp(DeclaredSlave):
     """Nine-link double-toggle clamp driven by position; see the module doc."""
 
     author = "toggle-clamp"
-    description = "Double-toggle mold/die clamp: kinematics, pin friction, tie-bar elastics, inertia"
+    description = "Double-toggle mold/die clamp: kinematics, pin friction, elastics, inertia"
     default_experiment = DefaultExperiment(start_time=0.0, stop_time=10.0, step_size=1e-3)
     STATE_EXCLUDE = frozenset({"_plant"})
     VARIABLES = (
