@@ -1,0 +1,459 @@
+"""Firmware logic of the rig's MCU, as specified in docs/rig-protocol.md, without any I/O.
+
+:class:`McuModel` holds the state machine, the trajectory buffer, the safety checks and
+the sensor model (encoder quantisation, load-cell amplifier noise and ADC). It is driven
+by :meth:`McuModel.handle` (one decoded host frame) and :meth:`McuModel.tick` (one
+telemetry period) and returns the messages the MCU sends. The mechanics come from a
+:class:`RigPhysics` callback, so the same firmware runs any plant.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import random
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+from hil import protocol as p
+
+# faults that halt stepping at once; the others (underrun, heartbeat) decelerate first
+HALTING_FAULTS = (
+    p.Fault.FORCE_LIMIT | p.Fault.TRAVEL_LIMIT | p.Fault.FOLLOWING_ERROR
+    | p.Fault.LOAD_SATURATED | p.Fault.LOAD_STUCK | p.Fault.DRIVER | p.Fault.INTERNAL
+)
+MOTION_STATES = (p.State.RUNNING, p.State.STOPPING)
+
+
+class RigPhysics(Protocol):
+    """Mechanics of the rig, plugged into the emulator.
+
+    Called once per telemetry period with the commanded input-link position ``x`` (m,
+    the ball-screw table, already quantised to whole steps) and the emulator time ``t``
+    (s, monotonic from the emulator's start). Returns the true platen position (m) and
+    the true force between the table and the input link (N, positive when the table
+    pushes). Sensor effects (encoder quantisation, load-cell noise) are added by the MCU
+    model, not here.
+    """
+
+    def __call__(self, x: float, t: float) -> tuple[float, float]: ...
+
+
+@dataclass(frozen=True)
+class RigHardware:
+    """Constants of the emulated rig, reported to the host in HELLO_REPLY."""
+
+    telemetry_hz: int = 1000
+    buffer_capacity: int = 2048
+    step_nm: int = 200  # 25 000 steps/rev on a 5 mm lead
+    enc_nm: int = 1000  # 1 um optical encoder
+    load_offset: int = 1500  # ADC counts at zero force (amplifier offset)
+    load_gain_n: float = 1e-4  # N per ADC count: +-500 N -> +-5 000 000 counts
+    adc_min: int = -8_388_608  # 24-bit ADC rails
+    adc_max: int = 8_388_607
+    load_noise_n: float = 0.2  # rms noise of the load cell and amplifier
+    x_origin: float = 0.0  # input position (m) at step count 0
+    fw_version: int = 0x0100
+
+    @property
+    def period(self) -> float:
+        """Telemetry (and trajectory point) period, s."""
+        return 1.0 / self.telemetry_hz
+
+
+class Sensors:
+    """Encoder and load cell: quantisation, noise, ADC rails and injected sensor faults."""
+
+    def __init__(self, physics: RigPhysics, hw: RigHardware, rng: random.Random) -> None:
+        self.physics, self.hw, self.rng = physics, hw, rng
+        self.x_origin = hw.x_origin
+        self.enc_offset = 0
+        self.platen_zero = physics(hw.x_origin, 0.0)[0]
+        self.load_stuck = False
+        self.enc_stuck = False
+        self.spike_n = 0.0
+        self.spike_samples = 0
+        self._last: tuple[int, int] | None = None
+
+    def x(self, steps: int) -> float:
+        """Input position (m) of a step count."""
+        return self.x_origin + steps * self.hw.step_nm / 1e9
+
+    def read(self, steps: int, t: float) -> tuple[int, int]:
+        """Encoder counts and load-cell raw counts at ``steps`` and time ``t``."""
+        platen, force = self.physics(self.x(steps), t)
+        if self.spike_samples > 0:
+            force += self.spike_n
+            self.spike_samples -= 1
+        enc = round((platen - self.platen_zero) / (self.hw.enc_nm / 1e9)) + self.enc_offset
+        noisy = force + self.rng.gauss(0.0, self.hw.load_noise_n)
+        raw = round(self.hw.load_offset + noisy / self.hw.load_gain_n)
+        raw = min(max(raw, self.hw.adc_min), self.hw.adc_max)
+        if self._last is not None:
+            enc = self._last[0] if self.enc_stuck else enc
+            raw = self._last[1] if self.load_stuck else raw
+        self._last = (enc, raw)
+        return enc, raw
+
+    def rezero(self, steps: int, enc_now: int, steps_new: int, enc_new: int) -> None:
+        """Redefine counts so that the present position reads (steps_new, enc_new)."""
+        self.x_origin = self.x(steps) - steps_new * self.hw.step_nm / 1e9
+        self.enc_offset += enc_new - enc_now
+
+
+class McuModel:
+    """The MCU's firmware: sessions, commands, trajectory execution, safety, telemetry."""
+
+    def __init__(self, physics: RigPhysics, hw: RigHardware, rng: random.Random) -> None:
+        self.hw, self.rng = hw, rng
+        self.sensors = Sensors(physics, hw, rng)
+        self._out: list[p.Message] = []  # events and telemetry not yet returned
+        self.steps = 0
+        self.enc, self.load_raw = self.sensors.read(0, 0.0)
+        self.boot()
+
+    # --- lifecycle ------------------------------------------------------------------------
+
+    def boot(self) -> None:
+        """Power-on or reset: new boot id, no session, counts restart at zero."""
+        self.sensors.rezero(self.steps, self.enc, 0, 0)
+        self.steps, self.enc = 0, 0
+        self.boot_id = self.rng.getrandbits(32) | 1
+        self.state = p.State.BOOT
+        self.session = False
+        self.faults = p.Fault.NONE
+        self.cfg = p.Config(load_offset=self.hw.load_offset, load_gain_n=self.hw.load_gain_n)
+        self.sample = 0
+        self.last_seq: int | None = None
+        self.last_reply: p.Message | None = None
+        self.last_host_rx = 0.0
+        self.driver_enabled = False
+        self._clear_trajectory()
+        self._velocity = 0.0  # steps per tick, used by a controlled stop
+        self._pos = 0.0
+        self._stop_target = p.State.IDLE
+        self._same_load = 0
+
+    def _clear_trajectory(self) -> None:
+        self.points: deque[tuple[int, int]] = deque()
+        self.next_index = 0  # index the next chunk must start at
+        self.exec_index = 0  # points executed so far
+        self.final_received = False
+        self.accepting = True  # False once a stop or fault discarded the trajectory
+        self.expected_enc = p.NO_CHECK
+
+    # --- host frames ----------------------------------------------------------------------
+
+    def handle(self, frame: p.Frame, now: float) -> list[p.Message]:
+        """Execute one valid host frame received at ``now``; return the replies."""
+        self.last_host_rx = now
+        try:
+            msg = p.parse_message(frame)
+        except p.MessageError:
+            known = frame.msg_type in p.MESSAGES
+            return [self._ack(frame.seq, p.Result.BAD_LENGTH if known else p.Result.UNKNOWN_TYPE)]
+        if isinstance(msg, p.Heartbeat) or frame.msg_type >= 0x80:
+            return self._drain()
+        if isinstance(msg, (p.Hello, p.EStop)):
+            reply = self._execute(msg, frame.seq)
+        elif self.last_seq is not None and frame.seq == self.last_seq:
+            reply = self.last_reply  # a retransmission: answer again, do not execute again
+        elif self.last_seq is not None and not p.seq_newer(frame.seq, self.last_seq):
+            reply = self._ack(frame.seq, p.Result.STALE)
+        else:
+            reply = self._execute(msg, frame.seq)
+        if not isinstance(reply, p.HelloReply) or reply.result == p.Result.OK:
+            self.last_seq, self.last_reply = frame.seq, reply
+        replies = [reply] if reply is not None and frame.flags & p.FLAG_ACK_REQ else []
+        return replies + self._drain()
+
+    def _execute(self, msg: p.Message, seq: int) -> p.Message:
+        if isinstance(msg, p.Hello):
+            return self._hello(msg, seq)
+        if isinstance(msg, p.EStop):
+            self.estop()
+            return self._ack(seq, p.Result.OK)
+        if not self.session and not isinstance(msg, p.Stop):
+            return self._ack(seq, p.Result.NO_SESSION)
+        handler: Callable[[p.Message], p.Result] = self._handlers[type(msg)]
+        return self._ack(seq, handler(self, msg))
+
+    def _hello(self, msg: p.Hello, seq: int) -> p.HelloReply:
+        if self.state in MOTION_STATES:
+            result = p.Result.BAD_STATE
+        elif msg.proto_major != p.PROTO_MAJOR:
+            result = p.Result.VERSION_MISMATCH
+        else:
+            result = p.Result.OK
+            self.session = True
+            if self.state == p.State.BOOT:
+                self._set_state(p.State.IDLE, p.Reason.COMMAND)
+        hw = self.hw
+        return p.HelloReply(
+            seq, result, self.state, self.sample, len(self.points), self._free(),
+            p.PROTO_MAJOR, p.PROTO_MINOR, hw.fw_version, self.boot_id, msg.host_nonce,
+            hw.telemetry_hz, round(1e6 * hw.period), p.MAX_CHUNK_POINTS, hw.buffer_capacity,
+            hw.step_nm, hw.enc_nm, self.cfg.load_offset, self.cfg.load_gain_n,
+            hw.adc_min, hw.adc_max,
+        )
+
+    def _config(self, msg: p.Config) -> p.Result:
+        if self.state != p.State.IDLE:
+            return p.Result.BAD_STATE
+        valid = (
+            msg.force_limit_n > 0 and msg.steps_min < msg.steps_max and msg.enc_min < msg.enc_max
+            and msg.following_error_counts > 0 and msg.load_gain_n >= 0 and msg.decel_steps_s2 > 0
+            and msg.max_step_delta > 0 and msg.heartbeat_timeout_ms > 0 and msg.stuck_samples > 0
+            and all(math.isfinite(v) for v in (msg.force_limit_n, msg.load_gain_n,
+                                                msg.decel_steps_s2))
+        )
+        if not valid:
+            return p.Result.BAD_VALUE
+        if msg.load_gain_n == 0:  # keep the stored calibration
+            msg = dataclasses.replace(msg, load_offset=self.cfg.load_offset,
+                                      load_gain_n=self.cfg.load_gain_n)
+        self.cfg = msg
+        return p.Result.OK
+
+    def _chunk(self, msg: p.TrajChunk) -> p.Result:
+        if msg.first_index == 0 and self.state == p.State.IDLE:
+            self._clear_trajectory()  # index 0 starts a new trajectory
+        if self.state not in (p.State.IDLE, p.State.RUNNING) or not self.accepting:
+            return p.Result.BAD_STATE
+        if msg.first_index + len(msg.points) <= self.next_index:
+            return p.Result.OK  # already have these points (a late duplicate)
+        if msg.first_index != self.next_index:
+            return p.Result.SEQUENCE_GAP
+        if self.final_received:
+            return p.Result.BAD_STATE
+        if len(msg.points) > self._free():
+            return p.Result.NO_SPACE
+        prev = self.points[-1][0] if self.points else self.steps
+        for steps, _ in msg.points:
+            if not self.cfg.steps_min <= steps <= self.cfg.steps_max:
+                return p.Result.OUT_OF_LIMITS
+            if abs(steps - prev) > self.cfg.max_step_delta:
+                return p.Result.BAD_VALUE
+            prev = steps
+        self.points.extend(msg.points)
+        self.next_index += len(msg.points)
+        self.final_received = msg.final
+        return p.Result.OK
+
+    def _start(self, _msg: p.Start) -> p.Result:
+        if self.faults:
+            return p.Result.FAULT_ACTIVE
+        if self.state != p.State.IDLE:
+            return p.Result.BAD_STATE
+        if not self.points:
+            return p.Result.EMPTY
+        self.driver_enabled = True
+        self._same_load = 0
+        self._set_state(p.State.RUNNING, p.Reason.COMMAND)
+        return p.Result.OK
+
+    def _stop(self, _msg: p.Stop) -> p.Result:
+        if self.state == p.State.RUNNING:
+            self._begin_stop(p.State.IDLE, p.Reason.COMMAND)
+        if self.state in (p.State.IDLE, p.State.STOPPING):
+            self._discard_buffer()
+        return p.Result.OK
+
+    def _clear_fault(self, _msg: p.ClearFault) -> p.Result:
+        if self.state not in (p.State.FAULT, p.State.ESTOP):
+            return p.Result.OK
+        present = self._check_sensors(apply=False)
+        if present:
+            return p.Result.FAULT_ACTIVE
+        self.faults = p.Fault.NONE
+        self._clear_trajectory()
+        self._set_state(p.State.IDLE, p.Reason.COMMAND)
+        return p.Result.OK
+
+    def _set_position(self, msg: p.SetPosition) -> p.Result:
+        if self.state != p.State.IDLE:
+            return p.Result.BAD_STATE
+        self.sensors.rezero(self.steps, self.enc, msg.steps, msg.enc)
+        self.steps, self.enc = msg.steps, msg.enc
+        self._clear_trajectory()
+        return p.Result.OK
+
+    def _bye(self, _msg: p.Bye) -> p.Result:
+        if self.state in MOTION_STATES:
+            return p.Result.BAD_STATE
+        self.session = False
+        if self.state == p.State.IDLE:
+            self._set_state(p.State.BOOT, p.Reason.COMMAND)
+        return p.Result.OK
+
+    _handlers = {
+        p.Config: _config, p.TrajChunk: _chunk, p.Start: _start, p.Stop: _stop,
+        p.ClearFault: _clear_fault, p.SetPosition: _set_position, p.Bye: _bye,
+    }
+
+    def estop(self) -> None:
+        """Halt stepping now and disable the driver."""
+        self._velocity = 0.0
+        self.driver_enabled = False
+        self._discard_buffer()
+        self._latch(p.Fault.ESTOP, 0, 0)
+        if self.state != p.State.ESTOP:
+            self._set_state(p.State.ESTOP, p.Reason.FAULT)
+
+    def link_lost(self) -> None:
+        """The host vanished (USB detach, or DTR dropped): controlled stop, end the session."""
+        self.session = False
+        if self.state == p.State.RUNNING:
+            self._begin_stop(p.State.IDLE, p.Reason.LINK_LOST)
+
+    # --- one telemetry period -------------------------------------------------------------
+
+    def tick(self, now: float, t_us: int) -> list[p.Message]:
+        """Advance one period: watchdog, motion, sensors, checks; return events and telemetry."""
+        if self.session and now - self.last_host_rx > self.cfg.heartbeat_timeout_ms * 1e-3:
+            self._fault(p.Fault.HEARTBEAT_LOST, round(1e3 * (now - self.last_host_rx)),
+                        self.cfg.heartbeat_timeout_ms)
+        if self.state == p.State.RUNNING:
+            self._run_step()
+        elif self.state in (p.State.STOPPING, p.State.FAULT) and self._velocity:
+            self._decelerate()
+        prev_raw = self.load_raw
+        self.enc, self.load_raw = self.sensors.read(self.steps, now)
+        self._same_load = self._same_load + 1 if self.load_raw == prev_raw else 0
+        if self.state in (p.State.IDLE, *MOTION_STATES):
+            self._check_sensors(apply=True)
+        self._out.append(self._telemetry(t_us))
+        self.sample = (self.sample + 1) & 0xFFFFFFFF
+        return self._drain()
+
+    def _run_step(self) -> None:
+        if self.points:
+            steps, self.expected_enc = self.points.popleft()
+            self._velocity = float(steps - self.steps)
+            self.steps = steps
+            self._pos = float(steps)
+            self.exec_index += 1
+        elif self.final_received:
+            self._velocity = 0.0
+            self.expected_enc = p.NO_CHECK
+            self._set_state(p.State.IDLE, p.Reason.RUN_COMPLETE)
+        else:
+            self._fault(p.Fault.BUFFER_UNDERRUN, self.exec_index, self.next_index)
+
+    def _decelerate(self) -> None:
+        dv = self.cfg.decel_steps_s2 * self.hw.period**2
+        v = self._velocity
+        self._velocity = math.copysign(max(abs(v) - dv, 0.0), v)
+        self._pos += self._velocity
+        target = round(self._pos)
+        if not self.cfg.steps_min <= target <= self.cfg.steps_max:
+            self._velocity = 0.0
+            self._fault(p.Fault.TRAVEL_LIMIT, target, self.cfg.steps_max)
+            return
+        self.steps = target
+        if self._velocity == 0.0 and self.state == p.State.STOPPING:
+            self._set_state(self._stop_target, p.Reason.STOP_COMPLETE)
+
+    def _check_sensors(self, *, apply: bool) -> p.Fault:
+        """Evaluate the limits on the present readings; latch them when ``apply``."""
+        cfg = self.cfg
+        force = (self.load_raw - cfg.load_offset) * cfg.load_gain_n
+        checks = [
+            (p.Fault.LOAD_SATURATED,
+             self.load_raw <= self.hw.adc_min or self.load_raw >= self.hw.adc_max,
+             self.load_raw, self.hw.adc_max),
+            (p.Fault.FORCE_LIMIT, abs(force) > cfg.force_limit_n,
+             round(force), round(cfg.force_limit_n)),
+            (p.Fault.TRAVEL_LIMIT, not cfg.steps_min <= self.steps <= cfg.steps_max,
+             self.steps, cfg.steps_max),
+            (p.Fault.TRAVEL_LIMIT, not cfg.enc_min <= self.enc <= cfg.enc_max,
+             self.enc, cfg.enc_max),
+        ]
+        if self.state == p.State.RUNNING:
+            error = self.enc - self.expected_enc
+            checks += [
+                (p.Fault.FOLLOWING_ERROR,
+                 self.expected_enc != p.NO_CHECK and abs(error) > cfg.following_error_counts,
+                 error, cfg.following_error_counts),
+                (p.Fault.LOAD_STUCK, self._same_load >= cfg.stuck_samples,
+                 self._same_load, cfg.stuck_samples),
+            ]
+        found = p.Fault.NONE
+        for fault, active, value, limit in checks:
+            if active and not found:
+                found = fault
+                if apply:
+                    self._fault(fault, value, limit)
+        return found
+
+    # --- faults and state -----------------------------------------------------------------
+
+    def _fault(self, fault: p.Fault, value: int, limit: int) -> None:
+        if fault & self.faults:
+            return
+        self._latch(fault, value, limit)
+        if fault & HALTING_FAULTS:
+            self._velocity = 0.0
+            self._discard_buffer()
+            if self.state != p.State.FAULT:
+                self._set_state(p.State.FAULT, p.Reason.FAULT)
+        elif self.state == p.State.RUNNING:
+            self._begin_stop(p.State.FAULT, p.Reason.FAULT)
+        elif self.state == p.State.STOPPING:
+            self._stop_target = p.State.FAULT
+        elif self.state == p.State.IDLE:
+            self._set_state(p.State.FAULT, p.Reason.FAULT)
+
+    def _latch(self, fault: p.Fault, value: int, limit: int) -> None:
+        self.faults |= fault
+        clip = lambda v: max(min(int(v), 2**31 - 1), -(2**31))  # noqa: E731
+        self._emit(p.FaultReport(fault, self.sample, self.state, clip(value), clip(limit)))
+
+    def _begin_stop(self, target: p.State, reason: p.Reason) -> None:
+        self._discard_buffer()
+        self._stop_target = target
+        self._pos = float(self.steps)
+        self._set_state(p.State.STOPPING, reason)
+
+    def _discard_buffer(self) -> None:
+        self.points.clear()
+        self.accepting = False
+        self.expected_enc = p.NO_CHECK
+
+    def _set_state(self, new: p.State, reason: p.Reason) -> None:
+        old, self.state = self.state, new
+        self._emit(p.StateChange(old, new, reason, self.exec_index, self.sample))
+
+    def _emit(self, msg: p.Message) -> None:
+        self._out.append(msg)
+
+    def _drain(self) -> list[p.Message]:
+        out, self._out = self._out, []
+        return out
+
+    # --- replies --------------------------------------------------------------------------
+
+    def _free(self) -> int:
+        return self.hw.buffer_capacity - len(self.points)
+
+    def _ack(self, seq: int, result: p.Result) -> p.Ack:
+        return p.Ack(seq, result, self.state, self.sample, len(self.points), self._free())
+
+    def _telemetry(self, t_us: int) -> p.Telemetry:
+        flags = p.TelemetryFlag.NONE
+        if self._velocity and self.state in MOTION_STATES:
+            flags |= p.TelemetryFlag.MOVING
+        if self.final_received:
+            flags |= p.TelemetryFlag.FINAL_RECEIVED
+        if not self.hw.adc_min < self.load_raw < self.hw.adc_max:
+            flags |= p.TelemetryFlag.LOAD_SATURATED
+        if self.session:
+            flags |= p.TelemetryFlag.SESSION
+        if self.driver_enabled:
+            flags |= p.TelemetryFlag.DRIVER_ENABLED
+        return p.Telemetry(
+            self.boot_id, self.sample, t_us & 0xFFFFFFFF, self.steps, self.enc, self.load_raw,
+            self.exec_index, len(self.points), int(self.faults), self.state, int(flags),
+        )

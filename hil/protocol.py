@@ -1,0 +1,561 @@
+"""Codec of the rig protocol (docs/rig-protocol.md): COBS framing, CRC-16, message layouts.
+
+Pure functions and dataclasses, no I/O, shared by the host link and the rig emulator.
+A frame on the wire is ``COBS(header + payload + crc) + b"\\x00"``; the header is
+``<BBH`` (type, flags, seq), the CRC is CRC-16/CCITT-FALSE over header and payload,
+stored little-endian. Every decoding failure raises a :class:`ProtocolError` subclass.
+"""
+
+from __future__ import annotations
+
+import binascii
+import functools
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass, field, fields
+from enum import IntEnum, IntFlag
+from typing import ClassVar, TypeVar
+
+PROTO_MAJOR = 1
+PROTO_MINOR = 0
+
+HEADER = struct.Struct("<BBH")
+CRC = struct.Struct("<H")
+MAX_PAYLOAD = 250
+MAX_BODY = HEADER.size + MAX_PAYLOAD + CRC.size  # 256
+MAX_ENCODED = MAX_BODY + 1 + MAX_BODY // 254  # 258: COBS worst case, without the delimiter
+MAX_CHUNK_POINTS = 30
+NO_CHECK = -(2**31)  # expected encoder count meaning "do not check the following error"
+
+FLAG_ACK_REQ = 0x01  # host -> MCU: answer with an ACK
+FLAG_RETRY = 0x02  # host -> MCU: this frame is a retransmission (informative)
+
+
+class ProtocolError(Exception):
+    """Base of every error raised by this codec."""
+
+
+class CobsError(ProtocolError):
+    """The bytes between two delimiters are not valid COBS."""
+
+
+class FrameLengthError(ProtocolError):
+    """A frame is shorter than a header plus CRC or longer than the maximum."""
+
+
+class CrcError(ProtocolError):
+    """The CRC trailer does not match the frame's contents."""
+
+
+class MessageError(ProtocolError):
+    """A valid frame holds an unknown message type or a payload of the wrong length."""
+
+
+class MsgType(IntEnum):
+    """Message type codes: host -> MCU below 0x80, MCU -> host from 0x80."""
+
+    HELLO = 0x01
+    HEARTBEAT = 0x02
+    CONFIG = 0x03
+    TRAJ_CHUNK = 0x04
+    START = 0x05
+    STOP = 0x06
+    ESTOP = 0x07
+    CLEAR_FAULT = 0x08
+    SET_POSITION = 0x09
+    BYE = 0x0A
+    ACK = 0x80
+    HELLO_REPLY = 0x81
+    TELEMETRY = 0x82
+    FAULT = 0x83
+    STATE = 0x84
+
+
+class State(IntEnum):
+    """MCU states (section 'State machine' of the protocol document)."""
+
+    BOOT = 0
+    IDLE = 1
+    RUNNING = 2
+    STOPPING = 3
+    FAULT = 4
+    ESTOP = 5
+
+
+class Fault(IntFlag):
+    """Latched fault bits, carried in every telemetry sample."""
+
+    NONE = 0
+    FORCE_LIMIT = 0x0001
+    TRAVEL_LIMIT = 0x0002
+    FOLLOWING_ERROR = 0x0004
+    BUFFER_UNDERRUN = 0x0008
+    LOAD_SATURATED = 0x0010
+    LOAD_STUCK = 0x0020
+    HEARTBEAT_LOST = 0x0040
+    ESTOP = 0x0080
+    DRIVER = 0x0100
+    INTERNAL = 0x0200
+
+
+class Result(IntEnum):
+    """Result code of an ACK: OK or the reason a command was refused."""
+
+    OK = 0
+    BAD_STATE = 1
+    BAD_LENGTH = 2
+    BAD_VALUE = 3
+    NO_SPACE = 4
+    SEQUENCE_GAP = 5
+    OUT_OF_LIMITS = 6
+    NO_SESSION = 7
+    UNKNOWN_TYPE = 8
+    VERSION_MISMATCH = 9
+    FAULT_ACTIVE = 10
+    EMPTY = 11
+    STALE = 12
+
+
+class Reason(IntEnum):
+    """Why the MCU changed state (STATE message)."""
+
+    COMMAND = 0
+    RUN_COMPLETE = 1
+    FAULT = 2
+    STOP_COMPLETE = 3
+    LINK_LOST = 4
+
+
+class TelemetryFlag(IntFlag):
+    """Instantaneous status bits of a telemetry sample."""
+
+    NONE = 0
+    MOVING = 0x01
+    FINAL_RECEIVED = 0x02
+    LOAD_SATURATED = 0x04
+    SESSION = 0x08
+    DRIVER_ENABLED = 0x10
+
+
+# --- COBS and CRC -------------------------------------------------------------------------
+
+
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, unreflected; '123456789' -> 0x29B1."""
+    return binascii.crc_hqx(data, 0xFFFF)
+
+
+def cobs_encode(data: bytes) -> bytes:
+    """Consistent-overhead byte stuffing: the result holds no zero byte."""
+    out = bytearray()
+    for piece in bytes(data).split(b"\x00"):
+        while len(piece) >= 254:
+            out.append(0xFF)
+            out += piece[:254]
+            piece = piece[254:]
+        out.append(len(piece) + 1)
+        out += piece
+    return bytes(out)
+
+
+def cobs_decode(encoded: bytes) -> bytes:
+    """Inverse of :func:`cobs_encode`; raises :class:`CobsError` on malformed input."""
+    if b"\x00" in encoded:
+        raise CobsError("zero byte inside a COBS block")
+    out = bytearray()
+    i, n = 0, len(encoded)
+    while i < n:
+        code = encoded[i]
+        end = i + code
+        if end > n:
+            raise CobsError(f"COBS block at offset {i} runs {end - n} bytes past the frame end")
+        out += encoded[i + 1 : end]
+        if code < 0xFF and end < n:
+            out.append(0)
+        i = end
+    return bytes(out)
+
+
+# --- frames -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """One decoded frame: header fields and the raw payload."""
+
+    msg_type: int
+    flags: int
+    seq: int
+    payload: bytes = b""
+
+
+def encode_frame(frame: Frame) -> bytes:
+    """Frame -> wire bytes, including the trailing zero delimiter."""
+    if len(frame.payload) > MAX_PAYLOAD:
+        raise FrameLengthError(f"payload of {len(frame.payload)} bytes exceeds {MAX_PAYLOAD}")
+    body = HEADER.pack(frame.msg_type, frame.flags, frame.seq & 0xFFFF) + frame.payload
+    return cobs_encode(body + CRC.pack(crc16(body))) + b"\x00"
+
+
+def decode_frame(encoded: bytes) -> Frame:
+    """COBS bytes between two delimiters -> Frame; raises a ProtocolError on any defect."""
+    if len(encoded) > MAX_ENCODED:
+        raise FrameLengthError(f"frame of {len(encoded)} encoded bytes exceeds {MAX_ENCODED}")
+    body = cobs_decode(encoded)
+    if len(body) < HEADER.size + CRC.size:
+        raise FrameLengthError(f"frame of {len(body)} bytes is shorter than header + CRC")
+    if len(body) > MAX_BODY:
+        raise FrameLengthError(f"frame body of {len(body)} bytes exceeds {MAX_BODY}")
+    (crc,) = CRC.unpack_from(body, len(body) - CRC.size)
+    if crc != crc16(body[: -CRC.size]):
+        raise CrcError(f"CRC mismatch (frame says {crc:#06x})")
+    msg_type, flags, seq = HEADER.unpack_from(body)
+    return Frame(msg_type, flags, seq, body[HEADER.size : -CRC.size])
+
+
+@dataclass
+class DecoderStats:
+    """Counters of what a FrameDecoder received and rejected."""
+
+    frames: int = 0
+    crc_errors: int = 0
+    cobs_errors: int = 0
+    length_errors: int = 0
+    bytes_in: int = 0
+
+    @property
+    def rejected(self) -> int:
+        """Frames dropped for any reason."""
+        return self.crc_errors + self.cobs_errors + self.length_errors
+
+
+class FrameDecoder:
+    """Streaming decoder: feed arbitrary byte chunks, get every valid frame.
+
+    Junk, truncated and corrupted frames are dropped and counted in :attr:`stats`
+    (the last reason in :attr:`last_error`); a frame with a bad CRC is never returned.
+    An over-long run without a delimiter is discarded up to the next delimiter.
+    """
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self._overflowed = False
+        self.stats = DecoderStats()
+        self.last_error: ProtocolError | None = None
+
+    def feed(self, data: bytes) -> Iterator[Frame]:
+        """Consume ``data``; yield the frames it completes, in order."""
+        self.stats.bytes_in += len(data)
+        *complete, tail = bytes(data).split(b"\x00")
+        for piece in complete:
+            encoded = bytes(self._buf) + piece
+            overflowed = self._overflowed
+            self._buf.clear()
+            self._overflowed = False
+            if overflowed:
+                self._reject(FrameLengthError("frame longer than the maximum, dropped"))
+            elif encoded:
+                frame = self._decode(encoded)
+                if frame is not None:
+                    yield frame
+        if not self._overflowed:
+            self._buf += tail
+            if len(self._buf) > MAX_ENCODED:
+                self._buf.clear()
+                self._overflowed = True
+
+    def _decode(self, encoded: bytes) -> Frame | None:
+        try:
+            frame = decode_frame(encoded)
+        except ProtocolError as exc:
+            self._reject(exc)
+            return None
+        self.stats.frames += 1
+        return frame
+
+    def _reject(self, exc: ProtocolError) -> None:
+        self.last_error = exc
+        if isinstance(exc, CrcError):
+            self.stats.crc_errors += 1
+        elif isinstance(exc, CobsError):
+            self.stats.cobs_errors += 1
+        else:
+            self.stats.length_errors += 1
+
+
+# --- messages -----------------------------------------------------------------------------
+
+
+M = TypeVar("M", bound="Message")
+
+
+@dataclass(frozen=True, slots=True)
+class Message:
+    """A message with a fixed little-endian layout ``FORMAT`` over its fields, in order."""
+
+    TYPE: ClassVar[MsgType]
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<")
+
+    def pack(self) -> bytes:
+        """Payload bytes of this message."""
+        return self.FORMAT.pack(*(getattr(self, name) for name in _wire_fields(type(self))))
+
+    @classmethod
+    def unpack(cls: type[M], payload: bytes) -> M:
+        """Payload bytes -> message; MessageError on a wrong length."""
+        if len(payload) != cls.FORMAT.size:
+            raise MessageError(
+                f"{cls.TYPE.name} payload is {len(payload)} bytes, expected {cls.FORMAT.size}"
+            )
+        return cls(*cls.FORMAT.unpack(payload))
+
+    def frame(self, seq: int, flags: int = 0) -> Frame:
+        """Wrap this message in a frame."""
+        return Frame(self.TYPE, flags, seq & 0xFFFF, self.pack())
+
+
+@dataclass(frozen=True, slots=True)
+class Hello(Message):
+    """Host opens a session; the MCU answers with HELLO_REPLY."""
+
+    TYPE: ClassVar[MsgType] = MsgType.HELLO
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<BBI")
+    proto_major: int = PROTO_MAJOR
+    proto_minor: int = PROTO_MINOR
+    host_nonce: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Heartbeat(Message):
+    """Host is alive; resets the MCU's heartbeat watchdog (as does every valid host frame)."""
+
+    TYPE: ClassVar[MsgType] = MsgType.HEARTBEAT
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<I")
+    host_ms: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Config(Message):
+    """Safety limits, load-cell calibration and stop deceleration (accepted in IDLE only).
+
+    ``load_gain_n == 0`` keeps the calibration stored in the MCU (``load_offset`` ignored).
+    """
+
+    TYPE: ClassVar[MsgType] = MsgType.CONFIG
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<fiiiiiiffHHH")
+    force_limit_n: float = 400.0
+    steps_min: int = -50_000
+    steps_max: int = 400_000
+    enc_min: int = -20_000
+    enc_max: int = 200_000
+    following_error_counts: int = 1_000
+    load_offset: int = 0
+    load_gain_n: float = 0.0
+    decel_steps_s2: float = 5e6
+    max_step_delta: int = 250
+    heartbeat_timeout_ms: int = 250
+    stuck_samples: int = 200
+
+
+@dataclass(frozen=True, slots=True)
+class TrajChunk(Message):
+    """Up to MAX_CHUNK_POINTS trajectory points (absolute steps, expected encoder counts)."""
+
+    TYPE: ClassVar[MsgType] = MsgType.TRAJ_CHUNK
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<IBB")
+    POINT: ClassVar[struct.Struct] = struct.Struct("<ii")
+    FINAL: ClassVar[int] = 0x01
+    first_index: int = 0
+    flags: int = 0
+    points: tuple[tuple[int, int], ...] = ()
+
+    def pack(self) -> bytes:
+        """Payload: header then n points of ``<ii``."""
+        if not 0 < len(self.points) <= MAX_CHUNK_POINTS:
+            n = len(self.points)
+            raise MessageError(f"a chunk holds 1..{MAX_CHUNK_POINTS} points, not {n}")
+        head = self.FORMAT.pack(self.first_index, self.flags, len(self.points))
+        return head + b"".join(self.POINT.pack(s, e) for s, e in self.points)
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> TrajChunk:
+        """Payload -> chunk; MessageError when the length disagrees with the point count."""
+        if len(payload) < cls.FORMAT.size:
+            raise MessageError(f"TRAJ_CHUNK payload of {len(payload)} bytes is too short")
+        first, flags, n = cls.FORMAT.unpack_from(payload)
+        if not 0 < n <= MAX_CHUNK_POINTS or len(payload) != cls.FORMAT.size + n * cls.POINT.size:
+            raise MessageError(f"TRAJ_CHUNK of {len(payload)} bytes does not hold {n} points")
+        points = tuple(cls.POINT.iter_unpack(payload[cls.FORMAT.size :]))
+        return cls(first, flags, points)
+
+    @property
+    def final(self) -> bool:
+        """True when this chunk ends the trajectory."""
+        return bool(self.flags & self.FINAL)
+
+
+@dataclass(frozen=True, slots=True)
+class Start(Message):
+    """Start executing the buffered trajectory."""
+
+    TYPE: ClassVar[MsgType] = MsgType.START
+
+
+@dataclass(frozen=True, slots=True)
+class Stop(Message):
+    """Controlled stop: decelerate, discard the buffer, go IDLE."""
+
+    TYPE: ClassVar[MsgType] = MsgType.STOP
+
+
+@dataclass(frozen=True, slots=True)
+class EStop(Message):
+    """Emergency stop: halt stepping at once, disable the driver, go ESTOP."""
+
+    TYPE: ClassVar[MsgType] = MsgType.ESTOP
+
+
+@dataclass(frozen=True, slots=True)
+class ClearFault(Message):
+    """Leave FAULT or ESTOP for IDLE once no fault condition remains."""
+
+    TYPE: ClassVar[MsgType] = MsgType.CLEAR_FAULT
+
+
+@dataclass(frozen=True, slots=True)
+class SetPosition(Message):
+    """Redefine the current step and encoder counts (reference after homing)."""
+
+    TYPE: ClassVar[MsgType] = MsgType.SET_POSITION
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<ii")
+    steps: int = 0
+    enc: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Bye(Message):
+    """End the session: stop if moving, go BOOT, disarm the heartbeat watchdog."""
+
+    TYPE: ClassVar[MsgType] = MsgType.BYE
+
+
+@dataclass(frozen=True, slots=True)
+class Ack(Message):
+    """Answer to a command frame carrying FLAG_ACK_REQ."""
+
+    TYPE: ClassVar[MsgType] = MsgType.ACK
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<HBBIHH")
+    acked_seq: int = 0
+    result: int = Result.OK
+    state: int = State.BOOT
+    sample: int = 0
+    buf_level: int = 0
+    buf_free: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class HelloReply(Message):
+    """Answer to HELLO: the ACK fields, then the MCU's identity, capacities and scalings."""
+
+    TYPE: ClassVar[MsgType] = MsgType.HELLO_REPLY
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<HBBIHH" + "BBHIIHHBHIIifii")
+    acked_seq: int = 0
+    result: int = Result.OK
+    state: int = State.BOOT
+    sample: int = 0
+    buf_level: int = 0
+    buf_free: int = 0
+    proto_major: int = PROTO_MAJOR
+    proto_minor: int = PROTO_MINOR
+    fw_version: int = 0
+    boot_id: int = 0
+    host_nonce: int = 0
+    telemetry_hz: int = 1000
+    point_period_us: int = 1000
+    max_chunk_points: int = MAX_CHUNK_POINTS
+    buffer_capacity: int = 2048
+    step_nm: int = 200
+    enc_nm: int = 1000
+    load_offset: int = 0
+    load_gain_n: float = 1e-4
+    adc_min: int = -8_388_608
+    adc_max: int = 8_388_607
+
+
+@dataclass(frozen=True, slots=True)
+class Telemetry(Message):
+    """One 1 kHz sample; ``rx_time`` is set by the receiver (host monotonic s), not sent."""
+
+    TYPE: ClassVar[MsgType] = MsgType.TELEMETRY
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<IIIiiiIHHBB")
+    boot_id: int = 0
+    sample: int = 0
+    t_us: int = 0
+    steps: int = 0
+    enc: int = 0
+    load_raw: int = 0
+    exec_index: int = 0
+    buf_level: int = 0
+    faults: int = 0
+    state: int = State.BOOT
+    flags: int = 0
+    rx_time: float = field(default=0.0, compare=False, metadata={"wire": False})
+
+
+@dataclass(frozen=True, slots=True)
+class FaultReport(Message):
+    """Sent once when a fault bit latches; the bits also stay set in every telemetry sample."""
+
+    TYPE: ClassVar[MsgType] = MsgType.FAULT
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<HIBii")
+    fault: int = 0
+    sample: int = 0
+    state: int = State.FAULT
+    value: int = 0
+    limit: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class StateChange(Message):
+    """Sent on every state transition."""
+
+    TYPE: ClassVar[MsgType] = MsgType.STATE
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<BBBII")
+    old: int = 0
+    new: int = 0
+    reason: int = Reason.COMMAND
+    exec_index: int = 0
+    sample: int = 0
+
+
+@functools.cache
+def _wire_fields(cls: type[Message]) -> tuple[str, ...]:
+    """Names of the fields of ``cls`` that are on the wire, in layout order."""
+    return tuple(f.name for f in fields(cls) if f.metadata.get("wire", True))
+
+
+MESSAGES: dict[int, type[Message]] = {
+    cls.TYPE: cls
+    for cls in (
+        Hello, Heartbeat, Config, TrajChunk, Start, Stop, EStop, ClearFault, SetPosition, Bye,
+        Ack, HelloReply, Telemetry, FaultReport, StateChange,
+    )
+}
+
+
+def parse_message(frame: Frame) -> Message:
+    """Frame -> typed message; MessageError on an unknown type or a bad payload length."""
+    cls = MESSAGES.get(frame.msg_type)
+    if cls is None:
+        raise MessageError(f"unknown message type {frame.msg_type:#04x}")
+    return cls.unpack(frame.payload)
+
+
+def encode_message(msg: Message, seq: int, flags: int = 0) -> bytes:
+    """Message -> wire bytes (frame, COBS, delimiter)."""
+    return encode_frame(msg.frame(seq, flags))
+
+
+def seq_newer(seq: int, last: int) -> bool:
+    """RFC 1982 serial-number order on 16 bits: True when ``seq`` is after ``last``."""
+    return 0 < ((seq - last) & 0xFFFF) < 0x8000

@@ -1,0 +1,350 @@
+"""Rig emulator: the MCU's side of the rig protocol on a pseudo-terminal, with fault injection.
+
+:class:`RigEmulator` opens a pty (``os.openpty``), runs :class:`~hil.mcu_model.McuModel`
+at the telemetry rate and speaks the protocol of docs/rig-protocol.md to whoever opens
+the pty's device path (``SerialLink(emulator.port)``). The mechanics are a pluggable
+:class:`~hil.mcu_model.RigPhysics`; :class:`FaultPlan` injects link and rig faults.
+Run it in a thread (:meth:`RigEmulator.start`) or in a process of its own
+(:func:`spawn_emulator`).
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import random
+import select
+import threading
+import time
+import tty
+from dataclasses import dataclass, field
+
+from hil import protocol as p
+from hil.mcu_model import McuModel, RigHardware, RigPhysics
+from hil.realtime import set_realtime
+
+RESYNC_AFTER = 0.1  # s behind schedule after which missed ticks are skipped, not caught up
+TX_BACKLOG_MAX = 16_384  # bytes queued for a host that does not read; further frames drop
+
+
+@dataclass(frozen=True)
+class FaultPlan:
+    """Faults to inject. Probabilities are per frame; times are s after the first START."""
+
+    seed: int = 1
+    drop_byte: float = 0.0  # remove one byte of an outgoing frame
+    flip_bit: float = 0.0  # flip one bit of an outgoing frame
+    truncate: float = 0.0  # cut an outgoing frame short (its delimiter still follows)
+    split: float = 0.0  # write an outgoing frame in two parts, 0.3 ms apart (harmless)
+    junk: float = 0.0  # random bytes and a delimiter before an outgoing frame
+    rx_drop_byte: float = 0.0  # remove one byte of an incoming read
+    rx_flip_bit: float = 0.0  # flip one bit of an incoming read
+    stall_at: float | None = None  # the MCU hangs: no telemetry, no input processing
+    stall_for: float = 0.05
+    disconnect_at: float | None = None  # the link vanishes (pty closed)
+    reset_at: float | None = None  # the MCU resets: new boot id, no session, counts at 0
+    force_spike_at: float | None = None  # add force_spike_n to the load cell
+    force_spike_n: float = 1000.0
+    force_spike_samples: int = 3
+    stuck_load_at: float | None = None  # the load-cell reading freezes
+    stuck_encoder_at: float | None = None  # the encoder reading freezes
+
+
+@dataclass
+class EmulatorLog:
+    """What the emulator did, for tests and benchmarks (times are time.monotonic())."""
+
+    commands: list[tuple[float, p.MsgType]] = field(default_factory=list)
+    injected: dict[str, float] = field(default_factory=dict)  # fault name -> time injected
+    sent_telemetry: dict[tuple[int, int], p.Telemetry] = field(default_factory=dict)
+    tx_frames: int = 0
+    tx_dropped: int = 0  # frames dropped because the host did not read
+    ticks_skipped: int = 0
+
+    def first_command(self, kind: p.MsgType, after: float = 0.0) -> float | None:
+        """Time the first command of ``kind`` arrived at or after ``after``."""
+        return next((t for t, k in self.commands if k == kind and t >= after), None)
+
+
+class RigEmulator:
+    """The rig's MCU on a pseudo-terminal; :attr:`port` is the path a host opens."""
+
+    def __init__(
+        self,
+        physics: RigPhysics,
+        hardware: RigHardware | None = None,
+        faults: FaultPlan | None = None,
+        *,
+        record_telemetry: bool = False,
+        time_origin: float | None = None,
+        realtime: bool = False,
+    ) -> None:
+        """``time_origin``: monotonic time of t_us = 0 (default: the emulator's start).
+
+        With ``time_origin=0`` telemetry timestamps are CLOCK_MONOTONIC in µs, so a host
+        on the same machine can measure its latency exactly. ``realtime`` asks for
+        SCHED_FIFO scheduling of the serving thread, as a firmware's timer interrupt would
+        have (best effort: ignored without the permission).
+        """
+        self.hw = hardware or RigHardware()
+        self.faults = faults or FaultPlan()
+        self._rng = random.Random(self.faults.seed)
+        self.mcu = McuModel(physics, self.hw, random.Random(self.faults.seed + 1))
+        self.log = EmulatorLog()
+        self._record = record_telemetry
+        self._realtime = realtime
+        self._decoder = p.FrameDecoder()
+        self._tx_seq = 0
+        self._backlog: list[tuple[float, bytes]] = []  # (release time, bytes) in order
+        self._master = self._slave = -1
+        self.port = ""
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._t0 = time.monotonic()
+        self._origin = self._t0 if time_origin is None else time_origin
+        self._run_tick: int | None = None  # tick of the first START
+        self._tick = 0
+        self._pending = {
+            name: at for name in ("stall", "disconnect", "reset", "force_spike", "stuck_load",
+                                  "stuck_encoder")
+            if (at := getattr(self.faults, f"{name}_at")) is not None
+        }
+
+    # --- lifecycle ------------------------------------------------------------------------
+
+    def open(self) -> str:
+        """Create the pseudo-terminal; return the device path for the host."""
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)  # no echo, no line editing, no CR/LF translation
+        os.set_blocking(self._master, False)
+        self.port = os.ttyname(self._slave)
+        return self.port
+
+    def start(self) -> str:
+        """Open the pty and serve it from a daemon thread; return the device path."""
+        port = self.open()
+        self._thread = threading.Thread(target=self.serve, name="rig-emulator", daemon=True)
+        self._thread.start()
+        return port
+
+    def close(self) -> None:
+        """Stop serving and close the pty (idempotent)."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        self._close_fds()
+
+    def __enter__(self) -> RigEmulator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _close_fds(self) -> None:
+        for fd in (self._master, self._slave):
+            if fd >= 0:
+                os.close(fd)
+        self._master = self._slave = -1
+
+    # --- main loop ------------------------------------------------------------------------
+
+    def serve(self) -> None:
+        """Run the MCU until close() or an injected disconnect."""
+        if self._master < 0:
+            self.open()
+        if self._realtime:
+            set_realtime()
+        period = self.hw.period
+        next_tick = time.monotonic()
+        while not self._stop.is_set() and self._master >= 0:
+            now = time.monotonic()
+            release = self._next_release()
+            ready = release <= now  # something to write: wake when the pty can take it
+            wait = max(0.0, min(next_tick, float("inf") if ready else release) - now)
+            readable, _, _ = select.select([self._master], [self._master] if ready else [], [],
+                                           wait)
+            if readable:
+                self._receive()
+            now = time.monotonic()
+            if now >= next_tick:
+                if now - next_tick > RESYNC_AFTER:
+                    skipped = int((now - next_tick) / period)
+                    self.log.ticks_skipped += skipped
+                    next_tick += skipped * period
+                self._on_tick(now)
+                next_tick += period
+            self._flush()
+
+    def _on_tick(self, now: float) -> None:
+        self._inject_scheduled(now)
+        if self._master < 0:
+            return
+        t_us = round((now - self._origin) * 1e6)
+        for msg in self.mcu.tick(now, t_us):
+            if isinstance(msg, p.Telemetry) and self._record:
+                self.log.sent_telemetry[(msg.boot_id, msg.sample)] = msg
+            self._send(msg)
+        self._tick += 1
+
+    def _receive(self) -> None:
+        try:
+            data = os.read(self._master, 4096)
+        except BlockingIOError:
+            return
+        except OSError:  # the host side vanished; a pty then reports EIO
+            data = b""
+        data = self._corrupt(data, self.faults.rx_drop_byte, self.faults.rx_flip_bit)
+        now = time.monotonic()
+        for frame in self._decoder.feed(data):
+            self.log.commands.append((now, _msg_type(frame.msg_type)))
+            if frame.msg_type == p.MsgType.START and self._run_tick is None:
+                self._run_tick = self._tick
+            for reply in self.mcu.handle(frame, now):
+                self._send(reply)
+
+    # --- fault injection ------------------------------------------------------------------
+
+    def _inject_scheduled(self, now: float) -> None:
+        if self._run_tick is None:
+            return
+        elapsed = (self._tick - self._run_tick) * self.hw.period
+        for name, at in list(self._pending.items()):
+            if elapsed >= at:
+                del self._pending[name]
+                self.log.injected[name] = now
+                getattr(self, f"_inject_{name}")()
+
+    def _inject_stall(self) -> None:
+        time.sleep(self.faults.stall_for)  # the whole MCU hangs, as a blocked firmware would
+
+    def _inject_disconnect(self) -> None:
+        self._close_fds()
+        self.mcu.link_lost()
+        while self.mcu.state == p.State.STOPPING:  # the firmware completes its stop alone
+            self.mcu.tick(time.monotonic(), 0)
+
+    def _inject_reset(self) -> None:
+        self.mcu.boot()
+        self._backlog.clear()
+
+    def _inject_force_spike(self) -> None:
+        self.mcu.sensors.spike_n = self.faults.force_spike_n
+        self.mcu.sensors.spike_samples = self.faults.force_spike_samples
+
+    def _inject_stuck_load(self) -> None:
+        self.mcu.sensors.load_stuck = True
+
+    def _inject_stuck_encoder(self) -> None:
+        self.mcu.sensors.enc_stuck = True
+
+    def _corrupt(self, data: bytes, drop: float, flip: float) -> bytes:
+        """Drop one byte and/or flip one bit of ``data`` with the given probabilities."""
+        if not data or not (drop or flip):
+            return data
+        buf = bytearray(data)
+        if self._rng.random() < drop:
+            del buf[self._rng.randrange(len(buf))]
+        if buf and self._rng.random() < flip:
+            buf[self._rng.randrange(len(buf))] ^= 1 << self._rng.randrange(8)
+        return bytes(buf)
+
+    # --- transmit -------------------------------------------------------------------------
+
+    def _send(self, msg: p.Message) -> None:
+        wire = p.encode_message(msg, self._tx_seq)
+        self._tx_seq = (self._tx_seq + 1) & 0xFFFF
+        self.log.tx_frames += 1
+        if sum(len(b) for _, b in self._backlog) > TX_BACKLOG_MAX:
+            self.log.tx_dropped += 1
+            return
+        f, rng, now = self.faults, self._rng, time.monotonic()
+        if rng.random() < f.junk:
+            self._backlog.append((now, rng.randbytes(rng.randrange(1, 40)) + b"\x00"))
+        body = self._corrupt(wire[:-1], f.drop_byte, f.flip_bit)
+        if rng.random() < f.truncate:
+            body = body[: rng.randrange(len(body))]
+        wire = body + b"\x00"
+        if rng.random() < f.split:
+            cut = rng.randrange(1, len(wire))
+            self._backlog += [(now, wire[:cut]), (now + 3e-4, wire[cut:])]
+        else:
+            self._backlog.append((now, wire))
+
+    def _next_release(self) -> float:
+        return self._backlog[0][0] if self._backlog else float("inf")
+
+    def _flush(self) -> None:
+        now = time.monotonic()
+        while self._backlog and self._backlog[0][0] <= now and self._master >= 0:
+            release, data = self._backlog[0]
+            try:
+                written = os.write(self._master, data)
+            except BlockingIOError:
+                return
+            if written < len(data):
+                self._backlog[0] = (release, data[written:])
+                return
+            self._backlog.pop(0)
+
+
+def _msg_type(code: int) -> p.MsgType | int:
+    try:
+        return p.MsgType(code)
+    except ValueError:
+        return code
+
+
+# --- in a process of its own -------------------------------------------------------------
+
+
+class EmulatorProcess:
+    """An emulator served by a child process; :attr:`port` is its pty path."""
+
+    def __init__(self, process: mp.process.BaseProcess, port: str, stop: mp.synchronize.Event):
+        self.process, self.port, self._stop = process, port, stop
+
+    def close(self) -> None:
+        """Ask the child to stop, then make sure it has."""
+        self._stop.set()
+        self.process.join(timeout=2.0)
+        if self.process.is_alive():
+            self.process.terminate()
+            self.process.join(timeout=2.0)
+
+    def __enter__(self) -> EmulatorProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _child(physics: RigPhysics, hardware: RigHardware | None, faults: FaultPlan | None,
+           time_origin: float | None, realtime: bool, ports: mp.connection.Connection,
+           stop: mp.synchronize.Event) -> None:
+    emulator = RigEmulator(physics, hardware, faults, time_origin=time_origin,
+                           realtime=realtime)
+    ports.send(emulator.start())
+    stop.wait()
+    emulator.close()
+
+
+def spawn_emulator(
+    physics: RigPhysics,
+    hardware: RigHardware | None = None,
+    faults: FaultPlan | None = None,
+    *,
+    time_origin: float | None = None,
+    realtime: bool = False,
+    timeout: float = 30.0,
+) -> EmulatorProcess:
+    """Start an emulator in a new (spawned) process; ``physics`` must be picklable."""
+    ctx = mp.get_context("spawn")
+    here, there = ctx.Pipe()
+    stop = ctx.Event()
+    args = (physics, hardware, faults, time_origin, realtime, there, stop)
+    proc = ctx.Process(target=_child, args=args, name="rig-emulator", daemon=True)
+    proc.start()
+    if not here.poll(timeout):
+        proc.terminate()
+        raise RuntimeError("the emulator process did not report its port")
+    return EmulatorProcess(proc, here.recv(), stop)

@@ -1,0 +1,534 @@
+"""Host side of the rig protocol over pyserial (docs/rig-protocol.md).
+
+:class:`SerialLink` opens any pyserial URL (a device path, a pseudo-terminal,
+``socket://host:port``, ``loop://``), runs a reader thread that decodes frames, sends
+heartbeats and watches the telemetry, and offers commands with acknowledgement and
+retransmission, the version handshake, streamed trajectories with flow control, a
+telemetry queue, stop and emergency stop. Any failure (watchdog timeout, disconnect,
+MCU reset, rig fault) is raised from the next :meth:`SerialLink.next_sample` call,
+after every sample received before it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import queue
+import random
+import select
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+
+import serial
+
+from hil import protocol as p
+from hil.realtime import set_realtime
+
+ESTOP_REPEATS = 3  # an emergency stop is sent this many times back to back
+
+
+class RigError(Exception):
+    """Base of every error of the rig link."""
+
+
+class HandshakeError(RigError):
+    """No session could be opened (no answer, wrong protocol version, rig busy)."""
+
+
+class CommandError(RigError):
+    """A command was refused (NAK) or never acknowledged."""
+
+
+class LinkTimeoutError(RigError):
+    """The host-side watchdog saw no telemetry for longer than its timeout."""
+
+
+class LinkLostError(RigError):
+    """The port failed or was disconnected."""
+
+
+class RigResetError(RigError):
+    """The MCU rebooted during the session; its position reference is lost."""
+
+
+class RigFaultError(RigError):
+    """The MCU latched a fault (it has already stopped or halted)."""
+
+    def __init__(self, message: str, faults: p.Fault) -> None:
+        super().__init__(message)
+        self.faults = faults
+
+
+@dataclass(frozen=True)
+class Scaling:
+    """Raw units of the rig -> SI, from HELLO_REPLY and the load-cell calibration in use."""
+
+    step_m: float
+    enc_m: float
+    load_offset: int
+    load_gain_n: float
+    period: float
+
+    def x(self, steps: int, origin: float = 0.0) -> float:
+        """Input-link position (m) of a step count; ``origin`` is the position at step 0."""
+        return origin + steps * self.step_m
+
+    def steps(self, x: float, origin: float = 0.0) -> int:
+        """Nearest step count of input-link position ``x`` (m)."""
+        return round((x - origin) / self.step_m)
+
+    def platen(self, enc: int, origin: float = 0.0) -> float:
+        """Platen position (m) of an encoder count; ``origin`` is the position at count 0."""
+        return origin + enc * self.enc_m
+
+    def counts(self, platen: float, origin: float = 0.0) -> int:
+        """Nearest encoder count of platen position ``platen`` (m)."""
+        return round((platen - origin) / self.enc_m)
+
+    def force(self, load_raw: int) -> float:
+        """Input force (N) of a raw load-cell reading."""
+        return (load_raw - self.load_offset) * self.load_gain_n
+
+
+@dataclass
+class LinkStats:
+    """Counters and timestamps of a link (times are time.monotonic())."""
+
+    samples: int = 0
+    lost_samples: int = 0  # gaps in the telemetry sample index
+    queue_dropped: int = 0  # samples dropped because nobody consumed them
+    retransmissions: int = 0
+    bad_messages: int = 0  # valid frames with an unknown type or wrong length
+    last_telemetry_rx: float = 0.0
+    failed_at: float | None = None
+    stop_sent_at: float | None = None
+
+
+class _Pending:
+    """A command waiting for its ACK."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.reply: p.Ack | p.HelloReply | None = None
+
+
+class SerialLink:
+    """A session with the rig's MCU; use as a context manager so the port always closes."""
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        baudrate: int = 921_600,
+        ack_timeout: float = 0.02,
+        retries: int = 5,
+        heartbeat_period: float | None = 0.02,
+        telemetry_timeout: float | None = None,
+        queue_size: int = 100_000,
+        realtime: bool = False,
+    ) -> None:
+        """``telemetry_timeout`` defaults to three telemetry periods; ``heartbeat_period``
+        None sends no heartbeats (only to test the MCU's watchdog); ``realtime`` asks for
+        SCHED_FIFO scheduling of the reader thread, which keeps the 3 ms watchdog honest
+        on a loaded host (best effort: ignored without the permission)."""
+        self.url, self.baudrate = url, baudrate
+        self.ack_timeout, self.retries = ack_timeout, retries
+        self.heartbeat_period = heartbeat_period
+        self.realtime = realtime
+        self._telemetry_timeout = telemetry_timeout
+        self.stats = LinkStats()
+        self.decoder = p.FrameDecoder()
+        self.info: p.HelloReply | None = None
+        self.scaling: Scaling | None = None
+        self.fault_reports: list[p.FaultReport] = []
+        self.state_changes: list[p.StateChange] = []
+        self._queue: queue.Queue[p.Telemetry | None] = queue.Queue(queue_size)
+        self._ser: serial.SerialBase | None = None
+        self._fd: int | None = None
+        self._reader: threading.Thread | None = None
+        self._closing = threading.Event()
+        self._write_lock = threading.Lock()
+        self._cmd_lock = threading.Lock()
+        self._seq = random.getrandbits(16)
+        self._pending: dict[int, _Pending] = {}
+        self._failure: RigError | None = None
+        self._last_sample: int | None = None
+        self._faults_from = 0  # fault bits in samples before this index are already handled
+
+    # --- opening and closing --------------------------------------------------------------
+
+    def open(self, config: p.Config | None = None) -> p.HelloReply:
+        """Open the port, start the reader, handshake; send ``config`` if given."""
+        try:
+            self._ser = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise LinkLostError(f"cannot open {self.url}: {exc}") from exc
+        try:
+            self._fd = self._ser.fileno()
+        except (AttributeError, serial.SerialException, OSError):
+            self._fd = None
+        self._ser.reset_input_buffer()
+        self._reader = threading.Thread(target=self._read_loop, name="rig-reader", daemon=True)
+        self._reader.start()
+        try:
+            self._handshake()
+            if config is not None:
+                self.configure(config)
+        except BaseException:
+            self.close()
+            raise
+        return self.info
+
+    def _handshake(self) -> None:
+        nonce = random.getrandbits(32)
+        deadline = time.monotonic() + 2.0
+        while True:
+            try:
+                reply = self.command(p.Hello(p.PROTO_MAJOR, p.PROTO_MINOR, nonce), check=False)
+            except CommandError as exc:
+                raise HandshakeError(f"no answer to HELLO on {self.url}: {exc}") from exc
+            if reply.result == p.Result.BAD_STATE and time.monotonic() < deadline:
+                self.command(p.Stop(), check=False)  # a previous session left it moving
+                time.sleep(0.05)
+                continue
+            break
+        if not isinstance(reply, p.HelloReply) or reply.result != p.Result.OK:
+            raise HandshakeError(
+                f"rig refused the session: {p.Result(reply.result).name} (MCU protocol "
+                f"{getattr(reply, 'proto_major', '?')}, host {p.PROTO_MAJOR})")
+        if reply.host_nonce != nonce:
+            raise HandshakeError("HELLO_REPLY echoes another session's nonce")
+        self.scaling = Scaling(reply.step_nm / 1e9, reply.enc_nm / 1e9, reply.load_offset,
+                               reply.load_gain_n, 1.0 / reply.telemetry_hz)
+        self._last_sample = None
+        self.stats.last_telemetry_rx = time.monotonic()
+        self.info = reply  # last: it arms the reader's watchdog and heartbeats
+
+    @property
+    def telemetry_timeout(self) -> float:
+        """Host watchdog: longest allowed silence of the telemetry stream, s."""
+        if self._telemetry_timeout is not None:
+            return self._telemetry_timeout
+        return 3.0 / self.info.telemetry_hz if self.info else 1.0
+
+    def close(self) -> None:
+        """Stop the rig if it may move, end the session, stop the reader, close the port.
+
+        Never raises; safe to call more than once and after any failure.
+        """
+        if self._ser is None:
+            return
+        if self.info is not None and not isinstance(self._failure, LinkLostError):
+            self.stop_quietly()
+            with contextlib.suppress(RigError):
+                self.command(p.Bye(), check=False)
+        self._closing.set()
+        if self._reader is not None and self._reader is not threading.current_thread():
+            self._reader.join(timeout=1.0)
+        with contextlib.suppress(serial.SerialException, OSError):
+            self._ser.close()
+        self._ser = None
+        self.info = None
+
+    def __enter__(self) -> SerialLink:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- commands -------------------------------------------------------------------------
+
+    def command(self, msg: p.Message, *, check: bool = True) -> p.Ack | p.HelloReply:
+        """Send ``msg``, wait for its ACK, retransmit on timeout; CommandError on NAK."""
+        with self._cmd_lock:
+            seq = self._next_seq()
+            pending = self._pending[seq] = _Pending()
+            try:
+                for attempt in range(self.retries + 1):
+                    flags = p.FLAG_ACK_REQ | (p.FLAG_RETRY if attempt else 0)
+                    self._write(p.encode_message(msg, seq, flags))
+                    if pending.event.wait(self.ack_timeout):
+                        break
+                    if isinstance(self._failure, LinkLostError):
+                        raise self._failure
+                    self.stats.retransmissions += 1
+                else:
+                    raise CommandError(f"{msg.TYPE.name} not acknowledged after "
+                                       f"{self.retries + 1} attempts")
+            finally:
+                del self._pending[seq]
+        reply = pending.reply
+        if check and reply.result != p.Result.OK:
+            error = CommandError(f"{msg.TYPE.name} refused: {p.Result(reply.result).name} "
+                                 f"(MCU state {p.State(reply.state).name})")
+            if self._failure is not None:
+                raise self._failure from error
+            raise error
+        return reply
+
+    def configure(self, config: p.Config) -> None:
+        """Send limits (and a calibration, if its gain is not 0) in IDLE; the scaling follows."""
+        self.command(config)
+        if config.load_gain_n == 0:
+            return
+        self.scaling = dataclasses.replace(self.scaling, load_offset=config.load_offset,
+                                           load_gain_n=config.load_gain_n)
+
+    def send_chunk(self, first_index: int, points: Sequence[tuple[int, int]],
+                   *, final: bool = False, check: bool = True) -> p.Ack:
+        """Send one chunk of (steps, expected encoder counts) points."""
+        flags = p.TrajChunk.FINAL if final else 0
+        return self.command(p.TrajChunk(first_index, flags, tuple(points)), check=check)
+
+    def start(self) -> p.Ack:
+        """Start the buffered trajectory; the ACK's ``sample`` is the first sample of the run."""
+        return self.command(p.Start())
+
+    def stop(self) -> None:
+        """Controlled stop (decelerate, discard the buffer)."""
+        self.command(p.Stop())
+
+    def clear_fault(self) -> None:
+        """Leave FAULT/ESTOP; forget a RigFaultError failure."""
+        ack = self.command(p.ClearFault())
+        self._faults_from = ack.sample + 1
+        if isinstance(self._failure, RigFaultError):
+            self._failure = None
+
+    def set_position(self, steps: int, enc: int) -> None:
+        """Redefine the present step and encoder counts (after homing)."""
+        self.command(p.SetPosition(steps, enc))
+
+    def estop(self) -> bool:
+        """Emergency stop, sent at once even while another command waits; True if acked."""
+        seq = self._next_seq()
+        pending = self._pending[seq] = _Pending()
+        try:
+            for _ in range(ESTOP_REPEATS):
+                self._write(p.encode_message(p.EStop(), seq, p.FLAG_ACK_REQ))
+            return pending.event.wait(self.ack_timeout * (self.retries + 1))
+        except LinkLostError:
+            return False
+        finally:
+            self._pending.pop(seq, None)
+
+    def stop_quietly(self) -> None:
+        """STOP, or ESTOP if STOP is not acknowledged; never raises (for cleanup paths)."""
+        if isinstance(self._failure, LinkLostError):
+            return
+        try:
+            self.command(p.Stop(), check=False)
+        except RigError:
+            self.estop()
+
+    def _next_seq(self) -> int:
+        with self._write_lock:
+            self._seq = (self._seq + 1) & 0xFFFF
+            return self._seq
+
+    def _write(self, data: bytes) -> None:
+        ser = self._ser
+        if ser is None:
+            raise LinkLostError("port is closed")
+        try:
+            with self._write_lock:
+                ser.write(data)
+        except (serial.SerialException, OSError) as exc:
+            lost = LinkLostError(f"write to {self.url} failed: {exc}")
+            self._fail(lost)
+            raise lost from exc
+
+    # --- telemetry ------------------------------------------------------------------------
+
+    def next_sample(self, timeout: float = 1.0) -> p.Telemetry:
+        """The next telemetry sample; raises the link's failure once the samples before it
+        are consumed, or LinkTimeoutError if none arrives within ``timeout``."""
+        while True:
+            try:
+                item = self._queue.get(timeout=timeout)
+            except queue.Empty:
+                if self._failure is not None:
+                    raise self._failure from None
+                raise LinkTimeoutError(f"no telemetry for {timeout} s") from None
+            if item is not None:
+                return item
+            if self._failure is not None:
+                raise self._failure
+
+    def drain(self) -> list[p.Telemetry]:
+        """All samples queued now, without waiting or raising."""
+        out = []
+        while True:
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                return out
+            if item is not None:
+                out.append(item)
+
+    @property
+    def failure(self) -> RigError | None:
+        """The failure that ended the session, if any."""
+        return self._failure
+
+    def run_trajectory(self, points: Sequence[tuple[int, int]]) -> Iterator[p.Telemetry]:
+        """Stream ``points`` (steps, expected encoder counts; p.NO_CHECK skips the check),
+        start them and yield every sample of the run until the MCU reports it complete.
+
+        Flow control: points sent minus points executed (from telemetry) never exceeds
+        the MCU's buffer. Any exception, including the consumer abandoning the
+        generator, stops the rig before it propagates.
+        """
+        if not points:
+            raise ValueError("a trajectory needs at least one point")
+        capacity, size = self.info.buffer_capacity, self.info.max_chunk_points
+        sent = 0
+
+        def top_up(executed: int) -> int:
+            nonlocal sent
+            while sent < len(points) and sent - executed + size <= capacity:
+                chunk = points[sent : sent + size]
+                ack = self.send_chunk(sent, chunk, final=sent + len(chunk) == len(points),
+                                      check=False)
+                if ack.result == p.Result.NO_SPACE:
+                    break  # our estimate was optimistic; retry after the next sample
+                if ack.result != p.Result.OK:
+                    if self._failure is not None:
+                        raise self._failure
+                    raise CommandError(f"chunk at point {sent} refused: "
+                                       f"{p.Result(ack.result).name}")
+                sent += len(chunk)
+            return sent
+
+        try:
+            top_up(0)
+            first = self.start().sample
+            while True:
+                tel = self.next_sample(timeout=max(1.0, 10 * self.telemetry_timeout))
+                if tel.sample < first:
+                    continue
+                yield tel
+                if tel.state == p.State.IDLE and tel.exec_index >= len(points):
+                    return
+                if tel.state != p.State.RUNNING:
+                    raise RigError(f"run ended early in state {p.State(tel.state).name} "
+                                   f"after {tel.exec_index} of {len(points)} points")
+                top_up(tel.exec_index)
+        except BaseException:
+            self.stop_quietly()
+            raise
+
+    # --- reader thread --------------------------------------------------------------------
+
+    def _read_loop(self) -> None:
+        if self.realtime:
+            set_realtime()
+        next_heartbeat = time.monotonic()
+        while not self._closing.is_set():
+            now = time.monotonic()
+            heartbeat_due = next_heartbeat if self.info and self.heartbeat_period else now + 1
+            wake = min(heartbeat_due, self._watchdog_deadline()) - now
+            try:
+                data = self._read(max(0.0, min(wake, 0.05)))
+            except (serial.SerialException, OSError) as exc:
+                self._fail(LinkLostError(f"{self.url} disconnected: {exc}"))
+                return
+            now = time.monotonic()
+            for frame in self.decoder.feed(data):
+                self._dispatch(frame, now)
+            if self.info and self.heartbeat_period and now >= next_heartbeat:
+                next_heartbeat = now + self.heartbeat_period
+                self._send_quietly(p.Heartbeat(int(now * 1e3) & 0xFFFFFFFF))
+            if now >= self._watchdog_deadline() and not self._pending_input():
+                silence = now - self.stats.last_telemetry_rx
+                self._fail(LinkTimeoutError(
+                    f"no telemetry for {silence * 1e3:.1f} ms (watchdog "
+                    f"{self.telemetry_timeout * 1e3:.1f} ms): rig stalled or link broken"))
+
+    def _read(self, timeout: float) -> bytes:
+        ser = self._ser
+        if self._fd is not None:
+            readable, _, _ = select.select([self._fd], [], [], timeout)
+            return ser.read(ser.in_waiting or 1) if readable else b""
+        waiting = ser.in_waiting
+        if not waiting:
+            time.sleep(min(timeout, 5e-4))
+            waiting = ser.in_waiting
+        return ser.read(waiting) if waiting else b""
+
+    def _pending_input(self) -> bool:
+        try:
+            return bool(self._ser.in_waiting)
+        except (serial.SerialException, OSError, AttributeError):
+            return False
+
+    def _watchdog_deadline(self) -> float:
+        if self.info is None or self._failure is not None:
+            return float("inf")
+        return self.stats.last_telemetry_rx + self.telemetry_timeout
+
+    def _dispatch(self, frame: p.Frame, now: float) -> None:
+        try:
+            msg = p.parse_message(frame)
+        except p.MessageError:
+            self.stats.bad_messages += 1
+            return
+        if isinstance(msg, p.Telemetry):
+            self._on_telemetry(dataclasses.replace(msg, rx_time=now), now)
+        elif isinstance(msg, (p.Ack, p.HelloReply)):
+            pending = self._pending.get(msg.acked_seq)
+            if pending is not None and pending.reply is None:
+                pending.reply = msg
+                pending.event.set()
+        elif isinstance(msg, p.FaultReport):
+            self.fault_reports.append(msg)
+            if self.info is not None and msg.sample >= self._faults_from:
+                self._fail(RigFaultError(
+                    f"rig fault {p.Fault(msg.fault).name} at sample {msg.sample}: value "
+                    f"{msg.value}, limit {msg.limit} (MCU state {p.State(msg.state).name})",
+                    p.Fault(msg.fault)))
+        elif isinstance(msg, p.StateChange):
+            self.state_changes.append(msg)
+
+    def _on_telemetry(self, tel: p.Telemetry, now: float) -> None:
+        if self.info is None:
+            return  # before the handshake: stale or foreign samples
+        if tel.boot_id != self.info.boot_id:
+            self._fail(RigResetError(
+                f"MCU reset detected mid-session: boot id changed from "
+                f"{self.info.boot_id:#010x} to {tel.boot_id:#010x} after sample "
+                f"{self._last_sample}; the rig's position reference is lost, re-home and "
+                f"open a new session"))
+            return
+        if self._last_sample is not None and tel.sample > self._last_sample + 1:
+            self.stats.lost_samples += tel.sample - self._last_sample - 1
+        self._last_sample = tel.sample
+        self.stats.samples += 1
+        self.stats.last_telemetry_rx = now
+        try:
+            self._queue.put_nowait(tel)
+        except queue.Full:
+            self.stats.queue_dropped += 1
+        if tel.faults and tel.sample >= self._faults_from:
+            faults = p.Fault(tel.faults)
+            self._fail(RigFaultError(f"rig fault {faults.name} (state {p.State(tel.state).name}) "
+                                f"at sample {tel.sample}", faults))
+
+    def _fail(self, error: RigError) -> None:
+        """Record the first failure, stop the rig unless the link is gone, wake consumers."""
+        if self._failure is not None:
+            return
+        self._failure = error
+        self.stats.failed_at = time.monotonic()
+        if not isinstance(error, LinkLostError) and self.info is not None:
+            self._send_quietly(p.Stop(), ack=True)
+            self.stats.stop_sent_at = time.monotonic()
+        with contextlib.suppress(queue.Full):
+            self._queue.put_nowait(None)
+
+    def _send_quietly(self, msg: p.Message, *, ack: bool = False) -> None:
+        """Send without waiting (the reader cannot wait for its own ACKs)."""
+        with contextlib.suppress(LinkLostError):
+            self._write(p.encode_message(msg, self._next_seq(), p.FLAG_ACK_REQ if ack else 0))
