@@ -1,0 +1,91 @@
+"""``hil rsm``: fit the response surfaces of section 5.2 to runs (or to the paper's tables)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from hil.rsm import (
+    RESPONSES,
+    TERMS,
+    RsmError,
+    fit_rsm,
+    load_paper_tables,
+    load_summaries,
+    plot_rsm,
+    toggle_cos_theta8,
+)
+from toggle.params import load_preset
+
+
+def add_parser(subparsers: Any) -> None:
+    """Register ``rsm`` on the ``hil`` command's sub-parsers."""
+    p = subparsers.add_parser(
+        "rsm", help="fit the response surfaces (Eqs 44-47) to runs and draw contour maps",
+        description="Least-squares fit of the modified cubic model in v and delta_r8 to the "
+                    "summaries of reciprocating runs (>= 3 speeds x 3 link errors), as in "
+                    "Chang, Lee & Hsu 2021, section 5.2. Coefficients are printed in the "
+                    "paper's units (v in mm/s, delta_r8 in mm; mm or N); --json gives SI too.",
+    )
+    p.add_argument("runs", nargs="*", metavar="RUN", help="run directories or summary.json files")
+    p.add_argument("--paper-tables", action="store_true",
+                   help="fit the means of the paper's Tables 3-8 instead, and compare with "
+                        "its Eqs 44-47")
+    p.add_argument("--preset", default=None,
+                   help="nominal mechanism: plot against the platen error at the toggle "
+                        "dL_TP (as the paper's Figures 17-20) instead of delta_r8")
+    p.add_argument("--out", type=Path, default=None,
+                   help="directory for rsm.json and the contour maps (PNG)")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+    p.set_defaults(handler=run)
+
+
+def _printed_comparison(fit_paper: dict[str, tuple[float, ...]]) -> dict[str, Any]:
+    """Each printed coefficient of Eqs 44-47 next to the fitted one and whether they agree
+    to the printed digits (half a unit in the last printed place)."""
+    printed = load_paper_tables().equations
+    out = {}
+    for name, coefs in fit_paper.items():
+        rows = []
+        for text, value in zip(printed[name], coefs):
+            decimals = len(text.split(".")[1]) if "." in text else 0
+            rows.append({"printed": float(text), "fitted": value,
+                         "agrees": abs(value - float(text)) <= 0.5 * 10.0**-decimals})
+        out[name] = rows
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.paper_tables == bool(args.runs):
+        raise RsmError("give run directories or --paper-tables (one of the two)")
+    fit = fit_rsm(load_paper_tables() if args.paper_tables else load_summaries(args.runs))
+    payload = fit.to_dict()
+    paper = {name: r.paper_coefficients for name, r in fit.responses.items()}
+    if args.paper_tables:
+        payload["printed_equations"] = _printed_comparison(paper)
+    cos8 = toggle_cos_theta8(load_preset(args.preset)) if args.preset else None
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "rsm.json").write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
+        payload["figures"] = [str(p) for p in plot_rsm(fit, args.out, cos_theta8=cos8)]
+    if args.json:
+        print(json.dumps(payload, indent=2))
+        return 0
+    print(f"modified cubic model fitted to {len(fit.speed)} points "
+          "(v in mm/s, delta_r8 = D in mm; coefficients in mm or N)")
+    for name, r in fit.responses.items():
+        eq, unit, _ = RESPONSES[name]
+        print(f"\n{name} [{unit}] ({eq} model): residual norm "
+              f"{r.residual_norm * RESPONSES[name][2]:.4g} {unit}, R^2 {r.r_squared:.4f}")
+        rows = payload.get("printed_equations", {}).get(name)
+        for i, term in enumerate(TERMS):
+            line = f"  {term:>6}  {r.paper_coefficients[i]:>14.6g}"
+            if rows:
+                mark = "agrees" if rows[i]["agrees"] else "differs"
+                line += f"   printed {rows[i]['printed']:>12.7g}  {mark}"
+            print(line)
+    for fig in payload.get("figures", []):
+        print(f"wrote {fig}")
+    return 0

@@ -1,0 +1,190 @@
+"""The reciprocating experiment of Chang, Lee & Hsu 2021, section 5, and its cycle segmentation.
+
+The input link is driven forward from the open position x_open (link 3 horizontal)
+to the toggle x_TP and back, N times, at a speed v. Each stroke is a jerk-limited
+("double S") move: its position is the distance D times the CDF of the sum of three
+uniform variables U(0, D/v) + U(0, v/a) + U(0, a/j), i.e. a velocity pulse of height v
+and width D/v smoothed by two box filters (of widths v/a and a/j). That gives exactly
+the distance D, peak velocity <= v (= v when the stroke is long enough to cruise), peak
+acceleration <= a and peak jerk <= j; without a jerk limit the second filter is
+dropped (trapezoidal velocity). The strokes join at rest, without dwell.
+
+A recorded stream is cut into cycles by the commanded position alone, so the same
+segmentation serves every back-end and a re-read CSV.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from hil.samples import Trajectory, TrajectoryError
+from toggle.kinematics import stroke_limits
+from toggle.params import Mechanism
+
+#: Default ramp limits: at 25 mm/s the velocity ramp lasts 50 ms + 10 ms.
+DEFAULT_ACCEL = 0.5  # m/s^2
+DEFAULT_JERK = 50.0  # m/s^3
+DEFAULT_PERIOD = 1e-3  # s
+#: Band around x_open / x_TP (m) within which the commanded position counts as "at the end".
+DEFAULT_END_TOL = 1e-6
+
+
+def _integrated_cdf(s: np.ndarray, widths: Sequence[float]) -> np.ndarray:
+    """Integral from 0 to s of the CDF of the sum of independent U(0, w) variables.
+
+    Closed form: sum over subsets S of (-1)^|S| (s - sum_S w)_+^(m+1) / ((m+1)! prod w)
+    while s < sum w; beyond, s - sum(w) / 2 exactly.
+    """
+    m, total = len(widths), sum(widths)
+    acc = np.zeros_like(s)
+    for k in range(m + 1):
+        for subset in itertools.combinations(widths, k):
+            acc += (-1) ** k * np.maximum(s - sum(subset), 0.0) ** (m + 1)
+    ramp = acc / (math.factorial(m + 1) * math.prod(widths))
+    return np.where(s >= total, s - total / 2, ramp)
+
+
+def stroke_positions(
+    start: float, end: float, speed: float, period: float,
+    accel: float = DEFAULT_ACCEL, jerk: float | None = DEFAULT_JERK,
+) -> np.ndarray:
+    """Positions of one jerk-limited move from ``start`` to ``end`` every ``period`` s.
+
+    The first sample is ``start``; the last is exactly ``end`` (the move's duration
+    is rounded up to a whole number of periods).
+    """
+    for name, value in (("speed", speed), ("period", period), ("accel", accel)):
+        if not (math.isfinite(value) and value > 0):
+            raise TrajectoryError(f"{name} must be positive, got {value!r}")
+    if jerk is not None and not (math.isfinite(jerk) and jerk > 0):
+        raise TrajectoryError(f"jerk must be positive or None, got {jerk!r}")
+    distance = abs(end - start)
+    if distance == 0:
+        raise TrajectoryError("a stroke needs distinct start and end positions")
+    cruise = distance / speed
+    ramps = [speed / accel] + ([accel / jerk] if jerk is not None else [])
+    n = math.ceil((cruise + sum(ramps)) / period - 1e-9)
+    t = np.arange(n + 1) * period
+    # CDF of U(0, cruise) + ramps = (G(t) - G(t - cruise)) / cruise, G the integrated
+    # CDF of the ramps alone: no cancellation between large powers of t
+    frac = (_integrated_cdf(t, ramps) - _integrated_cdf(t - cruise, ramps)) / cruise
+    x = start + (end - start) * np.clip(frac, 0.0, 1.0)
+    x[-1] = end  # the move is over by then (frac = 1); avoid start + (end - start) roundoff
+    return x
+
+
+def _repeat_cycles(forward: np.ndarray, backward: np.ndarray, cycles: int,
+                   period: float) -> Trajectory:
+    """forward, backward, forward, ... sharing their end samples, as one trajectory."""
+    if not (isinstance(cycles, int) and cycles >= 1):
+        raise TrajectoryError(f"cycles must be a positive integer, got {cycles!r}")
+    one = np.concatenate([forward[:-1], backward[:-1]])
+    x = np.concatenate([np.tile(one, cycles), backward[-1:]])
+    return Trajectory.from_positions(x, period)
+
+
+def reciprocating_trajectory(
+    mech: Mechanism, speed: float, cycles: int, period: float = DEFAULT_PERIOD, *,
+    accel: float = DEFAULT_ACCEL, jerk: float | None = DEFAULT_JERK,
+) -> Trajectory:
+    """Seed 000's experiment: x_open -> x_TP -> x_open, ``cycles`` times, at ``speed`` m/s.
+
+    The end positions come from ``mech``'s lower half, so pass the nominal mechanism
+    (the paper drives every Delta r8 between the nominal -3.439 and 51.566 mm).
+    """
+    x_open, x_tp = stroke_limits(mech.lower)
+    forward = stroke_positions(x_open, x_tp, speed, period, accel, jerk)
+    return _repeat_cycles(forward, forward[::-1], cycles, period)
+
+
+def profile_cycles(forward: Trajectory, cycles: int) -> Trajectory:
+    """A planned forward stroke, replayed ``cycles`` times with its time-mirror as the return."""
+    return _repeat_cycles(forward.x_cmd, forward.x_cmd[::-1], cycles, forward.period)
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """Sample indices of one complete cycle (all inclusive).
+
+    start: at x_open where the forward stroke begins; toggle: first sample at the
+    toggle (the cycle's largest command); reverse: last sample at the toggle, where
+    the backward stroke begins; end: first sample back at x_open.
+    """
+
+    start: int
+    toggle: int
+    reverse: int
+    end: int
+
+    @property
+    def forward(self) -> slice:
+        return slice(self.start, self.toggle + 1)
+
+    @property
+    def backward(self) -> slice:
+        return slice(self.reverse, self.end + 1)
+
+
+def _end_runs(zone: np.ndarray) -> list[tuple[int, int, int]]:
+    """Maximal runs (zone, first, last) of the non-zero zones, merging repeats of one zone."""
+    idx = np.flatnonzero(zone)
+    runs: list[tuple[int, int, int]] = []
+    if idx.size == 0:
+        return runs
+    z = zone[idx]
+    breaks = np.flatnonzero(z[1:] != z[:-1]) + 1
+    for lo, hi in zip(np.r_[0, breaks], np.r_[breaks, idx.size]):
+        runs.append((int(z[lo]), int(idx[lo]), int(idx[hi - 1])))
+    return runs
+
+
+def segment_cycles(
+    x_cmd: np.ndarray, x_open: float, x_toggle: float, tol: float = DEFAULT_END_TOL
+) -> list[Cycle]:
+    """Complete cycles of a stream, found from its commanded positions.
+
+    A sample is "open" within ``tol`` of x_open (or below) and "toggle" within ``tol``
+    of x_toggle (or above); a cycle is an open run, a toggle run and the next open
+    run. An unfinished last cycle (an aborted run) is left out.
+    """
+    x = np.asarray(x_cmd, dtype=float)
+    if not x_toggle - x_open > 2 * tol:
+        raise ValueError(f"x_toggle {x_toggle} m must exceed x_open {x_open} m by more than 2 tol")
+    zone = np.where(x <= x_open + tol, -1, np.where(x >= x_toggle - tol, 1, 0))
+    runs = _end_runs(zone)
+    cycles = []
+    for (za, a0, a1), (zb, b0, b1), (zc, c0, c1) in zip(runs, runs[1:], runs[2:]):
+        if (za, zb, zc) != (-1, 1, -1):
+            continue
+        a, b, c = x[a0:a1 + 1], x[b0:b1 + 1], x[c0:c1 + 1]
+        cycles.append(Cycle(
+            start=a0 + int(np.flatnonzero(a == a.min())[-1]),
+            toggle=b0 + int(np.argmax(b)),
+            reverse=b0 + int(np.flatnonzero(b == b.max())[-1]),
+            end=c0 + int(np.argmin(c)),
+        ))
+    return cycles
+
+
+class CycleCounter:
+    """Counts completed cycles while samples arrive (for a progress bar)."""
+
+    def __init__(self, x_open: float, x_toggle: float, tol: float = DEFAULT_END_TOL) -> None:
+        self._open, self._toggle, self._tol = x_open + tol, x_toggle - tol, tol
+        self._reached_toggle = False
+        self.completed = 0
+
+    def update(self, x_cmd: float) -> bool:
+        """Feed one commanded position; True when it completes a cycle."""
+        if x_cmd >= self._toggle:
+            self._reached_toggle = True
+        elif x_cmd <= self._open and self._reached_toggle:
+            self._reached_toggle = False
+            self.completed += 1
+            return True
+        return False
