@@ -7,12 +7,16 @@ linear encoder reads ``platen_position``, the load cell reads ``input_force``.
 Build with ``toggle build-fmu`` (writes build/ToggleClamp.fmu).
 """
 
+import math
+
 from pythonfmu import DefaultExperiment
 
 from toggle.fmu_slave import DeclaredSlave, Var
 from toggle.params import PAPER_NAMES
 from toggle.plant import CompiledPlant, DriveState, configure, follow
 
+#: Parameter value that means "the preset's value".
+PRESET = -1.0
 #: Dimensional errors, one parameter per dimension of each half (seed 000's names).
 ERRORS = tuple(name for half in ("lower", "upper") for name in PAPER_NAMES[half].values())
 MASSES = {"m_crosshead": "crosshead", "m_links": "links", "m_platen": "platen",
@@ -42,16 +46,15 @@ class ToggleClamp(DeclaredSlave):
     STATE_EXCLUDE = frozenset({"_plant"})
     VARIABLES = (
         Var("preset", "parameter", "", "Shipped preset name or TOML path", start="chang2021"),
-        Var("mu", "parameter", "1", "Pin friction coefficient; negative: the preset's",
-            start=-1.0),
+        Var("mu", "parameter", "1", "Pin friction coefficient; -1: the preset's",
+            start=PRESET),
         Var("x_contact", "parameter", "m",
             "Crosshead position at mold contact; at or beyond the toggle: no mold", start=1.0),
-        Var("m_crosshead", "parameter", "kg", "Crosshead mass; negative: the preset's", start=-1.0),
-        Var("m_links", "parameter", "kg", "Lumped link mass; negative: the preset's", start=-1.0),
-        Var("m_platen", "parameter", "kg", "Moving-platen mass; negative: the preset's",
-            start=-1.0),
-        Var("guide_damping", "parameter", "N.s/m", "Viscous guide friction; negative: the preset's",
-            start=-1.0),
+        Var("m_crosshead", "parameter", "kg", "Crosshead mass; -1: the preset's", start=PRESET),
+        Var("m_links", "parameter", "kg", "Lumped link mass; -1: the preset's", start=PRESET),
+        Var("m_platen", "parameter", "kg", "Moving-platen mass; -1: the preset's", start=PRESET),
+        Var("guide_damping", "parameter", "N.s/m", "Viscous guide friction; -1: the preset's",
+            start=PRESET),
         Var("drive_bandwidth", "parameter", "Hz",
             "Drive tracking bandwidth; 0: ideal position source", start=0.0, min=0.0),
         Var("drive_damping", "parameter", "1", "Drive tracking damping ratio", start=0.7,
@@ -62,14 +65,27 @@ class ToggleClamp(DeclaredSlave):
         *(Var(name, "output", unit, text, depends_on=()) for name, unit, text in OUTPUTS),
     )
 
+    def _given(self, name: str) -> float | None:
+        """A parameter's value, None for the preset's (-1); anything else must be >= 0."""
+        value = getattr(self, name)
+        if value == PRESET:
+            return None
+        if not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"parameter {name} must be >= 0 (or -1 for the preset's), "
+                             f"got {value!r}")
+        return value
+
     def initialize(self) -> None:
-        masses = {field: getattr(self, name) for name, field in MASSES.items()
-                  if getattr(self, name) >= 0}
+        for name in ("drive_bandwidth", "drive_damping"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"parameter {name} must be finite and >= 0, got {value!r}")
+        masses = {field: self._given(name) for name, field in MASSES.items()}
         cfg = configure(
             self.preset,
-            mu=self.mu if self.mu >= 0 else None,
+            mu=self._given("mu"),
             x_contact=self.x_contact,
-            masses=masses,
+            masses={k: v for k, v in masses.items() if v is not None},
             errors={n: getattr(self, f"delta_{n}") for n in ERRORS},
         )
         self._plant = CompiledPlant(cfg)
@@ -83,7 +99,6 @@ class ToggleClamp(DeclaredSlave):
 
     def _publish(self, drive: DriveState | None = None) -> None:
         drive = drive or self._drive
-        outputs = self._plant(drive.x, drive.v, drive.a)  # raises outside the range
+        outputs = self._plant(*drive)  # raises outside the range
         self._drive = drive
-        for name, value in zip(outputs._fields, outputs):
-            setattr(self, name, value)
+        self.__dict__.update(zip(outputs._fields, outputs))  # the output variables

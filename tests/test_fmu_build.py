@@ -2,12 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
-import json
 import math
-import subprocess
-import sys
-import textwrap
 import zipfile
 from pathlib import Path
 
@@ -17,22 +12,14 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Discard, fmi2Error
 from fmpy.validation import validate_fmu
+from fmu_support import fmutool_log, load_module, run_fresh, run_libcosim
 
 from toggle.fmu_build import build_fmu, extend_model_description, fmu_module_name
 from toggle.fmu_host import release_native_runtime, start_slave
 from toggle.fmu_slave import Var
 
 SLAVE_FILE = Path(__file__).parent / "fmu_fixtures" / "trivial_slave.py"
-
-
-def _load_fixture_module():
-    spec = importlib.util.spec_from_file_location("trivial_slave_inproc", SLAVE_FILE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-TRIVIAL = _load_fixture_module()
+TRIVIAL = load_module(SLAVE_FILE, "trivial_slave_inproc")
 
 
 @pytest.fixture(scope="module")
@@ -79,14 +66,7 @@ def test_fmpy_validation_finds_no_problem(fmu: Path):
 
 
 def test_fmutool_check_finds_no_problem(fmu: Path):
-    fmutool = Path(sys.executable).parent / "fmutool"
-    if not fmutool.exists():
-        pytest.skip("fmu-manipulation-toolbox is not installed")
-    run = subprocess.run(
-        [str(fmutool), "-input", str(fmu), "-check"], capture_output=True, text=True, timeout=60
-    )
-    log = run.stdout + run.stderr
-    assert run.returncode == 0, log
+    log = fmutool_log(fmu)
     assert "ERROR" not in log and "No semantic error" in log, log
 
 
@@ -240,77 +220,26 @@ def test_out_of_range_input_discards_step_and_keeps_state(unzipped: Path):
 
 # ---- other processes and masters -----------------------------------------------------
 
-FRESH_PROCESS = textwrap.dedent(
-    """
-    import ctypes, json, sys
-    from pathlib import Path
-    import numpy as np
-    from fmpy import extract, simulate_fmu
-    fmu, unzip = sys.argv[1], Path(sys.argv[2])
-    extract(fmu, str(unzip))
-    signal = np.array([(0.0, 0.5), (1.0, 0.5)], dtype=[("time", float), ("u", float)])
-    res = simulate_fmu(str(unzip), stop_time=0.01, step_size=1e-3, input=signal,
-                       output=["y", "x"])
-    toggle_file = sys.modules["toggle"].__file__
-    lib = unzip / "binaries" / "linux64" / "TrivialGain.so"
-    ctypes.CDLL(str(lib)).finalizePythonInterpreter()  # pythonfmu 0.7 exit-time double free
-    print(json.dumps({"y": res["y"][-1], "x": res["x"][-1], "toggle": toggle_file}))
-    """
-)
-
 
 def test_fmu_runs_in_a_fresh_process_from_its_bundled_files(fmu: Path, tmp_path: Path):
-    unzip = tmp_path / "unzipped"
-    run = subprocess.run(
-        [sys.executable, "-c", FRESH_PROCESS, str(fmu), str(unzip)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        cwd=tmp_path,
-    )
-    assert run.returncode == 0, run.stderr
-    result = json.loads(run.stdout.strip().splitlines()[-1])
-    assert result["y"] == 1.0 and result["x"] == pytest.approx(0.005, rel=1e-12)
-    assert Path(result["toggle"]).is_relative_to(unzip / "resources")  # not the dev tree
-
-
-LIBCOSIM_TWO_INSTANCES = textwrap.dedent(
-    """
-    import json, sys
-    from libcosimpy.CosimExecution import CosimExecution
-    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
-    from libcosimpy.CosimObserver import CosimObserver
-    from libcosimpy.CosimSlave import CosimLocalSlave
-    log_output_level(CosimLogLevel.WARNING)
-    execution = CosimExecution.from_step_size(1_000_000)  # ns: 1 ms
-    a = execution.add_local_slave(CosimLocalSlave(fmu_path=sys.argv[1], instance_name="a"))
-    b = execution.add_local_slave(CosimLocalSlave(fmu_path=sys.argv[1], instance_name="b"))
-    refs = {v.name.decode(): v.reference for v in execution.slave_variables(a)}
-    observer = CosimObserver.create_last_value()
-    execution.add_observer(observer)
-    execution.real_initial_value(a, refs["u"], 0.25)
-    execution.real_initial_value(b, refs["gain"], 3.0)
-    execution.connect_real_variables(a, refs["y"], b, refs["u"])
-    ok = execution.simulate_until(100_000_000)  # ns: 0.1 s
-    print(json.dumps({"ok": ok,
-                      "a": observer.last_real_values(a, [refs["y"], refs["x"]]),
-                      "b": observer.last_real_values(b, [refs["y"], refs["x"]])}))
-    """
-)
+    result = run_fresh(fmu, tmp_path, ("u", [0.0, 1.0], [0.5, 0.5]), ["y", "x"],
+                       stop_time=0.01, step_size=1e-3)
+    assert result["last"]["y"] == 1.0
+    assert result["last"]["x"] == pytest.approx(0.005, rel=1e-12)
+    assert Path(result["toggle"]).is_relative_to(Path(result["unzip"], "resources"))  # not dev
 
 
 def test_two_instances_run_in_libcosim(fmu: Path, tmp_path: Path):
     pytest.importorskip("libcosimpy")
-    run = subprocess.run(
-        [sys.executable, "-c", LIBCOSIM_TWO_INSTANCES, str(fmu)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        cwd=tmp_path,
+    result = run_libcosim(
+        tmp_path,
+        slaves={"a": fmu, "b": fmu},
+        observe={"a": ["y", "x"], "b": ["y", "x"]},
+        initial=[("a", "u", 0.25), ("b", "gain", 3.0)],
+        connections=[("a", "y", "b", "u")],
     )
-    assert run.returncode == 0, run.stderr
-    result = json.loads(run.stdout.strip().splitlines()[-1])
     assert result["ok"]
-    assert result["a"] == pytest.approx([0.5, 0.025], rel=1e-12)  # y = 2 u, x = u t
+    a, b = result["last"]["a"], result["last"]["b"]
+    assert [a["y"], a["x"]] == pytest.approx([0.5, 0.025], rel=1e-12)  # y = 2 u, x = u t
     # b.u = a.y = 0.5 from initialisation on (outputs are valid after init)
-    assert result["b"] == pytest.approx([1.5, 0.05], rel=1e-12)
+    assert [b["y"], b["x"]] == pytest.approx([1.5, 0.05], rel=1e-12)

@@ -163,8 +163,12 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig) -> PlantOutputs:
 class CompiledPlant:
     """:func:`plant_outputs` compiled once into a CasADi function, for time stepping.
 
-    One call costs a few microseconds; inputs outside the assemblable range and
-    non-finite results raise :class:`PlantError` instead of returning NaN.
+    One call costs a few microseconds: it evaluates through CasADi's buffer
+    interface (numpy arrays bound once to the function's input and output), so
+    no DM is built per call, which would cost ten times the evaluation. Hence
+    one instance must not be called from two threads at once. Inputs outside
+    the assemblable range and non-finite results raise :class:`PlantError`
+    instead of returning NaN.
     """
 
     def __init__(self, cfg: PlantConfig) -> None:
@@ -174,6 +178,10 @@ class CompiledPlant:
         outs = plant_outputs(sym[0], sym[1], sym[2], cfg)
         self._fn = ca.Function("plant", [sym], [ca.vertcat(*[ca.SX(o) for o in outs])],
                                {"cse": True})
+        self._arg, self._res = np.zeros(3), np.zeros(len(PlantOutputs._fields))
+        self._buffer, self._eval = self._fn.buffer()
+        self._buffer.set_arg(0, memoryview(self._arg))
+        self._buffer.set_res(0, memoryview(self._res))
 
     def __call__(self, x: float, v: float, a: float) -> PlantOutputs:
         if not (self.x_min <= x <= self.x_max):
@@ -181,14 +189,13 @@ class CompiledPlant:
                 f"input position x = {x!r} m outside the assemblable range "
                 f"[{self.x_min:.6g}, {self.x_max:.6g}] m"
             )
-        values = self._fn(ca.DM([x, v, a])).full().ravel()
-        if not np.all(np.isfinite(values)):
+        self._arg[:] = (x, v, a)
+        self._eval()
+        values = self._res.tolist()
+        if not all(map(math.isfinite, values)):
             bad = [n for n, val in zip(PlantOutputs._fields, values) if not math.isfinite(val)]
             raise PlantError(f"no finite plant solution at x = {x!r} m ({', '.join(bad)})")
-        return PlantOutputs(*values.tolist())
-
-
-
+        return PlantOutputs(*values)
 
 
 def configure(
@@ -211,12 +218,17 @@ def configure(
     from toggle.params import load_preset, paper_dimension
 
     mech = load_preset(preset)
+    changed = []
     for name, delta in (errors or {}).items():
         if not math.isfinite(delta):
             raise ParameterError(f"dimensional error delta_{name} must be finite, got {delta!r}")
         half, dim = paper_dimension(name)
         if delta:
-            mech = mech.with_error(half, dim, delta)
+            try:
+                mech = mech.with_error(half, dim, delta)
+            except ParameterError as exc:
+                raise ParameterError(f"delta_{name} = {delta!r} m: {exc}") from exc
+            changed.append(f"delta_{name} = {delta!r} m")
     if masses:
         if mech.dynamics is None:
             raise ParameterError(f"preset {mech.name!r} has no [dynamics] section to override")
@@ -225,7 +237,9 @@ def configure(
         try:
             toggle_position(mech.half(h))
         except AssemblyError as exc:
-            raise ParameterError(f"the {h} half with these dimensional errors: {exc}") from exc
+            raise ParameterError(
+                f"the {h} half with {', '.join(changed) or 'its nominal dimensions'}: {exc}"
+            ) from exc
     if x_contact is not None and x_contact >= toggle_position(mech.lower):
         x_contact = None
     return PlantConfig(mech, mu=mu, x_contact=x_contact)
@@ -240,15 +254,17 @@ class DriveState(NamedTuple):
 
 
 @functools.lru_cache(maxsize=64)
-def _lag_matrices(bandwidth: float, damping: float, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact zero-order-hold discretisation of x'' = w^2 (u - x) - 2 zeta w x'."""
+def _lag_matrices(
+    bandwidth: float, damping: float, h: float
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Exact zero-order-hold discretisation of x'' = w^2 (u - x) - 2 zeta w x' (as floats)."""
     from scipy.linalg import expm
 
     w = 2 * math.pi * bandwidth
     A = np.array([[0.0, 1.0], [-w * w, -2 * damping * w]])
     B = np.array([0.0, w * w])
     M = expm(np.block([[A, B[:, None]], [np.zeros((1, 3))]]) * h)
-    return M[:2, :2], M[:2, 2]
+    return tuple(float(v) for v in M[:2, :2].ravel()), (float(M[0, 2]), float(M[1, 2]))
 
 
 def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
@@ -264,10 +280,11 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
     if bandwidth <= 0:
         v = (x_cmd - state.x) / h
         return DriveState(x_cmd, v, (v - state.v) / h)
-    Phi, Gam = _lag_matrices(bandwidth, damping, h)
-    x, v = Phi @ np.array([state.x, state.v]) + Gam * x_cmd
+    (p00, p01, p10, p11), (g0, g1) = _lag_matrices(bandwidth, damping, h)
+    x = p00 * state.x + p01 * state.v + g0 * x_cmd
+    v = p10 * state.x + p11 * state.v + g1 * x_cmd
     w = 2 * math.pi * bandwidth
-    return DriveState(float(x), float(v), float(w * w * (x_cmd - x) - 2 * damping * w * v))
+    return DriveState(x, v, w * w * (x_cmd - x) - 2 * damping * w * v)
 
 
 __all__ = [

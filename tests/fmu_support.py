@@ -1,0 +1,175 @@
+"""Helpers shared by the FMU tests: run an FMU in other processes and masters.
+
+Both runners start a fresh Python (one that has not imported this project)
+with a script that takes a JSON spec, and return the JSON the script prints
+last. ``run_fresh`` simulates with fmpy and reports where ``toggle`` was
+imported from (it must be the FMU's own ``resources/``); ``run_libcosim`` runs
+any number of FMU instances in one libcosimpy (DNV libcosim) execution.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+import textwrap
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from types import ModuleType
+
+from toggle.fmu_build import DEFAULT_SLAVE
+from toggle.fmu_slave import Var
+
+FRESH_PROCESS = textwrap.dedent(
+    """
+    import ctypes, json, sys
+    from pathlib import Path
+    import numpy as np
+    from fmpy import extract, platform, read_model_description, sharedLibraryExtension
+    from fmpy import simulate_fmu
+    spec = json.loads(sys.argv[1])
+    unzip = Path(spec["unzip"])
+    extract(spec["fmu"], str(unzip))
+    name, times, values = spec["input"]
+    signal = np.array(list(zip(times, values)), dtype=[("time", float), (name, float)])
+    res = simulate_fmu(str(unzip), stop_time=spec["stop_time"], step_size=spec["step_size"],
+                       input=signal, start_values=spec["start_values"], output=spec["output"])
+    toggle_file = sys.modules["toggle"].__file__
+    model = read_model_description(str(unzip)).coSimulation.modelIdentifier
+    lib = unzip / "binaries" / platform / (model + sharedLibraryExtension)
+    ctypes.CDLL(str(lib)).finalizePythonInterpreter()  # pythonfmu 0.7 exit-time double free
+    print(json.dumps({"last": {n: float(res[n][-1]) for n in spec["output"]},
+                      "toggle": toggle_file}))
+    """
+)
+
+LIBCOSIM = textwrap.dedent(
+    """
+    import json, sys
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+    spec = json.loads(sys.argv[1])
+    log_output_level(CosimLogLevel.WARNING)
+    execution = CosimExecution.from_step_size(spec["step_ns"])
+    index, refs = {}, {}
+    for name, fmu in spec["slaves"].items():
+        index[name] = execution.add_local_slave(CosimLocalSlave(fmu_path=fmu, instance_name=name))
+        refs[name] = {v.name.decode(): v.reference for v in execution.slave_variables(index[name])}
+    observer = CosimObserver.create_last_value()
+    execution.add_observer(observer)
+    for name, var, value in spec["initial"]:
+        execution.real_initial_value(index[name], refs[name][var], value)
+    for src, out, dst, inp in spec["connections"]:
+        execution.connect_real_variables(index[src], refs[src][out], index[dst], refs[dst][inp])
+    ok = execution.simulate_until(spec["stop_ns"])
+    last = {name: dict(zip(names, observer.last_real_values(index[name],
+                                                             [refs[name][n] for n in names])))
+            for name, names in spec["observe"].items()}
+    print(json.dumps({"ok": ok, "last": last}))
+    """
+)
+
+
+def fmutool_log(fmu: Path) -> str:
+    """Output of ``fmutool -check`` (fmu-manipulation-toolbox) on ``fmu``; skip if absent."""
+    import pytest
+
+    fmutool = Path(sys.executable).parent / "fmutool"
+    if not fmutool.exists():
+        pytest.skip("fmu-manipulation-toolbox is not installed")
+    run = subprocess.run(
+        [str(fmutool), "-input", str(fmu), "-check"], capture_output=True, text=True, timeout=60
+    )
+    log = run.stdout + run.stderr
+    assert run.returncode == 0, log
+    return log
+
+
+def load_module(path: Path, name: str) -> ModuleType:
+    """Import a slave file in-process under ``name``.
+
+    Use a name that differs from the module name inside the FMU: pythonfmu
+    imports the slave by that name and would reuse a module already in
+    ``sys.modules``.
+    """
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _run_script(script: str, spec: dict, cwd: Path) -> dict:
+    run = subprocess.run(
+        [sys.executable, "-c", script, json.dumps(spec)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=cwd,
+    )
+    assert run.returncode == 0, run.stderr
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def run_fresh(
+    fmu: Path,
+    cwd: Path,
+    signal: tuple[str, Sequence[float], Sequence[float]],
+    output: Sequence[str],
+    stop_time: float,
+    step_size: float,
+    start_values: Mapping[str, float | str] | None = None,
+) -> dict:
+    """Simulate ``fmu`` with fmpy in a fresh Python; ``signal`` is (input name, times, values).
+
+    Returns ``{"last": {output: value at stop_time}, "toggle": <toggle/__init__.py used>,
+    "unzip": <extraction folder>}``.
+    """
+    unzip = cwd / "unzipped"
+    spec = {"fmu": str(fmu), "unzip": str(unzip), "input": [signal[0], list(signal[1]),
+                                                           list(signal[2])],
+            "output": list(output), "stop_time": stop_time, "step_size": step_size,
+            "start_values": dict(start_values or {})}
+    return _run_script(FRESH_PROCESS, spec, cwd) | {"unzip": str(unzip)}
+
+
+def run_libcosim(
+    cwd: Path,
+    slaves: Mapping[str, Path],
+    observe: Mapping[str, Sequence[str]],
+    initial: Sequence[tuple[str, str, float]] = (),
+    connections: Sequence[tuple[str, str, str, str]] = (),
+    step_size: float = 1e-3,
+    stop_time: float = 0.1,
+) -> dict:
+    """Run instances (name → FMU path) in one libcosim execution with a fixed step.
+
+    ``initial`` rows are (instance, variable, value); ``connections`` rows are
+    (source instance, output, target instance, input). Returns
+    ``{"ok": bool, "last": {instance: {variable: value at stop_time}}}``.
+    """
+    spec = {"slaves": {k: str(v) for k, v in slaves.items()},
+            "observe": {k: list(v) for k, v in observe.items()},
+            "initial": [list(row) for row in initial],
+            "connections": [list(row) for row in connections],
+            "step_ns": round(step_size * 1e9), "stop_ns": round(stop_time * 1e9)}
+    return _run_script(LIBCOSIM, spec, cwd)
+
+
+def variable_table(variables: Sequence[Var]) -> str:
+    """Markdown table of a slave's variables (docs/fmu.md embeds ToggleClamp's)."""
+    rows = ["| Name | Causality | Unit | Start | Description |", "|---|---|---|---|---|"]
+    for var in variables:
+        if var.is_string:
+            start, unit = f'`"{var.start}"`', ""
+        else:
+            start, unit = ("" if var.start is None else f"{var.start:g}"), var.unit
+        rows.append(f"| `{var.name}` | {var.causality} | {unit} | {start} | {var.description} |")
+    return "\n".join(rows) + "\n"
+
+
+if __name__ == "__main__":  # print ToggleClamp's table for docs/fmu.md
+    print(variable_table(load_module(DEFAULT_SLAVE, "toggle_clamp_fmu_doc").ToggleClamp.VARIABLES),
+          end="")

@@ -1,0 +1,339 @@
+"""ToggleClamp.fmu: description, agreement with toggle.plant, state, errors, other masters.
+
+The FMU is built once for the module. The reference for every output is
+:func:`toggle.plant.plant_outputs` evaluated with numpy at the input-link
+motion (x, velocity, acceleration) the FMU reports: the plant is algebraic in
+that motion, so the two must agree to rounding (tolerance 1e-9 of each output's
+peak; about 1e-11 is observed).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import extract, read_model_description, simulate_fmu
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2Discard, fmi2Error
+from fmpy.validation import validate_fmu
+from fmu_support import fmutool_log, load_module, run_fresh, run_libcosim, variable_table
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from toggle.fmu_build import DEFAULT_SLAVE, build_fmu
+from toggle.fmu_host import release_native_runtime, start_slave
+from toggle.kinematics import stroke_limits
+from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
+
+SLAVE = load_module(DEFAULT_SLAVE, "toggle_clamp_fmu_inproc").ToggleClamp
+DOC = Path(__file__).resolve().parents[1] / "docs" / "fmu.md"
+OUTPUTS = list(PlantOutputs._fields)
+X_OPEN, X_TOGGLE = stroke_limits(configure("chang2021").mechanism.lower)
+X_CONTACT = X_TOGGLE - 1e-3  # mold contact 1 mm of crosshead travel before the toggle
+DELTA_R8 = 0.3e-3  # m, link 8 too long: the halves differ
+MOLD = {"x_contact": X_CONTACT, "delta_r8": DELTA_R8}
+REL = 1e-9  # of each output's peak
+
+
+@pytest.fixture(scope="module")
+def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_fmu(tmp_path_factory.mktemp("fmu"))
+
+
+@pytest.fixture(scope="module")
+def unzipped(fmu: Path, tmp_path_factory: pytest.TempPathFactory):
+    """The FMU extracted once; its native runtime is released after the module's tests."""
+    directory = Path(extract(str(fmu), str(tmp_path_factory.mktemp("unzipped"))))
+    yield directory
+    release_native_runtime(directory)
+
+
+def _reference(x, v, a, **start) -> PlantOutputs:
+    """plant_outputs at the reported motion, with the plant the FMU parameters describe."""
+    errors = {k.removeprefix("delta_"): val for k, val in start.items() if k.startswith("delta_")}
+    cfg = configure("chang2021", x_contact=start.get("x_contact"), errors=errors)
+    return plant_outputs(np.asarray(x), np.asarray(v), np.asarray(a), cfg)
+
+
+def _assert_outputs_match(actual: dict, reference: PlantOutputs) -> None:
+    for name in OUTPUTS:
+        got = np.asarray(actual[name], float)
+        want = np.broadcast_to(np.asarray(getattr(reference, name), float), got.shape)
+        if name == "mechanical_advantage":  # 1/|q|: ill-conditioned where the thrust ratio q
+            got, want = 1.0 / got, 1.0 / want  # nears 0 at the toggle, so compare q itself
+        peak = float(np.max(np.abs(want)))
+        assert np.all(np.isfinite(got)), name
+        np.testing.assert_allclose(got, want, rtol=0, atol=REL * peak + 1e-300, err_msg=name)
+
+
+def _outputs(slave, refs) -> dict[str, float]:
+    return dict(zip(OUTPUTS, slave.getReal([refs[n] for n in OUTPUTS])))
+
+
+def _run(slave, refs, commands_and_steps, t: float = 0.0) -> list[dict[str, float]]:
+    """Set x_cmd, doStep for each (x_cmd, h); return the outputs after each step."""
+    out = []
+    for x_cmd, h in commands_and_steps:
+        slave.setReal([refs["x_cmd"]], [x_cmd])
+        slave.doStep(t, h)
+        t += h
+        out.append(_outputs(slave, refs))
+    return out
+
+
+def _close(slave, *states) -> None:
+    for state in states:
+        slave.freeFMUstate(state)
+    slave.terminate()
+    slave.freeInstance()
+
+
+def _logger(log: list[tuple[int, str]]):
+    return lambda status, text: log.append((status, text))
+
+
+# ---- model description -----------------------------------------------------------------
+
+
+def test_fmpy_validation_finds_no_problem(fmu: Path):
+    assert validate_fmu(str(fmu)) == []
+
+
+def test_fmutool_check_finds_no_problem(fmu: Path):
+    log = fmutool_log(fmu)
+    assert "ERROR" not in log and "No semantic error" in log, log
+
+
+def test_description_has_units_starts_and_structure(fmu: Path):
+    md = read_model_description(str(fmu))
+    units = {u.name for u in md.unitDefinitions}
+    by_name = {v.name: v for v in md.modelVariables}
+    assert list(by_name) == [v.name for v in SLAVE.VARIABLES]
+    for spec in SLAVE.VARIABLES:
+        v = by_name[spec.name]
+        assert v.description == spec.description
+        if v.type == "Real":
+            assert v.unit == spec.unit and v.unit in units
+        if spec.causality == "parameter":
+            assert (v.initial, v.variability) == ("exact", "fixed")
+            assert (v.start if spec.is_string else float(v.start)) == spec.start
+        if spec.causality == "output":
+            assert v.initial == "calculated" and v.start is None
+    assert [v.type for v in md.modelVariables].count("Real") == len(SLAVE.VARIABLES) - 1
+    outputs = [v.name for v in SLAVE.VARIABLES if v.causality == "output"]
+    assert [u.variable.name for u in md.outputs] == outputs == OUTPUTS
+    assert [u.variable.name for u in md.initialUnknowns] == outputs
+    assert float(md.defaultExperiment.stepSize) == 1e-3
+    assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
+    assert float(by_name["drive_bandwidth"].min) == 0.0
+
+
+def test_doc_variable_table_matches_the_slave():
+    """docs/fmu.md embeds the table generated from VARIABLES (python tests/fmu_support.py)."""
+    assert variable_table(SLAVE.VARIABLES) in DOC.read_text()
+
+
+# ---- a closing stroke in fmpy ----------------------------------------------------------
+
+STROKE_TIME, STOP_TIME = 0.4, 0.6  # s: quintic move from x_open to the toggle, then hold
+
+
+def _stroke_command() -> np.ndarray:
+    t = np.linspace(0.0, STOP_TIME, 601)
+    s = np.clip(t / STROKE_TIME, 0.0, 1.0)
+    x = X_OPEN + (X_TOGGLE - X_OPEN) * s**3 * (10 - 15 * s + 6 * s**2)
+    return np.array(list(zip(t, x)), dtype=[("time", float), ("x_cmd", float)])
+
+
+def _simulate_stroke(unzipped: Path, **start: float):
+    return simulate_fmu(str(unzipped), stop_time=STOP_TIME, step_size=1e-3,
+                        input=_stroke_command(), start_values={"x_cmd": X_OPEN, **start},
+                        output=[*OUTPUTS, "x_cmd"])
+
+
+@pytest.mark.parametrize("bandwidth", [0.0, 20.0])
+def test_stroke_outputs_equal_the_library(unzipped: Path, bandwidth: float):
+    res = _simulate_stroke(unzipped, drive_bandwidth=bandwidth, **MOLD)
+    _assert_outputs_match(res, _reference(res["x"], res["velocity"], res["acceleration"], **MOLD))
+    before, after = res["x"] < X_CONTACT - 1e-6, res["x"] > X_CONTACT + 1e-6
+    assert np.all(res["clamp_force"][before] == 0) and res["clamp_force"][-1] > 100.0  # N
+    assert np.all(res["platen_velocity"][after] == 0)  # the platen stops at the mold
+    assert abs(res["asymmetry"][-1]) > 0.1 * DELTA_R8
+
+
+def test_ideal_drive_puts_the_input_link_at_the_command(unzipped: Path):
+    res = _simulate_stroke(unzipped, **MOLD)
+    np.testing.assert_array_equal(res["x"], res["x_cmd"])
+    np.testing.assert_allclose(res["velocity"][1:], np.diff(res["x"]) / 1e-3, rtol=1e-12)
+    assert res["x"][-1] == pytest.approx(X_TOGGLE, abs=1e-12)
+
+
+def test_drive_with_bandwidth_lags_then_settles(unzipped: Path):
+    res = _simulate_stroke(unzipped, drive_bandwidth=20.0, drive_damping=0.7, **MOLD)
+    error = res["x_cmd"] - res["x"]
+    moving = res["time"] < STROKE_TIME
+    assert np.max(error[moving]) > 1e-3  # m: a 20 Hz drive trails a 0.4 s stroke by mm
+    assert abs(error[-1]) < 1e-9 and abs(res["velocity"][-1]) < 1e-6
+
+
+# ---- state, step sizes, errors (in-process fmpy) ------------------------------------------
+
+APPROACH = [(X_OPEN + k * 2.5e-3, 5e-3) for k in range(1, 21)]  # ends 5 mm before the toggle
+FUTURE = [(X_CONTACT + 2e-4, 1e-3), (X_TOGGLE, 4e-3), (X_TOGGLE, 2e-2), (X_TOGGLE, 2e-4),
+          (X_CONTACT, 1e-2)]
+
+
+def test_state_rollback_reproduces_outputs(unzipped: Path):
+    slave, refs = start_slave(unzipped, "rollback", {"drive_bandwidth": 50.0, **MOLD})
+    _run(slave, refs, APPROACH)
+    state = slave.getFMUstate()
+    serialized = slave.serializeFMUstate(state)
+    first = _run(slave, refs, FUTURE)
+    slave.setFMUstate(state)
+    second = _run(slave, refs, FUTURE)
+    slave.setFMUstate(state)  # the same state restores twice
+    third = _run(slave, refs, FUTURE)
+    restored = slave.deSerializeFMUstate(serialized)
+    slave.setFMUstate(restored)
+    fourth = _run(slave, refs, FUTURE)
+    _close(slave, state, restored)
+    assert first == second == third == fourth
+    assert first[0]["velocity"] != 0 and first[-1]["clamp_force"] > 0  # internal state moved
+
+
+@pytest.mark.parametrize("bandwidth", [0.0, 20.0])
+def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: float):
+    steps = [*APPROACH[:3], (X_OPEN + 1e-2, 1e-4), (X_OPEN + 2e-2, 3e-2), *FUTURE]
+    slave, refs = start_slave(unzipped, "steps", {"drive_bandwidth": bandwidth,
+                                                  "x_cmd": X_OPEN, **MOLD})
+    out = _run(slave, refs, steps)
+    _close(slave)
+    drive = DriveState(X_OPEN, 0.0, 0.0)
+    for (x_cmd, h), got in zip(steps, out, strict=True):
+        drive = follow(drive, x_cmd, h, bandwidth, 0.7)
+        assert (got["x"], got["velocity"], got["acceleration"]) == pytest.approx(
+            tuple(drive), rel=1e-12, abs=1e-15)
+    columns = {n: [o[n] for o in out] for n in OUTPUTS}
+    _assert_outputs_match(columns, _reference(columns["x"], columns["velocity"],
+                                              columns["acceleration"], **MOLD))
+
+
+@pytest.mark.parametrize(
+    ("start", "named"),
+    [
+        ({"delta_r4b": 1.0}, "r4b"),  # link 4 cannot close: the geometry does not assemble
+        ({"preset": "no_such_clamp"}, "no_such_clamp"),
+        ({"x_contact": -1.0}, "x_contact"),
+        ({"m_platen": math.inf}, "platen"),
+        ({"mu": math.inf}, "mu"),
+        ({"delta_r8": math.nan}, "delta_r8"),
+        ({"x_cmd": 0.5}, "x = 0.5"),
+        ({"delta_r7b": 1.0}, "delta_r7b"),
+        ({"drive_bandwidth": 10.0, "drive_damping": -1.0}, "drive_damping"),
+        ({"mu": -0.2}, "mu"),
+        ({"m_platen": float("nan")}, "m_platen"),
+    ],
+)
+def test_invalid_parameter_fails_initialisation_and_every_step(unzipped: Path, start, named):
+    log: list[tuple[int, str]] = []
+    slave, refs = start_slave(unzipped, "bad", start, log=_logger(log))
+    statuses = []
+    for t, h in [(0.0, 1e-3), (1e-3, 1e-2)]:
+        with pytest.raises(FMICallException) as refused:
+            slave.doStep(t, h)
+        statuses.append(refused.value.status)
+    values = _outputs(slave, refs)
+    _close(slave)
+    errors = [text for status, text in log if status == fmi2Error]
+    assert errors and errors[0].startswith("initialisation failed") and named in errors[0], log
+    assert statuses == [fmi2Discard, fmi2Discard]
+    assert all(math.isfinite(v) for v in values.values())
+
+
+@pytest.mark.parametrize("x_cmd", [0.09, -0.09, math.nan])
+def test_input_outside_the_range_discards_the_step_and_keeps_working(unzipped: Path, x_cmd):
+    log: list[tuple[int, str]] = []
+    slave, refs = start_slave(unzipped, "range", {"x_cmd": X_OPEN, **MOLD}, log=_logger(log))
+    before = _run(slave, refs, APPROACH[:2])[-1]
+    slave.setReal([refs["x_cmd"]], [x_cmd])
+    with pytest.raises(FMICallException) as refused:
+        slave.doStep(1e-2, 5e-3)
+    after_discard = _outputs(slave, refs)
+    recovered = _run(slave, refs, APPROACH[2:4], t=1e-2)
+    _close(slave)
+    assert refused.value.status == fmi2Discard
+    assert any(status == fmi2Discard and "assemblable range" in text for status, text in log), log
+    assert after_discard == before
+    assert recovered[0]["velocity"] == pytest.approx(2.5e-3 / 5e-3)  # from the kept state
+    columns = {n: [o[n] for o in recovered] for n in OUTPUTS}
+    _assert_outputs_match(columns, _reference(columns["x"], columns["velocity"],
+                                              columns["acceleration"], **MOLD))
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    st.lists(st.tuples(st.floats(-0.1, 0.1), st.sampled_from([1e-5, 1e-3, 0.02])), min_size=1,
+             max_size=6),
+    st.sampled_from([0.0, 5.0]),
+)
+def test_outputs_are_finite_for_any_command_sequence(unzipped: Path, commands, bandwidth):
+    """Every step either succeeds with finite outputs or is discarded leaving them unchanged."""
+    slave, refs = start_slave(unzipped, "any", {"drive_bandwidth": bandwidth, "x_cmd": X_OPEN,
+                                                **MOLD})
+    t, previous = 0.0, _outputs(slave, refs)
+    try:
+        for x_cmd, h in commands:
+            slave.setReal([refs["x_cmd"]], [x_cmd])
+            try:
+                slave.doStep(t, h)
+                t += h
+            except FMICallException as refused:
+                assert refused.status == fmi2Discard
+                assert _outputs(slave, refs) == previous
+            previous = _outputs(slave, refs)
+            assert all(math.isfinite(v) for v in previous.values())
+    finally:
+        _close(slave)
+
+
+# ---- other processes and masters -----------------------------------------------------------
+
+
+def test_fmu_runs_in_a_fresh_process_from_its_bundled_files(fmu: Path, tmp_path: Path):
+    signal = ("x_cmd", [0.0, 0.04, 1.0], [X_OPEN, X_CONTACT + 2e-4, X_CONTACT + 2e-4])
+    result = run_fresh(fmu, tmp_path, signal, OUTPUTS, stop_time=0.05, step_size=1e-3,
+                       start_values={"x_cmd": X_OPEN, **MOLD})
+    last = result["last"]
+    _assert_outputs_match(last, _reference(last["x"], last["velocity"], last["acceleration"],
+                                           **MOLD))
+    assert last["clamp_force"] > 0
+    assert Path(result["toggle"]).is_relative_to(Path(result["unzip"], "resources"))  # not dev
+
+
+def test_two_clamps_and_a_ramp_run_in_libcosim(fmu: Path, tmp_path: Path):
+    """Two ToggleClamp instances (nominal and link 8 + 0.5 mm) follow one ramp FMU."""
+    pytest.importorskip("libcosimpy")
+    ramp = build_fmu(tmp_path / "ramp", Path(__file__).parent / "fmu_fixtures" /
+                     "trivial_slave.py")  # x = integral of u: the command ramp
+    observed = ["x", "velocity", "acceleration", "input_force", "asymmetry", "platen_position"]
+    result = run_libcosim(
+        tmp_path,
+        slaves={"ramp": ramp, "nominal": fmu, "long_r8": fmu},
+        observe={"ramp": ["x"], "nominal": observed, "long_r8": observed},
+        initial=[("ramp", "u", 0.1), ("nominal", "x_cmd", 0.0), ("long_r8", "x_cmd", 0.0),
+                 ("long_r8", "delta_r8", 0.5e-3)],
+        connections=[("ramp", "x", "nominal", "x_cmd"), ("ramp", "x", "long_r8", "x_cmd")],
+        stop_time=0.3,
+    )
+    assert result["ok"]
+    nominal, long_r8 = result["last"]["nominal"], result["last"]["long_r8"]
+    assert nominal["x"] == long_r8["x"] == pytest.approx(0.03 - 1e-4, rel=1e-12)  # 1 step late
+    assert nominal["velocity"] == pytest.approx(0.1, rel=1e-9)
+    for last, start in [(nominal, {}), (long_r8, {"delta_r8": 0.5e-3})]:
+        ref = _reference(last["x"], last["velocity"], last["acceleration"], **start)
+        for name in observed:
+            assert last[name] == pytest.approx(float(getattr(ref, name)), rel=REL, abs=1e-300)
+    assert nominal["asymmetry"] == 0 and long_r8["asymmetry"] > 0.25e-3
+    assert long_r8["input_force"] != pytest.approx(nominal["input_force"], rel=1e-6)
