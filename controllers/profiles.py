@@ -1,0 +1,198 @@
+"""Motion profiles of the crosshead: piecewise-constant jerk, baselines, CSV.
+
+A :class:`Profile` is a chain of segments of constant jerk (the planner's
+exact discretisation; an acceleration jump at a segment start also serves
+the trapezoidal velocity profile). :func:`s_curve` gives the two baselines
+the planner is measured against: the trapezoidal velocity profile (jerk
+unlimited) and the jerk-limited S-curve, each stretched to a given duration.
+:func:`predict` samples a profile through the plant (the FMU's model) and
+:func:`write_profile_csv` writes what the HIL layer executes.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+from scipy.optimize import brentq
+
+from toggle.plant import PlantConfig, plant_outputs
+
+#: The CSV columns, units in the header (``hil run --profile`` reads time and position).
+CSV_COLUMNS = ("time [s]", "position [m]", "velocity [m/s]", "acceleration [m/s^2]",
+               "input_force [N]", "platen_position [m]")
+
+
+class ProfileError(ValueError):
+    """A profile that cannot be built or read (message names the reason)."""
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Piecewise-constant-jerk motion: segment k starts at ``knots[k]`` in state
+    (x[k], v[k], a[k]) and runs with jerk ``jerk[k]`` until ``knots[k + 1]`` (SI)."""
+
+    knots: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    jerk: np.ndarray
+
+    @classmethod
+    def build(cls, x0: float, durations: np.ndarray, jerk: np.ndarray,
+              accel: np.ndarray | None = None) -> Profile:
+        """Integrate from rest at x0; ``accel`` sets each segment's starting
+        acceleration (jumps), else the acceleration is continuous from zero."""
+        d, j = np.asarray(durations, float), np.asarray(jerk, float)
+        x, v, a = np.empty(d.size), np.empty(d.size), np.empty(d.size)
+        state = (x0, 0.0, 0.0)
+        for k in range(d.size):
+            a0 = state[2] if accel is None else float(accel[k])
+            x[k], v[k], a[k] = state[0], state[1], a0
+            state = _advance(state[0], state[1], a0, j[k], d[k])
+        return cls(np.concatenate(([0.0], np.cumsum(d))), x, v, a, j)
+
+    @property
+    def duration(self) -> float:
+        return float(self.knots[-1])
+
+    def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, velocity and acceleration at times t (clipped to the profile)."""
+        t = np.clip(np.asarray(t, float), 0.0, self.duration)
+        k = np.clip(np.searchsorted(self.knots, t, side="right") - 1, 0, self.jerk.size - 1)
+        return _advance(self.x[k], self.v[k], self.a[k], self.jerk[k], t - self.knots[k])
+
+
+def _advance(x, v, a, j, dt):
+    """Exact state after dt at constant jerk j."""
+    return (x + dt * (v + dt * (a / 2 + dt * j / 6)), v + dt * (a + dt * j / 2), a + dt * j)
+
+
+def _accel_time(v: float, a_max: float, j_max: float) -> float:
+    """Time from rest to speed v with acceleration and jerk limits (symmetric ramp)."""
+    if math.isinf(j_max):
+        return v / a_max
+    if v >= a_max * a_max / j_max:
+        return v / a_max + a_max / j_max
+    return 2.0 * math.sqrt(v / j_max)
+
+
+def _accel_segments(v: float, a_max: float, j_max: float) -> tuple[list, list]:
+    """(durations, jerks) of the ramp from rest to v (one segment if jerk is unlimited)."""
+    if math.isinf(j_max):
+        return [v / a_max], [0.0]
+    t_j = min(a_max / j_max, math.sqrt(v / j_max))
+    t_flat = max(v / (j_max * t_j) - t_j, 0.0)
+    return [t_j, t_flat, t_j], [j_max, 0.0, -j_max]
+
+
+def _top_speed(S: float, v_max: float, a_max: float, j_max: float) -> float:
+    """Highest cruise speed a rest-to-rest stroke S can reach under the limits."""
+    def cruise(v: float) -> float:  # distance left for cruising at speed v
+        return S - v * _accel_time(v, a_max, j_max)
+
+    return v_max if cruise(v_max) >= 0 else brentq(cruise, 1e-12 * v_max, v_max, xtol=1e-15)
+
+
+def minimum_time(S: float, v_max: float, a_max: float, j_max: float = math.inf) -> float:
+    """Shortest rest-to-rest time for stroke S under velocity, acceleration and jerk limits
+    (the S-curve at full limits is time-optimal for the triple integrator)."""
+    v = _top_speed(S, v_max, a_max, j_max)
+    return S / v + _accel_time(v, a_max, j_max)
+
+
+def s_curve(x_start: float, x_end: float, duration: float, v_max: float, a_max: float,
+            j_max: float = math.inf) -> Profile:
+    """Rest-to-rest S-curve (trapezoidal velocity if ``j_max`` is inf) taking
+    exactly ``duration``: full acceleration and jerk, the cruise speed lowered
+    until the stroke takes that long. Raises :class:`ProfileError` if the
+    limits cannot cover the stroke in that time."""
+    S = x_end - x_start
+    if not (S > 0 and duration > 0):
+        raise ProfileError(f"need a positive stroke and duration, got {S!r} m in {duration!r} s")
+    v_top = _top_speed(S, v_max, a_max, j_max)
+    t_min = minimum_time(S, v_max, a_max, j_max)
+    if duration < t_min * (1 - 1e-12):
+        raise ProfileError(
+            f"the stroke of {S * 1e3:.4g} mm needs at least {t_min:.4g} s with these limits "
+            f"(v {v_max:.4g} m/s, a {a_max:.4g} m/s^2, j {j_max:.4g} m/s^3)"
+        )
+    v = v_top if duration <= t_min else brentq(
+        lambda u: S / u + _accel_time(u, a_max, j_max) - duration, 0.5 * S / duration, v_top,
+        xtol=1e-14)
+    d, j = _accel_segments(v, a_max, j_max)
+    # ramp up, cruise, the mirrored ramp down, and a zero-length rest segment at the end
+    durations = np.array([*d, max(duration - 2 * sum(d), 0.0), *d[::-1], 0.0])
+    jerks = np.array([*j, 0.0, *(-np.array(j)), 0.0])
+    accel = np.array([a_max, 0.0, -a_max, 0.0]) if math.isinf(j_max) else None
+    return Profile.build(x_start, durations, jerks, accel)
+
+
+class ProfileSamples(NamedTuple):
+    """A profile sampled in time with the plant's prediction (SI; the CSV's columns)."""
+
+    time: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    input_force: np.ndarray
+    platen_position: np.ndarray
+
+    @property
+    def peak_force(self) -> float:
+        return float(np.max(np.abs(self.input_force)))
+
+    @property
+    def rms_force(self) -> float:
+        """Root mean square of the input force over the duration (trapezoidal rule), N."""
+        t, f2 = self.time, self.input_force ** 2
+        return float(math.sqrt(np.sum(np.diff(t) * (f2[1:] + f2[:-1]) / 2) / (t[-1] - t[0])))
+
+
+def sample_times(duration: float, period: float) -> np.ndarray:
+    """Uniform times from 0 to ``duration`` inclusive, spaced by at most ``period``."""
+    return np.linspace(0.0, duration, max(1, math.ceil(duration / period - 1e-9)) + 1)
+
+
+def predict(profile: Profile, cfg: PlantConfig, period: float = 1e-3) -> ProfileSamples:
+    """Sample the profile every ``period`` and evaluate the plant on it."""
+    t = sample_times(profile.duration, period)
+    x, v, a = profile.sample(t)
+    out = plant_outputs(x, v, a, cfg)
+    return ProfileSamples(t, x, v, a, np.asarray(out.input_force, float),
+                          np.asarray(out.platen_position, float) * np.ones_like(t))
+
+
+def write_profile_csv(path: str | Path, samples: ProfileSamples) -> Path:
+    """Write the samples with the units in the header (:data:`CSV_COLUMNS`)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(CSV_COLUMNS)
+        writer.writerows([f"{value:.12g}" for value in row] for row in zip(*samples))
+    return path
+
+
+def read_profile_csv(path: str | Path) -> ProfileSamples:
+    """Read a CSV written by :func:`write_profile_csv` (all columns required)."""
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            header = [h.strip() for h in next(csv.reader(fh), [])]
+        missing = [c for c in CSV_COLUMNS if c not in header]
+        if missing:
+            raise ProfileError(f"profile {path} lacks column(s) {missing}")
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2,
+                          usecols=[header.index(c) for c in CSV_COLUMNS])
+    except (OSError, ValueError) as exc:
+        if isinstance(exc, ProfileError):
+            raise
+        raise ProfileError(f"cannot read profile {path}: {exc}") from exc
+    if data.shape[0] < 2 or np.any(np.diff(data[:, 0]) <= 0):
+        raise ProfileError(f"profile {path}: need >= 2 rows with increasing time")
+    return ProfileSamples(*data.T)

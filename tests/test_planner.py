@@ -1,0 +1,213 @@
+"""The stroke planner: FMU replay, baselines, limits, warm start, infeasible requests, CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from controllers.limits import drive_limits
+from controllers.planner import (
+    CREEP_FACTOR,
+    PlanningError,
+    baselines,
+    plan_config,
+    planner_for,
+)
+from controllers.profiles import (
+    CSV_COLUMNS,
+    minimum_time,
+    read_profile_csv,
+    s_curve,
+    write_profile_csv,
+)
+from toggle.cli import main
+from toggle.elastics import ClampingError
+from toggle.fmu_build import build_fmu
+from toggle.params import Dynamics, load_preset
+from toggle.plant import plant_outputs
+
+DURATION = 3.0
+#: Assumed masses of the SM-55 (its preset has no [dynamics]): crosshead, links, platen, guides.
+SM55_MASSES = {"crosshead": 40.0, "links": 120.0, "platen": 500.0, "guide_damping": 2000.0}
+
+
+@pytest.fixture(scope="module")
+def chang():
+    cfg = plan_config("chang2021")
+    limits = drive_limits(cfg.mechanism)
+    planner = planner_for(cfg, limits)
+    return cfg, limits, planner, planner.solve(DURATION, warm=False)
+
+
+@pytest.fixture(scope="module")
+def fmu(tmp_path_factory: pytest.TempPathFactory):
+    return build_fmu(tmp_path_factory.mktemp("fmu"))
+
+
+def test_plan_meets_the_boundary_conditions_and_limits(chang):
+    cfg, limits, planner, plan = chang
+    s = plan.samples
+    assert plan.duration == pytest.approx(DURATION, rel=1e-9)
+    assert s.position[0] == pytest.approx(planner.x_open, abs=1e-12)
+    assert s.position[-1] == pytest.approx(planner.x_final, abs=1e-9)
+    assert abs(s.velocity[-1]) < 1e-9 and abs(s.acceleration[-1]) < 1e-7
+    tol = 1 + 1e-6
+    # limits are imposed at the nodes; between them the cubic may overshoot the speed a little
+    assert np.all(s.velocity >= -1e-9) and s.velocity.max() <= limits.velocity * (1 + 1e-3)
+    assert np.abs(s.acceleration).max() <= limits.acceleration * tol
+    assert np.abs(plan.profile.jerk).max() <= limits.jerk * tol
+    # the platen's speed at mold contact, from the plant at the contact instant (platen moving)
+    x, v, a = plan.profile.sample(np.array([plan.t_contact]))
+    out = plant_outputs(x, v, a, cfg.with_(x_contact=None))
+    assert float(out.platen_velocity[0]) <= planner.contact_speed * tol
+    assert float(x[0]) == pytest.approx(cfg.x_contact, abs=1e-9)
+    # the plant holds the clamp force at rest in the locked position
+    assert planner.clamp_force() == pytest.approx(2000.0, rel=0.01)
+    # no creeping through the clamping (where the smooth friction model fades out)
+    clamping = (s.time > plan.t_contact) & (s.time < plan.t_contact + 0.5 * (
+        DURATION - plan.t_contact))
+    assert s.velocity[clamping].min() >= CREEP_FACTOR * cfg.velocity_epsilon * (1 - 1e-2)
+
+
+def test_peak_force_below_both_baselines(chang):
+    cfg, limits, _, plan = chang
+    base = baselines(cfg, limits, plan.duration)
+    for samples in base.values():
+        assert samples.time[-1] == pytest.approx(plan.duration)
+        assert samples.position[-1] == pytest.approx(plan.samples.position[-1], abs=1e-12)
+        assert plan.peak_force < samples.peak_force * (1 - 0.01)  # at least 1 % lower
+
+
+def _replay(fmu, cfg, plan, h):
+    """Replay the plan through the FMU at step h; return (t, plan positions, FMU results).
+
+    fmpy applies the input set at t_k during the step to t_k + h and reports the output at
+    t_k + h, so the positions are fed one step early."""
+    from fmpy import simulate_fmu
+
+    t = np.linspace(0.0, plan.duration, round(plan.duration / h) + 1)
+    x = plan.profile.sample(t)[0]
+    signal = np.array(list(zip(t - h, x)), dtype=[("time", float), ("x_cmd", float)])
+    res = simulate_fmu(str(fmu), start_time=0.0, stop_time=t[-1], step_size=h,
+                       output_interval=h, input=signal, output=["x", "input_force"],
+                       start_values={"x_contact": cfg.x_contact, "x_cmd": x[0]})
+    assert res["time"].size == t.size
+    np.testing.assert_allclose(res["x"], x, atol=1e-9)
+    return t, x, res
+
+
+def test_fmu_replay_reproduces_the_predicted_force(chang, fmu):
+    """At the HIL period (1 ms) the FMU's ideal drive differentiates x_cmd backwards, so its
+    velocity is the plan's at t - h/2 and its acceleration the plan's at t - h: compared at
+    those instants the force agrees within 1 % of the peak; sampled ten times finer it agrees
+    with the prediction at the same instants."""
+    cfg, _, _, plan = chang
+    h = 1e-3
+    t, x, res = _replay(fmu, cfg, plan, h)
+    v, a = plan.profile.sample(t - h / 2)[1], plan.profile.sample(t - h)[2]
+    drive = np.asarray(plant_outputs(x, v, a, cfg).input_force)
+    assert np.abs(res["input_force"] - drive)[1:].max() <= 0.01 * plan.peak_force
+    h = 1e-4
+    t, x, res = _replay(fmu, cfg, plan, h)
+    predicted = np.asarray(plant_outputs(*plan.profile.sample(t), cfg).input_force)
+    assert np.abs(res["input_force"] - predicted).max() <= 0.01 * plan.peak_force
+
+
+def test_warm_replan_is_faster_and_reuses_the_problem(chang):
+    cfg, limits, planner, plan = chang
+    again = planner_for(cfg, limits)
+    assert again is planner  # the built problem is kept
+    replan = again.solve(DURATION * 1.05, start=plan)
+    assert replan.warm and replan.duration == pytest.approx(DURATION * 1.05, rel=1e-9)
+    assert replan.iterations < plan.iterations
+    assert replan.solve_time < plan.solve_time
+    cold = again.solve(DURATION * 1.05, warm=False)
+    assert replan.peak_force == pytest.approx(cold.peak_force, rel=1e-2)  # local optima
+
+
+def test_other_mold_height_warm_starts_from_the_previous_plan(chang):
+    cfg, limits, _, plan = chang
+    moved = planner_for(plan_config("chang2021", x_contact=cfg.x_contact - 0.2e-3), limits)
+    replan = moved.solve(DURATION, start=plan)
+    assert replan.warm and replan.iterations < plan.iterations
+    assert moved.clamp_force() > 2000.0  # an earlier contact clamps harder
+
+
+def test_sm55_plans():
+    mech = replace(load_preset("lin2003_sm55"), dynamics=Dynamics(**SM55_MASSES))
+    cfg = plan_config(mech)
+    limits = drive_limits(mech)
+    assert limits.velocity == pytest.approx(2000 / 60 * (30 / 42) * 0.020)
+    planner = planner_for(cfg, limits, intervals=100)
+    plan = planner.solve(1.5)
+    base = baselines(cfg, limits, plan.duration)
+    assert plan.peak_force < min(b.peak_force for b in base.values())
+    assert plan.peak_force <= limits.force(mech.drive)
+
+
+def test_too_short_a_duration_names_the_limit_and_the_shortest(chang):
+    _, limits, planner, _ = chang
+    with pytest.raises(PlanningError, match="too short") as info:
+        planner.solve(1.0)
+    shortest = float(info.value.args[0].split("takes ")[1].split(" s")[0])
+    assert shortest >= minimum_time(planner.stroke, limits.velocity, limits.acceleration,
+                                    limits.jerk) * (1 - 1e-3)
+    assert "velocity" in str(info.value)
+    assert planner.solve(shortest * 1.02).duration == pytest.approx(shortest * 1.02)
+
+
+def test_torque_limit_and_unreachable_clamp_force():
+    cfg = plan_config("chang2021")
+    weak = drive_limits(cfg.mechanism, torque=0.012)  # 13.6 N of thrust, below the ~15 N peak
+    with pytest.raises(PlanningError, match="motor torque limit binds"):
+        planner_for(cfg, weak, intervals=60).solve(DURATION)
+    with pytest.raises(ClampingError, match="beyond reach"):
+        plan_config("chang2021", clamp_force=1e12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(duration=st.floats(1.0, 20.0), jerk=st.sampled_from([math.inf, 8.0, 0.5]))
+def test_baselines_take_the_duration_within_the_limits(duration, jerk):
+    S, v, a = 0.055, 0.04, 0.4
+    if duration < minimum_time(S, v, a, jerk):
+        return
+    prof = s_curve(0.0, S, duration, v, a, jerk)
+    t = np.linspace(0, prof.duration, 2001)
+    x, vel, acc = prof.sample(t)
+    assert prof.duration == pytest.approx(duration, rel=1e-9)
+    assert x[-1] == pytest.approx(S, abs=1e-12) and abs(vel[-1]) < 1e-12
+    assert vel.max() <= v * (1 + 1e-9) and np.abs(acc).max() <= a * (1 + 1e-9)
+    assert np.all(np.diff(x) >= -1e-15)
+
+
+def test_cli_writes_the_profile_and_the_json(tmp_path, capsys):
+    out = tmp_path / "plan.csv"
+    assert main(["plan", "--preset", "chang2021", "--duration", "3", "--json",
+                 "--out", str(out)]) == 0
+    report = json.loads(capsys.readouterr().out)
+    for key in ("peak_force", "rms_force", "baseline_peak_force", "s_curve_peak_force",
+                "reduction_percent", "solve_time", "iterations"):
+        assert math.isfinite(report[key])
+    assert report["reduction_percent"] > 0 and report["s_curve_reduction_percent"] > 0
+    assert out.read_text().splitlines()[0] == ",".join(CSV_COLUMNS)
+    samples = read_profile_csv(out)
+    assert samples.peak_force == pytest.approx(report["peak_force"], rel=1e-9)
+    copy = write_profile_csv(tmp_path / "copy.csv", samples)
+    np.testing.assert_allclose(read_profile_csv(copy).position, samples.position, rtol=1e-11)
+    png = tmp_path / "plan.png"
+    assert main(["plot", "plan", str(out), "--out", str(png)]) == 0
+    assert png.stat().st_size > 10_000
+
+
+def test_cli_infeasible_requests_exit_2(capsys):
+    assert main(["plan", "--duration", "1.0"]) == 2
+    err = capsys.readouterr().err
+    assert "too short" in err and "shortest feasible" in err and "Traceback" not in err
+    assert main(["plan", "--clamp-force", "1e12"]) == 2
+    assert "beyond reach" in capsys.readouterr().err
