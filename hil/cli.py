@@ -66,6 +66,12 @@ def _backend(args: argparse.Namespace) -> Plant:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.profile is None and args.speed is None and args.x_contact is None:
+        # the default job clamps a mold: the plan's contact position (the preset's final
+        # tie-bar force) is the simulated mold height too
+        from controllers.planner import plan_config
+
+        args.x_contact = plan_config(args.preset).x_contact
     setup = RigSetup(preset=args.preset, delta_r8=args.delta_r8, mu=args.mu,
                      x_contact=args.x_contact, force_limit=args.force_limit)
     plant = _backend(args)
