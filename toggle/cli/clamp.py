@@ -115,17 +115,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 # --- figures ---------------------------------------------------------------------------
 
 
-def _save(fig, path: Path) -> None:
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    print(path)
-
-
 def plot(args: argparse.Namespace) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from toggle.plots import plt, save_figure
 
     mech = mechanism(args)
     out = Path(args.out)
@@ -152,7 +143,7 @@ def plot(args: argparse.Namespace) -> int:
         ax.grid(True, alpha=0.3)
         ax.legend()
         ax.set_title(f"{mech.name}: real-mold clamping")
-        _save(fig, out / name)
+        print(save_figure(fig, out / name))
         plt.close(fig)
 
     mus = np.linspace(0.0, max(max(args.mu), 0.2), 21)
@@ -164,7 +155,7 @@ def plot(args: argparse.Namespace) -> int:
     ax.set_ylabel(r"Maximum thrust $F_{0,\max}$ [kN]")
     ax.grid(True, alpha=0.3)
     ax.set_title(f"{mech.name}: maximum crosshead thrust")
-    _save(fig, out / "fig7_thrust_max.png")
+    print(save_figure(fig, out / "fig7_thrust_max.png"))
     plt.close(fig)
 
     if mech.drive is not None:
@@ -179,7 +170,7 @@ def plot(args: argparse.Namespace) -> int:
         ax.grid(True, alpha=0.3)
         ax.legend()
         ax.set_title(f"{mech.name}: {args.rpm:g} rpm, $\\eta$ = {mech.drive.efficiency:g}")
-        _save(fig, out / "fig8_motor_torque.png")
+        print(save_figure(fig, out / "fig8_motor_torque.png"))
         plt.close(fig)
     return 0
 
