@@ -21,13 +21,14 @@ own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
 
 Variables are scaled by the stroke, a reference time (the kinematic minimum)
 and a reference force; the interval lengths of the two phases are variables
-and the duration is a constraint whose bounds fix it or leave it free. So one
-built problem (CasADi ``nlpsol``, per-point plant functions mapped over the
-nodes, the objective weights as parameters) serves every duration and mode,
-and a re-plan warm-starts IPOPT from the previous primal and dual solution,
-stretched in time to the new duration. The mold-contact position is a number
-inside :func:`~toggle.plant.plant_outputs`, so another mold height builds a
-new problem (cached by :func:`planner_for`), warm-started from the previous plan.
+and the duration is a constraint whose bounds fix it or leave it free. The
+objective weights, the mold-contact position and the force scale are
+parameters. So one built problem (:class:`StrokeProblem`, shared by
+:func:`planner_for` across mold heights) serves every duration, mode and mold
+height, and a re-plan warm-starts IPOPT from the previous primal and dual
+solution, stretched in time to the new duration. IPOPT's derivatives come from
+per-node jets of the plant, compiled to machine code where a C compiler exists
+(:mod:`controllers.compiled`), see :class:`StrokeProblem`.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import brentq
 
+from controllers.compiled import compiled
 from controllers.limits import DriveLimits, drive_limits
 from controllers.profiles import Profile, ProfileSamples, minimum_time, predict, s_curve
 from toggle.elastics import ClampingError, clamp_state, clamp_stroke, contact_position
@@ -59,9 +61,11 @@ _REGULARISATION = 1e-2  # weight of the squared jerk (relative to its limit), fo
 _BINDING = 0.99  # a limit counts as binding above this fraction of its value
 _IPOPT = {"print_level": 0, "sb": "yes", "max_iter": 500, "tol": 1e-6,
           "acceptable_tol": 1e-4, "mu_strategy": "adaptive"}
-_WARM = {"warm_start_init_point": "yes", "mu_init": 1e-7, "warm_start_bound_push": 1e-9,
-         "warm_start_bound_frac": 1e-9, "warm_start_slack_bound_push": 1e-9,
-         "warm_start_slack_bound_frac": 1e-9, "warm_start_mult_bound_push": 1e-9}
+#: From a nearby solution the monotone barrier update, started small, takes the fewest steps.
+_WARM = {"warm_start_init_point": "yes", "mu_strategy": "monotone", "mu_init": 1e-7,
+         "warm_start_bound_push": 1e-9, "warm_start_bound_frac": 1e-9,
+         "warm_start_slack_bound_push": 1e-9, "warm_start_slack_bound_frac": 1e-9,
+         "warm_start_mult_bound_push": 1e-9}
 
 
 class PlanningError(ValueError):
@@ -73,7 +77,7 @@ class Plan:
     """A planned stroke: the profile, its prediction through the plant and solver data."""
 
     profile: Profile
-    samples: ProfileSamples
+    config: PlantConfig = field(repr=False)
     objective: str
     t_contact: float
     solve_time: float
@@ -84,6 +88,11 @@ class Plan:
     @property
     def duration(self) -> float:
         return self.profile.duration
+
+    @functools.cached_property
+    def samples(self) -> ProfileSamples:
+        """The profile every millisecond through the plant, computed when first asked for."""
+        return predict(self.profile, self.config)
 
     @property
     def peak_force(self) -> float:
@@ -159,18 +168,39 @@ def _min_jerk(tau: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(np.polyval(np.polyder(c, m) if m else c, tau) for m in range(4))
 
 
-class ClampPlanner:
-    """The built problem for one plant, drive limits and contact-speed limit.
+#: Upper triangle of a symmetric 3 x 3 matrix, row by row (the per-node plant Hessians).
+_UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+_JET = 10  # rows of a node's plant data: value, gradient (3), Hessian upper triangle (6)
 
-    :meth:`solve` plans a stroke of a given duration, :meth:`minimum_time`
-    the fastest one under a force limit; each warm-starts from the previous
-    solution unless told otherwise.
+
+def _jets(name: str, output: ca.SX, z: ca.SX, xc: ca.SX) -> tuple[ca.Function, ...]:
+    """One plant output h(z, x_contact) of a node, z = (x, v, a), as three functions of
+    (z, x_contact) -> value, and its first- and second-order jets, each column a
+    :data:`_JET`-row block (missing orders zero)."""
+    H, g = ca.hessian(output, z)
+    zero = ca.SX.zeros
+    rows = (ca.vertcat(output, zero(_JET - 1)), ca.vertcat(output, g, zero(_JET - 4)),
+            ca.vertcat(output, g, *[H[i, j] for i, j in _UPPER]))
+    return tuple(ca.Function(f"{name}{k}", [z, xc], [r], {"cse": True})
+                 for k, r in enumerate(rows))
+
+
+class StrokeProblem:
+    """The optimal control problem for one mold-free plant, drive limits and contact-speed
+    limit, built once; the mold-contact position is one of its parameters.
+
+    Variables are scaled: position xi = (x - x_open) / S, velocity, acceleration and jerk
+    in units of S / T_ref^k, interval lengths theta in units of T_ref. The plant enters
+    only through its outputs at the nodes (input force, platen speed at contact), each a
+    function of that node's (x, v, a). So IPOPT's derivatives are assembled from per-node
+    jets (value, gradient, Hessian of each output, small SX functions mapped over the nodes)
+    and a small SX graph of the rest, in which each output is its second-order Taylor model
+    about the current point: exact value, gradient and Hessian of the Lagrangian there,
+    without CasADi differentiating through the mapped plant at every call.
     """
 
-    def __init__(self, cfg: PlantConfig, limits: DriveLimits, *,
-                 contact_speed: float = CONTACT_SPEED, intervals: int = INTERVALS) -> None:
-        if cfg.x_contact is None:
-            raise ParameterError("the planner needs a mold-contact position (x_contact)")
+    def __init__(self, cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
+                 intervals: int) -> None:
         if not (isinstance(intervals, int) and intervals >= 4):
             raise ParameterError(f"intervals must be an integer >= 4, got {intervals!r}")
         if not (math.isfinite(contact_speed) and contact_speed > 0):
@@ -181,18 +211,164 @@ class ClampPlanner:
         if not (lo <= self.x_open and self.x_final <= hi):
             raise ParameterError("the stroke leaves the assemblable range")
         self.stroke = self.x_final - self.x_open
-        self.xi_contact = (cfg.x_contact - self.x_open) / self.stroke
-        self.n1 = intervals - intervals // 2
-        self.n2 = intervals // 2
-        self.force_limit = limits.force(cfg.mechanism.drive)
+        self.n1, self.n2 = intervals - intervals // 2, intervals // 2
+        self.size = 4 * intervals + 6
         self.t_ref = minimum_time(self.stroke, limits.velocity, limits.acceleration, limits.jerk)
-        self._jerk_bound = limits.jerk * self.t_ref**3 / self.stroke
-        self.f_ref = self._reference_force()
+        self.jerk_bound = limits.jerk * self.t_ref**3 / self.stroke
         self._solvers: dict[bool, Any] = {}
-        self._nlp, self._g_bounds, self._monitor = self._build()
-        self.last: Plan | None = None
+        self.last: Plan | None = None  # the latest plan, for any mold height
+        self._build()
 
-    # ---- construction ---------------------------------------------------------------
+    def _nodes(self, w: Any) -> tuple[Any, ...]:
+        """Scaled variables -> (xi, nu, al, jerk, th1, th2, s) and the node states (3 x N+1)."""
+        N = self.n1 + self.n2
+        xi, nu, al = (w[k * (N + 1):(k + 1) * (N + 1)] for k in range(3))
+        S, t_ref = self.stroke, self.t_ref
+        z = ca.vertcat(self.x_open + S * xi.T, S / t_ref * nu.T, S / t_ref**2 * al.T)
+        return xi, nu, al, w[3 * N + 3:4 * N + 3], w[4 * N + 3], w[4 * N + 4], w[4 * N + 5], z
+
+    def _groups(self) -> list[tuple[tuple[ca.Function, ...], slice]]:
+        """The plant outputs the problem uses, as (jets, node slice): the mold-free input force
+        over the approach, the input force with the mold over the clamping, and the platen
+        speed at contact."""
+        z, xc = ca.SX.sym("z", 3), ca.SX.sym("x_contact")
+        free = plant_outputs(z[0], z[1], z[2], self.config)
+        mold = plant_outputs(z[0], z[1], z[2], self.config, x_contact=xc)
+        n1, N = self.n1, self.n1 + self.n2
+        jets = [_jets(name, ca.SX(out), z, xc) for name, out in (
+            ("free", free.input_force), ("mold", mold.input_force),
+            ("contact", free.platen_velocity))]
+        # the values stay interpreted: nlpsol differentiates the NLP function it is given
+        fast = iter(compiled([fn for group in jets for fn in group[1:]], "plant_jets"))
+        nodes = (slice(0, n1 + 1), slice(n1, N + 1), slice(n1, n1 + 1))
+        return [((group[0], next(fast), next(fast)), span) for group, span in zip(jets, nodes)]
+
+    def _model(self, w: ca.SX, w0: ca.SX, p: ca.SX, data: ca.SX, spans: list[slice]
+               ) -> tuple[ca.SX, ca.SX]:
+        """Objective and constraints with each plant output replaced by its Taylor model
+        about the point w0, from the node data (:data:`_JET` rows per output, the outputs'
+        nodes ``spans``)."""
+        n1, n2 = self.n1, self.n2
+        xi, nu, al, io, th1, th2, s, z = self._nodes(w)
+        dz = z - self._nodes(w0)[-1]
+        outputs, col = [], 0
+        for nodes in spans:
+            d, n = dz[:, nodes], nodes.stop - nodes.start
+            block = data[:, col:col + n]
+            quad = sum((1 if i == j else 2) * block[4 + k, :] * d[i, :] * d[j, :]
+                       for k, (i, j) in enumerate(_UPPER))
+            outputs.append(block[0, :] + ca.sum1(block[1:4, :] * d) + quad / 2)
+            col += n
+        F = ca.vertcat(outputs[0].T, outputs[1].T) / p[5]
+        contact = outputs[2] / self.contact_speed
+        h = ca.vertcat(ca.repmat(th1, n1, 1), ca.repmat(th2, n2, 1))
+        dyn = ca.vertcat(
+            xi[1:] - (xi[:-1] + h * (nu[:-1] + h * (al[:-1] / 2 + h * io / 6))),
+            nu[1:] - (nu[:-1] + h * (al[:-1] + h * io / 2)),
+            al[1:] - (al[:-1] + h * io),
+        )
+
+        def integral(Fp: ca.SX, step: ca.SX) -> ca.SX:  # trapezoidal rule
+            return step * (ca.sumsqr(Fp) - (Fp[0] ** 2 + Fp[-1] ** 2) / 2)
+
+        energy = integral(F[:n1 + 1], th1) + integral(F[n1 + 1:], th2)
+        duration = n1 * th1 + n2 * th2
+        objective = (p[0] * s + p[1] * energy + p[2] * duration
+                     + p[3] * ca.dot(h, (io / self.jerk_bound) ** 2))
+        return objective, ca.vertcat(dyn, xi[n1], F - s, F + s, contact, duration)
+
+    def _build(self) -> None:
+        """The NLP functions IPOPT calls (value, gradient, constraint Jacobian, Hessian of
+        the Lagrangian), each the per-node jets mapped over the nodes feeding the model."""
+        N = self.n1 + self.n2
+        groups = self._groups()
+        m = sum(nodes.stop - nodes.start for _, nodes in groups)
+        w, w0 = ca.SX.sym("w", self.size), ca.SX.sym("w0", self.size)
+        p, data = ca.SX.sym("p", 6), ca.SX.sym("data", _JET, m)
+        lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", 3 * N + 1 + 2 * (N + 2) + 2)
+        f, g = self._model(w, w0, p, data, [nodes for _, nodes in groups])
+        hess = ca.triu(ca.hessian(lam_f * f + ca.dot(lam_g, g), w)[0])
+        args = [w, w0, p, data]
+        model = {"fg": ca.Function("fg", args, [f, g]),
+                 "grad_f": ca.Function("grad_f", args, [f, ca.gradient(f, w)]),
+                 "jac_g": ca.Function("jac_g", args, [g, ca.jacobian(g, w)]),
+                 "hess": ca.Function("hess_lag", [*args, lam_f, lam_g], [hess])}
+        W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", 6)
+        L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", lam_g.numel())
+        z = self._nodes(W)[-1]
+
+        def node_data(order: int) -> ca.MX:
+            return ca.horzcat(*[jets[order].map(nodes.stop - nodes.start)(z[:, nodes], P[4])
+                                for jets, nodes in groups])
+
+        values = node_data(0)
+        self._nlp = ca.Function("nlp", [W, P], model["fg"](W, W, P, values), ["x", "p"],
+                                ["f", "g"])
+        self._derivatives = {
+            "grad_f": ca.Function("nlp_grad_f", [W, P], model["grad_f"](W, W, P, node_data(1)),
+                                  ["x", "p"], ["f", "grad_f_x"]),
+            "jac_g": ca.Function("nlp_jac_g", [W, P], model["jac_g"](W, W, P, node_data(1)),
+                                 ["x", "p"], ["g", "jac_g_x"]),
+            "hess_lag": ca.Function("nlp_hess_l", [W, P, L_f, L_g],
+                                    [model["hess"](W, W, P, node_data(2), L_f, L_g)],
+                                    ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
+        }
+        n1 = self.n1
+        self.monitor = ca.Function("monitor", [W, P], [
+            ca.vertcat(values[0, :n1 + 1].T, values[0, n1 + 1:N + 2].T),
+            values[0, N + 2] / self.contact_speed])
+        nf = N + 2
+        self.g_bounds = (
+            np.concatenate([np.zeros(3 * N), [np.nan], np.full(nf, -np.inf), np.zeros(nf),
+                            [-np.inf, 0.0]]),
+            np.concatenate([np.zeros(3 * N), [np.nan], np.zeros(nf), np.full(nf, np.inf),
+                            [1.0, np.inf]]))
+
+    def solver(self, warm: bool) -> Any:
+        """The IPOPT instance, cold or with the warm-start options (each built once)."""
+        if warm not in self._solvers:
+            opts = {"ipopt": {**_IPOPT, **(_WARM if warm else {})}, "print_time": False,
+                    "error_on_fail": False, "calc_lam_p": False, **self._derivatives}
+            self._solvers[warm] = ca.nlpsol("plan", "ipopt", self._nlp, opts)
+        return self._solvers[warm]
+
+
+@functools.lru_cache(maxsize=8)
+def _problem_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
+                 intervals: int) -> StrokeProblem:
+    """A built problem, shared by the planners of every mold height of one plant."""
+    return StrokeProblem(cfg, limits, contact_speed, intervals)
+
+
+class ClampPlanner:
+    """Plans strokes of one plant with its mold, on a :class:`StrokeProblem`.
+
+    :meth:`solve` plans a stroke of a given duration, :meth:`minimum_time`
+    the fastest one under a force limit; each warm-starts from the previous
+    solution on the same problem (another duration or mold height) unless told
+    otherwise. Without ``problem`` the planner builds its own.
+    """
+
+    def __init__(self, cfg: PlantConfig, limits: DriveLimits, *,
+                 contact_speed: float = CONTACT_SPEED, intervals: int = INTERVALS,
+                 problem: StrokeProblem | None = None) -> None:
+        if cfg.x_contact is None:
+            raise ParameterError("the planner needs a mold-contact position (x_contact)")
+        self.problem = problem or StrokeProblem(cfg.with_(x_contact=None), limits,
+                                                contact_speed, intervals)
+        pr = self.problem
+        self.config, self.limits, self.contact_speed = cfg, limits, contact_speed
+        self.x_open, self.x_final, self.stroke, self.t_ref = (pr.x_open, pr.x_final, pr.stroke,
+                                                              pr.t_ref)
+        self.n1, self.n2 = pr.n1, pr.n2
+        self.xi_contact = (cfg.x_contact - self.x_open) / self.stroke
+        self.force_limit = limits.force(cfg.mechanism.drive)
+        self.f_ref = self._reference_force()
+
+    @property
+    def last(self) -> Plan | None:
+        """The latest plan on this planner's problem (any mold height)."""
+        return self.problem.last
 
     def _reference_force(self) -> float:
         """Scale of the input force: its quasi-static peak at the reference speed, N."""
@@ -200,64 +376,8 @@ class ClampPlanner:
         f = plant_outputs(xs, np.full_like(xs, self.stroke / self.t_ref), 0 * xs, self.config)
         return max(float(np.max(np.abs(f.input_force))), 1e-6)
 
-    def _plant_functions(self) -> tuple[ca.Function, ca.Function]:
-        """(x, v, a) -> (F, platen velocity) of the mold-free plant, and F with the mold."""
-        x, v, a = (ca.SX.sym(n) for n in "xva")
-        free = plant_outputs(x, v, a, self.config.with_(x_contact=None))
-        mold = plant_outputs(x, v, a, self.config)
-        opts = {"cse": True}
-        f_free = ca.Function("free", [x, v, a],
-                             [ca.SX(free.input_force), ca.SX(free.platen_velocity)], opts)
-        f_mold = ca.Function("mold", [x, v, a], [ca.SX(mold.input_force)], opts)
-        return f_free, f_mold
-
-    def _build(self) -> tuple[dict, tuple[np.ndarray, np.ndarray], ca.Function]:
-        """The NLP in scaled variables: position xi = (x - x_open) / S, velocity, acceleration
-        and jerk in units of S / T_ref^k, interval lengths theta in units of T_ref."""
-        n1, n2 = self.n1, self.n2
-        N = n1 + n2
-        w = ca.MX.sym("w", 4 * N + 6)
-        xi, nu, al = (w[k * (N + 1):(k + 1) * (N + 1)] for k in range(3))
-        io = w[3 * N + 3:4 * N + 3]
-        th1, th2, s = w[4 * N + 3], w[4 * N + 4], w[4 * N + 5]
-        weights = ca.MX.sym("p", 4)  # peak, integral of F^2, duration, jerk regularisation
-        d = ca.vertcat(ca.repmat(th1, n1, 1), ca.repmat(th2, n2, 1))
-        dyn = ca.vertcat(
-            xi[1:] - (xi[:-1] + d * (nu[:-1] + d * (al[:-1] / 2 + d * io / 6))),
-            nu[1:] - (nu[:-1] + d * (al[:-1] + d * io / 2)),
-            al[1:] - (al[:-1] + d * io),
-        )
-        S, t_ref = self.stroke, self.t_ref
-        x, v, a = self.x_open + S * xi.T, S / t_ref * nu.T, S / t_ref**2 * al.T
-        f_free, f_mold = self._plant_functions()
-        F1, pv = f_free.map(n1 + 1)(x[:n1 + 1], v[:n1 + 1], a[:n1 + 1])
-        F2 = f_mold.map(n2 + 1)(x[n1:], v[n1:], a[n1:])
-        F = ca.vertcat(F1.T, F2.T) / self.f_ref
-
-        def integral(Fp: ca.MX, h: ca.MX) -> ca.MX:  # trapezoidal rule
-            return h * (ca.sumsqr(Fp) - (Fp[0] ** 2 + Fp[-1] ** 2) / 2)
-
-        energy = integral(F[:n1 + 1], th1) + integral(F[n1 + 1:], th2)
-        duration = n1 * th1 + n2 * th2
-        objective = (weights[0] * s + weights[1] * energy + weights[2] * duration
-                     + weights[3] * ca.dot(d, (io / self._jerk_bound) ** 2))
-        g = ca.vertcat(dyn, xi[n1] - self.xi_contact, F - s, F + s,
-                       pv[n1] / self.contact_speed, duration)
-        nf = N + 2
-        lbg = np.concatenate([np.zeros(3 * N + 1), np.full(nf, -np.inf), np.zeros(nf),
-                              [-np.inf, 0.0]])
-        ubg = np.concatenate([np.zeros(3 * N + 1), np.zeros(nf), np.full(nf, np.inf),
-                              [1.0, np.inf]])
-        nlp = {"x": w, "p": weights, "f": objective, "g": g}
-        monitor = ca.Function("monitor", [w], [F, pv[n1] / self.contact_speed])
-        return nlp, (lbg, ubg), monitor
-
-    def _solver(self, warm: bool) -> Any:
-        if warm not in self._solvers:
-            opts = {"ipopt": {**_IPOPT, **(_WARM if warm else {})}, "print_time": False,
-                    "error_on_fail": False}
-            self._solvers[warm] = ca.nlpsol("plan", "ipopt", self._nlp, opts)
-        return self._solvers[warm]
+    def _parameters(self, weights: list[float]) -> list[float]:
+        return [*weights, self.config.x_contact, self.f_ref]
 
     # ---- solving --------------------------------------------------------------------
 
@@ -269,7 +389,8 @@ class ClampPlanner:
                  (-lim.acceleration * t_ref**2 / S, lim.acceleration * t_ref**2 / S))
         for k, (lo, hi) in enumerate(spans):
             lbx[k * (N + 1):(k + 1) * (N + 1)], ubx[k * (N + 1):(k + 1) * (N + 1)] = lo, hi
-        lbx[3 * N + 3:4 * N + 3], ubx[3 * N + 3:4 * N + 3] = -self._jerk_bound, self._jerk_bound
+        lbx[3 * N + 3:4 * N + 3] = -self.problem.jerk_bound
+        ubx[3 * N + 3:4 * N + 3] = self.problem.jerk_bound
         # no creeping through the clamping below the friction model's smoothing speed
         creep = CREEP_FACTOR * self.config.velocity_epsilon * t_ref / S
         lbx[N + 1 + self.n1:2 * N + 1 - max(2, self.n2 // 10)] = creep
@@ -306,16 +427,17 @@ class ClampPlanner:
     def _run(self, weights: list[float], t_bounds: tuple[float, float], force_limit: float,
              objective: str, start: Plan | None, warm: bool) -> tuple[Plan, bool]:
         start = start or self.last
-        warm = warm and start is not None
+        warm = warm and start is not None and start.solution["x"].size == self.problem.size
         lbx, ubx = self._bounds(force_limit)
-        lbg, ubg = (b.copy() for b in self._g_bounds)
+        lbg, ubg = (b.copy() for b in self.problem.g_bounds)
         lbg[-1], ubg[-1] = (t / self.t_ref for t in t_bounds)
+        lbg[3 * (self.n1 + self.n2)] = ubg[3 * (self.n1 + self.n2)] = self.xi_contact
         target = min(max(2 * self.t_ref, t_bounds[0]), t_bounds[1])
         args = self._stretched(start, target) if warm else {"x0": self._initial_guess(target)}
         args["x0"] = np.clip(args["x0"], lbx, ubx)
-        solver = self._solver(warm)
+        solver = self.problem.solver(warm)
         tic = time.perf_counter()
-        sol = solver(p=weights, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **args)
+        sol = solver(p=self._parameters(weights), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **args)
         elapsed = time.perf_counter() - tic
         stats = solver.stats()
         solution = {k: np.asarray(sol[k]).ravel() for k in ("x", "lam_x", "lam_g")}
@@ -331,7 +453,7 @@ class ClampPlanner:
                           x=self.x_open + S * w[:N], v=S / t_ref * w[N + 1:2 * N + 1],
                           a=S / t_ref**2 * w[2 * N + 2:3 * N + 2],
                           jerk=S / t_ref**3 * w[3 * N + 3:4 * N + 3])
-        return Plan(profile, predict(profile, self.config), objective,
+        return Plan(profile, self.config, objective,
                     float(profile.knots[n1]), elapsed, iterations, warm, sol)
 
     def solve(self, duration: float, objective: str = "peak", *, start: Plan | None = None,
@@ -353,7 +475,7 @@ class ClampPlanner:
                                  None, False)
         if not ok:
             self._too_short(duration)
-        self.last = plan
+        self.problem.last = plan
         return plan
 
     def minimum_time(self, force_limit: float | None = None, *, start: Plan | None = None,
@@ -370,15 +492,16 @@ class ClampPlanner:
             plan, ok = self._run(weights, bounds, limit, "time", None, False)
         if not ok:
             raise PlanningError("the planner found no profile that meets the drive limits "
-                                f"(IPOPT: {self._solver(False).stats()['return_status']})")
-        self.last = plan
+                                f"(IPOPT: {self.problem.solver(False).stats()['return_status']})")
+        self.problem.last = plan
         return plan
 
     # ---- diagnosis ------------------------------------------------------------------
 
     def binding_limits(self, plan: Plan, force_limit: float | None = None) -> list[str]:
         """Names of the limits the plan runs at (within 1 %)."""
-        F, contact = (np.asarray(v).ravel() for v in self._monitor(plan.solution["x"]))
+        F, contact = (np.asarray(v).ravel()
+                      for v in self.problem.monitor(plan.solution["x"], self._parameters([0] * 4)))
         pr, lim = plan.profile, self.limits
         limit = self.force_limit if force_limit is None else force_limit
         found = {
@@ -387,7 +510,7 @@ class ClampPlanner:
                 np.max(np.abs(pr.a)) / lim.acceleration,
             f"jerk (max {lim.jerk:.4g} m/s^3)": np.max(np.abs(pr.jerk)) / lim.jerk,
             f"motor torque (max {lim.torque:.4g} N m, {limit:.4g} N thrust)":
-                np.max(np.abs(F)) * self.f_ref / limit,
+                np.max(np.abs(F)) / limit,
             f"platen speed at mold contact (max {self.contact_speed * 1e3:.4g} mm/s)": contact[0],
         }
         return [name for name, ratio in found.items() if ratio >= _BINDING]
@@ -423,8 +546,11 @@ class ClampPlanner:
 @functools.lru_cache(maxsize=8)
 def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CONTACT_SPEED,
                 intervals: int = INTERVALS) -> ClampPlanner:
-    """A built planner, kept so that a re-plan for the same plant does not rebuild."""
-    return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals)
+    """A planner on a kept problem, so that a re-plan for the same plant, for any mold
+    height, neither rebuilds nor starts cold."""
+    problem = _problem_for(cfg.with_(x_contact=None), limits, contact_speed, intervals)
+    return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
+                        problem=problem)
 
 
 def baselines(cfg: PlantConfig, limits: DriveLimits, duration: float

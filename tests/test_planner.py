@@ -6,11 +6,13 @@ import json
 import math
 from dataclasses import replace
 
+import casadi as ca
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from controllers.compiled import compiled
 from controllers.limits import drive_limits
 from controllers.planner import (
     CREEP_FACTOR,
@@ -132,11 +134,29 @@ def test_warm_replan_is_faster_and_reuses_the_problem(chang):
 
 
 def test_other_mold_height_warm_starts_from_the_previous_plan(chang):
-    cfg, limits, _, plan = chang
+    cfg, limits, planner, plan = chang
     moved = planner_for(plan_config("chang2021", x_contact=cfg.x_contact - 0.2e-3), limits)
+    assert moved.problem is planner.problem  # the mold height is a parameter: no rebuild
     replan = moved.solve(DURATION, start=plan)
     assert replan.warm and replan.iterations < plan.iterations
+    x, v, a = replan.profile.sample(np.array([replan.t_contact]))
+    assert float(x[0]) == pytest.approx(moved.config.x_contact, abs=1e-9)
     assert moved.clamp_force() > 2000.0  # an earlier contact clamps harder
+    cold = moved.solve(DURATION, warm=False)
+    assert replan.peak_force == pytest.approx(cold.peak_force, rel=1e-2)
+
+
+def test_compiled_jets_match_and_fall_back_without_a_compiler(tmp_path, monkeypatch):
+    z = ca.SX.sym("z", 3)
+    fn = ca.Function("jet_check", [z], [ca.vertcat(ca.sin(z[0]) * z[1], ca.tanh(z[2]))])
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
+    point = [0.3, -1.2, 2.0]
+    (fast,) = compiled([fn], "check")
+    assert fast.class_name() == "External" and len(list(tmp_path.glob("check_*.so"))) == 1
+    np.testing.assert_allclose(np.asarray(fast(point)), np.asarray(fn(point)), rtol=1e-14)
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path / "other"))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    assert compiled([fn], "check") == [fn]  # interpreted, same results
 
 
 def test_sm55_plans():

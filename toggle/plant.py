@@ -113,13 +113,17 @@ class PlantConfig:
         return replace(self, **changes)
 
 
-def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig) -> PlantOutputs:
+def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = None
+                  ) -> PlantOutputs:
     """Plant outputs at input position x, velocity v and acceleration a.
 
     Floats, arrays or CasADi symbols; no assembly check (see
-    :class:`CompiledPlant` for the checked numeric form).
+    :class:`CompiledPlant` for the checked numeric form). ``x_contact``, if
+    given, replaces ``cfg.x_contact`` and may be a CasADi symbol: the planner
+    keeps the mold height a parameter of its problem (no numeric check here).
     """
     mech, dyn = cfg.mechanism, cfg.dynamics
+    x_contact = cfg.x_contact if x_contact is None else x_contact
     terms = [motion_terms(x, mech.half(h)) for h in HALVES]
     L = 0.5 * (terms[0][0] + terms[1][0])
     g = 0.5 * (terms[0][1] + terms[1][1])
@@ -127,16 +131,16 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig) -> PlantOutputs:
     direction = np.tanh(v / cfg.velocity_epsilon)
     m_in = dyn.crosshead + 0.5 * dyn.links
     m_out = dyn.platen + 0.5 * dyn.links
-    if cfg.x_contact is None:
+    if x_contact is None:
         moving = 1.0
         platen = L
         clamp = tiebar = thrust = 0.0 * x
         ma = 1.0 / np.maximum(np.fabs(g), 1.0 / MA_CAP)
     else:
-        L_contact = 0.5 * sum(float(half_pose(cfg.x_contact, mech.half(h)).L) for h in HALVES)
-        moving = np.where(x < cfg.x_contact, 1.0, 0.0)
-        platen = np.where(x < cfg.x_contact, L, L_contact)
-        states = [clamp_state(x, cfg.x_contact, mech, cfg.friction, direction, half=h)
+        L_contact = 0.5 * sum(half_pose(x_contact, mech.half(h)).L for h in HALVES)
+        moving = np.where(x < x_contact, 1.0, 0.0)
+        platen = np.where(x < x_contact, L, L_contact)
+        states = [clamp_state(x, x_contact, mech, cfg.friction, direction, half=h)
                   for h in HALVES]
         clamp = 0.5 * (states[0].clamp_force + states[1].clamp_force)
         tiebar = 0.5 * (states[0].tiebar_force + states[1].tiebar_force)
