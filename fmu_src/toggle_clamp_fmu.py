@@ -44,6 +44,7 @@ class ToggleClamp(DeclaredSlave):
     description = "Double-toggle mold/die clamp: kinematics, pin friction, elastics, inertia"
     default_experiment = DefaultExperiment(start_time=0.0, stop_time=10.0, step_size=1e-3)
     STATE_EXCLUDE = frozenset({"_plant"})
+    ATOMIC_STEP = True  # _publish assigns only after CompiledPlant returned finite outputs
     VARIABLES = (
         Var("preset", "parameter", "", "Shipped preset name or TOML path", start="chang2021"),
         Var("mu", "parameter", "1", "Pin friction coefficient; -1: the preset's",

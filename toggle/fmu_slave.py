@@ -109,6 +109,9 @@ class DeclaredSlave(Fmi2Slave):
 
     VARIABLES: ClassVar[tuple[Var, ...]] = ()
     STATE_EXCLUDE: ClassVar[frozenset[str]] = frozenset()
+    #: True when :meth:`step` assigns nothing before it can fail and assigns only
+    #: finite outputs: the base class then skips its per-step snapshot and check.
+    ATOMIC_STEP: ClassVar[bool] = False
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
@@ -144,12 +147,14 @@ class DeclaredSlave(Fmi2Slave):
         if self.failure is not None:
             self.log(f"doStep refused, {self.failure}", Fmi2Status.error)
             return False
-        snapshot = dict(self.__dict__)
+        snapshot = None if self.ATOMIC_STEP else dict(self.__dict__)
         try:
             self.step(current_time, step_size)
-            self._check_outputs_finite()
+            if snapshot is not None:
+                self._check_outputs_finite()
         except Exception as exc:  # reject the step instead of fmi2Fatal
-            self.__dict__.update(snapshot)
+            if snapshot is not None:
+                self.__dict__.update(snapshot)
             self.log(f"step at t={current_time:g} s rejected: {exc}", Fmi2Status.discard)
             return False
         return True
