@@ -73,6 +73,17 @@ LIBCOSIM = textwrap.dedent(
 )
 
 
+def validator_problems(fmu: Path) -> list[str]:
+    """Problems fmpy's validator and ``fmutool -check`` find in ``fmu`` (none: [])."""
+    from fmpy.validation import validate_fmu
+
+    problems = list(validate_fmu(str(fmu)))
+    log = fmutool_log(fmu)
+    if "ERROR" in log or "No semantic error" not in log:
+        problems.append(f"fmutool -check: {log}")
+    return problems
+
+
 def fmutool_log(fmu: Path) -> str:
     """Output of ``fmutool -check`` (fmu-manipulation-toolbox) on ``fmu``; skip if absent."""
     import pytest
