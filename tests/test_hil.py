@@ -53,7 +53,12 @@ def test_real_backend_on_the_emulator_agrees_with_the_fmu(fmu_run, tmp_path):
     # force: the load cell's 0.2 N rms noise and the stepper's 0.2 um steps
     for key in ("force_forward_rms", "force_backward_rms"):
         assert rig[key]["mean"] == pytest.approx(sim[key]["mean"], abs=0.5), key
-    assert rig["force_toggle"]["mean"] == pytest.approx(sim["force_toggle"]["mean"], abs=1.5)
+    # at the toggle the drive comes to rest: the pin friction follows the sign of a speed that
+    # the stepper's 0.2 um steps quantise, so this single sample differs most
+    toggle = sim["force_toggle"]["mean"]
+    assert rig["force_toggle"]["mean"] == pytest.approx(toggle, abs=max(1.5, 0.2 * abs(toggle)))
+    assert rig["force_forward_max"]["mean"] == pytest.approx(sim["force_forward_max"]["mean"],
+                                                             rel=0.05)
     csv_head = (out / "samples.csv").read_text().splitlines()[0]
     assert "[s]" in csv_head and "[m]" in csv_head and "[N]" in csv_head
 

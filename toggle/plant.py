@@ -19,8 +19,9 @@ stops at mold contact, so only m_in remains after it), c the guide damping
 and F0 the static crosshead thrust against the tie bars with pin friction
 (zero before mold contact). The friction direction is tanh(v / v_eps), a
 smooth sign for the optimiser. With unequal halves each half's clamp state is
-computed with its own dimensions and the two are averaged (the platen is
-rigid; the internal force their mismatch creates is :mod:`toggle.asymmetry`'s).
+computed with its own dimensions and the two are averaged, and the force the
+rigid platen needs to force them to agree adds the pin friction and elastic
+energy of :mod:`toggle.asymmetry` (docs/unequal-halves.md).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 
+from toggle.asymmetry import AsymmetryParams, extra_input_force
 from toggle.drive import motor_torque
 from toggle.elastics import clamp_state
 from toggle.kinematics import AssemblyError, assemblable_range, half_pose, motion_terms
@@ -72,6 +74,8 @@ class PlantConfig:
     mu: float | None = None  # kinetic pin friction; None: the preset's (0 without [clamp])
     x_contact: float | None = None  # crosshead position at mold contact; None: no mold
     velocity_epsilon: float = 1e-4  # m/s, width of the smooth friction direction
+    #: the unequal-halves model (calibrated defaults of the desktop clamp)
+    asymmetry: AsymmetryParams = AsymmetryParams()
 
     def __post_init__(self) -> None:
         mech = self.mechanism
@@ -149,6 +153,8 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
         ma = 1.0 / np.maximum(np.fabs(q), 1.0 / MA_CAP)
     inertia = m_in * a + moving * m_out * g * (g * a + gp * v * v)
     force = inertia + dyn.guide_damping * v + thrust
+    if not mech.symmetric:  # a parameter decision: equal halves add exactly nothing
+        force = force + extra_input_force(x, v, mech.lower, mech.upper, cfg.asymmetry)
     theta4 = half_pose(x, mech.lower, check=False).theta4
     return PlantOutputs(
         x=x, velocity=v, acceleration=a,

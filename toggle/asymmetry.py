@@ -1,0 +1,317 @@
+"""Unequal halves forced to agree by the rigid, guided platen (issue 8; docs/unequal-halves.md).
+
+The nine-link clamp moves only because its two halves are equal. With a
+dimensional error the halves want the platen at different places,
+L_U(x) != L_L(x) (both from :func:`toggle.kinematics.half_pose`, each with its
+own dimensions). The platen is rigid and guided, so:
+
+1. the mismatch first takes up free play (platen tilt in its bushing clearance,
+   pin clearances): delta0;
+2. the rest, s_e = max(|dL| - delta0, 0), is forced into the halves in series:
+   pin contacts closed on their clearance (Hertz-type law s_c = (N / K_c)^(2/3),
+   the Lankarani-Nikravesh exponent 3/2) and the halves' linear compliance
+   c(x) = 1 / k_s + ((dL_L/dx)^2 + (dL_U/dx)^2) / k_d (links 4b and 5 of both
+   halves, plus each half's drive side seen through its linkage: soft far from the
+   toggle, stiff at it); an internal force pair N(x) solves
+   s_e = (N / K_c)^(2/3) + c(x) N;
+3. N loads every pin of both halves; their friction circles dissipate
+   P / |v| = sum_j rho_j |F_j| |dphi_j/dx|, felt at the input as a force
+   opposing the motion; the stored elastic energy U(x) adds the conservative
+   force dU/dx = N ds_e/dx - N^2/2 dc/dx (returned on the way back).
+
+The pin friction is velocity-strengthening (steady-state rate-and-state law,
+mu(v_s) = mu + (a - b) ln(1 + v_s / v_c), v_s the sliding speed at the pin):
+the rate dependence of Tables 6-8.
+
+The model is written once, with numpy ufuncs on the output of ``half_pose``,
+and compiled to a CasADi function of (x, v, lower dims, upper dims, params), so
+it evaluates on floats, numpy arrays and CasADi SX alike; ``extra_input_force``
+is what the FMU plant calls each step.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import astuple, dataclass, fields
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import casadi as ca
+import numpy as np
+
+from toggle.kinematics import half_pose, stroke_limits
+from toggle.params import DIMENSIONS, HalfDims, Mechanism, PinRadii
+
+#: Mismatch below which |dL| is rounded (smooth |.| for solvers), m; exactly 0 at dL = 0.
+_ABS_EPS = 1e-12
+#: Velocity scale of the smooth sign of the friction force, m/s.
+_SIGN_EPS = 1e-6
+#: Newton steps for the internal force (monotone from an upper bound; 1e-15 relative).
+_NEWTON_STEPS = 12
+
+
+class AsymmetryError(ValueError):
+    """Parameters outside their physical range, or halves that cannot be forced together."""
+
+
+@dataclass(frozen=True)
+class AsymmetryParams:
+    """Physical parameters of the forced-agreement model, SI.
+
+    Defaults: the desktop clamp of Chang et al. 2021, calibrated on Table 6
+    (free_play, contact_stiffness) with the rest from its materials and sizes
+    (docs/unequal-halves.md, section 4).
+    """
+
+    free_play: float = 0.1162e-3  # delta0, m: platen tilt in the bushings + pin clearances
+    contact_stiffness: float = 7.91e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
+    series_stiffness: float = 3.3e7  # k_s, N/m: links 4b and 5 of both halves in series (A6061)
+    drive_stiffness: float = 1.0e5  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
+    mu: float = 0.3  # pin friction coefficient at the reference slip speed (SUS304 pin in A6061)
+    rate_strengthening: float = 0.02  # a - b of the steady-state rate-and-state law
+    reference_slip: float = 1.0e-3  # v_ref, m/s: slip speed at which the coefficient is mu
+    slip_velocity: float = 1.0e-6  # v_c, m/s: regularises the log law at rest
+    pins: PinRadii = PinRadii(B=4.0e-3, C=4.0e-3, D=4.0e-3)
+    #: Internal force above which the halves cannot be forced together elastically (yield), N.
+    max_internal_force: float = 2.0e4
+
+    def __post_init__(self) -> None:
+        ranges = {
+            "free_play": (0.0, 5e-3),
+            "contact_stiffness": (1e5, 1e12),
+            "series_stiffness": (1e4, 1e12),
+            "drive_stiffness": (1e3, 1e12),
+            "mu": (0.0, 1.0),
+            "rate_strengthening": (0.0, 0.1),
+            "reference_slip": (1e-9, 1.0),
+            "slip_velocity": (1e-12, 1.0),
+            "max_internal_force": (1.0, 1e9),
+        }
+        for name, (lo, hi) in ranges.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+                math.isfinite(value) and lo <= value <= hi
+            ):
+                raise AsymmetryError(f"{name} must lie in [{lo:g}, {hi:g}] (SI), got {value!r}")
+        at_rest = self.mu - self.rate_strengthening * math.log(
+            (self.reference_slip + self.slip_velocity) / self.slip_velocity)
+        if at_rest < 0:
+            raise AsymmetryError(
+                f"the friction law gives a negative coefficient at rest ({at_rest:.3g}): "
+                "raise mu or lower rate_strengthening"
+            )
+        if max(astuple(self.pins)) > 0.05:
+            raise AsymmetryError(f"pin radii above 50 mm are not a desktop clamp: {self.pins}")
+
+    def replace(self, **changes: float) -> AsymmetryParams:
+        return type(self)(**{**{f.name: getattr(self, f.name) for f in fields(self)}, **changes})
+
+    def vector(self) -> np.ndarray:
+        """The parameters in the order of the compiled model's input ``q``."""
+        return np.array([self.free_play, self.contact_stiffness, self.series_stiffness,
+                         self.drive_stiffness, self.mu, self.rate_strengthening,
+                         self.reference_slip, self.slip_velocity,
+                         self.pins.B, self.pins.C, self.pins.D])
+
+
+class Asymmetry(NamedTuple):
+    """Model output at (x, v): forces in N, mismatch in m."""
+
+    force: Any  # extra input force, N (positive pushes the crosshead towards the toggle)
+    friction: Any  # its dissipative part, N (sign of v)
+    elastic: Any  # its conservative part dU/dx, N
+    internal_force: Any  # N, the force pair between the halves and the platen
+    mismatch: Any  # L_U - L_L, m
+
+
+# --- the model, written once -------------------------------------------------------------
+
+
+def _pin_loads(pose: Any, dims: Any, n: Any) -> tuple[Any, Any, Any, Any, Any]:
+    """Pin-force magnitudes |F_A|, |F_B|, |F_C|, |F_D|, |F_E| of a half with output force n.
+
+    Pivot C of link 4 at the origin, B = r4b (cos th4, sin th4), D = r4a (cos(th4 +
+    alpha4), sin(th4 + alpha4)); link 5 runs along u5 = (cos th5, sin th5) from B to the
+    platen joint A, link 3 along u3 = (cos th3, sin th3) from the crosshead pin E to D.
+    Both are two-force members; link 4 balances moments about C (seed 001's statics
+    with mu -> 0, the friction being first order in mu).
+    """
+    th3, th4, th5, a4 = pose.theta3, pose.theta4, pose.theta5, pose.alpha4
+    r4a, r4b = dims[3], dims[4]
+    f5 = n / np.cos(th5)  # link 5 axial force
+    cross_b = r4b * (np.cos(th4) * np.sin(th5) - np.sin(th4) * np.cos(th5))
+    cross_d = r4a * (np.cos(th4 + a4) * np.sin(th3) - np.sin(th4 + a4) * np.cos(th3))
+    t3 = f5 * cross_b / cross_d  # link 3 axial force
+    rc_x = f5 * np.cos(th5) - t3 * np.cos(th3)
+    rc_y = f5 * np.sin(th5) - t3 * np.sin(th3)
+    f5, t3 = np.fabs(f5), np.fabs(t3)
+    return f5, f5, np.sqrt(rc_x * rc_x + rc_y * rc_y), t3, t3
+
+
+def _friction_power(x: Any, v: Any, dims: Any, n: Any, q: Any) -> Any:
+    """Friction-circle dissipation of one half per unit input speed, N (>= 0)."""
+    pose = half_pose(x, dims, check=False)
+    rate = [ca.jacobian(a, x) for a in (pose.theta3, pose.theta4, pose.theta5)]
+    d3, d4, d5 = rate
+    turns = (d5, d5 - d4, d4, d3 - d4, d3)  # relative rotation per unit x at A, B, C, D, E
+    radii = (q[8], q[8], q[9], q[10], q[10])  # joint A as B, E as D (toggle.params.PinRadii)
+    mu_ref, ab, v_ref, v_c = q[4], q[5], q[6], q[7]
+    total = 0
+    for load, turn, r in zip(_pin_loads(pose, dims, n), turns, radii, strict=True):
+        slip = r * np.fabs(turn) * np.fabs(v)
+        mu = mu_ref + ab * np.log((slip + v_c) / (v_ref + v_c))
+        total = total + mu / np.sqrt(1 + mu * mu) * r * load * np.fabs(turn)
+    return total
+
+
+def _internal_force(excess: Any, compliance: Any, k_contact: Any) -> Any:
+    """N solving excess = (N / K_c)^(2/3) + compliance N, by Newton on y = N^(1/3).
+
+    g(y) = c y^3 + a y^2 - s is convex and increasing for y >= 0, so Newton from the
+    upper bound min(sqrt(s / a), cbrt(s / c)) decreases monotonically to the root.
+    """
+    a = k_contact ** (-2.0 / 3.0)
+    y = np.fmin(np.sqrt(excess / a), (excess / compliance) ** (1.0 / 3.0))
+    for _ in range(_NEWTON_STEPS):
+        g = compliance * y**3 + a * y * y - excess
+        y = y - g / (3 * compliance * y * y + 2 * a * y + 1e-300)
+    return y**3
+
+
+@functools.cache
+def _model() -> ca.Function:
+    """CasADi function (x, v, lower[8], upper[8], q[11]) -> force, friction, elastic, N, dL."""
+    x, v = ca.SX.sym("x"), ca.SX.sym("v")
+    pl, pu = ca.SX.sym("lower", len(DIMENSIONS)), ca.SX.sym("upper", len(DIMENSIONS))
+    q = ca.SX.sym("q", 11)
+    dims_l = [pl[i] for i in range(len(DIMENSIONS))]
+    dims_u = [pu[i] for i in range(len(DIMENSIONS))]
+    free_play, k_contact, k_series, k_drive = q[0], q[1], q[2], q[3]
+
+    L_l, L_u = half_pose(x, dims_l, check=False).L, half_pose(x, dims_u, check=False).L
+    slope_l, slope_u = ca.jacobian(L_l, x), ca.jacobian(L_u, x)
+    mismatch = L_u - L_l
+    size = np.sqrt(mismatch * mismatch + _ABS_EPS**2) - _ABS_EPS
+    excess = np.fmax(size - free_play, 0)
+    compliance = 1 / k_series + (slope_l * slope_l + slope_u * slope_u) / k_drive
+    n = _internal_force(excess, compliance, k_contact)
+    # dU/dx at equilibrium: dU/ds_e = N, dU/dc at fixed s_e = -N^2 / 2 (envelope theorem)
+    elastic = n * ca.jacobian(excess, x) - 0.5 * n * n * ca.jacobian(compliance, x)
+    power = _friction_power(x, v, dims_l, n, q) + _friction_power(x, v, dims_u, n, q)
+    friction = v / np.sqrt(v * v + _SIGN_EPS**2) * power
+    return ca.Function("asymmetry", [x, v, pl, pu, q],
+                       [friction + elastic, friction, elastic, n, mismatch],
+                       ["x", "v", "lower", "upper", "q"],
+                       ["force", "friction", "elastic", "internal_force", "mismatch"])
+
+
+# --- public API ----------------------------------------------------------------------------
+
+
+def _is_symbolic(*values: Any) -> bool:
+    return any(isinstance(v, (ca.SX, ca.MX)) or type(v).__module__.startswith("casadi")
+               for v in values)
+
+
+def _dims_vector(dims: HalfDims | Any) -> Any:
+    return np.array(dims.as_tuple()) if isinstance(dims, HalfDims) else dims
+
+
+def asymmetry(
+    x: Any, v: Any, lower: HalfDims | Any, upper: HalfDims | Any,
+    params: AsymmetryParams = AsymmetryParams(),
+) -> Asymmetry:
+    """Forces of the forced agreement of two halves at crosshead position x (m), speed v (m/s).
+
+    Floats or arrays (broadcast together) give numpy arrays; CasADi SX/MX in any
+    argument give symbolic expressions. A numeric input where either half cannot
+    assemble raises :class:`toggle.kinematics.AssemblyError` naming the half.
+    """
+    f = _model()
+    if _is_symbolic(x, v, lower, upper):
+        out = f(x, v, _dims_vector(lower), _dims_vector(upper), params.vector())
+        return Asymmetry(*out)
+    xs, vs = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(v, dtype=float))
+    if not np.all(np.isfinite(vs)):
+        raise AsymmetryError(f"speed must be finite, got {v!r}")
+    half_pose(xs, lower, label="lower half")  # raises AssemblyError where needed
+    half_pose(xs, upper, label="upper half")
+    out = f(xs.reshape(1, -1), vs.reshape(1, -1), _dims_vector(lower), _dims_vector(upper),
+            params.vector())
+    result = Asymmetry(*(np.asarray(o).reshape(xs.shape) for o in out))
+    worst = int(np.argmax(result.internal_force))
+    if result.internal_force.ravel()[worst] > params.max_internal_force:
+        raise AsymmetryError(
+            f"the halves cannot be forced together elastically: at x = {xs.ravel()[worst]:.6g} m "
+            f"their mismatch {result.mismatch.ravel()[worst]:.3g} m needs an internal force of "
+            f"{result.internal_force.ravel()[worst]:.3g} N > {params.max_internal_force:g} N"
+        )
+    return result
+
+
+def extra_input_force(
+    x: Any, v: Any, lower: HalfDims | Any, upper: HalfDims | Any,
+    params: AsymmetryParams = AsymmetryParams(),
+) -> Any:
+    """Extra crosshead force (N) from unequal halves: the FMU plant's per-step call.
+
+    Add it to the force the drive must deliver: positive resists closing (v > 0);
+    zero for equal halves. Floats, arrays or CasADi SX (see :func:`asymmetry`).
+    """
+    return asymmetry(x, v, lower, upper, params).force
+
+
+def toggle_force(
+    mech: Mechanism, speed: float, params: AsymmetryParams = AsymmetryParams(),
+    x_toggle: float | None = None,
+) -> float:
+    """Predicted extra input force at the toggle in the forward stroke, F_TP (N).
+
+    ``x_toggle`` defaults to the lower (unaltered) half's toggle, the paper's 51.566 mm.
+    """
+    if not (math.isfinite(speed) and speed > 0):
+        raise AsymmetryError(f"forward speed must be positive, got {speed!r} m/s")
+    x_tp = stroke_limits(mech.lower)[1] if x_toggle is None else x_toggle
+    return float(asymmetry(x_tp, speed, mech.lower, mech.upper, params).force)
+
+
+def force_curves(
+    mech: Mechanism, speed: float, params: AsymmetryParams = AsymmetryParams(), points: int = 300,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, forward force, backward force) over the lower half's stroke, m and N."""
+    x_open, x_tp = stroke_limits(mech.lower)
+    xs = np.linspace(x_open, x_tp, points)
+    fwd = asymmetry(xs, speed, mech.lower, mech.upper, params).force
+    back = asymmetry(xs, -speed, mech.lower, mech.upper, params).force
+    return xs, fwd, back
+
+
+def plot_force_curves(
+    mech: Mechanism, path: Path, speed: float = 5e-3,
+    errors: tuple[float, ...] = (0.0, 0.25e-3, 0.5e-3, 0.75e-3),
+    params: AsymmetryParams = AsymmetryParams(),
+) -> Path:
+    """PNG of the extra input force against x, forward and backward, one curve per delta_r8."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for i, err in enumerate(errors):
+        xs, fwd, back = force_curves(mech.with_error("upper", "r5", err), speed, params)
+        colour = f"C{i}"
+        ax.plot(xs * 1e3, fwd, color=colour, label=f"Δr8 = {err * 1e3:.2f} mm forward")
+        ax.plot(xs * 1e3, back, color=colour, ls="--", label=f"Δr8 = {err * 1e3:.2f} mm backward")
+    ax.axhline(0, color="0.6", lw=0.8)
+    ax.set_xlabel("input position x (mm)")
+    ax.set_ylabel("extra input force (N)")
+    ax.set_title(f"{mech.name}: unequal halves, v = {speed * 1e3:g} mm/s")
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

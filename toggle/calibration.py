@@ -1,0 +1,140 @@
+"""Fit the unequal-halves model (toggle.asymmetry) to measured toggle forces.
+
+Data: a table like Chang et al. 2021's Tables 6-8 (F_TP mean and three-sigma band
+per speed and link-8 error; ``hil/data/chang2021_tables.toml``) or run summaries
+in the same shape. At most three parameters are fitted, by weighted least squares
+(residual / three-sigma band) in log coordinates, so every fitted value stays
+positive; the rest keep their physical defaults.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from toggle.asymmetry import AsymmetryError, AsymmetryParams, toggle_force
+from toggle.params import Mechanism
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+#: The paper's tables, kept with the HIL data (units as printed: mm/s, mm, N).
+PAPER_TABLES = Path(__file__).resolve().parents[1] / "hil" / "data" / "chang2021_tables.toml"
+#: Parameters a calibration may fit (all positive scalars of AsymmetryParams).
+FITTABLE = ("free_play", "contact_stiffness", "series_stiffness", "drive_stiffness", "mu",
+            "rate_strengthening")
+MAX_FITTED = 3
+
+
+@dataclass(frozen=True)
+class ForceTable:
+    """Measured toggle forces: ``mean[i, j]`` and ``three_sigma[i, j]`` (N) at speed i, error j."""
+
+    speeds: np.ndarray  # m/s
+    errors: np.ndarray  # link-8 length error delta_r8, m
+    mean: np.ndarray
+    three_sigma: np.ndarray
+
+    def __post_init__(self) -> None:
+        shape = (len(self.speeds), len(self.errors))
+        if np.shape(self.mean) != shape or np.shape(self.three_sigma) != shape:
+            raise ValueError(f"force table must be {shape} (speeds x errors)")
+        if np.any(np.asarray(self.three_sigma) <= 0):
+            raise ValueError("three-sigma bands must be positive")
+
+    def speed_index(self, speed: float) -> int:
+        hits = np.flatnonzero(np.isclose(self.speeds, speed, rtol=1e-6))
+        if not len(hits):
+            raise ValueError(f"no data at {speed!r} m/s; speeds: {self.speeds.tolist()}")
+        return int(hits[0])
+
+
+def load_force_table(path: str | Path = PAPER_TABLES, key: str = "force_toggle") -> ForceTable:
+    """Read a paper-style table (mm/s, mm, N as printed) and convert to SI."""
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        table = data["tables"][key]
+        return ForceTable(np.asarray(data["speed"], float) * 1e-3,
+                          np.asarray(data["delta_r8"], float) * 1e-3,
+                          np.asarray(table["mean"], float), np.asarray(table["three_sigma"], float))
+    except (OSError, KeyError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"cannot read force table {key!r} from {path}: {exc}") from exc
+
+
+def predict(table: ForceTable, mech: Mechanism, params: AsymmetryParams) -> np.ndarray:
+    """Model F_TP (N) at every (speed, error) of the table; errors go to the upper r5 (link 8)."""
+    return np.array([[toggle_force(mech.with_error("upper", "r5", err), speed, params)
+                      for err in table.errors] for speed in table.speeds])
+
+
+class Calibration(NamedTuple):
+    params: AsymmetryParams
+    fitted: tuple[str, ...]
+    speed: float
+    normalised_residuals: np.ndarray  # (model - mean) / three_sigma at the calibration speed
+
+
+def calibrate(
+    table: ForceTable, mech: Mechanism, speed: float,
+    fit: tuple[str, ...] = ("free_play", "contact_stiffness"),
+    start: AsymmetryParams | None = None,
+) -> Calibration:
+    """Fit at most three parameters to the table's row at ``speed`` (m/s), from ``start``
+    (default: the model's defaults)."""
+    start = start or AsymmetryParams()
+    if not 0 < len(fit) <= MAX_FITTED or len(set(fit)) != len(fit):
+        raise ValueError(f"fit 1 to {MAX_FITTED} distinct parameters, got {fit}")
+    unknown = set(fit) - set(FITTABLE)
+    if unknown:
+        raise ValueError(f"cannot fit {sorted(unknown)}; fittable: {', '.join(FITTABLE)}")
+    i = table.speed_index(speed)
+    row = ForceTable(table.speeds[i:i + 1], table.errors, table.mean[i:i + 1],
+                     table.three_sigma[i:i + 1])
+    floor = 1e-9  # log coordinates need a positive start (free play may start at 0)
+
+    def params_at(z: np.ndarray) -> AsymmetryParams:
+        return start.replace(**{name: float(math.exp(zi)) for name, zi in zip(fit, z, strict=True)})
+
+    def residuals(z: np.ndarray) -> np.ndarray:
+        try:
+            model = predict(row, mech, params_at(z))
+        except AsymmetryError:
+            return np.full(len(table.errors), 1e6)
+        return ((model - row.mean) / row.three_sigma).ravel()
+
+    z0 = np.log([max(getattr(start, name), floor) for name in fit])
+    result = least_squares(residuals, z0, x_scale=1.0, diff_step=1e-6)
+    best = params_at(result.x)
+    return Calibration(best, tuple(fit), float(table.speeds[i]), residuals(result.x))
+
+
+class Comparison(NamedTuple):
+    """One row of the side-by-side table: model against a measured F_TP."""
+
+    speed: float  # m/s
+    error: float  # delta_r8, m
+    measured: float  # N
+    three_sigma: float  # N
+    model: float  # N
+    relative_error: float  # (model - measured) / measured
+
+    @property
+    def within_band(self) -> bool:
+        return abs(self.model - self.measured) <= self.three_sigma
+
+
+def compare(table: ForceTable, mech: Mechanism, params: AsymmetryParams) -> list[Comparison]:
+    """Side-by-side rows for every (speed, error) of the table."""
+    model = predict(table, mech, params)
+    mean, band = table.mean, table.three_sigma
+    return [Comparison(float(s), float(e), float(mean[i, j]), float(band[i, j]),
+                       float(model[i, j]), float((model[i, j] - mean[i, j]) / mean[i, j]))
+            for i, s in enumerate(table.speeds) for j, e in enumerate(table.errors)]
