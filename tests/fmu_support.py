@@ -73,6 +73,14 @@ LIBCOSIM = textwrap.dedent(
 )
 
 
+def close_slave(slave, *states) -> None:
+    """Free saved FMU states, terminate and free an fmpy slave."""
+    for state in states:
+        slave.freeFMUstate(state)
+    slave.terminate()
+    slave.freeInstance()
+
+
 def validator_problems(fmu: Path) -> list[str]:
     """Problems fmpy's validator and ``fmutool -check`` find in ``fmu`` (none: [])."""
     from fmpy.validation import validate_fmu

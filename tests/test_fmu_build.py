@@ -11,7 +11,7 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Discard, fmi2Error
-from fmu_support import load_module, run_fresh, run_libcosim, validator_problems
+from fmu_support import close_slave, load_module, run_fresh, run_libcosim, validator_problems
 
 from toggle.fmu_build import build_fmu, extend_model_description, fmu_module_name
 from toggle.fmu_host import release_native_runtime, start_slave
@@ -43,13 +43,6 @@ def _run(slave, refs, u_and_dt) -> list[tuple[float, float]]:
         t += dt
         out.append(tuple(slave.getReal([refs["y"], refs["x"]])))
     return out
-
-
-def _close(slave, *states) -> None:
-    for state in states:
-        slave.freeFMUstate(state)
-    slave.terminate()
-    slave.freeInstance()
 
 
 # ---- build and model description ---------------------------------------------------
@@ -158,7 +151,7 @@ def test_variable_step_sizes_integrate_exactly(unzipped: Path):
     slave, refs = start_slave(unzipped, "steps")
     steps = [(0.5, 1e-3), (-0.2, 5e-3), (1.0, 2e-2), (0.1, 1e-4)]
     out = _run(slave, refs, steps)
-    _close(slave)
+    close_slave(slave)
     assert out[-1][1] == pytest.approx(sum(u * dt for u, dt in steps), rel=1e-14)
     assert [y for y, _ in out] == [2.0 * u for u, _ in steps]
 
@@ -177,7 +170,7 @@ def test_state_rollback_reproduces_outputs(unzipped: Path):
     restored = slave.deSerializeFMUstate(serialized)
     slave.setFMUstate(restored)
     fourth = _run(slave, refs, future)
-    _close(slave, state, restored)
+    close_slave(slave, state, restored)
     assert first == second == third == fourth
     assert first[-1][1] != pytest.approx(0.09)  # the internal integral did advance
 
@@ -188,7 +181,7 @@ def test_invalid_parameter_is_logged_and_every_step_discarded(unzipped: Path):
     with pytest.raises(FMICallException) as failure:
         slave.doStep(0.0, 1e-3)
     values = slave.getReal([refs["y"], refs["x"]])
-    _close(slave)
+    close_slave(slave)
     assert failure.value.status == fmi2Discard
     assert any(status == fmi2Error and "gain" in text for status, text in log), log
     assert all(math.isfinite(v) for v in values)
@@ -205,7 +198,7 @@ def test_out_of_range_input_discards_step_and_keeps_state(unzipped: Path):
     slave.setReal([refs["u"]], [0.5])
     slave.doStep(0.1, 0.1)
     recovered = slave.getReal([refs["x"]])[0]
-    _close(slave)
+    close_slave(slave)
     assert failure.value.status == fmi2Discard
     assert any(status == fmi2Discard and "u = 5" in text for status, text in log), log
     assert after_discard == before

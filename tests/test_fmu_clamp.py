@@ -17,7 +17,14 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Discard, fmi2Error
-from fmu_support import load_module, run_fresh, run_libcosim, validator_problems, variable_table
+from fmu_support import (
+    close_slave,
+    load_module,
+    run_fresh,
+    run_libcosim,
+    validator_problems,
+    variable_table,
+)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -80,13 +87,6 @@ def _run(slave, refs, commands_and_steps, t: float = 0.0) -> list[dict[str, floa
         t += h
         out.append(_outputs(slave, refs))
     return out
-
-
-def _close(slave, *states) -> None:
-    for state in states:
-        slave.freeFMUstate(state)
-    slave.terminate()
-    slave.freeInstance()
 
 
 def _logger(log: list[tuple[int, str]]):
@@ -192,7 +192,7 @@ def test_state_rollback_reproduces_outputs(unzipped: Path):
     restored = slave.deSerializeFMUstate(serialized)
     slave.setFMUstate(restored)
     fourth = _run(slave, refs, FUTURE)
-    _close(slave, state, restored)
+    close_slave(slave, state, restored)
     assert first == second == third == fourth
     assert first[0]["velocity"] != 0 and first[-1]["clamp_force"] > 0  # internal state moved
 
@@ -203,7 +203,7 @@ def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: f
     slave, refs = start_slave(unzipped, "steps", {"drive_bandwidth": bandwidth,
                                                   "x_cmd": X_OPEN, **MOLD})
     out = _run(slave, refs, steps)
-    _close(slave)
+    close_slave(slave)
     drive = DriveState(X_OPEN, 0.0, 0.0)
     for (x_cmd, h), got in zip(steps, out, strict=True):
         drive = follow(drive, x_cmd, h, bandwidth, 0.7)
@@ -239,7 +239,7 @@ def test_invalid_parameter_fails_initialisation_and_every_step(unzipped: Path, s
             slave.doStep(t, h)
         statuses.append(refused.value.status)
     values = _outputs(slave, refs)
-    _close(slave)
+    close_slave(slave)
     errors = [text for status, text in log if status == fmi2Error]
     assert errors and errors[0].startswith("initialisation failed") and named in errors[0], log
     assert statuses == [fmi2Discard, fmi2Discard]
@@ -256,7 +256,7 @@ def test_input_outside_the_range_discards_the_step_and_keeps_working(unzipped: P
         slave.doStep(1e-2, 5e-3)
     after_discard = _outputs(slave, refs)
     recovered = _run(slave, refs, APPROACH[2:4], t=1e-2)
-    _close(slave)
+    close_slave(slave)
     assert refused.value.status == fmi2Discard
     assert any(status == fmi2Discard and "assemblable range" in text for status, text in log), log
     assert after_discard == before
@@ -289,7 +289,7 @@ def test_outputs_are_finite_for_any_command_sequence(unzipped: Path, commands, b
             previous = _outputs(slave, refs)
             assert all(math.isfinite(v) for v in previous.values())
     finally:
-        _close(slave)
+        close_slave(slave)
 
 
 # ---- other processes and masters -----------------------------------------------------------

@@ -6,12 +6,18 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
 from toggle.asymmetry import asymmetry, force_curves, plot_force_curves
-from toggle.cli.common import MM, add_json_argument, add_preset_argument, mechanism, print_json
+from toggle.cli.common import (
+    MM,
+    add_json_argument,
+    add_out_argument,
+    add_preset_argument,
+    mechanism,
+    print_json,
+)
 from toggle.kinematics import stroke_limits
 
 
@@ -80,5 +86,5 @@ def plot(args: argparse.Namespace) -> int:
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("asymmetry", help="extra input force vs x for delta_r8 = 0..0.75 mm")
     _add_common(p)
-    p.add_argument("--out", type=Path, default=Path("figures"), help="output folder")
+    add_out_argument(p)
     p.set_defaults(handler=plot)

@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import Any
 
 from toggle.params import Mechanism, load_preset, preset_names
@@ -24,6 +25,11 @@ def add_json_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--json", action="store_true", help="print machine-readable JSON (SI units)"
     )
+
+
+def add_out_argument(parser: argparse.ArgumentParser) -> None:
+    """The ``--out`` folder of a ``toggle plot`` figure."""
+    parser.add_argument("--out", type=Path, default=Path("figures"), help="output folder")
 
 
 def mechanism(args: argparse.Namespace) -> Mechanism:

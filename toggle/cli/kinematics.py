@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
 from toggle.cli.common import (
     MM,
     add_json_argument,
+    add_out_argument,
     add_preset_argument,
     deg,
     mechanism,
@@ -103,5 +103,5 @@ def plot(args: argparse.Namespace) -> int:
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("kinematics", help="L(x), dL/dx and MA of both halves (seed 000 Fig 6)")
     add_preset_argument(p)
-    p.add_argument("--out", type=Path, default=Path("figures"), help="output folder")
+    add_out_argument(p)
     p.set_defaults(handler=plot)

@@ -15,7 +15,15 @@ from typing import Any
 
 import numpy as np
 
-from toggle.cli.common import MM, add_json_argument, add_preset_argument, deg, print_json, table
+from toggle.cli.common import (
+    MM,
+    add_json_argument,
+    add_out_argument,
+    add_preset_argument,
+    deg,
+    print_json,
+    table,
+)
 from toggle.params import DIMENSIONS, HALVES, load_preset
 from toggle.study import (
     CRITERIA,
@@ -234,10 +242,10 @@ def _plot_sweep(args: argparse.Namespace) -> int:
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("study", help="Ms, Mv, Mp, psi against toggle angle (seed 004 Figs 3-6)")
     _add_range_arguments(p, "li_micro")
-    p.add_argument("--out", type=Path, default=Path("figures"), help="output folder")
+    add_out_argument(p)
     p.set_defaults(handler=_plot_study)
     s = kinds.add_parser("sweep", help="contours of the study's criteria over two dimensions")
     _add_range_arguments(s, "li_micro/1")
     _add_dim_argument(s)
-    s.add_argument("--out", type=Path, default=Path("figures"), help="output folder")
+    add_out_argument(s)
     s.set_defaults(handler=_plot_sweep)

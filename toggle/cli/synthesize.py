@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import asdict
-from pathlib import Path
 from typing import Any
 
 from toggle import press, synthesis
-from toggle.cli.common import MM, add_json_argument, print_json, table
+from toggle.cli.common import MM, add_json_argument, add_out_argument, print_json, table
 from toggle.params import load_preset
 
 
@@ -137,5 +136,5 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("synthesize",
                          help="significance of each error source (seed 003, Figs 6-7)")
     p.add_argument("--preset", default="dong2022", help="press or clamp preset (default dong2022)")
-    p.add_argument("--out", type=Path, default=Path("figures"), help="output folder")
+    add_out_argument(p)
     p.set_defaults(handler=plot)

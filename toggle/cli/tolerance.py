@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import asdict
-from pathlib import Path
 
 from toggle.cli.common import (
     MM,
     add_json_argument,
+    add_out_argument,
     add_preset_argument,
     mechanism,
     print_json,
@@ -96,5 +96,5 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("tolerance", help="error curves of each half and δL vs IT (Figs 7-9)")
     add_preset_argument(p)
     p.add_argument("--it", type=int, default=10, help="IT grade of the error curves")
-    p.add_argument("--out", type=Path, default=Path("figures"), help="output folder")
+    add_out_argument(p)
     p.set_defaults(handler=plot)
