@@ -2,95 +2,169 @@
 
 from __future__ import annotations
 
+import json
+
+import casadi as ca
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from toggle.asymmetry import AsymmetryError, AsymmetryParams, asymmetry, force_curves, toggle_force
+from toggle.asymmetry import (
+    AsymmetryError,
+    AsymmetryParams,
+    asymmetry,
+    extra_input_force,
+    force_curves,
+)
 from toggle.calibration import calibrate, compare, load_force_table
-from toggle.kinematics import AssemblyError, stroke_limits
+from toggle.cli import main
+from toggle.kinematics import AssemblyError
 from toggle.params import load_preset
-from toggle.plant import PlantConfig, plant_outputs
 
 MECH = load_preset("chang2021")
-TABLE = load_force_table()
+#: Prediction tolerance for Tables 7-8 (issue 8).
+RELATIVE = 0.25
+#: Rows of Tables 7-8 the model does not claim (docs/unequal-halves.md, section 6): at
+#: delta_r8 = 0.25 mm the measured F_TP falls with speed (28.7, 22.6, 18.2 N) while it
+#: rises at 0.5 and 0.75 mm; one friction law on one internal force cannot do both.
+NOT_CLAIMED = {(15e-3, 0.25e-3), (25e-3, 0.25e-3)}
 
 
 @pytest.fixture(scope="module")
-def calibrated():
-    return calibrate(TABLE, MECH, 5e-3, fit=("free_play", "contact_stiffness"))
+def table():
+    return load_force_table()
 
 
-def test_calibrated_on_table6_reproduces_table6_within_three_sigma(calibrated):
+@pytest.fixture(scope="module")
+def calibrated(table):
+    return calibrate(table, MECH, 5e-3, fit=("free_play", "contact_stiffness"))
+
+
+@pytest.fixture(scope="module")
+def side_by_side(table, calibrated):
+    return compare(table, MECH, calibrated.params)
+
+
+def _print(rows) -> None:
+    print("\n v mm/s  dr8 mm   F_TP meas  +-3sigma    model   rel.err")
+    for r in rows:
+        print(f"{r.speed * 1e3:7.0f} {r.error * 1e3:7.2f} {r.measured:11.3f} {r.three_sigma:9.3f}"
+              f" {r.model:8.2f} {100 * r.relative_error:8.1f}%")
+
+
+def test_calibration_reproduces_table6_within_three_sigma(calibrated, side_by_side):
+    _print(side_by_side)
     assert len(calibrated.fitted) <= 3
-    rows = [c for c in compare(TABLE, MECH, calibrated.params) if c.speed == 5e-3]
-    assert len(rows) == 4
-    assert all(c.within_band for c in rows), rows
+    table6 = [r for r in side_by_side if np.isclose(r.speed, 5e-3)]
+    assert len(table6) == 4
+    assert all(r.within_band for r in table6), table6
+    # the calibrated values are the shipped defaults (docs table), to 2 %
+    default = AsymmetryParams()
+    assert calibrated.params.free_play == pytest.approx(default.free_play, rel=0.02)
+    assert calibrated.params.contact_stiffness == pytest.approx(default.contact_stiffness, rel=0.02)
 
 
-def test_prediction_of_tables7_and_8_side_by_side(calibrated):
-    """Model (calibrated at 5 mm/s only) against the measured F_TP at 15 and 25 mm/s.
-
-    Within 25 % where the link error dominates (delta_r8 = 0.5 and 0.75 mm). At 0 mm the
-    measured forces (0.8-0.9 N) are noise around zero: the model gives 0 and must lie in
-    the three-sigma band. At 0.25 mm the paper's own forces fall with speed (28.7, 22.6,
-    18.2 N), unlike every other row: its other small errors partly cancel link 8's
-    (section 5.1), which no model of delta_r8 alone can follow; reported, not asserted.
-    """
-    rows = [c for c in compare(TABLE, MECH, calibrated.params) if c.speed > 5e-3]
-    table = "\n".join(
-        f"v={c.speed * 1e3:4.0f} mm/s dr8={c.error * 1e3:4.2f} mm measured {c.measured:7.2f}"
-        f" +-{c.three_sigma:5.2f} N model {c.model:7.2f} N ({c.relative_error:+.0%})"
-        for c in rows)
-    print(table)
-    for c in rows:
-        if c.error >= 0.5e-3:
-            assert abs(c.relative_error) <= 0.25, table
-        elif c.error == 0:
-            assert c.within_band, table
-    at_half = [c.model for c in rows if c.error == 0.5e-3]
-    assert at_half[0] < at_half[1]  # the force rises with speed, as measured
+def test_tables_7_and_8_predicted(side_by_side):
+    later = [r for r in side_by_side if not np.isclose(r.speed, 5e-3)]
+    assert len(later) == 8
+    for r in later:
+        key = (round(r.speed, 6), round(r.error, 7))
+        if r.error == 0:
+            # F_TP ~ 1 N with a 3-4 N band: a relative band means nothing; absolute band
+            assert r.within_band, r
+        elif key in NOT_CLAIMED:
+            assert abs(r.relative_error) > RELATIVE, f"{r} now holds: update NOT_CLAIMED and docs"
+        else:
+            assert abs(r.relative_error) <= RELATIVE, r
+    # the model's F_TP rises with speed (rate-strengthening pin friction)
+    held = [r for r in side_by_side if r.error == 0.5e-3]
+    assert held[0].model < held[1].model < held[2].model
 
 
 def test_equal_halves_add_no_force():
-    xs = np.linspace(*stroke_limits(MECH.lower), 50)
-    out = asymmetry(xs, 5e-3, MECH.lower, MECH.upper)
-    assert np.all(out.force == 0) and np.all(out.internal_force == 0)
-    cfg = PlantConfig(MECH)
-    unequal = PlantConfig(MECH.with_error("upper", "r5", 0.5e-3))
-    a = plant_outputs(xs, 5e-3, 0.0, cfg).input_force
-    b = plant_outputs(xs, 5e-3, 0.0, unequal).input_force
-    assert np.all(b >= a - 1e-9) and np.max(b - a) > 50
+    xs = np.linspace(-3e-3, 51.5e-3, 50)
+    for dims in (MECH.lower, MECH.lower.replace(r3=MECH.lower.r3 + 0.1e-3)):
+        out = asymmetry(xs, 5e-3, dims, dims)
+        assert np.all(out.force == 0) and np.all(out.internal_force == 0)
+    assert extra_input_force(0.04, -0.02, MECH.lower, MECH.lower) == 0
 
 
-def test_force_rises_near_the_end_of_the_forward_stroke():
-    mech = MECH.with_error("upper", "r5", 0.5e-3)
-    xs, fwd, back = force_curves(mech, 5e-3)
-    early, late = fwd[xs < 0.02], fwd[xs >= 0.035]
-    assert late.max() > 10 * max(early.max(), 1.0)
-    assert np.all(back <= 1e-9)  # backward the friction opposes the motion
+def test_small_error_within_free_play_adds_no_force():
+    mech = MECH.with_error("upper", "r5", 0.5 * AsymmetryParams().free_play)
+    _, fwd, back = force_curves(mech, 5e-3, points=50)
+    assert np.all(fwd == 0) and np.all(back == 0)
 
 
-@settings(max_examples=25, deadline=None)
-@given(st.floats(0.0, 0.75e-3), st.floats(1e-3, 30e-3))
-def test_a_closed_cycle_never_makes_energy(delta, speed):
-    mech = MECH.with_error("upper", "r5", delta)
+@settings(max_examples=8, deadline=None)
+@given(dr8=st.floats(-0.6e-3, 0.75e-3), dr3=st.floats(-0.1e-3, 0.1e-3),
+       speed=st.floats(1e-3, 30e-3))
+def test_closed_cycle_work_is_non_negative(dr8, dr3, speed):
+    mech = MECH.with_error("upper", "r5", dr8).with_error("lower", "r3", dr3)
     xs, fwd, back = force_curves(mech, speed, points=400)
-    work = np.trapezoid(fwd, xs) - np.trapezoid(back, xs)  # forward work + backward work
+    work = np.trapezoid(fwd, xs) - np.trapezoid(back, xs)  # forward, then back along -x
     assert work >= -1e-9
-    assert np.all(fwd - back >= -1e-9)
+    assert np.all(fwd >= asymmetry(xs, 0.0, mech.lower, mech.upper).force - 1e-9)
 
 
-def test_bad_input_gets_a_clear_error():
-    with pytest.raises(AsymmetryError, match="free_play"):
-        AsymmetryParams(free_play=-1e-3)
-    with pytest.raises(AsymmetryError, match="mu"):
-        AsymmetryParams(mu=3.0)
-    with pytest.raises(AsymmetryError, match="speed"):
-        toggle_force(MECH, -5e-3)
-    with pytest.raises(AssemblyError):
-        asymmetry(0.0, 5e-3, MECH.lower, MECH.upper.replace(r5=0.005, e=0.2))
+def test_force_rises_near_end_of_forward_stroke():
+    mech = MECH.with_error("upper", "r5", 0.5e-3)
+    xs, fwd, _ = force_curves(mech, 5e-3, points=200)
+    early, late = fwd[xs < 30e-3], fwd[xs >= 35e-3]
+    assert late.max() > 5 * early.max()
+    assert fwd[-1] > 20 * fwd[0]
+
+
+def test_symbolic_matches_numeric():
+    x, v = ca.SX.sym("x"), ca.SX.sym("v")
+    upper = MECH.with_error("upper", "r5", 0.5e-3).upper
+    expr = extra_input_force(x, v, MECH.lower, upper)
+    f = ca.Function("f", [x, v], [expr])
+    assert float(f(0.045, 0.01)) == pytest.approx(
+        float(extra_input_force(0.045, 0.01, MECH.lower, upper)), rel=1e-12)
+
+
+def test_bad_input_raises_clear_errors():
+    with pytest.raises(AssemblyError, match="upper half"):
+        asymmetry(0.05, 5e-3, MECH.lower, MECH.upper.replace(r3=5e-3))
     with pytest.raises(AsymmetryError, match="cannot be forced together"):
-        toggle_force(MECH.with_error("upper", "r5", 3e-3), 5e-3,
-                     AsymmetryParams(max_internal_force=1e3))
+        asymmetry(0.05, 5e-3, MECH.lower, MECH.upper.replace(r5=MECH.upper.r5 + 5e-3))
+    for bad in ({"free_play": -1e-6}, {"mu": 1.5}, {"contact_stiffness": float("nan")},
+                {"mu": 0.01, "rate_strengthening": 0.05}):
+        with pytest.raises(AsymmetryError):
+            AsymmetryParams(**bad)
+    with pytest.raises(AsymmetryError, match="speed"):
+        asymmetry(0.05, float("inf"), MECH.lower, MECH.upper)
+
+
+def test_calibration_rejects_more_than_three_parameters(table):
+    with pytest.raises(ValueError, match="1 to 3"):
+        calibrate(table, MECH, 5e-3,
+                  fit=("free_play", "contact_stiffness", "mu", "drive_stiffness"))
+    with pytest.raises(ValueError, match="no data"):
+        calibrate(table, MECH, 7e-3)
+
+
+def test_cli_json(capsys):
+    assert main(["asymmetry", "--delta-r8", "0.5e-3", "--speed", "5e-3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["force_toggle"] == pytest.approx(
+        float(asymmetry(out["x_toggle"], 5e-3, MECH.lower,
+                        MECH.with_error("upper", "r5", 0.5e-3).upper).force))
+    assert main(["asymmetry", "--speed=-1"]) == 2
+
+
+def test_the_plant_adds_the_extra_force_only_for_unequal_halves():
+    """The FMU, the simulated rig and the emulator all get the model through the plant."""
+    import numpy as np
+
+    from toggle.kinematics import stroke_limits
+    from toggle.params import load_preset
+    from toggle.plant import PlantConfig, plant_outputs
+
+    mech = load_preset("chang2021")
+    xs = np.linspace(*stroke_limits(mech.lower), 50)
+    equal = plant_outputs(xs, 5e-3, 0.0, PlantConfig(mech)).input_force
+    unequal = plant_outputs(xs, 5e-3, 0.0,
+                            PlantConfig(mech.with_error("upper", "r5", 0.5e-3))).input_force
+    assert np.all(unequal >= equal - 1e-9) and np.max(unequal - equal) > 50
