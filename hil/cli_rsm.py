@@ -51,7 +51,7 @@ def _printed_comparison(fit_paper: dict[str, tuple[float, ...]]) -> dict[str, An
         rows = []
         for text, value in zip(printed[name], coefs):
             decimals = len(text.split(".")[1]) if "." in text else 0
-            rows.append({"printed": float(text), "fitted": value,
+            rows.append({"printed": float(text), "printed_text": text, "fitted": value,
                          "agrees": abs(value - float(text)) <= 0.5 * 10.0**-decimals})
         out[name] = rows
     return out
@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
             line = f"  {term:>6}  {r.paper_coefficients[i]:>14.6g}"
             if rows:
                 mark = "agrees" if rows[i]["agrees"] else "differs"
-                line += f"   printed {rows[i]['printed']:>12.7g}  {mark}"
+                line += f"   printed {rows[i]['printed_text']:>12}  {mark}"
             print(line)
     for fig in payload.get("figures", []):
         print(f"wrote {fig}")

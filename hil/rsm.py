@@ -261,7 +261,8 @@ def plot_rsm(fit: RsmFit, out_dir: str | Path, *, cos_theta8: float | None = Non
         z = r.predict(V, D) * factor
         cs = ax.contourf(D * 1e3 * scale_x, V * 1e3, z, levels=levels, cmap="viridis")
         ax.contour(cs, colors="k", linewidths=0.4)
-        ax.plot(fit.delta_r8 * 1e3 * scale_x, fit.speed * 1e3, "w+", ms=8, label="data points")
+        ax.plot(fit.delta_r8 * 1e3 * scale_x, fit.speed * 1e3, "w+", ms=8, mew=1.5,
+                clip_on=False, label="data points")
         fig.colorbar(cs, ax=ax, label=f"{name} ({unit})")
         ax.set_xlabel(xlabel)
         ax.set_ylabel("input speed v (mm/s)")
