@@ -311,10 +311,7 @@ def averaged_force_curves(data: RunData, cycles: list[Cycle], x_open: float, x_t
 def plot_force_curves(curves: Mapping[str, ForceCurves], path: str | Path,
                       title: str = "Averaged input force") -> Path:
     """Forward (solid) and backward (dashed) averaged force against x, one colour per run."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from toggle.plots import plt, save_figure
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for i, (label, c) in enumerate(curves.items()):
@@ -327,11 +324,7 @@ def plot_force_curves(curves: Mapping[str, ForceCurves], path: str | Path,
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize="small")
-    path = Path(path)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, Path(path))
 
 
 def _curve_label(meta: RunMeta) -> str:

@@ -13,7 +13,7 @@ or N).
 
 Reproduction (tests/test_rsm.py): fitted to the means of Tables 6-8, the coefficients of
 Eqs 45-47 come out equal to every printed digit, once the minus signs lost in the
-extracted text are restored (hil/data/chang2021_tables.toml lists them); re-expressed in
+extracted text are restored (toggle/data/chang2021_tables.toml lists them); re-expressed in
 the platen error at the toggle, dL_TP = D / cos(theta8(x_TP)) with theta8 from
 toggle.kinematics, they also give Eqs 53-55 to every printed digit. Fitted to the means
 of Tables 3-5, the stroke error model is close to Eq 44 but not identical: the two
@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,15 +34,11 @@ from typing import Any
 
 import numpy as np
 
+import toggle
 from toggle.kinematics import half_pose, toggle_position
-from toggle.params import Mechanism
+from toggle.params import Mechanism, tomllib
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
-
-TABLES_FILE = Path(__file__).with_name("data") / "chang2021_tables.toml"
+TABLES_FILE = Path(toggle.__file__).with_name("data") / "chang2021_tables.toml"
 
 #: Terms of the modified cubic model and their powers of (v, D).
 TERMS = ("1", "v", "D", "v D", "v^2", "D^2", "v^2 D", "v D^2")
@@ -242,10 +237,7 @@ def plot_rsm(fit: RsmFit, out_dir: str | Path, *, cos_theta8: float | None = Non
     With ``cos_theta8`` the abscissa is the platen error at the toggle dL_TP (mm), as in
     the paper's figures; otherwise delta_r8 (mm). Returns the PNG paths.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from toggle.plots import plt, save_figure
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -268,11 +260,7 @@ def plot_rsm(fit: RsmFit, out_dir: str | Path, *, cos_theta8: float | None = Non
         ax.set_ylabel("input speed v (mm/s)")
         ax.set_title(f"Response surface of {name} ({eq} model)")
         ax.legend(loc="upper right", fontsize="small")
-        fig.tight_layout()
-        path = out / f"rsm_{name}.png"
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        paths.append(path)
+        paths.append(save_figure(fig, out / f"rsm_{name}.png"))
     return paths
 
 

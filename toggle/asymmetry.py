@@ -40,7 +40,7 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 
-from toggle.kinematics import half_pose, stroke_limits
+from toggle.kinematics import half_pose, is_symbolic, stroke_limits
 from toggle.params import DIMENSIONS, HalfDims, Mechanism, PinRadii
 
 #: Mismatch below which |dL| is rounded (smooth |.| for solvers), m; exactly 0 at dL = 0.
@@ -209,11 +209,6 @@ def _model() -> ca.Function:
 # --- public API ----------------------------------------------------------------------------
 
 
-def _is_symbolic(*values: Any) -> bool:
-    return any(isinstance(v, (ca.SX, ca.MX)) or type(v).__module__.startswith("casadi")
-               for v in values)
-
-
 def _dims_vector(dims: HalfDims | Any) -> Any:
     return np.array(dims.as_tuple()) if isinstance(dims, HalfDims) else dims
 
@@ -229,7 +224,7 @@ def asymmetry(
     assemble raises :class:`toggle.kinematics.AssemblyError` naming the half.
     """
     f = _model()
-    if _is_symbolic(x, v, lower, upper):
+    if is_symbolic(x, v, lower, upper):
         out = f(x, v, _dims_vector(lower), _dims_vector(upper), params.vector())
         return Asymmetry(*out)
     xs, vs = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(v, dtype=float))
@@ -293,10 +288,7 @@ def plot_force_curves(
     params: AsymmetryParams = AsymmetryParams(),
 ) -> Path:
     """PNG of the extra input force against x, forward and backward, one curve per delta_r8."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from toggle.plots import plt, save_figure
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for i, err in enumerate(errors):
@@ -309,9 +301,4 @@ def plot_force_curves(
     ax.set_ylabel("extra input force (N)")
     ax.set_title(f"{mech.name}: unequal halves, v = {speed * 1e3:g} mm/s")
     ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, Path(path))

@@ -1,7 +1,7 @@
 """Fit the unequal-halves model (toggle.asymmetry) to measured toggle forces.
 
 Data: a table like Chang et al. 2021's Tables 6-8 (F_TP mean and three-sigma band
-per speed and link-8 error; ``hil/data/chang2021_tables.toml``) or run summaries
+per speed and link-8 error; ``toggle/data/chang2021_tables.toml``) or run summaries
 in the same shape. At most three parameters are fitted, by weighted least squares
 (residual / three-sigma band) in log coordinates, so every fitted value stays
 positive; the rest keep their physical defaults.
@@ -10,7 +10,6 @@ positive; the rest keep their physical defaults.
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -19,15 +18,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from toggle.asymmetry import AsymmetryError, AsymmetryParams, toggle_force
-from toggle.params import Mechanism
+from toggle.params import Mechanism, tomllib
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
-
-#: The paper's tables, kept with the HIL data (units as printed: mm/s, mm, N).
-PAPER_TABLES = Path(__file__).resolve().parents[1] / "hil" / "data" / "chang2021_tables.toml"
+#: The paper's tables, shared with the HIL response surfaces (units as printed: mm/s, mm, N).
+PAPER_TABLES = Path(__file__).with_name("data") / "chang2021_tables.toml"
 #: Parameters a calibration may fit (all positive scalars of AsymmetryParams).
 FITTABLE = ("free_play", "contact_stiffness", "series_stiffness", "drive_stiffness", "mu",
             "rate_strengthening")

@@ -79,8 +79,9 @@ class HalfMotion(NamedTuple):
 _SYMBOLIC_TYPES = (ca.SX, ca.MX, ca.casadi.ArrayInterface)
 
 
-def _is_symbolic(value: Any) -> bool:
-    return isinstance(value, _SYMBOLIC_TYPES)
+def is_symbolic(*values: Any) -> bool:
+    """Whether any value is a CasADi expression (the model then builds, not computes)."""
+    return any(isinstance(v, _SYMBOLIC_TYPES) for v in values)
 
 
 def _within(arg: Any, lo: float, hi: float, loop: str, x: Any, label: str) -> Any:
@@ -93,7 +94,7 @@ def _within(arg: Any, lo: float, hi: float, loop: str, x: Any, label: str) -> An
         if lo - _DOMAIN_SLACK <= arg <= hi + _DOMAIN_SLACK:
             return min(max(arg, lo), hi)
         arg = np.asarray(arg)
-    elif _is_symbolic(arg):
+    elif is_symbolic(arg):
         return arg
     arg = np.asarray(arg, dtype=float)
     bad = ~((arg >= lo - _DOMAIN_SLACK) & (arg <= hi + _DOMAIN_SLACK))
@@ -192,7 +193,7 @@ def motion_terms(x: Any, dims: HalfDims) -> tuple[Any, Any, Any]:
     :func:`assemblable_range` themselves.
     """
     p = np.array(dims.as_tuple())
-    if _is_symbolic(x):
+    if is_symbolic(x):
         L, dL, d2L, _ = _motion_function()(x, p)
         return L, dL, d2L
     x = np.asarray(x, dtype=float)
@@ -200,12 +201,14 @@ def motion_terms(x: Any, dims: HalfDims) -> tuple[Any, Any, Any]:
     return tuple(np.asarray(o).reshape(x.shape) for o in out[:3])
 
 
-def _evaluate(x: Any, dims: HalfDims, label: str) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Check assembly with the numpy path, then evaluate the AD function."""
+def _evaluate(
+    x: Any, dims: HalfDims, label: str
+) -> tuple[np.ndarray, HalfPose, list[np.ndarray]]:
+    """The checked pose by the numpy path (AssemblyError where needed), then the AD function."""
     x_arr = np.asarray(x, dtype=float)
-    half_pose(x_arr, dims, label=label)  # raises AssemblyError where needed
+    pose = half_pose(x_arr, dims, label=label)
     out = _motion_function()(x_arr.reshape(1, -1), np.array(dims.as_tuple()))
-    return x_arr, [np.asarray(o) for o in out]
+    return x_arr, pose, [np.asarray(o) for o in out]
 
 
 def half_motion(x: Any, dims: HalfDims, *, label: str = "half") -> HalfMotion:
@@ -214,11 +217,10 @@ def half_motion(x: Any, dims: HalfDims, *, label: str = "half") -> HalfMotion:
     The ideal mechanical advantage of the whole clamp is output force over
     input force without friction; by virtual work it is 1 / (dL/dx).
     """
-    x_arr, (L, dL, d2L, _) = _evaluate(x, dims, label)
-    pose = half_pose(x_arr, dims, label=label)
+    x_arr, pose, (L, dL, d2L, _) = _evaluate(x, dims, label)
     shape = x_arr.shape
     dL = dL.reshape(shape)
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", over="ignore"):  # 1/dL is inf at the toggle
         ma = np.where(dL != 0, 1.0 / np.where(dL != 0, dL, 1.0), np.inf)
     return HalfMotion(L.reshape(shape), dL, d2L.reshape(shape), np.asarray(pose.theta3),
                       np.asarray(pose.theta4), np.asarray(pose.theta5), ma)
@@ -226,7 +228,7 @@ def half_motion(x: Any, dims: HalfDims, *, label: str = "half") -> HalfMotion:
 
 def sensitivities(x: Any, dims: HalfDims, *, label: str = "half") -> dict[str, np.ndarray]:
     """Exact sensitivities dL/dp of the output to every dimension at fixed x."""
-    x_arr, (_, _, _, jac) = _evaluate(x, dims, label)
+    x_arr, _, (_, _, _, jac) = _evaluate(x, dims, label)
     jac = jac.reshape(-1, len(DIMENSIONS))
     return {name: jac[:, i].reshape(x_arr.shape) for i, name in enumerate(DIMENSIONS)}
 
@@ -243,6 +245,7 @@ def _assemblable_grid(dims: HalfDims, n: int = 4001) -> tuple[np.ndarray, HalfPo
     return xs[ok], HalfPose(*(np.asarray(v)[ok] if np.ndim(v) else v for v in pose))
 
 
+@functools.lru_cache(maxsize=256)
 def assemblable_range(dims: HalfDims) -> tuple[float, float]:
     """The interval of input positions around the stroke where the half assembles, m.
 
@@ -281,6 +284,7 @@ def _roots(xs: np.ndarray, g: np.ndarray, f: Any) -> list[float]:
     return [float(brentq(f, xs[i], xs[i + 1], xtol=1e-15, rtol=tol)) for i in idx]
 
 
+@functools.lru_cache(maxsize=256)
 def stroke_limits(dims: HalfDims) -> tuple[float, float]:
     """Open and toggle input positions (x_open, x_TP) of one half, m.
 
@@ -292,7 +296,7 @@ def stroke_limits(dims: HalfDims) -> tuple[float, float]:
     toggle; a clamp whose link 3 never becomes horizontal (L4 < dE, as the
     SM-55 of seed 001) opens where link 3 comes nearest to it (the maximum of
     theta3 before the toggle). Roots come from a scan of the assemblable range,
-    refined by Brent's method.
+    refined by Brent's method; results are cached per (immutable) half.
     """
     xs, pose = _assemblable_grid(dims)
     target = math.asin(dims.e / (dims.r4b + dims.r5))

@@ -36,6 +36,10 @@ class ParameterError(ValueError):
     """A parameter file or value that does not describe a valid mechanism."""
 
 
+class UnknownPresetError(ParameterError):
+    """No shipped preset and no file of that name."""
+
+
 def paper_dimension(name: str) -> tuple[str, str]:
     """Map a paper name such as ``"r8"`` or ``"eL"`` to ``(half, field)``."""
     for half, names in PAPER_NAMES.items():
@@ -430,13 +434,13 @@ def _split_group(name: str, group: str | int | None) -> tuple[str, str | int | N
     return name, group
 
 
-def _preset_table(name: str) -> tuple[dict[str, Any], str]:
+def preset_table(name: str) -> tuple[dict[str, Any], str]:
     """Parsed TOML of a shipped preset or of a file, and the origin used in messages."""
     if name.endswith(".toml") or Path(name).is_file():
         return _read_toml(Path(name)), name
     resource = resources.files("toggle") / "presets" / f"{name}.toml"
     if not resource.is_file():
-        raise ParameterError(f"unknown preset {name!r}; shipped: {', '.join(preset_names())}")
+        raise UnknownPresetError(f"unknown preset {name!r}; shipped: {', '.join(preset_names())}")
     return tomllib.loads(resource.read_text(encoding="utf-8")), f"preset {name}"
 
 
@@ -448,10 +452,10 @@ def load_preset(name: str, group: str | int | None = None) -> Mechanism:
     without either it gives the family's default group.
     """
     name, group = _split_group(name, group)
-    table, origin = _preset_table(name)
+    table, origin = preset_table(name)
     return mechanism_from_dict(table, origin, group)
 
 
 def preset_groups(name: str) -> list[str]:
     """Group names of a preset family (shipped name or file); [] for a single mechanism."""
-    return group_names(_preset_table(name)[0])
+    return group_names(preset_table(name)[0])

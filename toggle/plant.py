@@ -37,8 +37,21 @@ import numpy as np
 from toggle.asymmetry import AsymmetryParams, extra_input_force
 from toggle.drive import motor_torque
 from toggle.elastics import clamp_state
-from toggle.kinematics import AssemblyError, assemblable_range, half_pose, motion_terms
-from toggle.params import HALVES, Dynamics, Mechanism, ParameterError
+from toggle.kinematics import (
+    AssemblyError,
+    assemblable_range,
+    half_pose,
+    motion_terms,
+    toggle_position,
+)
+from toggle.params import (
+    HALVES,
+    Dynamics,
+    Mechanism,
+    ParameterError,
+    load_preset,
+    paper_dimension,
+)
 from toggle.statics import force_ratios
 
 #: Mechanical advantage reported where it is unbounded (the frictionless toggle).
@@ -224,9 +237,6 @@ def configure(
     A contact position at or beyond the toggle means no mold. Every bad value
     raises :class:`ParameterError` naming it.
     """
-    from toggle.kinematics import toggle_position
-    from toggle.params import load_preset, paper_dimension
-
     mech = load_preset(preset)
     changed = []
     for name, delta in (errors or {}).items():

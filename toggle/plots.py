@@ -18,6 +18,7 @@ MM = 1e3
 
 
 def save_figure(fig: plt.Figure, path: Path) -> Path:
+    """Write a figure as PNG (120 dpi, folders created), close it, return the path."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

@@ -27,23 +27,15 @@ from __future__ import annotations
 
 import functools
 import math
-import sys
 from dataclasses import dataclass, fields
-from importlib import resources
-from pathlib import Path
 from typing import Any, NamedTuple
 
 import casadi as ca
 import numpy as np
 
 from toggle.kinematics import AssemblyError
-from toggle.params import ParameterError
+from toggle.params import ParameterError, UnknownPresetError, preset_table
 from toggle.synthesis import ErrorModel, SynthesisSettings, refine_extremum, settings_from_table
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 ca.GlobalOptions.setNumpyMode(True)
 
@@ -299,16 +291,10 @@ def press_from_dict(table: dict[str, Any], origin: str = "<dict>") -> Press:
 
 def _read_table(name: str) -> tuple[dict[str, Any], str] | None:
     """Parsed TOML of a preset name or file, with its origin; None if no such preset."""
-    if name.endswith(".toml") or Path(name).is_file():
-        path = Path(name)
-        try:
-            return tomllib.loads(path.read_text(encoding="utf-8")), str(path)
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise ParameterError(f"cannot read press file {path}: {exc}") from exc
-    resource = resources.files("toggle") / "presets" / f"{name}.toml"
-    if not resource.is_file():
+    try:
+        return preset_table(name)
+    except UnknownPresetError:
         return None
-    return tomllib.loads(resource.read_text(encoding="utf-8")), f"preset {name}"
 
 
 def is_press_preset(name: str) -> bool:

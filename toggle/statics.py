@@ -52,10 +52,9 @@ import math
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
-import casadi as ca
 import numpy as np
 
-from toggle.kinematics import half_pose
+from toggle.kinematics import half_pose, is_symbolic
 from toggle.params import HalfDims, PinRadii
 
 #: Directions of crosshead motion.
@@ -104,10 +103,6 @@ class ForceRatios(NamedTuple):
     crosshead_link: Any
 
 
-def _is_symbolic(value: Any) -> bool:
-    return isinstance(value, (ca.SX, ca.MX)) or type(value).__module__.startswith("casadi")
-
-
 def _lengths(dims: HalfDims | Sequence[Any]) -> tuple[Any, Any, Any, Any]:
     """(L1, L2, L3, L4) = (r5, r4b, r3, r4a) of one half."""
     r1, r2, r3, r4a, r4b, r4c, r5, e = dims.as_tuple() if isinstance(dims, HalfDims) else dims
@@ -116,11 +111,11 @@ def _lengths(dims: HalfDims | Sequence[Any]) -> tuple[Any, Any, Any, Any]:
 
 def check_friction(mu: Any, direction: Any = CLOSING) -> None:
     """Raise :class:`StaticsError` for mu < 0 or |direction| > 1 (numeric input only)."""
-    if not _is_symbolic(mu):
+    if not is_symbolic(mu):
         m = np.asarray(mu, dtype=float)
         if not np.all(np.isfinite(m)) or np.any(m < 0):
             raise StaticsError(f"friction coefficient mu must be finite and >= 0, got {mu!r}")
-    if not _is_symbolic(direction):
+    if not is_symbolic(direction):
         s = np.asarray(direction, dtype=float)
         if not np.all(np.isfinite(s)) or np.any(np.abs(s) > 1):
             raise StaticsError(
@@ -150,7 +145,7 @@ def friction_terms(
     rho_B, rho_C, rho_D = f * pins.B, f * pins.C, f * pins.D
     sin_b, sin_p = 2.0 * rho_B / L1, 2.0 * rho_D / L3
     for sin_mu, link in ((sin_b, "link 1 (r5)"), (sin_p, "the crosshead link (r3)")):
-        if not _is_symbolic(sin_mu) and np.any(np.abs(np.asarray(sin_mu, dtype=float)) >= 1):
+        if not is_symbolic(sin_mu) and np.any(np.abs(np.asarray(sin_mu, dtype=float)) >= 1):
             raise StaticsError(
                 f"with mu = {mu!r} the friction circles at both ends of {link} overlap "
                 "its length: the linkage is self-locking"
@@ -208,7 +203,7 @@ def force_ratios(
     pushing = den_push > 0
     thrust = np.where(pushing, q_push, q_pull)
     p_line = np.where(pushing, p_push, p_pull)
-    if not _is_symbolic(thrust) and not np.all(np.isfinite(thrust)):
+    if not is_symbolic(thrust) and not np.all(np.isfinite(thrust)):
         raise StaticsError(
             f"no static equilibrium at x = {x!r} m with mu = {mu!r}: "
             "the friction circles are too large for this linkage (self-locking)"
@@ -243,7 +238,7 @@ def mechanical_advantage(
 ) -> Any:
     """F_cl / F0 with friction (Eq 29); inf where F0 vanishes (frictionless toggle)."""
     q = force_ratios(x, dims, pins, mu, direction).thrust
-    if _is_symbolic(q):
+    if is_symbolic(q):
         return 1.0 / q
     q = np.asarray(q, dtype=float)
     with np.errstate(divide="ignore"):

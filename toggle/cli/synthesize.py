@@ -105,11 +105,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def plot(args: argparse.Namespace) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
+
+    from toggle.plots import plt, save_figure
 
     model = error_model(args.preset)
     rows = synthesis.sensitivity_table(model)
@@ -123,12 +121,7 @@ def plot(args: argparse.Namespace) -> int:
     ax.set_ylabel("significance coefficient λ (–)")
     ax.set_title(f"{model.name}: significance of each error source ({model.output_label})")
     ax.legend()
-    path = args.out / f"significance_{model.name}.png"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    print(path)
+    print(save_figure(fig, args.out / f"significance_{model.name}.png"))
     return 0
 
 
