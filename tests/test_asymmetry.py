@@ -1,8 +1,9 @@
-"""Unequal halves (issue 8): calibration on Table 6, prediction of Tables 7-8, invariants."""
+"""Unequal halves (issue 8): calibration on Tables 6 (and 7), prediction of 7-8, invariants."""
 
 from __future__ import annotations
 
 import json
+import math
 
 import casadi as ca
 import numpy as np
@@ -16,6 +17,7 @@ from toggle.asymmetry import (
     asymmetry,
     extra_input_force,
     force_curves,
+    toggle_force,
 )
 from toggle.calibration import calibrate, compare, load_force_table
 from toggle.cli import main
@@ -25,10 +27,12 @@ from toggle.params import load_preset
 MECH = load_preset("chang2021")
 #: Prediction tolerance for Tables 7-8 (issue 8).
 RELATIVE = 0.25
-#: Rows of Tables 7-8 the model does not claim (docs/unequal-halves.md, section 6): at
+#: Boundary lubrication only: the friction law a single-speed table can calibrate.
+BOUNDARY = AsymmetryParams(hersey_transition=math.inf)
+#: Rows a Table-6-only calibration does not predict (docs/unequal-halves.md, section 6): at
 #: delta_r8 = 0.25 mm the measured F_TP falls with speed (28.7, 22.6, 18.2 N) while it
-#: rises at 0.5 and 0.75 mm; one friction law on one internal force cannot do both.
-NOT_CLAIMED = {(15e-3, 0.25e-3), (25e-3, 0.25e-3)}
+#: rises at 0.5 and 0.75 mm; the load-dependent film that explains it needs a second speed.
+NOT_FROM_TABLE6 = {(15e-3, 0.25e-3), (25e-3, 0.25e-3)}
 
 
 @pytest.fixture(scope="module")
@@ -37,49 +41,76 @@ def table():
 
 
 @pytest.fixture(scope="module")
-def calibrated(table):
-    return calibrate(table, MECH, 5e-3, fit=("free_play", "contact_stiffness"))
+def table6_only(table):
+    """Calibrated on Table 6 alone: stiffness and free play, boundary friction."""
+    cal = calibrate(table, MECH, 5e-3, fit=("free_play", "contact_stiffness"), start=BOUNDARY)
+    return cal, compare(table, MECH, cal.params)
 
 
 @pytest.fixture(scope="module")
-def side_by_side(table, calibrated):
-    return compare(table, MECH, calibrated.params)
+def tables67(table):
+    """Calibrated on Tables 6 and 7 (three parameters): the shipped defaults."""
+    cal = calibrate(table, MECH, (5e-3, 15e-3),
+                    fit=("free_play", "contact_stiffness", "hersey_transition"),
+                    start=AsymmetryParams(free_play=0.1e-3, contact_stiffness=1e9,
+                                          hersey_transition=3e-6))
+    return cal, compare(table, MECH, cal.params)
 
 
-def _print(rows) -> None:
-    print("\n v mm/s  dr8 mm   F_TP meas  +-3sigma    model   rel.err")
+def _print(title, rows) -> None:
+    print(f"\n{title}\n v mm/s  dr8 mm   F_TP meas  +-3sigma    model   rel.err")
     for r in rows:
         print(f"{r.speed * 1e3:7.0f} {r.error * 1e3:7.2f} {r.measured:11.3f} {r.three_sigma:9.3f}"
               f" {r.model:8.2f} {100 * r.relative_error:8.1f}%")
 
 
-def test_calibration_reproduces_table6_within_three_sigma(calibrated, side_by_side):
-    _print(side_by_side)
-    assert len(calibrated.fitted) <= 3
-    table6 = [r for r in side_by_side if np.isclose(r.speed, 5e-3)]
-    assert len(table6) == 4
-    assert all(r.within_band for r in table6), table6
-    # the calibrated values are the shipped defaults (docs table), to 2 %
-    default = AsymmetryParams()
-    assert calibrated.params.free_play == pytest.approx(default.free_play, rel=0.02)
-    assert calibrated.params.contact_stiffness == pytest.approx(default.contact_stiffness, rel=0.02)
+def _at(rows, speed):
+    return [r for r in rows if np.isclose(r.speed, speed)]
 
 
-def test_tables_7_and_8_predicted(side_by_side):
-    later = [r for r in side_by_side if not np.isclose(r.speed, 5e-3)]
-    assert len(later) == 8
-    for r in later:
+def _holds(r) -> bool:
+    """Issue 8's criterion: 25 % of the mean; the delta_r8 = 0 rows (F_TP ~ 1 N, band 3-4 N)
+    by their absolute band, where a relative error means nothing."""
+    return r.within_band if r.error == 0 else abs(r.relative_error) <= RELATIVE
+
+
+def test_table6_alone_reproduces_table6_and_misses_the_light_rows_at_speed(table6_only):
+    cal, rows = table6_only
+    _print("calibrated on Table 6 alone (boundary friction)", rows)
+    assert len(cal.fitted) <= 3 and cal.speeds == (5e-3,)
+    assert all(r.within_band for r in _at(rows, 5e-3))
+    for r in _at(rows, 15e-3) + _at(rows, 25e-3):
         key = (round(r.speed, 6), round(r.error, 7))
-        if r.error == 0:
-            # F_TP ~ 1 N with a 3-4 N band: a relative band means nothing; absolute band
-            assert r.within_band, r
-        elif key in NOT_CLAIMED:
-            assert abs(r.relative_error) > RELATIVE, f"{r} now holds: update NOT_CLAIMED and docs"
-        else:
-            assert abs(r.relative_error) <= RELATIVE, r
-    # the model's F_TP rises with speed (rate-strengthening pin friction)
-    held = [r for r in side_by_side if r.error == 0.5e-3]
-    assert held[0].model < held[1].model < held[2].model
+        assert _holds(r) != (key in NOT_FROM_TABLE6), r
+
+
+def test_tables_6_7_calibration_is_the_default_and_predicts_table8(tables67):
+    cal, rows = tables67
+    _print("calibrated on Tables 6 and 7 (film friction); Table 8 predicted", rows)
+    default = AsymmetryParams()
+    for name in cal.fitted:  # converged from elsewhere to the shipped defaults (docs table)
+        assert getattr(cal.params, name) == pytest.approx(getattr(default, name), rel=0.02)
+    assert all(r.within_band for r in _at(rows, 5e-3) + _at(rows, 15e-3))
+    table8 = _at(rows, 25e-3)
+    assert len(table8) == 4 and all(_holds(r) for r in table8), table8
+    # the measured speed trends: F_TP falls with speed at 0.25 mm, rises at 0.5 and 0.75 mm
+    for error, sign in ((0.25e-3, -1), (0.5e-3, 1), (0.75e-3, 1)):
+        model = [r.model for r in rows if r.error == error]
+        assert np.all(sign * np.diff(model) > 0), (error, model)
+
+
+def test_the_lubricant_film_only_lowers_friction():
+    mech = MECH.with_error("upper", "r5", 0.5e-3)
+    xs = np.linspace(0.0, 51.5e-3, 40)
+    for speed in (5e-3, 25e-3):
+        film = asymmetry(xs, speed, mech.lower, mech.upper).friction
+        boundary = asymmetry(xs, speed, mech.lower, mech.upper, BOUNDARY).friction
+        assert np.all(film <= boundary + 1e-12) and np.all(film >= 0)
+    # the lighter the load, the larger the drop (the Hersey ratio is slip speed / load)
+    drop = [1 - toggle_force(MECH.with_error("upper", "r5", e), 25e-3)
+            / toggle_force(MECH.with_error("upper", "r5", e), 25e-3, BOUNDARY)
+            for e in (0.25e-3, 0.75e-3)]
+    assert drop[0] > drop[1] > 0
 
 
 def test_equal_halves_add_no_force():
@@ -130,7 +161,8 @@ def test_bad_input_raises_clear_errors():
     with pytest.raises(AsymmetryError, match="cannot be forced together"):
         asymmetry(0.05, 5e-3, MECH.lower, MECH.upper.replace(r5=MECH.upper.r5 + 5e-3))
     for bad in ({"free_play": -1e-6}, {"mu": 1.5}, {"contact_stiffness": float("nan")},
-                {"mu": 0.01, "rate_strengthening": 0.05}):
+                {"mu": 0.01, "rate_strengthening": 0.05}, {"hersey_transition": 0.0},
+                {"contact_stiffness": math.inf}):
         with pytest.raises(AsymmetryError):
             AsymmetryParams(**bad)
     with pytest.raises(AsymmetryError, match="speed"):
@@ -168,3 +200,13 @@ def test_the_plant_adds_the_extra_force_only_for_unequal_halves():
     unequal = plant_outputs(xs, 5e-3, 0.0,
                             PlantConfig(mech.with_error("upper", "r5", 0.5e-3))).input_force
     assert np.all(unequal >= equal - 1e-9) and np.max(unequal - equal) > 50
+
+
+def test_calibrate_cli(capsys):
+    assert main(["calibrate", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out["fitted"]) == {"free_play", "contact_stiffness", "hersey_transition"}
+    for name, value in out["fitted"].items():
+        assert value == pytest.approx(getattr(AsymmetryParams(), name), rel=0.02)
+    assert len(out["rows"]) == 12 and out["calibration_speeds"] == [5e-3, 15e-3]
+    assert main(["calibrate", "--speeds", "7e-3"]) == 2  # no such row: a clear error

@@ -19,9 +19,13 @@ own dimensions). The platen is rigid and guided, so:
    opposing the motion; the stored elastic energy U(x) adds the conservative
    force dU/dx = N ds_e/dx - N^2/2 dc/dx (returned on the way back).
 
-The pin friction is velocity-strengthening (steady-state rate-and-state law,
-mu(v_s) = mu + (a - b) ln(1 + v_s / v_c), v_s the sliding speed at the pin):
-the rate dependence of Tables 6-8.
+The pin friction is velocity-strengthening in boundary lubrication (steady-state
+rate-and-state law, mu_b(v_s) = mu + (a - b) ln((v_s + v_c) / (v_ref + v_c)), v_s the
+sliding speed at the pin) and falls as the lubricant film builds up, the faster and
+the more lightly loaded the pin (Stribeck, in the Hersey ratio h = v_s / |F| of slip
+speed to pin load): mu = mu_b(v_s) exp(-(h / h_s)^2). The two make the rate dependence
+of Tables 6-8: F_TP rises with speed where the pins are heavily loaded (link 8 off by
+0.5-0.75 mm) and falls where they are lightly loaded (0.25 mm).
 
 The model is written once, with numpy ufuncs on the output of ``half_pose``,
 and compiled to a CasADi function of (x, v, lower dims, upper dims, params), so
@@ -47,6 +51,8 @@ from toggle.params import DIMENSIONS, HalfDims, Mechanism, PinRadii
 _ABS_EPS = 1e-12
 #: Velocity scale of the smooth sign of the friction force, m/s.
 _SIGN_EPS = 1e-6
+#: Pin load added to the Hersey ratio's denominator (an unloaded pin has full film), N.
+_LOAD_EPS = 1e-9
 #: Newton steps for the internal force (monotone from an upper bound; 1e-15 relative).
 _NEWTON_STEPS = 12
 
@@ -59,19 +65,22 @@ class AsymmetryError(ValueError):
 class AsymmetryParams:
     """Physical parameters of the forced-agreement model, SI.
 
-    Defaults: the desktop clamp of Chang et al. 2021, calibrated on Table 6
-    (free_play, contact_stiffness) with the rest from its materials and sizes
-    (docs/unequal-halves.md, section 4).
+    Defaults: the desktop clamp of Chang et al. 2021, calibrated on Tables 6 and 7
+    (free_play, contact_stiffness, hersey_transition) with the rest from its materials
+    and sizes (docs/unequal-halves.md, section 4).
     """
 
-    free_play: float = 0.1162e-3  # delta0, m: platen tilt in the bushings + pin clearances
-    contact_stiffness: float = 7.91e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
+    free_play: float = 0.1250e-3  # delta0, m: platen tilt in the bushings + pin clearances
+    contact_stiffness: float = 8.675e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
     series_stiffness: float = 3.3e7  # k_s, N/m: links 4b and 5 of both halves in series (A6061)
     drive_stiffness: float = 1.0e5  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
     mu: float = 0.3  # pin friction coefficient at the reference slip speed (SUS304 pin in A6061)
     rate_strengthening: float = 0.02  # a - b of the steady-state rate-and-state law
     reference_slip: float = 1.0e-3  # v_ref, m/s: slip speed at which the coefficient is mu
     slip_velocity: float = 1.0e-6  # v_c, m/s: regularises the log law at rest
+    #: h_s, m/(s N): Hersey ratio (pin slip speed / pin load) at which the lubricant film has
+    #: lowered the friction to 1/e of boundary friction; inf = boundary lubrication only.
+    hersey_transition: float = 8.732e-7
     pins: PinRadii = PinRadii(B=4.0e-3, C=4.0e-3, D=4.0e-3)
     #: Internal force above which the halves cannot be forced together elastically (yield), N.
     max_internal_force: float = 2.0e4
@@ -86,12 +95,13 @@ class AsymmetryParams:
             "rate_strengthening": (0.0, 0.1),
             "reference_slip": (1e-9, 1.0),
             "slip_velocity": (1e-12, 1.0),
+            "hersey_transition": (1e-12, math.inf),
             "max_internal_force": (1.0, 1e9),
         }
         for name, (lo, hi) in ranges.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
-                math.isfinite(value) and lo <= value <= hi
+                lo <= value <= hi and (math.isfinite(value) or hi == math.inf)
             ):
                 raise AsymmetryError(f"{name} must lie in [{lo:g}, {hi:g}] (SI), got {value!r}")
         at_rest = self.mu - self.rate_strengthening * math.log(
@@ -112,7 +122,7 @@ class AsymmetryParams:
         return np.array([self.free_play, self.contact_stiffness, self.series_stiffness,
                          self.drive_stiffness, self.mu, self.rate_strengthening,
                          self.reference_slip, self.slip_velocity,
-                         self.pins.B, self.pins.C, self.pins.D])
+                         self.pins.B, self.pins.C, self.pins.D, 1 / self.hersey_transition])
 
 
 class Asymmetry(NamedTuple):
@@ -156,11 +166,12 @@ def _friction_power(x: Any, v: Any, dims: Any, n: Any, q: Any) -> Any:
     d3, d4, d5 = rate
     turns = (d5, d5 - d4, d4, d3 - d4, d3)  # relative rotation per unit x at A, B, C, D, E
     radii = (q[8], q[8], q[9], q[10], q[10])  # joint A as B, E as D (toggle.params.PinRadii)
-    mu_ref, ab, v_ref, v_c = q[4], q[5], q[6], q[7]
+    mu_ref, ab, v_ref, v_c, inv_hersey = q[4], q[5], q[6], q[7], q[11]
     total = 0
     for load, turn, r in zip(_pin_loads(pose, dims, n), turns, radii, strict=True):
         slip = r * np.fabs(turn) * np.fabs(v)
-        mu = mu_ref + ab * np.log((slip + v_c) / (v_ref + v_c))
+        film = slip / (load + _LOAD_EPS) * inv_hersey  # h / h_s
+        mu = (mu_ref + ab * np.log((slip + v_c) / (v_ref + v_c))) * np.exp(-film * film)
         total = total + mu / np.sqrt(1 + mu * mu) * r * load * np.fabs(turn)
     return total
 
@@ -181,10 +192,10 @@ def _internal_force(excess: Any, compliance: Any, k_contact: Any) -> Any:
 
 @functools.cache
 def _model() -> ca.Function:
-    """CasADi function (x, v, lower[8], upper[8], q[11]) -> force, friction, elastic, N, dL."""
+    """CasADi function (x, v, lower[8], upper[8], q[12]) -> force, friction, elastic, N, dL."""
     x, v = ca.SX.sym("x"), ca.SX.sym("v")
     pl, pu = ca.SX.sym("lower", len(DIMENSIONS)), ca.SX.sym("upper", len(DIMENSIONS))
-    q = ca.SX.sym("q", 11)
+    q = ca.SX.sym("q", 12)
     dims_l = [pl[i] for i in range(len(DIMENSIONS))]
     dims_u = [pu[i] for i in range(len(DIMENSIONS))]
     free_play, k_contact, k_series, k_drive = q[0], q[1], q[2], q[3]

@@ -4,12 +4,15 @@ Data: a table like Chang et al. 2021's Tables 6-8 (F_TP mean and three-sigma ban
 per speed and link-8 error; ``toggle/data/chang2021_tables.toml``) or run summaries
 in the same shape. At most three parameters are fitted, by weighted least squares
 (residual / three-sigma band) in log coordinates, so every fitted value stays
-positive; the rest keep their physical defaults.
+positive; the rest keep their physical defaults. The rows of one speed fix the
+stiffness and free play; the speed dependence of the friction (the Hersey transition)
+needs rows at two speeds (docs/unequal-halves.md, section 5).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -24,7 +27,7 @@ from toggle.params import Mechanism, tomllib
 PAPER_TABLES = Path(__file__).with_name("data") / "chang2021_tables.toml"
 #: Parameters a calibration may fit (all positive scalars of AsymmetryParams).
 FITTABLE = ("free_play", "contact_stiffness", "series_stiffness", "drive_stiffness", "mu",
-            "rate_strengthening")
+            "rate_strengthening", "hersey_transition")
 MAX_FITTED = 3
 
 
@@ -72,16 +75,16 @@ def predict(table: ForceTable, mech: Mechanism, params: AsymmetryParams) -> np.n
 class Calibration(NamedTuple):
     params: AsymmetryParams
     fitted: tuple[str, ...]
-    speed: float
-    normalised_residuals: np.ndarray  # (model - mean) / three_sigma at the calibration speed
+    speeds: tuple[float, ...]  # m/s, the table rows used
+    normalised_residuals: np.ndarray  # (model - mean) / three_sigma, speeds x errors
 
 
 def calibrate(
-    table: ForceTable, mech: Mechanism, speed: float,
+    table: ForceTable, mech: Mechanism, speeds: float | Sequence[float],
     fit: tuple[str, ...] = ("free_play", "contact_stiffness"),
     start: AsymmetryParams | None = None,
 ) -> Calibration:
-    """Fit at most three parameters to the table's row at ``speed`` (m/s), from ``start``
+    """Fit at most three parameters to the table's rows at ``speeds`` (m/s), from ``start``
     (default: the model's defaults)."""
     start = start or AsymmetryParams()
     if not 0 < len(fit) <= MAX_FITTED or len(set(fit)) != len(fit):
@@ -89,25 +92,31 @@ def calibrate(
     unknown = set(fit) - set(FITTABLE)
     if unknown:
         raise ValueError(f"cannot fit {sorted(unknown)}; fittable: {', '.join(FITTABLE)}")
-    i = table.speed_index(speed)
-    row = ForceTable(table.speeds[i:i + 1], table.errors, table.mean[i:i + 1],
-                     table.three_sigma[i:i + 1])
-    floor = 1e-9  # log coordinates need a positive start (free play may start at 0)
+    rows = [table.speed_index(s) for s in np.atleast_1d(np.asarray(speeds, dtype=float))]
+    used = ForceTable(table.speeds[rows], table.errors, table.mean[rows],
+                      table.three_sigma[rows])
 
     def params_at(z: np.ndarray) -> AsymmetryParams:
         return start.replace(**{name: float(math.exp(zi)) for name, zi in zip(fit, z, strict=True)})
 
     def residuals(z: np.ndarray) -> np.ndarray:
         try:
-            model = predict(row, mech, params_at(z))
+            model = predict(used, mech, params_at(z))
         except AsymmetryError:
-            return np.full(len(table.errors), 1e6)
-        return ((model - row.mean) / row.three_sigma).ravel()
+            return np.full(used.mean.size, 1e6)
+        return ((model - used.mean) / used.three_sigma).ravel()
 
-    z0 = np.log([max(getattr(start, name), floor) for name in fit])
-    result = least_squares(residuals, z0, x_scale=1.0, diff_step=1e-6)
-    best = params_at(result.x)
-    return Calibration(best, tuple(fit), float(table.speeds[i]), residuals(result.x))
+    result = least_squares(residuals, np.log([_start_value(start, name) for name in fit]),
+                           x_scale=1.0, diff_step=1e-6)
+    return Calibration(params_at(result.x), tuple(fit), tuple(map(float, used.speeds)),
+                       residuals(result.x).reshape(used.mean.shape))
+
+
+def _start_value(start: AsymmetryParams, name: str) -> float:
+    """A positive, finite start for a log-coordinate fit (free play may be 0, the Hersey
+    transition infinite: then the shipped default)."""
+    value = getattr(start, name)
+    return max(value if math.isfinite(value) else getattr(AsymmetryParams(), name), 1e-9)
 
 
 class Comparison(NamedTuple):

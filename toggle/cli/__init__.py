@@ -16,8 +16,8 @@ from toggle.kinematics import AssemblyError
 from toggle.params import ParameterError
 
 #: Command modules, in the order ``toggle --help`` lists them.
-COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetry", "build_fmu",
-            "plan", "plot")
+COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetry", "calibrate",
+            "build_fmu", "plan", "plot")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,67 @@
+"""``toggle calibrate``: fit the unequal-halves model to measured toggle forces.
+
+Reads a table in the paper's shape (``toggle/data/chang2021_tables.toml`` by default:
+F_TP mean and three-sigma band per speed and link-8 error, mm/s, mm, N as printed),
+fits at most three parameters on the rows of the given speeds and prints the fitted
+values (SI) and every row of the table side by side with the model.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import asdict
+from pathlib import Path
+
+from toggle.calibration import (
+    FITTABLE,
+    MAX_FITTED,
+    PAPER_TABLES,
+    calibrate,
+    compare,
+    load_force_table,
+)
+from toggle.cli.common import (
+    MM,
+    add_json_argument,
+    add_preset_argument,
+    mechanism,
+    print_json,
+    table,
+)
+
+
+def run(args: argparse.Namespace) -> int:
+    data = load_force_table(args.table)
+    mech = mechanism(args)
+    cal = calibrate(data, mech, tuple(args.speeds), fit=tuple(args.fit))
+    rows = compare(data, mech, cal.params)
+    fitted = {name: getattr(cal.params, name) for name in cal.fitted}
+    if args.json:
+        print_json({"fitted": fitted, "calibration_speeds": list(cal.speeds),
+                    "rows": [{**r._asdict(), "within_three_sigma": r.within_band} for r in rows],
+                    "params": {k: v for k, v in asdict(cal.params).items() if k != "pins"}})
+        return 0
+    print(f"{mech.name}: fitted on the rows at "
+          f"{', '.join(f'{s * MM:g}' for s in cal.speeds)} mm/s of {args.table}")
+    for name, value in fitted.items():
+        print(f"  {name} = {value:.6g} (SI)")
+    print(table(["v mm/s", "dr8 mm", "F_TP N", "+-3sigma N", "model N", "error %", "in band"],
+                [(r.speed * MM, r.error * MM, r.measured, r.three_sigma, r.model,
+                  100 * r.relative_error, "yes" if r.within_band else "no") for r in rows],
+                fmt="{:>12.2f}"))
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("calibrate",
+                       help="fit the unequal-halves model to measured F_TP (seed 000 Tables 6-8)")
+    add_preset_argument(p)
+    p.add_argument("--table", type=Path, default=PAPER_TABLES,
+                   help="TOML table in the paper's shape (default: seed 000 Tables 6-8)")
+    p.add_argument("--speeds", type=float, nargs="+", default=[5e-3, 15e-3],
+                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3)")
+    p.add_argument("--fit", nargs="+", choices=FITTABLE, metavar="PARAM",
+                   default=["free_play", "contact_stiffness", "hersey_transition"],
+                   help=f"at most {MAX_FITTED} of: {', '.join(FITTABLE)}")
+    add_json_argument(p)
+    p.set_defaults(handler=run)
