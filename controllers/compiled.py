@@ -1,25 +1,48 @@
-"""Machine code for the planner's per-node plant functions.
+"""Machine code for the planner's CasADi functions, cached on disk.
 
-CasADi's virtual machine evaluates the plant's jets (value, gradient,
-Hessian at every node) several times per IPOPT iteration; compiled C is
-about ten times faster. The C source CasADi generates is compiled once by
-the system C compiler (``CC``, default ``gcc``) and kept on disk under the
-hash of its source (``TOGGLE_CACHE_DIR``, default ``~/.cache/toggle-clamp``),
-so a later process loads it in milliseconds. Where no compiler works or the
-cache is not writable the functions stay interpreted: same results, slower.
+Building the planner's functions symbolically (the plant's jets at every node, the
+objective and constraints with their derivatives) takes a quarter of a second, and
+CasADi's virtual machine evaluates them several times per IPOPT iteration.
+:func:`compiled` generates C for them once, compiles it with the system C compiler
+(``CC``, default ``gcc``) and keeps the shared library in the cache directory
+(``TOGGLE_CACHE_DIR``, default ``~/.cache/toggle-clamp``) under a key computed from
+everything that determines the functions, so a later process loads them in
+milliseconds without building them. The caller's key covers the code
+(:func:`source_digest`) and its parameters; the compiler, the link flags, CasADi's
+version and the platform are added here. A changed input is a new key, never a stale
+library.
+
+Each translation unit has the optimisation level its caller chose: small code doing
+heavy arithmetic is worth ``-O1``, large straight-line code compiles in seconds at
+``-O0`` but in half a minute at ``-O1``. The units compile in parallel. A library is
+moved into the cache complete, named with the checksum of its content; one whose
+content does not match (truncated, damaged: loading it could crash the process) is
+deleted and rebuilt, as is one that does not load. Where no compiler works or the
+cache is not writable, the functions as built are used, interpreted: same results,
+slower. The newest :data:`KEEP` libraries of a name are kept.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import platform
 import subprocess
 import tempfile
+import zlib
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from types import ModuleType
 
 import casadi as ca
 
-CFLAGS = ("-O1", "-shared", "-fPIC")
+#: One translation unit: its optimisation flags and the functions it holds.
+Unit = tuple[tuple[str, ...], list[ca.Function]]
+_COMPILE = ("-fPIC", "-c")
+_LINK = ("-shared", "-s")
+_TIMEOUT = 300  # s, per compiler run
+#: Libraries of one name kept; older ones (of changed code or parameters) are deleted.
+KEEP = 16
 
 
 def cache_dir() -> Path:
@@ -28,33 +51,115 @@ def cache_dir() -> Path:
     return Path(os.environ.get("TOGGLE_CACHE_DIR", default))
 
 
-def _build(source: str, library: Path) -> bool:
-    """Compile ``source`` into ``library`` (atomically); False if that fails."""
+def source_digest(*packages: ModuleType) -> str:
+    """Hash of the source text of the modules directly in the packages' directories."""
+    digest = hashlib.sha256()
+    for package in packages:
+        roots = sorted({Path(entry) for entry in package.__path__ if Path(entry).is_dir()})
+        for path in sorted(p for root in roots for p in root.glob("*.py")):
+            digest.update(f"{package.__name__}.{path.stem}\0".encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _compiler() -> str:
+    return os.environ.get("CC", "gcc")
+
+
+def _stem(name: str, key: str) -> str:
+    """File-name stem of the library for ``key``, also keyed by the toolchain and platform."""
+    salt = (key, _compiler(), *_COMPILE, *_LINK, ca.__version__, platform.machine(),
+            platform.system())
+    digest = hashlib.sha256("\0".join(salt).encode()).hexdigest()[:24]
+    return f"{name}_{digest}"
+
+
+def _checksum(data: bytes) -> str:
+    """CRC-32 of a library's content (it catches truncation and damage), 8 hex digits."""
+    return f"{zlib.crc32(data):08x}"
+
+
+def _run_all(commands: list[list[str]]) -> None:
+    """Run the commands in parallel; raise if any fails."""
+    jobs = [subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            for cmd in commands]
     try:
-        library.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
-            c_file, so_file = Path(tmp) / "jets.c", Path(tmp) / library.name
-            c_file.write_text(source, encoding="utf-8")
-            subprocess.run([os.environ.get("CC", "gcc"), *CFLAGS, "-o", str(so_file),
-                            str(c_file)], check=True, capture_output=True, timeout=120)
-            os.replace(so_file, library)
-        return True
+        codes = [job.wait(timeout=_TIMEOUT) for job in jobs]
+    finally:
+        for job in jobs:
+            if job.poll() is None:
+                job.kill()
+                job.wait()
+    if any(codes):
+        raise subprocess.CalledProcessError(max(codes), commands[codes.index(max(codes))])
+
+
+def _compile(units: list[Unit], stem: str) -> Path | None:
+    """Generate, compile and link the units into a library named by ``stem`` and its
+    checksum, moved into the cache in one step; None on failure."""
+    try:
+        cache_dir().mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=cache_dir()) as tmp:
+            objects = [Path(tmp) / f"unit{k}.o" for k in range(len(units))]
+            for (_, functions), obj in zip(units, objects):
+                generator = ca.CodeGenerator(obj.with_suffix(".c").name)
+                for fn in functions:
+                    generator.add(fn)
+                obj.with_suffix(".c").write_text(generator.dump(), encoding="utf-8")
+            _run_all([[_compiler(), *flags, *_COMPILE, "-o", str(obj), str(obj.with_suffix(".c"))]
+                      for (flags, _), obj in zip(units, objects)])
+            shared = Path(tmp) / "library.so"
+            _run_all([[_compiler(), *_LINK, "-o", str(shared), *map(str, objects)]])
+            library = cache_dir() / f"{stem}_{_checksum(shared.read_bytes())}.so"
+            os.replace(shared, library)
+        return library
     except (OSError, subprocess.SubprocessError):
-        return False
+        return None
 
 
-def compiled(functions: list[ca.Function], name: str) -> list[ca.Function]:
-    """The functions, compiled and loaded from the cache (built on first use), or
-    themselves where that is not possible."""
-    generator = ca.CodeGenerator(f"{name}.c")
-    for fn in functions:
-        generator.add(fn)
-    source = generator.dump()
-    digest = hashlib.sha256(" ".join((*CFLAGS, source)).encode()).hexdigest()[:20]
-    library = cache_dir() / f"{name}_{digest}.so"
-    if not (library.exists() or _build(source, library)):
-        return functions
+def _prune(name: str) -> None:
+    """Delete all but the :data:`KEEP` newest libraries of ``name``."""
     try:
-        return [ca.external(fn.name(), str(library)) for fn in functions]
-    except RuntimeError:  # an unloadable library (another platform's cache): interpret
-        return functions
+        libraries = sorted(cache_dir().glob(f"{name}_*.so"), key=lambda p: p.stat().st_mtime)
+        for old in libraries[:-KEEP]:
+            old.unlink(missing_ok=True)
+    except OSError:  # another process pruning at the same time
+        pass
+
+
+def _intact(library: Path) -> bool:
+    """Whether the library's content matches the checksum in its name; a damaged one (a
+    truncated file can crash the process that loads it) is deleted."""
+    try:
+        if library.stem.rsplit("_", 1)[1] == _checksum(library.read_bytes()):
+            return True
+        library.unlink()
+    except OSError:
+        pass
+    return False
+
+
+def _load(library: Path, names: Sequence[str]) -> list[ca.Function] | None:
+    """The functions from ``library``, or None if it does not load."""
+    try:
+        return [ca.external(name, str(library)) for name in names]
+    except RuntimeError:
+        return None
+
+
+def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]]
+             ) -> list[ca.Function]:
+    """The functions ``names`` as machine code: from the library cached under ``key``, or
+    else built by ``build``, compiled, cached and loaded; as built (interpreted) where
+    compiling or loading fails."""
+    stem = _stem(name, key)
+    for library in cache_dir().glob(f"{stem}_*.so"):
+        loaded = _load(library, names) if _intact(library) else None
+        if loaded is not None:
+            return loaded
+    units = build()
+    built = {fn.name(): fn for _, functions in units for fn in functions}
+    library = _compile(units, stem)
+    loaded = _load(library, names) if library else None
+    _prune(name)
+    return loaded if loaded is not None else [built[n] for n in names]

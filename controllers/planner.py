@@ -26,9 +26,18 @@ objective weights, the mold-contact position and the force scale are
 parameters. So one built problem (:class:`StrokeProblem`, shared by
 :func:`planner_for` across mold heights) serves every duration, mode and mold
 height, and a re-plan warm-starts IPOPT from the previous primal and dual
-solution, stretched in time to the new duration. IPOPT's derivatives come from
-per-node jets of the plant, compiled to machine code where a C compiler exists
-(:mod:`controllers.compiled`), see :class:`StrokeProblem`.
+solution, stretched in time to the new duration. IPOPT's functions are per-node
+jets of the plant feeding a model of the rest (see :class:`StrokeProblem`),
+compiled to machine code once and kept on disk under a hash of everything that
+determines them (this code and the toggle model's, the plant, limits, contact
+speed and N: :mod:`controllers.compiled`), so a new process builds a problem in
+milliseconds; without a C compiler they are built symbolically and interpreted.
+
+Speed (``benchmarks/bench_planner.py``, chang2021, N = 200, 3 s, two cores): a
+cold plan takes about 0.18 s with the disk cache filled (the problem loaded in
+under 10 ms, 63 IPOPT iterations), a warm re-plan about 10 ms for another
+duration (3 iterations) and 16 ms for another mold height (6 iterations); the
+first plan of a plant (or after any change of the code) compiles for about 5 s.
 """
 
 from __future__ import annotations
@@ -36,14 +45,16 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import astuple, dataclass, field, replace
 from typing import Any
 
 import casadi as ca
 import numpy as np
 from scipy.optimize import brentq
 
-from controllers.compiled import compiled
+import controllers
+import toggle
+from controllers.compiled import Unit, compiled, source_digest
 from controllers.limits import DriveLimits, drive_limits
 from controllers.profiles import Profile, ProfileSamples, minimum_time, predict, s_curve
 from toggle.elastics import ClampingError, clamp_state, clamp_stroke, contact_position
@@ -59,8 +70,11 @@ INTERVALS = 200
 CREEP_FACTOR = 10.0
 _REGULARISATION = 1e-2  # weight of the squared jerk (relative to its limit), for uniqueness
 _BINDING = 0.99  # a limit counts as binding above this fraction of its value
+#: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
+#: scaling of every KKT matrix only costs time (a tenth of a warm re-plan).
 _IPOPT = {"print_level": 0, "sb": "yes", "max_iter": 500, "tol": 1e-6,
-          "acceptable_tol": 1e-4, "mu_strategy": "adaptive"}
+          "acceptable_tol": 1e-4, "mu_strategy": "adaptive", "mumps_permuting_scaling": 0,
+          "mumps_scaling": 0}
 #: From a nearby solution the monotone barrier update, started small, takes the fewest steps.
 _WARM = {"warm_start_init_point": "yes", "mu_strategy": "monotone", "mu_init": 1e-7,
          "warm_start_bound_push": 1e-9, "warm_start_bound_frac": 1e-9,
@@ -168,21 +182,46 @@ def _min_jerk(tau: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(np.polyval(np.polyder(c, m) if m else c, tau) for m in range(4))
 
 
+#: The plant outputs the problem evaluates at the nodes (see :meth:`StrokeProblem._spans`).
+_OUTPUTS = ("free", "mold", "contact")
+#: The functions compiled to machine code: jets of each output (value, + gradient, + Hessian),
+#: then the model (:meth:`StrokeProblem._model_functions`).
+_NAMES = (*(f"{name}{order}" for name in _OUTPUTS for order in range(3)), "input_force",
+          "f_plain", "grad_f_plain", "fg", "grad_f", "jac_g", "hess_lag")
+#: Optimisation level of the compilation units: the jets are small code doing the plant's
+#: arithmetic (-O1 makes them two to three times faster than -O0), the model is 1.6 MB of
+#: straight-line C, compiled in seconds at -O0 and in half a minute at -O1, which would save
+#: a tenth of the solve time.
+_OPTIMISATION = {"jets": ("-O1",), "model": ("-O0",)}
+#: The code that determines the problem's functions, hashed when this module is imported (so
+#: the hash matches the code this process runs, even if the files change later).
+_SOURCE = source_digest(toggle, controllers)
 #: Upper triangle of a symmetric 3 x 3 matrix, row by row (the per-node plant Hessians).
 _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 _JET = 10  # rows of a node's plant data: value, gradient (3), Hessian upper triangle (6)
 
 
-def _jets(name: str, output: ca.SX, z: ca.SX, xc: ca.SX) -> tuple[ca.Function, ...]:
+def _problem_key(cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
+                 intervals: int) -> str:
+    """Everything that determines a :class:`StrokeProblem`'s functions, the key of their
+    disk cache: the code and the problem's inputs (every field of the frozen parameters,
+    floats in their exact repr)."""
+    return "\n".join((_SOURCE, *map(repr, (astuple(cfg), astuple(limits), contact_speed,
+                                            intervals))))
+
+
+def _jets(name: str, output: ca.SX, z: ca.SX, xc: ca.SX, nodes: int
+          ) -> tuple[ca.Function, ...]:
     """One plant output h(z, x_contact) of a node, z = (x, v, a), as three functions of
-    (z, x_contact) -> value, and its first- and second-order jets, each column a
-    :data:`_JET`-row block (missing orders zero)."""
+    (z at ``nodes`` nodes, x_contact) -> its value, first- and second-order jet at each node,
+    a :data:`_JET`-row column per node (missing orders zero). Mapped here, so that the map
+    is compiled into a loop too."""
     H, g = ca.hessian(output, z)
     zero = ca.SX.zeros
     rows = (ca.vertcat(output, zero(_JET - 1)), ca.vertcat(output, g, zero(_JET - 4)),
             ca.vertcat(output, g, *[H[i, j] for i, j in _UPPER]))
-    return tuple(ca.Function(f"{name}{k}", [z, xc], [r], {"cse": True})
-                 for k, r in enumerate(rows))
+    return tuple(ca.Function(f"{name}{k}_node", [z, xc], [r], {"cse": True}).map(
+        f"{name}{k}", "serial", nodes, [1], []) for k, r in enumerate(rows))
 
 
 class StrokeProblem:
@@ -196,7 +235,9 @@ class StrokeProblem:
     jets (value, gradient, Hessian of each output, small SX functions mapped over the nodes)
     and a small SX graph of the rest, in which each output is its second-order Taylor model
     about the current point: exact value, gradient and Hessian of the Lagrangian there,
-    without CasADi differentiating through the mapped plant at every call.
+    without CasADi differentiating through the mapped plant at every call. Both come from
+    the disk cache of compiled code when it holds this problem (:func:`_problem_key`),
+    else they are built and compiled; only the small MX graph joining them is built here.
     """
 
     def __init__(self, cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
@@ -213,9 +254,10 @@ class StrokeProblem:
         self.stroke = self.x_final - self.x_open
         self.n1, self.n2 = intervals - intervals // 2, intervals // 2
         self.size = 4 * intervals + 6
+        self.n_constraints = 3 * intervals + 1 + 2 * (intervals + 2) + 2
         self.t_ref = minimum_time(self.stroke, limits.velocity, limits.acceleration, limits.jerk)
         self.jerk_bound = limits.jerk * self.t_ref**3 / self.stroke
-        self._solvers: dict[bool, Any] = {}
+        self._solvers: dict[tuple[bool, bool], Any] = {}
         self.last: Plan | None = None  # the latest plan, for any mold height
         self._build()
 
@@ -227,32 +269,35 @@ class StrokeProblem:
         z = ca.vertcat(self.x_open + S * xi.T, S / t_ref * nu.T, S / t_ref**2 * al.T)
         return xi, nu, al, w[3 * N + 3:4 * N + 3], w[4 * N + 3], w[4 * N + 4], w[4 * N + 5], z
 
-    def _groups(self) -> list[tuple[tuple[ca.Function, ...], slice]]:
-        """The plant outputs the problem uses, as (jets, node slice): the mold-free input force
-        over the approach, the input force with the mold over the clamping, and the platen
-        speed at contact."""
+    def _spans(self) -> tuple[slice, ...]:
+        """The nodes of each of :data:`_OUTPUTS`: the mold-free input force over the approach,
+        the input force with the mold over the clamping, the platen speed at contact."""
+        n1, N = self.n1, self.n1 + self.n2
+        return slice(0, n1 + 1), slice(n1, N + 1), slice(n1, n1 + 1)
+
+    def _symbolic(self) -> list[Unit]:
+        """The per-node jets of :data:`_OUTPUTS` and the model as SX functions, in
+        compilation units (see :data:`_OPTIMISATION`)."""
         z, xc = ca.SX.sym("z", 3), ca.SX.sym("x_contact")
         free = plant_outputs(z[0], z[1], z[2], self.config)
         mold = plant_outputs(z[0], z[1], z[2], self.config, x_contact=xc)
-        n1, N = self.n1, self.n1 + self.n2
-        jets = [_jets(name, ca.SX(out), z, xc) for name, out in (
-            ("free", free.input_force), ("mold", mold.input_force),
-            ("contact", free.platen_velocity))]
-        # the values stay interpreted: nlpsol differentiates the NLP function it is given
-        fast = iter(compiled([fn for group in jets for fn in group[1:]], "plant_jets"))
-        nodes = (slice(0, n1 + 1), slice(n1, N + 1), slice(n1, n1 + 1))
-        return [((group[0], next(fast), next(fast)), span) for group, span in zip(jets, nodes)]
+        outputs = (free.input_force, mold.input_force, free.platen_velocity)
+        jets = [fn for name, out, nodes in zip(_OUTPUTS, outputs, self._spans())
+                for fn in _jets(name, ca.SX(out), z, xc, nodes.stop - nodes.start)]
+        force = ca.Function("input_force", [z, xc], [mold.input_force], {"cse": True})
+        *values, hess = self._model_functions()
+        return [(_OPTIMISATION["jets"], [*jets, force]), (_OPTIMISATION["model"], values),
+                (_OPTIMISATION["model"], [hess])]
 
-    def _model(self, w: ca.SX, w0: ca.SX, p: ca.SX, data: ca.SX, spans: list[slice]
-               ) -> tuple[ca.SX, ca.SX]:
+    def _model(self, w: ca.SX, w0: ca.SX, p: ca.SX, data: ca.SX) -> tuple[ca.SX, ca.SX]:
         """Objective and constraints with each plant output replaced by its Taylor model
-        about the point w0, from the node data (:data:`_JET` rows per output, the outputs'
-        nodes ``spans``)."""
+        about the point w0, from the node data (:data:`_JET` rows per output and node, the
+        outputs' nodes :meth:`_spans`)."""
         n1, n2 = self.n1, self.n2
         xi, nu, al, io, th1, th2, s, z = self._nodes(w)
         dz = z - self._nodes(w0)[-1]
         outputs, col = [], 0
-        for nodes in spans:
+        for nodes in self._spans():
             d, n = dz[:, nodes], nodes.stop - nodes.start
             block = data[:, col:col + n]
             quad = sum((1 if i == j else 2) * block[4 + k, :] * d[i, :] * d[j, :]
@@ -277,40 +322,59 @@ class StrokeProblem:
                      + p[3] * ca.dot(h, (io / self.jerk_bound) ** 2))
         return objective, ca.vertcat(dyn, xi[n1], F - s, F + s, contact, duration)
 
-    def _build(self) -> None:
-        """The NLP functions IPOPT calls (value, gradient, constraint Jacobian, Hessian of
-        the Lagrangian), each the per-node jets mapped over the nodes feeding the model."""
-        N = self.n1 + self.n2
-        groups = self._groups()
-        m = sum(nodes.stop - nodes.start for _, nodes in groups)
+    def _model_functions(self) -> list[ca.Function]:
+        """The model's value (f, g), gradient, constraint Jacobian and Hessian of the
+        Lagrangian, functions of (w, p, node data): derivatives of the Taylor models taken
+        about w0, then evaluated at w0 = w, where the models are exact to second order. And
+        the objective's value and gradient without the force integral (its weight p[1]
+        zero: the peak and minimum-time objectives), functions of (w, p) alone, so that
+        IPOPT evaluates no plant for them."""
+        m = sum(nodes.stop - nodes.start for nodes in self._spans())
         w, w0 = ca.SX.sym("w", self.size), ca.SX.sym("w0", self.size)
         p, data = ca.SX.sym("p", 6), ca.SX.sym("data", _JET, m)
-        lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", 3 * N + 1 + 2 * (N + 2) + 2)
-        f, g = self._model(w, w0, p, data, [nodes for _, nodes in groups])
+        lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", self.n_constraints)
+        f, g = self._model(w, w0, p, data)
         hess = ca.triu(ca.hessian(lam_f * f + ca.dot(lam_g, g), w)[0])
-        args = [w, w0, p, data]
-        model = {"fg": ca.Function("fg", args, [f, g]),
-                 "grad_f": ca.Function("grad_f", args, [f, ca.gradient(f, w)]),
-                 "jac_g": ca.Function("jac_g", args, [g, ca.jacobian(g, w)]),
-                 "hess": ca.Function("hess_lag", [*args, lam_f, lam_g], [hess])}
+        f, g, grad, jac, hess = ca.substitute(
+            [f, g, ca.gradient(f, w), ca.jacobian(g, w), hess], [w0], [w])
+        args, opts = [w, p, data], {"cse": True}
+        plain, plain_grad = ca.substitute([f, grad], [p[1]], [0.0])
+        return [ca.Function("f_plain", [w, p], [plain], opts),
+                ca.Function("grad_f_plain", [w, p], [plain, plain_grad], opts),
+                ca.Function("fg", args, [f, g], opts),
+                ca.Function("grad_f", args, [f, grad], opts),
+                ca.Function("jac_g", args, [g, jac], opts),
+                ca.Function("hess_lag", [*args, lam_f, lam_g], [hess], opts)]
+
+    def _build(self) -> None:
+        """The NLP functions IPOPT calls (value, gradient, constraint Jacobian, Hessian of
+        the Lagrangian), each the per-node jets mapped over the nodes feeding the model;
+        the jets and the model come compiled from the disk cache where possible."""
+        N = self.n1 + self.n2
+        key = _problem_key(self.config, self.limits, self.contact_speed, N)
+        fn = dict(zip(_NAMES, compiled("stroke", key, _NAMES, self._symbolic)))
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", 6)
-        L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", lam_g.numel())
+        L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.n_constraints)
         z = self._nodes(W)[-1]
 
         def node_data(order: int) -> ca.MX:
-            return ca.horzcat(*[jets[order].map(nodes.stop - nodes.start)(z[:, nodes], P[4])
-                                for jets, nodes in groups])
+            return ca.horzcat(*[fn[f"{name}{order}"](z[:, nodes], P[4])
+                                for name, nodes in zip(_OUTPUTS, self._spans())])
 
-        values = node_data(0)
-        self._nlp = ca.Function("nlp", [W, P], model["fg"](W, W, P, values), ["x", "p"],
-                                ["f", "g"])
+        self._force = fn["input_force"]
+        values, slopes = node_data(0), node_data(1)
+        f, g = fn["fg"](W, P, values)
+        objectives = {True: (f, fn["grad_f"](W, P, slopes)),
+                      False: (fn["f_plain"](W, P), fn["grad_f_plain"](W, P))}
+        self._nlp = {energy: (ca.Function("nlp", [W, P], [obj, g], ["x", "p"], ["f", "g"]),
+                              ca.Function("nlp_grad_f", [W, P], grad, ["x", "p"],
+                                          ["f", "grad_f_x"]))
+                     for energy, (obj, grad) in objectives.items()}
         self._derivatives = {
-            "grad_f": ca.Function("nlp_grad_f", [W, P], model["grad_f"](W, W, P, node_data(1)),
-                                  ["x", "p"], ["f", "grad_f_x"]),
-            "jac_g": ca.Function("nlp_jac_g", [W, P], model["jac_g"](W, W, P, node_data(1)),
+            "jac_g": ca.Function("nlp_jac_g", [W, P], fn["jac_g"](W, P, slopes),
                                  ["x", "p"], ["g", "jac_g_x"]),
             "hess_lag": ca.Function("nlp_hess_l", [W, P, L_f, L_g],
-                                    [model["hess"](W, W, P, node_data(2), L_f, L_g)],
+                                    [fn["hess_lag"](W, P, node_data(2), L_f, L_g)],
                                     ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
         }
         n1 = self.n1
@@ -324,13 +388,22 @@ class StrokeProblem:
             np.concatenate([np.zeros(3 * N), [np.nan], np.zeros(nf), np.full(nf, np.inf),
                             [1.0, np.inf]]))
 
-    def solver(self, warm: bool) -> Any:
-        """The IPOPT instance, cold or with the warm-start options (each built once)."""
-        if warm not in self._solvers:
+    def input_force(self, x: Any, v: Any, a: Any, x_contact: float) -> np.ndarray:
+        """The plant's input force (N) at the points (x, v, a) with the mold at ``x_contact``
+        (the function of the clamping phase's jets, exact before contact too, compiled)."""
+        z = np.vstack(np.broadcast_arrays(x, v, a)).astype(float)
+        return np.asarray(self._force(z, x_contact))[0]
+
+    def solver(self, warm: bool, energy: bool) -> Any:
+        """The IPOPT instance, cold or with the warm-start options, for an objective with
+        the force integral (``energy``) or without it (each built once)."""
+        if (warm, energy) not in self._solvers:
+            nlp, grad_f = self._nlp[energy]
             opts = {"ipopt": {**_IPOPT, **(_WARM if warm else {})}, "print_time": False,
-                    "error_on_fail": False, "calc_lam_p": False, **self._derivatives}
-            self._solvers[warm] = ca.nlpsol("plan", "ipopt", self._nlp, opts)
-        return self._solvers[warm]
+                    "error_on_fail": False, "calc_lam_p": False, "no_nlp_grad": True,
+                    "grad_f": grad_f, **self._derivatives}
+            self._solvers[warm, energy] = ca.nlpsol("plan", "ipopt", nlp, opts)
+        return self._solvers[warm, energy]
 
 
 @functools.lru_cache(maxsize=8)
@@ -370,11 +443,15 @@ class ClampPlanner:
         """The latest plan on this planner's problem (any mold height)."""
         return self.problem.last
 
+    def _force(self, x: Any, v: Any, a: Any) -> np.ndarray:
+        """The plant's input force at the points (x, v, a) with this planner's mold, N."""
+        return self.problem.input_force(x, v, a, self.config.x_contact)
+
     def _reference_force(self) -> float:
         """Scale of the input force: its quasi-static peak at the reference speed, N."""
         xs = np.linspace(self.x_open, self.x_final, 401)
-        f = plant_outputs(xs, np.full_like(xs, self.stroke / self.t_ref), 0 * xs, self.config)
-        return max(float(np.max(np.abs(f.input_force))), 1e-6)
+        f = self._force(xs, self.stroke / self.t_ref, 0.0)
+        return max(float(np.max(np.abs(f))), 1e-6)
 
     def _parameters(self, weights: list[float]) -> list[float]:
         return [*weights, self.config.x_contact, self.f_ref]
@@ -408,8 +485,8 @@ class ClampPlanner:
         tau = np.concatenate([np.linspace(0, tau_c, n1 + 1), np.linspace(tau_c, 1, n2 + 1)[1:]])
         xi, nu, al, _ = _min_jerk(tau)
         jerk = np.diff(al) / np.diff(tau)
-        f = plant_outputs(self.x_open + self.stroke * xi, self.stroke * nu / duration,
-                          self.stroke * al / duration**2, self.config).input_force
+        f = self._force(self.x_open + self.stroke * xi, self.stroke * nu / duration,
+                        self.stroke * al / duration**2)
         s = float(np.max(np.abs(f))) / self.f_ref
         return np.concatenate([xi, nu * r, al * r**2, jerk * r**3,
                                [tau_c / n1 / r, (1 - tau_c) / n2 / r, s]])
@@ -435,7 +512,7 @@ class ClampPlanner:
         target = min(max(2 * self.t_ref, t_bounds[0]), t_bounds[1])
         args = self._stretched(start, target) if warm else {"x0": self._initial_guess(target)}
         args["x0"] = np.clip(args["x0"], lbx, ubx)
-        solver = self.problem.solver(warm)
+        solver = self.problem.solver(warm, energy=weights[1] > 0)
         tic = time.perf_counter()
         sol = solver(p=self._parameters(weights), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **args)
         elapsed = time.perf_counter() - tic
@@ -491,8 +568,9 @@ class ClampPlanner:
         if not ok and warm:
             plan, ok = self._run(weights, bounds, limit, "time", None, False)
         if not ok:
+            status = self.problem.solver(False, energy=False).stats()["return_status"]
             raise PlanningError("the planner found no profile that meets the drive limits "
-                                f"(IPOPT: {self.problem.solver(False).stats()['return_status']})")
+                                f"(IPOPT: {status})")
         self.problem.last = plan
         return plan
 
@@ -515,13 +593,16 @@ class ClampPlanner:
         }
         return [name for name, ratio in found.items() if ratio >= _BINDING]
 
+    @functools.cached_property
+    def _creep_thrust(self) -> float:
+        """The largest input force of clamping at creep speed, N."""
+        xs = np.linspace(self.config.x_contact, self.x_final, 401)
+        return float(np.max(self._force(xs, CREEP_FACTOR * self.config.velocity_epsilon, 0.0)))
+
     def _check_force(self, limit: float) -> None:
         """Refuse a force limit below the clamping thrust at creep speed (no profile can
         clamp without creeping under the friction model's smoothing speed)."""
-        xs = np.linspace(self.config.x_contact, self.x_final, 401)
-        creep = CREEP_FACTOR * self.config.velocity_epsilon
-        need = float(np.max(plant_outputs(xs, np.full_like(xs, creep), 0 * xs,
-                                          self.config).input_force))
+        need = self._creep_thrust
         if need > limit:
             raise PlanningError(
                 f"the motor torque limit binds: clamping to {self.clamp_force():.6g} N needs a "

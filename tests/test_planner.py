@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import types
 from dataclasses import replace
 
 import casadi as ca
@@ -12,11 +13,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controllers.compiled import compiled
+from controllers.compiled import compiled, source_digest
 from controllers.limits import drive_limits
 from controllers.planner import (
     CREEP_FACTOR,
+    ClampPlanner,
     PlanningError,
+    _problem_key,
     baselines,
     plan_config,
     planner_for,
@@ -146,17 +149,93 @@ def test_other_mold_height_warm_starts_from_the_previous_plan(chang):
     assert replan.peak_force == pytest.approx(cold.peak_force, rel=1e-2)
 
 
-def test_compiled_jets_match_and_fall_back_without_a_compiler(tmp_path, monkeypatch):
+def _check_function() -> ca.Function:
     z = ca.SX.sym("z", 3)
-    fn = ca.Function("jet_check", [z], [ca.vertcat(ca.sin(z[0]) * z[1], ca.tanh(z[2]))])
+    return ca.Function("jet_check", [z], [ca.vertcat(ca.sin(z[0]) * z[1], ca.tanh(z[2]))])
+
+
+class _Builds:
+    """A ``build`` callback for :func:`compiled` that counts its calls."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+
+    def __call__(self) -> list:
+        self.calls += 1
+        return [(("-O1",), [_check_function()])]
+
+
+POINT = [0.3, -1.2, 2.0]
+
+
+def test_compiled_functions_are_cached_under_their_key(tmp_path, monkeypatch):
     monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
-    point = [0.3, -1.2, 2.0]
-    (fast,) = compiled([fn], "check")
-    assert fast.class_name() == "External" and len(list(tmp_path.glob("check_*.so"))) == 1
-    np.testing.assert_allclose(np.asarray(fast(point)), np.asarray(fn(point)), rtol=1e-14)
-    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path / "other"))
+    build = _Builds()
+    (fast,) = compiled("check", "key 1", ["jet_check"], build)
+    assert fast.class_name() == "External" and build.calls == 1
+    expected = np.asarray(_check_function()(POINT))
+    np.testing.assert_allclose(np.asarray(fast(POINT)), expected, rtol=1e-14)
+    (again,) = compiled("check", "key 1", ["jet_check"], build)
+    assert again.class_name() == "External" and build.calls == 1  # loaded, not built
+    compiled("check", "key 2", ["jet_check"], build)  # another key: built and compiled again
+    assert build.calls == 2 and len(list(tmp_path.glob("check_*.so"))) == 2
+
+
+def test_a_corrupt_cached_library_is_rebuilt(tmp_path, monkeypatch):
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path / "good"))
+    compiled("check", "corrupt", ["jet_check"], _Builds())
+    (library,) = (tmp_path / "good").glob("check_*.so")
+    bad = tmp_path / "bad" / library.name  # the same library in another cache, truncated
+    bad.parent.mkdir()
+    bad.write_bytes(library.read_bytes()[:1000])  # loading this would crash the process
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(bad.parent))
+    build = _Builds()
+    (fast,) = compiled("check", "corrupt", ["jet_check"], build)
+    assert build.calls == 1 and fast.class_name() == "External"
+    (rebuilt,) = bad.parent.glob("check_*.so")  # the truncated file deleted, a whole one built
+    assert rebuilt.stat().st_size == library.stat().st_size
+    np.testing.assert_allclose(np.asarray(fast(POINT)), np.asarray(_check_function()(POINT)))
+
+
+def test_without_a_compiler_the_functions_stay_interpreted(tmp_path, monkeypatch):
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
     monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
-    assert compiled([fn], "check") == [fn]  # interpreted, same results
+    (fn,) = compiled("check", "no compiler", ["jet_check"], _Builds())
+    assert fn.class_name() == "SXFunction" and not list(tmp_path.glob("*.so"))
+    np.testing.assert_allclose(np.asarray(fn(POINT)), np.asarray(_check_function()(POINT)))
+
+
+def test_the_cache_key_covers_the_code_and_every_input(tmp_path):
+    cfg = plan_config("chang2021").with_(x_contact=None)
+    limits = drive_limits(cfg.mechanism)
+    key = _problem_key(cfg, limits, 5e-3, 200)
+    changed = [_problem_key(cfg.with_(mu=0.06), limits, 5e-3, 200),
+               _problem_key(cfg.with_(velocity_epsilon=2e-4), limits, 5e-3, 200),
+               _problem_key(cfg, replace(limits, jerk=limits.jerk * (1 + 1e-15)), 5e-3, 200),
+               _problem_key(cfg, limits, 4e-3, 200), _problem_key(cfg, limits, 5e-3, 100)]
+    assert key == _problem_key(cfg, limits, 5e-3, 200) and key not in changed
+    assert len(set(changed)) == len(changed)
+    package = types.ModuleType("fake")
+    package.__path__ = [str(tmp_path)]
+    (tmp_path / "model.py").write_text("GAIN = 1.0\n")
+    before = source_digest(package)
+    (tmp_path / "model.py").write_text("GAIN = 1.5\n")
+    assert source_digest(package) != before
+
+
+def test_interpreted_fallback_plans_the_same_stroke(tmp_path, monkeypatch):
+    cfg = plan_config("chang2021")
+    limits = drive_limits(cfg.mechanism)
+    compiled_planner = ClampPlanner(cfg, limits, intervals=20)
+    fast = compiled_planner.solve(DURATION, warm=False)
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    interpreted = ClampPlanner(cfg, limits, intervals=20)
+    slow = interpreted.solve(DURATION, warm=False)
+    assert compiled_planner.problem._force.class_name() == "External"
+    assert interpreted.problem._force.class_name() == "SXFunction"
+    assert slow.iterations == fast.iterations
+    assert slow.peak_force == pytest.approx(fast.peak_force, rel=1e-9)
 
 
 def test_sm55_plans():
