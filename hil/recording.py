@@ -322,7 +322,6 @@ def plot_force_curves(curves: Mapping[str, ForceCurves], path: str | Path,
     ax.set_xlabel("input position x (mm)")
     ax.set_ylabel("input force F (N)")
     ax.set_title(title)
-    ax.grid(True, alpha=0.3)
     ax.legend(fontsize="small")
     return save_figure(fig, Path(path))
 

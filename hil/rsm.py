@@ -34,11 +34,9 @@ from typing import Any
 
 import numpy as np
 
-import toggle
+from toggle.calibration import PAPER_TABLES
 from toggle.kinematics import half_pose, toggle_position
 from toggle.params import Mechanism, tomllib
-
-TABLES_FILE = Path(toggle.__file__).with_name("data") / "chang2021_tables.toml"
 
 #: Terms of the modified cubic model and their powers of (v, D).
 TERMS = ("1", "v", "D", "v D", "v^2", "D^2", "v^2 D", "v D^2")
@@ -147,7 +145,7 @@ class PaperTables:
         return out
 
 
-def load_paper_tables(path: str | Path = TABLES_FILE) -> PaperTables:
+def load_paper_tables(path: str | Path = PAPER_TABLES) -> PaperTables:
     """Read the shipped Tables 3-8 (or a file of the same layout)."""
     try:
         raw = tomllib.loads(Path(path).read_text(encoding="utf-8"))

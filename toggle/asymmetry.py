@@ -46,6 +46,7 @@ import numpy as np
 
 from toggle.kinematics import half_pose, is_symbolic, stroke_limits
 from toggle.params import DIMENSIONS, HalfDims, Mechanism, PinRadii
+from toggle.statics import force_ratios
 
 #: Mismatch below which |dL| is rounded (smooth |.| for solvers), m; exactly 0 at dL = 0.
 _ABS_EPS = 1e-12
@@ -53,6 +54,8 @@ _ABS_EPS = 1e-12
 _SIGN_EPS = 1e-6
 #: Pin load added to the Hersey ratio's denominator (an unloaded pin has full film), N.
 _LOAD_EPS = 1e-9
+#: Pin radii for the frictionless statics (unused at mu = 0; any valid radii).
+_NO_PINS = PinRadii(B=1e-3, C=1e-3, D=1e-3)
 #: Newton steps for the internal force (monotone from an upper bound; 1e-15 relative).
 _NEWTON_STEPS = 12
 
@@ -138,21 +141,17 @@ class Asymmetry(NamedTuple):
 # --- the model, written once -------------------------------------------------------------
 
 
-def _pin_loads(pose: Any, dims: Any, n: Any) -> tuple[Any, Any, Any, Any, Any]:
+def _pin_loads(x: Any, pose: Any, dims: Any, n: Any) -> tuple[Any, Any, Any, Any, Any]:
     """Pin-force magnitudes |F_A|, |F_B|, |F_C|, |F_D|, |F_E| of a half with output force n.
 
-    Pivot C of link 4 at the origin, B = r4b (cos th4, sin th4), D = r4a (cos(th4 +
-    alpha4), sin(th4 + alpha4)); link 5 runs along u5 = (cos th5, sin th5) from B to the
-    platen joint A, link 3 along u3 = (cos th3, sin th3) from the crosshead pin E to D.
-    Both are two-force members; link 4 balances moments about C (seed 001's statics
-    with mu -> 0, the friction being first order in mu).
+    The axial forces of the two-force links 5 (A-B) and 3 (E-D) come from the statics
+    (:func:`toggle.statics.force_ratios` with mu = 0: the friction is first order in mu);
+    pin C carries their resultant, link 5 along u5 = (cos th5, sin th5) and link 3 along
+    u3 = (cos th3, sin th3).
     """
-    th3, th4, th5, a4 = pose.theta3, pose.theta4, pose.theta5, pose.alpha4
-    r4a, r4b = dims[3], dims[4]
-    f5 = n / np.cos(th5)  # link 5 axial force
-    cross_b = r4b * (np.cos(th4) * np.sin(th5) - np.sin(th4) * np.cos(th5))
-    cross_d = r4a * (np.cos(th4 + a4) * np.sin(th3) - np.sin(th4 + a4) * np.cos(th3))
-    t3 = f5 * cross_b / cross_d  # link 3 axial force
+    ratios = force_ratios(x, dims, _NO_PINS, 0.0)
+    f5, t3 = n * ratios.link1, n * ratios.crosshead_link
+    th3, th5 = pose.theta3, pose.theta5
     rc_x = f5 * np.cos(th5) - t3 * np.cos(th3)
     rc_y = f5 * np.sin(th5) - t3 * np.sin(th3)
     f5, t3 = np.fabs(f5), np.fabs(t3)
@@ -168,7 +167,7 @@ def _friction_power(x: Any, v: Any, dims: Any, n: Any, q: Any) -> Any:
     radii = (q[8], q[8], q[9], q[10], q[10])  # joint A as B, E as D (toggle.params.PinRadii)
     mu_ref, ab, v_ref, v_c, inv_hersey = q[4], q[5], q[6], q[7], q[11]
     total = 0
-    for load, turn, r in zip(_pin_loads(pose, dims, n), turns, radii, strict=True):
+    for load, turn, r in zip(_pin_loads(x, pose, dims, n), turns, radii, strict=True):
         slip = r * np.fabs(turn) * np.fabs(v)
         film = slip / (load + _LOAD_EPS) * inv_hersey  # h / h_s
         mu = (mu_ref + ab * np.log((slip + v_c) / (v_ref + v_c))) * np.exp(-film * film)
@@ -214,7 +213,8 @@ def _model() -> ca.Function:
     return ca.Function("asymmetry", [x, v, pl, pu, q],
                        [friction + elastic, friction, elastic, n, mismatch],
                        ["x", "v", "lower", "upper", "q"],
-                       ["force", "friction", "elastic", "internal_force", "mismatch"])
+                       ["force", "friction", "elastic", "internal_force", "mismatch"],
+                       {"cse": True})
 
 
 # --- public API ----------------------------------------------------------------------------

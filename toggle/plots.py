@@ -8,6 +8,9 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+
+#: The house style of every figure (all plotting imports ``plt`` from here).
+plt.rcParams.update({"axes.grid": True, "grid.alpha": 0.3})
 import numpy as np  # noqa: E402
 
 from toggle.kinematics import half_motion, sensitivities, stroke_limits  # noqa: E402
@@ -41,7 +44,6 @@ def plot_kinematics(mech: Mechanism, path: Path, points: int = 400) -> Path:
     axes[2].set_ylabel("ideal mechanical advantage (1)")
     axes[2].set_xlabel("input position x (mm)")
     for ax in axes:
-        ax.grid(True, alpha=0.3)
         ax.legend()
     axes[0].set_title(f"{mech.name}: kinematics over the stroke")
     return save_figure(fig, path)
@@ -69,7 +71,6 @@ def plot_sensitivity(mech: Mechanism, grade: int, path: Path, points: int = 300)
         axes[1, col].set_ylabel("deviation (mm)")
         axes[1, col].set_xlabel("input position x (mm)")
         for ax in axes[:, col]:
-            ax.grid(True, alpha=0.3)
             ax.legend(fontsize=8)
     return save_figure(fig, path)
 
@@ -84,6 +85,5 @@ def plot_it_grades(mech: Mechanism, path: Path, grades: range = range(6, 13)) ->
     ax.set_xlabel("ISO tolerance grade IT (1)")
     ax.set_ylabel("asymmetry index at the toggle (mm)")
     ax.set_title(f"{mech.name}: asymmetry indices at the toggle position")
-    ax.grid(True, alpha=0.3)
     ax.legend()
     return save_figure(fig, path)

@@ -140,7 +140,6 @@ def plot(args: argparse.Namespace) -> int:
         if log:
             ax.set_yscale("log")
         ax.invert_xaxis()  # clamping runs from alpha_C down to the straight toggle
-        ax.grid(True, alpha=0.3)
         ax.legend()
         ax.set_title(f"{mech.name}: real-mold clamping")
         print(save_figure(fig, out / name))
@@ -153,7 +152,6 @@ def plot(args: argparse.Namespace) -> int:
     ax.plot(mus, np.array(peaks) / 1e3, marker="o")
     ax.set_xlabel(r"Friction coefficient $\mu$ [-]")
     ax.set_ylabel(r"Maximum thrust $F_{0,\max}$ [kN]")
-    ax.grid(True, alpha=0.3)
     ax.set_title(f"{mech.name}: maximum crosshead thrust")
     print(save_figure(fig, out / "fig7_thrust_max.png"))
     plt.close(fig)
@@ -167,7 +165,6 @@ def plot(args: argparse.Namespace) -> int:
             ax.plot(h.t, h.torque, label=f"$\\mu_d$ = {r.mu:g}")
         ax.set_xlabel("Time since mold contact [s]")
         ax.set_ylabel("Motor torque $T_m$ [N m]")
-        ax.grid(True, alpha=0.3)
         ax.legend()
         ax.set_title(f"{mech.name}: {args.rpm:g} rpm, $\\eta$ = {mech.drive.efficiency:g}")
         print(save_figure(fig, out / "fig8_motor_torque.png"))

@@ -132,7 +132,6 @@ def plot(args: argparse.Namespace) -> int:
     axes[2].set_ylabel("input force (N)")
     axes[2].set_xlabel("time (s)")
     for ax in axes:
-        ax.grid(True, alpha=0.3)
         ax.legend()
     axes[0].set_title(f"{cfg.mechanism.name}: planned stroke against the baselines")
     print(save_figure(fig, args.out))

@@ -200,7 +200,6 @@ def plot_study(results: list[GroupResult], title: str, path: Path) -> Path:
                 ax.plot(np.degrees(m.alpha), getattr(m, key) * scale, label=f"group {r.group}")
         ax.set_yscale("log" if log else "linear")
         ax.set_ylabel(label)
-        ax.grid(True, alpha=0.3)
     for ax in axes[1]:
         ax.set_xlabel("toggle angle alpha (deg)")
     axes[0, 0].legend(fontsize=8)
