@@ -1,13 +1,16 @@
 """One plant interface, two back-ends: the FMU (simulated rig) and the real rig.
 
 Lifecycle: ``configure`` (what to run) -> ``activate`` (build/instantiate the
-FMU, or open the port and handshake) -> ``run`` a :class:`~hil.samples.Trajectory`
-and stream :class:`~hil.samples.Sample` s -> ``deactivate`` (free the FMU, or
-stop the rig and close the port). Use a back-end as a context manager: every
-exit path, Ctrl-C and errors included, deactivates it. Both back-ends apply
-the same host-side safety (force limit, travel limits) and report positions in
-the same frame: the input position x in the model's frame, the platen relative
-to its position at the open position (where the encoder is zeroed).
+FMU, or open the port, handshake and reference the rig) -> ``run`` a
+:class:`~hil.samples.Trajectory` and stream :class:`~hil.samples.Sample` s ->
+``stop`` (after a run that ended early: bring the plant to a standstill and return
+the samples taken on the way) -> ``deactivate`` (free the FMU, or end the session
+and close the port). Use a back-end as a context manager: every exit path, Ctrl-C
+and errors included, deactivates it. Both back-ends apply the same host-side
+safety (force limit, travel limits, speed limit), move to the trajectory's start at
+a safe speed first (not recorded), and report positions in the same frame: the
+input position x in the model's frame, the platen relative to its position at the
+open position (where the encoder is zeroed).
 """
 
 from __future__ import annotations
@@ -16,19 +19,28 @@ import math
 import shutil
 import tempfile
 from abc import ABC, abstractmethod
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hil.experiment import stroke_positions
+from hil.homing import APPROACH_SPEED, START_TOLERANCE
 from hil.samples import Sample, Status, Trajectory, TrajectoryError
 from toggle.kinematics import output_position, stroke_limits
 from toggle.params import load_preset
 
+if TYPE_CHECKING:
+    from hil import protocol as p
+    from hil.serial_link import SerialLink
+
 #: Margin of the soft travel limits beyond the stroke, m.
 TRAVEL_MARGIN = 1e-3
+#: Fastest input speed a trajectory may command, m/s (the rig's max_step_delta per period).
+MAX_SPEED = 50e-3
 
 
 class RunStoppedError(RuntimeError):
@@ -90,24 +102,54 @@ class Plant(ABC):
         self._activate()
         self.active = True
 
-    def run(self, trajectory: Trajectory) -> Iterator[Sample]:
-        """Execute a trajectory; yield one sample per period. Raises :class:`RunStoppedError`."""
-        if not self.active:
-            raise RunStoppedError("activate the plant before running a trajectory")
+    def check(self, trajectory: Trajectory) -> None:
+        """Refuse a trajectory outside the travel limits or faster than MAX_SPEED."""
         lo, hi = self.setup.travel_limits
         if trajectory.x_cmd.min() < lo or trajectory.x_cmd.max() > hi:
             raise TrajectoryError(
                 f"trajectory leaves the soft travel limits [{lo:.6g}, {hi:.6g}] m "
                 f"(it spans [{trajectory.x_cmd.min():.6g}, {trajectory.x_cmd.max():.6g}] m)"
             )
+        speed = np.abs(np.diff(trajectory.x_cmd)) / trajectory.period
+        if speed.size and speed.max() > MAX_SPEED:
+            i = int(np.argmax(speed))
+            raise TrajectoryError(
+                f"trajectory commands {speed[i] * 1e3:.4g} mm/s at t = {trajectory.time[i]:.3f} s "
+                f"(x {trajectory.x_cmd[i]:.6g} -> {trajectory.x_cmd[i + 1]:.6g} m in one "
+                f"period); the rig's limit is {MAX_SPEED * 1e3:g} mm/s"
+            )
+
+    def run(self, trajectory: Trajectory) -> Iterator[Sample]:
+        """Move to the trajectory's start (unrecorded), execute it, yield one sample per
+        period. Raises :class:`RunStoppedError`; then call :meth:`stop`."""
+        if not self.active:
+            raise RunStoppedError("activate the plant before running a trajectory")
+        self.check(trajectory)
+        self.approach = self._move_to(float(trajectory.x_cmd[0]))
         for sample in self._run(trajectory):
             if abs(sample.force) > self.setup.force_limit:
-                yield Sample(sample.t, sample.x_cmd, sample.platen, sample.force, Status.FAULT)
+                yield Sample(sample.t, sample.x_cmd, sample.platen, sample.force, Status.FAULT,
+                             sample.index)
                 raise RunStoppedError(
-                    f"force limit: |{sample.force:.1f}| N > {self.setup.force_limit:g} N "
+                    f"host force limit: |{sample.force:.1f}| N > {self.setup.force_limit:g} N "
                     f"at x = {sample.x_cmd:.6g} m, t = {sample.t:.3f} s"
                 )
             yield sample
+
+    def stop(self) -> list[Sample]:
+        """After a run ended early: stop, and return the samples taken until the standstill.
+
+        Never raises. The simulated rig stops at once (nothing to return).
+        """
+        return []
+
+    def describe(self) -> dict[str, object]:
+        """What identifies this back-end in a run's metadata (JSON-ready)."""
+        return {"backend": self.name}
+
+    def link_report(self) -> dict[str, object]:
+        """Statistics of the link to the plant (JSON-ready); none for the simulated rig."""
+        return {}
 
     def deactivate(self) -> None:
         if self.active:
@@ -127,6 +169,10 @@ class Plant(ABC):
 
     @abstractmethod
     def _run(self, trajectory: Trajectory) -> Iterator[Sample]: ...
+
+    @abstractmethod
+    def _move_to(self, x: float) -> float:
+        """Move, unrecorded, to input position ``x`` (m) at APPROACH_SPEED; the distance."""
 
     @abstractmethod
     def _deactivate(self) -> None: ...
@@ -187,21 +233,38 @@ class FmuPlant(Plant):
             raise RunStoppedError(f"the FMU rejected the setup: {self.log[-1]}")
         self._out = [self._refs[n] for n in ("platen_position", "input_force")]
         self._zero = self._slave.getReal([self._out[0]])[0]
+        self._x, self._time = x_open, 0.0
 
-    def _run(self, trajectory: Trajectory) -> Iterator[Sample]:
+    def _step(self, x: float, h: float) -> tuple[float, float]:
+        """Command ``x`` (m) for one step of ``h`` s; (platen from its zero m, force N)."""
         from fmpy.fmi2 import fmi2Discard
 
-        slave, x_ref, h = self._slave, self._refs["x_cmd"], trajectory.period
-        t0 = getattr(self, "_time", 0.0)
+        slave = self._slave
+        slave.setReal([self._refs["x_cmd"]], [x])
+        status = slave.fmi2DoStep(slave.component, self._time, h, 1)
+        if status == fmi2Discard:
+            raise RunStoppedError(f"the FMU rejected the step at x = {x:.6g} m: "
+                                  f"{self.log[-1] if self.log else 'no message'}")
+        self._time += h
+        self._x = x
+        platen, force = slave.getReal(self._out)
+        return platen - self._zero, force
+
+    def _run(self, trajectory: Trajectory) -> Iterator[Sample]:
         for i, (t, x) in enumerate(zip(trajectory.time, trajectory.x_cmd)):
-            slave.setReal([x_ref], [float(x)])
-            status = slave.fmi2DoStep(slave.component, t0 + i * h, h, 1)
-            if status == fmi2Discard:
-                raise RunStoppedError(f"the FMU rejected the step at t = {t:.3f} s: "
-                                 f"{self.log[-1] if self.log else 'no message'}")
-            platen, force = slave.getReal(self._out)
-            yield Sample(float(t), float(x), platen - self._zero, force)
-        self._time = t0 + len(trajectory) * h
+            platen, force = self._step(float(x), trajectory.period)
+            yield Sample(float(t), float(x), platen, force, Status.OK, i)
+
+    def _move_to(self, x: float) -> float:
+        if abs(x - self._x) <= START_TOLERANCE:
+            return 0.0
+        start, h = self._x, self.setup.period
+        for xi in stroke_positions(start, x, APPROACH_SPEED, h)[1:]:
+            force = self._step(float(xi), h)[1]
+            if abs(force) > self.setup.force_limit:
+                raise RunStoppedError(f"host force limit: |{force:.1f}| N during the move to "
+                                      f"the start x = {x:.6g} m")
+        return abs(x - start)
 
     def _deactivate(self) -> None:
         from toggle.fmu_host import release_native_runtime
@@ -221,23 +284,33 @@ class FmuPlant(Plant):
 class RigPlant(Plant):
     """The real rig (or its emulator) over a serial URL: stepper, encoder, load cell.
 
-    The MCU executes the trajectory; the host streams it in chunks and
-    supervises: its watchdog, the MCU's faults and the force limit all end in
-    a stop command and a closed port (:class:`hil.serial_link.SerialLink`).
+    The MCU executes the trajectory and enforces the hard limits; the host streams it in
+    chunks and supervises. At activation a fault latched before this session refuses the
+    run (``hil rig clear`` is the operator's decision), an unreferenced rig is homed, and
+    the MCU gets the run's limits. Every run starts with a move to its first point.
     """
 
     name = "rig"
 
     def __init__(self, port: str, *, realtime: bool = True,
-                 telemetry_timeout: float | None = None) -> None:
+                 telemetry_timeout: float | None = None,
+                 notify: Callable[[str], None] | None = None) -> None:
         super().__init__()
         self.port = port
         self.realtime = realtime
         self.telemetry_timeout = telemetry_timeout
+        self.notify = notify or (lambda _msg: None)
         self._link = None
+        self.homed_distance: float | None = None
+
+    @property
+    def link(self) -> SerialLink | None:
+        """The open session (None before activation and after deactivation)."""
+        return self._link
 
     def _activate(self) -> None:
         from hil import protocol as p
+        from hil.homing import home
         from hil.serial_link import RigError, SerialLink
 
         s = self.setup
@@ -245,42 +318,127 @@ class RigPlant(Plant):
         nominal = load_preset(s.preset)
         self._L0 = float(output_position(self._x0, nominal.lower))
         self._nominal = nominal
-        self._link = SerialLink(self.port, realtime=self.realtime,
-                                telemetry_timeout=self.telemetry_timeout)
+        self._link = link = SerialLink(self.port, realtime=self.realtime,
+                                       telemetry_timeout=self.telemetry_timeout)
         try:
-            self._link.open()
-            sc = self._link.scaling
+            link.open()
+            if link.faults_at_open:
+                raise RunStoppedError(
+                    f"the rig at {self.port} has a latched fault from an earlier session: "
+                    f"{fault_names(link.faults_at_open)} (state "
+                    f"{p.State(link.status.state).name}); check the rig, then clear it with "
+                    f"`hil rig clear --port {self.port}`")
+            if not link.status.flags & p.TelemetryFlag.REFERENCED:
+                self.notify("the rig is not referenced (power-on or reset): homing at "
+                            "its home switch")
+                self.homed_distance = home(link)
+            sc = link.scaling
             lo, hi = s.travel_limits
-            self._link.configure(p.Config(
+            link.configure(p.Config(
                 force_limit_n=s.force_limit,
                 steps_min=sc.steps(lo, self._x0), steps_max=sc.steps(hi, self._x0),
             ))
         except RigError as exc:
-            self._link.close()
+            link.close()
+            self._link = None
             raise RunStoppedError(f"rig at {self.port}: {exc}") from exc
+        except BaseException:
+            link.close()
+            self._link = None
+            raise
+
+    def _move_to(self, x: float) -> float:
+        from hil.homing import move_to
+        from hil.serial_link import RigError
+
+        try:
+            distance = move_to(self._link, x, self._x0)
+        except RigError as exc:
+            raise RunStoppedError(f"rig fault while moving to the start x = {x:.6g} m: "
+                                  f"{exc}") from exc
+        if distance:
+            self.notify(f"moved the rig {distance * 1e3:.3f} mm to the start x = "
+                        f"{x * 1e3:.3f} mm at {APPROACH_SPEED * 1e3:g} mm/s")
+        return distance
+
+    def _sample(self, tel: p.Telemetry, total: int) -> Sample:
+        from hil import protocol as p
+
+        sc, x0 = self._link.scaling, self._x0
+        if tel.faults:
+            status = Status.FAULT
+        elif tel.state == p.State.RUNNING or (tel.state == p.State.IDLE
+                                               and tel.exec_index >= total):
+            status = Status.OK
+        else:
+            status = Status.STOPPING
+        return Sample((tel.sample - self._first) * sc.period, sc.x(tel.steps, x0),
+                      sc.platen(tel.enc), sc.force(tel.load_raw), status, tel.sample)
 
     def _run(self, trajectory: Trajectory) -> Iterator[Sample]:
-        from hil import protocol as p
         from hil.serial_link import RigError, RigFaultError
 
         link, sc, x0 = self._link, self._link.scaling, self._x0
         x = trajectory.x_cmd
         expected = np.asarray(output_position(x, self._nominal.lower)) - self._L0
         points = [(sc.steps(float(xi), x0), sc.counts(float(li))) for xi, li in zip(x, expected)]
-        first = None
+        self._first, self._total = None, len(points)
         try:
             for tel in link.run_trajectory(points):
-                first = tel.sample if first is None else first
-                status = Status.FAULT if tel.faults else (
-                    Status.OK if tel.state == p.State.RUNNING else Status.STOPPING)
-                yield Sample((tel.sample - first) * sc.period, sc.x(tel.steps, x0),
-                             sc.platen(tel.enc), sc.force(tel.load_raw), status)
+                self._first = tel.sample if self._first is None else self._first
+                yield self._sample(tel, len(points))
         except RigFaultError as exc:
             raise RunStoppedError(f"rig fault: {exc}") from exc
         except RigError as exc:
             raise RunStoppedError(f"rig link: {exc}") from exc
 
+    def stop(self) -> list[Sample]:
+        if self._link is None:
+            return []
+        self._link.stop_quietly()
+        rest = self._link.finish_run()
+        if rest and self._first is None:
+            self._first = rest[0].sample
+        return [self._sample(tel, self._total) for tel in rest]
+
+    def describe(self) -> dict[str, object]:
+        info = {"backend": self.name, "port": self.port}
+        link = self._link
+        if link is not None and link.info is not None:
+            i = link.info
+            info.update(protocol=f"{i.proto_major}.{i.proto_minor}",
+                        firmware=f"{i.fw_version >> 8}.{i.fw_version & 0xFF}",
+                        boot_id=f"{i.boot_id:#010x}", telemetry_hz=i.telemetry_hz,
+                        homed_distance=self.homed_distance,
+                        watchdog_s=link.telemetry_timeout,
+                        mcu_heartbeat_timeout_s=link.config.heartbeat_timeout_ms * 1e-3)
+        return info
+
+    def link_report(self) -> dict[str, object]:
+        """Link statistics of the session (JSON-ready; empty before activation)."""
+        link = self._link
+        if link is None:
+            return {}
+        st, dec = link.stats, link.decoder.stats
+        return {
+            "bad_frames": dec.rejected, "crc_errors": dec.crc_errors,
+            "bad_messages": st.bad_messages, "lost_samples": st.lost_samples,
+            "duplicate_samples": st.duplicates, "retransmissions": st.retransmissions,
+            "queue_dropped": st.queue_dropped,
+            "arrival_gap_p99_s": st.gap_percentile(0.99),
+            "arrival_gap_p999_s": st.gap_percentile(0.999),
+            "arrival_gap_max_s": st.max_arrival_gap,
+            "mcu_clock_excess_max_s": st.max_clock_excess,
+        }
+
     def _deactivate(self) -> None:
         if self._link is not None:
-            self._link.close()  # sends STOP and BYE, closes the port, never raises
+            self._link.close()  # STOP, standstill, BYE, closed port; never raises
             self._link = None
+
+
+def fault_names(faults: int) -> str:
+    """'FORCE_LIMIT | ESTOP' for a fault bit set."""
+    from hil import protocol as p
+
+    return " | ".join(f.name for f in p.Fault if f and f & faults) or "none"

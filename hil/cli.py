@@ -3,115 +3,177 @@
 ``hil run`` uses the FMU back-end unless ``--real`` (or ``backend = "real"`` in
 a ``--config`` TOML file) selects the rig on ``--port``; nothing else changes.
 Options are SI (m, m/s, N); the run directory gets samples.csv (units in the
-header), meta.json, summary.json and the force plot.
+header), meta.json, summary.json and the force plot. Exit codes: 0 done, 1 the
+run stopped early or could not start, 2 a usage error, 130/143 SIGINT/SIGTERM.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
-from hil import cli_rsm
+from hil import cli_rig, cli_rsm
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
 from hil.experiment import CycleCounter, profile_cycles, reciprocating_trajectory
+from hil.interrupts import Interrupted, SignalGuard
 from hil.recording import RecordingError, RunMeta, RunRecorder
+from hil.run_settings import (
+    BYTES_PER_SAMPLE,
+    RUN_DEFAULTS,
+    RunSettings,
+    add_number_options,
+    resolve_settings,
+)
 from hil.samples import Trajectory, TrajectoryError
-from toggle.params import ParameterError, load_preset, tomllib
+from toggle.params import ParameterError, load_preset
 
-#: Keys a --config file may set (the long options' names, with underscores).
-CONFIG_KEYS = {"backend", "port", "preset", "profile", "cycles", "speed", "delta_r8", "mu",
-               "x_contact", "force_limit", "out", "watchdog_ms"}
-
-
-def _config_defaults(path: Path | None) -> dict[str, Any]:
-    if path is None:
-        return {}
-    try:
-        table = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ParameterError(f"cannot read config {path}: {exc}") from exc
-    unknown = set(table) - CONFIG_KEYS
-    if unknown:
-        raise ParameterError(f"config {path}: unknown keys {sorted(unknown)}")
-    if table.get("backend", "fmu") not in ("fmu", "real"):
-        raise ParameterError(f"config {path}: backend must be 'fmu' or 'real'")
-    return table
+#: Printed rows of a run summary: (key, label, scale to the printed unit, unit).
+SUMMARY_ROWS = (
+    ("stroke", "stroke S", 1e3, "mm"),
+    ("stroke_error", "stroke error dS", 1e3, "mm"),
+    ("force_forward_max", "F_F(max)", 1.0, "N"),
+    ("force_forward_rms", "F_F(rms)", 1.0, "N"),
+    ("force_backward_min", "F_B(min)", 1.0, "N"),
+    ("force_backward_rms", "F_B(rms)", 1.0, "N"),
+    ("force_toggle", "F_TP", 1.0, "N"),
+)
+#: Runs longer than this print their estimated duration and file size first, s.
+ANNOUNCE_AFTER = 60.0
 
 
-def _trajectory(args: argparse.Namespace, setup: RigSetup) -> tuple[Trajectory, str]:
-    nominal = load_preset(setup.preset)
-    if args.profile:
-        forward = Trajectory.from_csv(args.profile, period=setup.period)
-        return profile_cycles(forward, args.cycles), str(args.profile)
-    if args.speed is not None:
-        return reciprocating_trajectory(nominal, args.speed, args.cycles, setup.period), None
+def _trajectory(s: RunSettings, guard: SignalGuard) -> tuple[Trajectory, str]:
+    period = RigSetup.period
+    if s.profile is not None:
+        forward = Trajectory.from_csv(s.profile, period=period)
+        return profile_cycles(forward, s.cycles), f"profile {s.profile}"
+    if s.speed is not None:
+        nominal = load_preset(s.preset)
+        return reciprocating_trajectory(nominal, s.speed, s.cycles, period), (
+            f"reciprocating at {s.speed * 1e3:g} mm/s")
     from controllers.planner import plan_default_profile
 
-    forward = plan_default_profile(setup.preset, period=setup.period)
-    return profile_cycles(forward, args.cycles), "planned (minimum peak input force)"
+    forward = plan_default_profile(s.preset, period=period)
+    guard.check()  # IPOPT swallows Ctrl-C: act on it before anything moves
+    return profile_cycles(forward, s.cycles), "planned (minimum peak input force)"
 
 
-def _backend(args: argparse.Namespace) -> Plant:
-    if args.backend == "real":
-        if not args.port:
-            raise ParameterError("--real needs --port (a device, a pty, socket:// or loop://)")
-        timeout = args.watchdog_ms * 1e-3 if args.watchdog_ms else None
-        return RigPlant(args.port, telemetry_timeout=timeout)
+def _backend(s: RunSettings) -> Plant:
+    if s.backend == "real":
+        timeout = s.watchdog_ms * 1e-3 if s.watchdog_ms is not None else None
+        return RigPlant(s.port, telemetry_timeout=timeout,
+                        notify=lambda msg: print(f"hil run: {msg}", file=sys.stderr))
     return FmuPlant()
 
 
-def run(args: argparse.Namespace) -> int:
-    if args.profile is None and args.speed is None and args.x_contact is None:
-        # the default job clamps a mold: the plan's contact position (the preset's final
-        # tie-bar force) is the simulated mold height too
-        from controllers.planner import plan_config
+def _guard_duration(trajectory: Trajectory, s: RunSettings) -> None:
+    """Refuse runs longer than --max-duration; announce long ones with their file size."""
+    duration = trajectory.duration
+    size_mb = len(trajectory) * BYTES_PER_SAMPLE / 1e6
+    text = f"{_duration_text(duration)} of motion, about {size_mb:.3g} MB of samples"
+    if duration > s.max_duration:
+        raise ParameterError(f"the run would take {text}, longer than --max-duration "
+                             f"{s.max_duration:g} s; raise --max-duration to run it")
+    if duration > ANNOUNCE_AFTER:
+        print(f"hil run: {len(trajectory)} samples, {text}", file=sys.stderr)
 
-        args.x_contact = plan_config(args.preset).x_contact
-    setup = RigSetup(preset=args.preset, delta_r8=args.delta_r8, mu=args.mu,
-                     x_contact=args.x_contact, force_limit=args.force_limit)
-    plant = _backend(args)
-    trajectory, profile = _trajectory(args, setup)
+
+def _duration_text(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.1f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def _print_summary(summary: dict, run_dir: Path, count: int, cycles: int, backend: str) -> None:
+    done = summary["cycles_complete"]
+    print(f"{count} samples, {done} of {cycles} cycles complete, in {run_dir} "
+          f"(samples.csv, summary.json, meta.json, plots)")
+    for key, label, scale, unit in SUMMARY_ROWS:
+        stat = summary.get(key)
+        if not isinstance(stat, dict):
+            continue
+        spread = (f"3 sigma {stat['three_sigma'] * scale:.4g} {unit}"
+                  if stat["three_sigma"] is not None else "one cycle: no spread")
+        print(f"  {label:16s} {stat['mean'] * scale:10.4f} {unit:2s}  ({spread})")
+    if backend == "fmu" and done > 1:
+        print("  (a spread of 0: the simulated rig is deterministic; the real rig's is not)")
+    link = summary.get("link") or {}
+    if link:
+        print(f"  link: {link['bad_frames']} bad frames, {link['lost_samples']} lost and "
+              f"{link['duplicate_samples']} duplicate samples, {link['retransmissions']} "
+              f"retransmissions; telemetry arrival p99 {link['arrival_gap_p99_s'] * 1e3:.0f} ms, "
+              f"max {link['arrival_gap_max_s'] * 1e3:.1f} ms")
+        if link["lost_samples"]:
+            print(f"hil run: warning: {link['lost_samples']} telemetry samples were lost on the "
+                  f"link and are not in samples.csv", file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    s = resolve_settings(args)
+    guard = SignalGuard()
+    with guard:
+        try:
+            return _run(s, guard)
+        except Interrupted as exc:  # before the recording started: nothing moved or recorded
+            print(f"hil run: {exc}; nothing was recorded", file=sys.stderr)
+            return exc.exit_code
+
+
+def _run(s: RunSettings, guard: SignalGuard) -> int:
+    trajectory, source = _trajectory(s, guard)
+    _guard_duration(trajectory, s)
+    setup = RigSetup(preset=s.preset, delta_r8=s.delta_r8, mu=s.mu, x_contact=s.x_contact,
+                     force_limit=s.force_limit)
+    plant = _backend(s)
     plant.configure(setup)
-    nominal = load_preset(setup.preset)
-    meta = RunMeta.for_experiment(nominal, backend=plant.name, cycles=args.cycles,
-                                  delta_r8=setup.delta_r8, period=setup.period,
-                                  speed=args.speed, profile=profile)
+    plant.check(trajectory)
+    nominal = load_preset(s.preset)
+    meta = RunMeta.for_experiment(nominal, backend=plant.name, cycles=s.cycles,
+                                  delta_r8=s.delta_r8, period=setup.period, speed=s.speed,
+                                  profile=source, settings=s.record())
     from tqdm import tqdm
 
     x_open, x_tp = setup.stroke
     counter = CycleCounter(x_open, x_tp)
-    status = 0
-    with RunRecorder(meta, args.out) as rec:
+    reason, interrupted = None, None
+    with plant, RunRecorder(meta, s.out) as rec:
         print(f"run directory: {rec.dir}", file=sys.stderr)
-        bar = tqdm(total=args.cycles, unit="cycle", desc=f"hil run ({plant.name})",
-                   disable=args.quiet)
+        bar = tqdm(total=s.cycles, unit="cycle", desc=f"hil run ({plant.name})",
+                   disable=s.quiet)
+        samples = plant.run(trajectory)
         try:
-            with plant:
-                for sample in plant.run(trajectory):
-                    rec.append(sample)
-                    if counter.update(sample.x_cmd):
-                        bar.update(1)
+            for sample in samples:
+                rec.append(sample)
+                if counter.update(sample.x_cmd):
+                    bar.update(1)
+                guard.check()
         except (RunStoppedError, TrajectoryError) as exc:
-            rec.abort(str(exc))
-            print(f"hil run: stopped: {exc}", file=sys.stderr)
-            status = 1
+            reason = str(exc)
+        except Interrupted as exc:
+            reason, interrupted = str(exc), exc
         finally:
+            guard.shield = True  # stopping and recording must not be interrupted
+            samples.close()
+            for sample in plant.stop():
+                rec.append(sample)
+            rec.annotate(plant=plant.describe(), link=plant.link_report())
+            if reason is not None:
+                rec.abort(reason)
             bar.close()
     summary = rec.summary
-    if args.json:
+    if reason is not None:
+        print(f"hil run: stopped: {reason}", file=sys.stderr)
+    if s.json:
         print(json.dumps({"run_dir": str(rec.dir), "samples": rec.count, **summary}, indent=2))
     else:
-        print(f"{rec.count} samples in {rec.dir} (samples.csv, summary.json, meta.json, plots)")
-        for key in ("stroke", "stroke_error", "force_forward_rms", "force_toggle"):
-            stat = summary.get(key)
-            if isinstance(stat, dict) and stat.get("mean") is not None:
-                print(f"  {key:18s} mean {stat['mean']:.6g}  three_sigma {stat['three_sigma']:.3g}")
-    return status
+        _print_summary(summary, rec.dir, rec.count, s.cycles, plant.name)
+    if interrupted is not None:
+        return interrupted.exit_code
+    return 1 if reason is not None else 0
 
 
 def emulate(args: argparse.Namespace) -> int:
@@ -122,64 +184,53 @@ def emulate(args: argparse.Namespace) -> int:
     setup = RigSetup(preset=args.preset, delta_r8=args.delta_r8, mu=args.mu,
                      x_contact=args.x_contact)
     faults = FaultPlan(drop_byte=args.drop_byte, flip_bit=args.flip_bit, junk=args.junk,
-                       stall_at=args.stall_at, seed=args.seed)
+                       stall_at=args.stall_at, reset_at=args.reset_at, estop_at=args.estop_at,
+                       disconnect_at=args.disconnect_at, seed=args.seed)
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
-    emulator = RigEmulator(physics, RigHardware(x_origin=setup.stroke[0]), faults)
+    # an MCU's timer interrupt is hard real time: SCHED_FIFO when the OS permits it
+    emulator = RigEmulator(physics, RigHardware(x_origin=setup.stroke[0]), faults,
+                           realtime=True)
     print(emulator.open(), flush=True)
-
-    def terminate(*_: object) -> None:
-        raise SystemExit(0)
-
-    signal.signal(signal.SIGTERM, terminate)
+    guard = SignalGuard()
     try:
-        emulator.serve()
-    except (KeyboardInterrupt, SystemExit):
+        with guard:
+            emulator.serve()
+    except Interrupted:
         pass
     finally:
         emulator.close()
     return 0
 
 
-def _add_physics_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", default="chang2021", help="mechanism preset (default chang2021)")
-    p.add_argument("--delta-r8", type=float, default=0.0, dest="delta_r8",
-                   help="length error of link 8 of the simulated clamp, m (e.g. 0.5e-3)")
-    p.add_argument("--mu", type=float, default=None, help="pin friction (default: the preset's)")
-    p.add_argument("--x-contact", type=float, default=None, dest="x_contact",
-                   help="crosshead position at mold contact, m (default: no mold)")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="hil", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="hil", description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    p = sub.add_parser("run", help="run an experiment (simulated rig unless --real)")
-    p.add_argument("--config", type=Path, default=None, help="TOML file with these options")
-    p.add_argument("--real", action="store_const", const="real", dest="backend",
+    p = sub.add_parser("run", help="run an experiment (simulated rig unless --real)",
+                       description="Run an experiment; every option can also come from "
+                                   "--config (command line wins). Defaults: "
+                                   + ", ".join(f"{k} {v}" for k, v in RUN_DEFAULTS.items()
+                                               if v is not None))
+    p.add_argument("--config", type=Path, default=None,
+                   help="TOML file with any of these options (keys with underscores)")
+    p.add_argument("--real", action="store_const", const="real", dest="backend", default=None,
                    help="use the real rig (or an emulator) on --port instead of the FMU")
     p.add_argument("--port", default=None, help="serial URL of the rig: /dev/ttyACM0, a pty, "
-                                                "socket://host:port, loop://")
-    _add_physics_options(p)
+                                                "socket://host:port (needs --real)")
+    p.add_argument("--preset", default=None, help="mechanism preset (default chang2021)")
+    add_number_options(p)
     p.add_argument("--profile", type=Path, default=None,
-                   help="planned profile CSV (toggle plan --out); replayed forward and back")
-    p.add_argument("--cycles", type=int, default=3, help="forward-backward cycles (default 3)")
-    p.add_argument("--speed", type=float, default=None,
-                   help="constant input speed of the reciprocating experiment, m/s (e.g. 5e-3)")
-    p.add_argument("--force-limit", type=float, default=400.0, dest="force_limit",
-                   help="stop when |input force| exceeds this, N (default 400)")
-    p.add_argument("--watchdog-ms", type=float, default=None, dest="watchdog_ms",
-                   help="host telemetry watchdog, ms (default three telemetry periods)")
+                   help="planned profile CSV (toggle plan --out); replayed forward and back, "
+                        "with the preset, mold and friction it was planned for")
     p.add_argument("--out", type=Path, default=None, help="run directory (default runs/<time>)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(handler=run, backend=None)
-    e = sub.add_parser("emulate", help="serve an emulated rig on a pseudo-terminal")
-    _add_physics_options(e)
-    e.add_argument("--drop-byte", type=float, default=0.0, help="fault: P(drop a byte) per frame")
-    e.add_argument("--flip-bit", type=float, default=0.0, help="fault: P(flip a bit) per frame")
-    e.add_argument("--junk", type=float, default=0.0, help="fault: P(junk before a frame)")
-    e.add_argument("--stall-at", type=float, default=None, help="fault: stall at t s after START")
-    e.add_argument("--seed", type=int, default=1, help="seed of the injected faults")
+    p.set_defaults(handler=run)
+    e = sub.add_parser("emulate", help="serve an emulated rig on a pseudo-terminal",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    cli_rig.add_emulator_options(e)
     e.set_defaults(handler=emulate)
+    cli_rig.add_parser(sub)
     cli_rsm.add_parser(sub)
     return parser
 
@@ -187,21 +238,17 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``hil`` script."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(cli_rig.join_negative_numbers(
+        sys.argv[1:] if argv is None else list(argv)))
     try:
-        if args.command == "run":
-            config = _config_defaults(args.config)
-            explicit = {k for k, v in vars(args).items() if v not in (None, False)}
-            for key, value in config.items():
-                if key not in explicit or parser.get_default(key) == getattr(args, key):
-                    setattr(args, key, Path(value) if key in ("out", "profile") else value)
-            args.backend = args.backend or "fmu"
-            if args.cycles < 1:
-                raise ParameterError(f"--cycles must be >= 1, got {args.cycles}")
         return int(args.handler(args) or 0)
-    except (ParameterError, TrajectoryError, RecordingError, RunStoppedError, ValueError) as exc:
+    except ParameterError as exc:
         print(f"hil {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except (TrajectoryError, RecordingError, RunStoppedError, cli_rig.RigCommandError,
+            ValueError) as exc:
+        print(f"hil {args.command}: error: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

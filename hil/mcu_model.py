@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import random
+import secrets
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -54,8 +55,9 @@ class RigHardware:
     adc_min: int = -8_388_608  # 24-bit ADC rails
     adc_max: int = 8_388_607
     load_noise_n: float = 0.2  # rms noise of the load cell and amplifier
-    x_origin: float = 0.0  # input position (m) at step count 0
-    fw_version: int = 0x0100
+    x_origin: float = 0.0  # input position (m) at step count 0 at power-on
+    home_x: float | None = None  # reference switch active at x <= home_x (default x_origin)
+    fw_version: int = 0x0101
 
     @property
     def period(self) -> float:
@@ -80,6 +82,11 @@ class Sensors:
     def x(self, steps: int) -> float:
         """Input position (m) of a step count."""
         return self.x_origin + steps * self.hw.step_nm / 1e9
+
+    def home_switch(self, steps: int) -> bool:
+        """The reference switch: active while the table is at or behind the open position."""
+        home = self.hw.x_origin if self.hw.home_x is None else self.hw.home_x
+        return self.x(steps) <= home + 1e-12
 
     def read(self, steps: int, t: float) -> tuple[int, int]:
         """Encoder counts and load-cell raw counts at ``steps`` and time ``t``."""
@@ -117,10 +124,18 @@ class McuModel:
     # --- lifecycle ------------------------------------------------------------------------
 
     def boot(self) -> None:
-        """Power-on or reset: new boot id, no session, counts restart at zero."""
+        """Power-on or reset: new boot id, no session, counts restart at zero, unreferenced.
+
+        The boot id comes from the OS's entropy (a firmware's hardware RNG), not from the
+        seeded fault generator, so every emulator start and every reset gets a new one.
+        """
         self.sensors.rezero(self.steps, self.enc, 0, 0)
         self.steps, self.enc = 0, 0
-        self.boot_id = self.rng.getrandbits(32) | 1
+        previous = getattr(self, "boot_id", 0)
+        self.boot_id = previous
+        while self.boot_id in (0, previous):
+            self.boot_id = secrets.randbits(32)
+        self.referenced = False
         self.state = p.State.BOOT
         self.session = False
         self.faults = p.Fault.NONE
@@ -154,17 +169,23 @@ class McuModel:
         except p.MessageError:
             known = frame.msg_type in p.MESSAGES
             return [self._ack(frame.seq, p.Result.BAD_LENGTH if known else p.Result.UNKNOWN_TYPE)]
-        if isinstance(msg, p.Heartbeat) or frame.msg_type >= 0x80:
+        if frame.msg_type >= 0x80:  # an MCU -> host type is no command
+            replies = ([self._ack(frame.seq, p.Result.UNKNOWN_TYPE)]
+                       if frame.flags & p.FLAG_ACK_REQ else [])
+            return replies + self._drain()
+        if isinstance(msg, p.Heartbeat):
             return self._drain()
+        stored = True
         if isinstance(msg, (p.Hello, p.EStop)):
             reply = self._execute(msg, frame.seq)
         elif self.last_seq is not None and frame.seq == self.last_seq:
             reply = self.last_reply  # a retransmission: answer again, do not execute again
-        elif self.last_seq is not None and not p.seq_newer(frame.seq, self.last_seq):
+        elif self.last_seq is not None and p.seq_stale(frame.seq, self.last_seq):
             reply = self._ack(frame.seq, p.Result.STALE)
+            stored = False  # a stale command must not re-base the stored seq
         else:
             reply = self._execute(msg, frame.seq)
-        if not isinstance(reply, p.HelloReply) or reply.result == p.Result.OK:
+        if stored and (not isinstance(reply, p.HelloReply) or reply.result == p.Result.OK):
             self.last_seq, self.last_reply = frame.seq, reply
         replies = [reply] if reply is not None and frame.flags & p.FLAG_ACK_REQ else []
         return replies + self._drain()
@@ -277,6 +298,7 @@ class McuModel:
             return p.Result.BAD_STATE
         self.sensors.rezero(self.steps, self.enc, msg.steps, msg.enc)
         self.steps, self.enc = msg.steps, msg.enc
+        self.referenced = True
         self._clear_trajectory()
         return p.Result.OK
 
@@ -453,6 +475,10 @@ class McuModel:
             flags |= p.TelemetryFlag.SESSION
         if self.driver_enabled:
             flags |= p.TelemetryFlag.DRIVER_ENABLED
+        if self.sensors.home_switch(self.steps):
+            flags |= p.TelemetryFlag.HOME_SWITCH
+        if self.referenced:
+            flags |= p.TelemetryFlag.REFERENCED
         return p.Telemetry(
             self.boot_id, self.sample, t_us & 0xFFFFFFFF, self.steps, self.enc, self.load_raw,
             self.exec_index, len(self.points), int(self.faults), self.state, int(flags),

@@ -17,7 +17,7 @@ from enum import IntEnum, IntFlag
 from typing import ClassVar, TypeVar
 
 PROTO_MAJOR = 1
-PROTO_MINOR = 0
+PROTO_MINOR = 1  # 1.1: telemetry flags HOME_SWITCH and REFERENCED; extension rule
 
 HEADER = struct.Struct("<BBH")
 CRC = struct.Struct("<H")
@@ -135,6 +135,8 @@ class TelemetryFlag(IntFlag):
     LOAD_SATURATED = 0x04
     SESSION = 0x08
     DRIVER_ENABLED = 0x10
+    HOME_SWITCH = 0x20  # 1.1: the reference switch at the open position is active (now)
+    REFERENCED = 0x40  # 1.1: step and encoder counts are referenced (SET_POSITION since boot)
 
 
 # --- COBS and CRC -------------------------------------------------------------------------
@@ -302,12 +304,16 @@ class Message:
 
     @classmethod
     def unpack(cls: type[M], payload: bytes) -> M:
-        """Payload bytes -> message; MessageError on a wrong length."""
-        if len(payload) != cls.FORMAT.size:
+        """Payload bytes -> message; MessageError when it is shorter than the layout.
+
+        Bytes beyond the layout are ignored: a later minor version appends fields
+        (docs/rig-protocol.md, section 10).
+        """
+        if len(payload) < cls.FORMAT.size:
             raise MessageError(
                 f"{cls.TYPE.name} payload is {len(payload)} bytes, expected {cls.FORMAT.size}"
             )
-        return cls(*cls.FORMAT.unpack(payload))
+        return cls(*cls.FORMAT.unpack_from(payload))
 
     def frame(self, seq: int, flags: int = 0) -> Frame:
         """Wrap this message in a frame."""
@@ -379,13 +385,14 @@ class TrajChunk(Message):
 
     @classmethod
     def unpack(cls, payload: bytes) -> TrajChunk:
-        """Payload -> chunk; MessageError when the length disagrees with the point count."""
+        """Payload -> chunk; MessageError when it is too short for its point count."""
         if len(payload) < cls.FORMAT.size:
             raise MessageError(f"TRAJ_CHUNK payload of {len(payload)} bytes is too short")
         first, flags, n = cls.FORMAT.unpack_from(payload)
-        if not 0 < n <= MAX_CHUNK_POINTS or len(payload) != cls.FORMAT.size + n * cls.POINT.size:
+        end = cls.FORMAT.size + n * cls.POINT.size
+        if not 0 < n <= MAX_CHUNK_POINTS or len(payload) < end:
             raise MessageError(f"TRAJ_CHUNK of {len(payload)} bytes does not hold {n} points")
-        points = tuple(cls.POINT.iter_unpack(payload[cls.FORMAT.size :]))
+        points = tuple(cls.POINT.iter_unpack(payload[cls.FORMAT.size : end]))
         return cls(first, flags, points)
 
     @property
@@ -559,3 +566,11 @@ def encode_message(msg: Message, seq: int, flags: int = 0) -> bytes:
 def seq_newer(seq: int, last: int) -> bool:
     """RFC 1982 serial-number order on 16 bits: True when ``seq`` is after ``last``."""
     return 0 < ((seq - last) & 0xFFFF) < 0x8000
+
+
+def seq_stale(seq: int, last: int) -> bool:
+    """True when ``seq`` is older than ``last``: 0 < (last - seq) mod 2^16 < 2^15.
+
+    Exactly 2^15 apart is undefined in RFC 1982; the protocol executes it (not stale).
+    """
+    return 0 < ((last - seq) & 0xFFFF) < 0x8000

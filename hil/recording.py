@@ -44,7 +44,9 @@ from hil.samples import Sample
 from toggle.kinematics import stroke, stroke_limits
 from toggle.params import Mechanism
 
-CSV_COLUMNS = ("time [s]", "x_cmd [m]", "platen [m]", "force [N]", "status")
+CSV_COLUMNS = ("time [s]", "x_cmd [m]", "platen [m]", "force [N]", "status", "sample")
+#: The header of run directories written before the sample column existed (still read).
+LEGACY_COLUMNS = CSV_COLUMNS[:-1]
 SAMPLES_CSV = "samples.csv"
 META_JSON = "meta.json"
 SUMMARY_JSON = "summary.json"
@@ -80,6 +82,13 @@ class RunMeta:
     abort_reason: str | None = None
     started: str | None = None
     finished: str | None = None
+    #: every setting that shaped the run (SI): preset, mold position, mu, limits, watchdogs,
+    #: the profile file and its SHA-256, the duration guard
+    settings: dict[str, Any] = field(default_factory=dict)
+    #: the back-end: FMU, or the rig's port, protocol and firmware versions and boot id
+    plant: dict[str, Any] = field(default_factory=dict)
+    #: link statistics of a rig session (bad frames, lost and duplicate samples, ...)
+    link: dict[str, Any] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
@@ -176,7 +185,7 @@ class RunRecorder:
         if not all(math.isfinite(v) for v in values):
             raise RecordingError(f"non-finite sample {s}")
         self._buffer.append(f"{s.t:.6f},{s.x_cmd:.9f},{s.platen:.9f},{s.force:.5f},"
-                            f"{getattr(s.status, 'value', s.status)}\n")
+                            f"{getattr(s.status, 'value', s.status)},{s.index}\n")
         self.count += 1
         if (len(self._buffer) >= self._flush_every
                 or time.monotonic() - self._last_flush >= self._flush_interval):
@@ -195,6 +204,10 @@ class RunRecorder:
         if not self.meta.aborted:
             self.meta = replace(self.meta, aborted=True, abort_reason=reason)
 
+    def annotate(self, **fields_: Any) -> None:
+        """Complete the metadata (plant identity, link statistics) before closing."""
+        self.meta = replace(self.meta, **fields_)
+
     def close(self) -> dict[str, Any]:
         """Flush and close the CSV, complete meta.json, write summary.json and the plot."""
         if self.summary is not None:
@@ -212,8 +225,12 @@ class RunRecorder:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         if exc is not None:
-            reason = ("interrupted by the user" if isinstance(exc, KeyboardInterrupt)
-                      else f"{type(exc).__name__}: {exc}")
+            if isinstance(exc, KeyboardInterrupt):
+                reason = "interrupted by the user"
+            elif isinstance(exc, Exception):
+                reason = f"{type(exc).__name__}: {exc}"
+            else:  # hil.interrupts.Interrupted: 'interrupted by SIGTERM'
+                reason = str(exc) or type(exc).__name__
             self.abort(reason)
         self.close()
 
@@ -226,7 +243,7 @@ def read_samples(csv_path: str | Path) -> RunData:
     except OSError as exc:
         raise RecordingError(f"cannot read {path}: {exc}") from exc
     header = raw.split(b"\n", 1)[0].decode("utf-8", "replace").strip()
-    if header != ",".join(CSV_COLUMNS):
+    if header not in (",".join(CSV_COLUMNS), ",".join(LEGACY_COLUMNS)):
         raise RecordingError(f"{path} is not a samples CSV (header {header!r})")
     rows = raw.count(b"\n") - 1
     if rows <= 0:
@@ -269,6 +286,9 @@ def _summarize(data: RunData, meta: RunMeta) -> tuple[dict[str, Any], list[Cycle
         "samples": int(data.t.size),
         "cycles_complete": len(cycles),
         "platen_zero": zero,
+        "aborted": meta.aborted,
+        "abort_reason": meta.abort_reason,
+        "link": meta.link,
     }
     if cycles:
         summary.update(cycle_statistics(data, cycles, meta.stroke_theory, zero))

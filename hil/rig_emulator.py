@@ -10,6 +10,7 @@ Run it in a thread (:meth:`RigEmulator.start`) or in a process of its own
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import random
@@ -41,6 +42,7 @@ class FaultPlan:
     rx_flip_bit: float = 0.0  # flip one bit of an incoming read
     stall_at: float | None = None  # the MCU hangs: no telemetry, no input processing
     stall_for: float = 0.05
+    estop_at: float | None = None  # the rig's stop input latches ESTOP (operator's button)
     disconnect_at: float | None = None  # the link vanishes (pty closed)
     reset_at: float | None = None  # the MCU resets: new boot id, no session, counts at 0
     force_spike_at: float | None = None  # add force_spike_n to the load cell
@@ -57,6 +59,10 @@ class EmulatorLog:
     commands: list[tuple[float, p.MsgType]] = field(default_factory=list)
     injected: dict[str, float] = field(default_factory=dict)  # fault name -> time injected
     sent_telemetry: dict[tuple[int, int], p.Telemetry] = field(default_factory=dict)
+    #: every telemetry frame written to the pty: (boot_id, sample, state, intact), in order;
+    #: intact is False when the fault plan damaged the frame (the host cannot decode it)
+    written: list[tuple[int, int, int, bool]] = field(default_factory=list)
+    run_starts: list[tuple[int, int]] = field(default_factory=list)  # (boot_id, first sample)
     tx_frames: int = 0
     tx_dropped: int = 0  # frames dropped because the host did not read
     ticks_skipped: int = 0
@@ -95,7 +101,8 @@ class RigEmulator:
         self._realtime = realtime
         self._decoder = p.FrameDecoder()
         self._tx_seq = 0
-        self._backlog: list[tuple[float, bytes]] = []  # (release time, bytes) in order
+        # (release time, bytes, telemetry (boot_id, sample, state, intact) or None), in order
+        self._backlog: list[tuple[float, bytes, tuple[int, int, int, bool] | None]] = []
         self._master = self._slave = -1
         self.port = ""
         self._stop = threading.Event()
@@ -106,7 +113,7 @@ class RigEmulator:
         self._tick = 0
         self._pending = {
             name: at for name in ("stall", "disconnect", "reset", "force_spike", "stuck_load",
-                                  "stuck_encoder")
+                                  "stuck_encoder", "estop")
             if (at := getattr(self.faults, f"{name}_at")) is not None
         }
 
@@ -171,20 +178,29 @@ class RigEmulator:
                     skipped = int((now - next_tick) / period)
                     self.log.ticks_skipped += skipped
                     next_tick += skipped * period
-                self._on_tick(now)
-                next_tick += period
+                next_tick += self._on_tick(now, next_tick) + period
             self._flush()
 
-    def _on_tick(self, now: float) -> None:
-        self._inject_scheduled(now)
+    def _on_tick(self, now: float, nominal: float) -> float:
+        """One MCU period at its nominal time; returns the time the MCU hung (a stall).
+
+        t_us is the period's scheduled time, as a firmware's timer interrupt stamps it:
+        the emulator's own scheduling jitter is not the MCU's. A stall skips the periods
+        it hangs through, so it shows as a jump of t_us between consecutive samples.
+        """
+        hung = self._inject_scheduled(now)
         if self._master < 0:
-            return
-        t_us = round((now - self._origin) * 1e6)
+            return hung
+        if hung:
+            nominal += hung
+            now = time.monotonic()
+        t_us = round((nominal - self._origin) * 1e6)
         for msg in self.mcu.tick(now, t_us):
             if isinstance(msg, p.Telemetry) and self._record:
                 self.log.sent_telemetry[(msg.boot_id, msg.sample)] = msg
             self._send(msg)
         self._tick += 1
+        return hung
 
     def _receive(self) -> None:
         try:
@@ -199,23 +215,34 @@ class RigEmulator:
             self.log.commands.append((now, _msg_type(frame.msg_type)))
             if frame.msg_type == p.MsgType.START and self._run_tick is None:
                 self._run_tick = self._tick
-            for reply in self.mcu.handle(frame, now):
+            replies = self.mcu.handle(frame, now)
+            if frame.msg_type == p.MsgType.START:
+                self.log.run_starts += [(self.mcu.boot_id, r.sample) for r in replies
+                                        if isinstance(r, p.Ack) and r.result == p.Result.OK]
+            for reply in replies:
                 self._send(reply)
 
     # --- fault injection ------------------------------------------------------------------
 
-    def _inject_scheduled(self, now: float) -> None:
+    def _inject_scheduled(self, now: float) -> float:
+        """Inject the faults that are due; return the time the MCU hung (0 without a stall)."""
         if self._run_tick is None:
-            return
+            return 0.0
         elapsed = (self._tick - self._run_tick) * self.hw.period
+        hung = 0.0
         for name, at in list(self._pending.items()):
             if elapsed >= at:
                 del self._pending[name]
                 self.log.injected[name] = now
-                getattr(self, f"_inject_{name}")()
+                hung += getattr(self, f"_inject_{name}")() or 0.0
+        return hung
 
-    def _inject_stall(self) -> None:
+    def _inject_stall(self) -> float:
         time.sleep(self.faults.stall_for)  # the whole MCU hangs, as a blocked firmware would
+        return self.faults.stall_for
+
+    def _inject_estop(self) -> None:
+        self.mcu.estop()
 
     def _inject_disconnect(self) -> None:
         self._close_fds()
@@ -251,24 +278,26 @@ class RigEmulator:
     # --- transmit -------------------------------------------------------------------------
 
     def _send(self, msg: p.Message) -> None:
-        wire = p.encode_message(msg, self._tx_seq)
+        original = p.encode_message(msg, self._tx_seq)
         self._tx_seq = (self._tx_seq + 1) & 0xFFFF
         self.log.tx_frames += 1
-        if sum(len(b) for _, b in self._backlog) > TX_BACKLOG_MAX:
+        if sum(len(b) for _, b, _ in self._backlog) > TX_BACKLOG_MAX:
             self.log.tx_dropped += 1
             return
         f, rng, now = self.faults, self._rng, time.monotonic()
         if rng.random() < f.junk:
-            self._backlog.append((now, rng.randbytes(rng.randrange(1, 40)) + b"\x00"))
-        body = self._corrupt(wire[:-1], f.drop_byte, f.flip_bit)
+            self._backlog.append((now, rng.randbytes(rng.randrange(1, 40)) + b"\x00", None))
+        body = self._corrupt(original[:-1], f.drop_byte, f.flip_bit)
         if rng.random() < f.truncate:
             body = body[: rng.randrange(len(body))]
         wire = body + b"\x00"
+        tel = ((msg.boot_id, msg.sample, msg.state, wire == original)
+               if isinstance(msg, p.Telemetry) else None)
         if rng.random() < f.split:
             cut = rng.randrange(1, len(wire))
-            self._backlog += [(now, wire[:cut]), (now + 3e-4, wire[cut:])]
+            self._backlog += [(now, wire[:cut], None), (now + 3e-4, wire[cut:], tel)]
         else:
-            self._backlog.append((now, wire))
+            self._backlog.append((now, wire, tel))
 
     def _next_release(self) -> float:
         return self._backlog[0][0] if self._backlog else float("inf")
@@ -276,15 +305,20 @@ class RigEmulator:
     def _flush(self) -> None:
         now = time.monotonic()
         while self._backlog and self._backlog[0][0] <= now and self._master >= 0:
-            release, data = self._backlog[0]
+            release, data, tel = self._backlog[0]
             try:
                 written = os.write(self._master, data)
             except BlockingIOError:
                 return
+            except OSError:  # the host side closed the pty: nothing more gets out
+                self._backlog.clear()
+                return
             if written < len(data):
-                self._backlog[0] = (release, data[written:])
+                self._backlog[0] = (release, data[written:], tel)
                 return
             self._backlog.pop(0)
+            if tel is not None:
+                self.log.written.append(tel)
 
 
 def _msg_type(code: int) -> p.MsgType | int:
@@ -300,16 +334,22 @@ def _msg_type(code: int) -> p.MsgType | int:
 class EmulatorProcess:
     """An emulator served by a child process; :attr:`port` is its pty path."""
 
-    def __init__(self, process: mp.process.BaseProcess, port: str, stop: mp.synchronize.Event):
-        self.process, self.port, self._stop = process, port, stop
+    def __init__(self, process: mp.process.BaseProcess, port: str, stop: mp.synchronize.Event,
+                 pipe: mp.connection.Connection) -> None:
+        self.process, self.port, self._stop, self._pipe = process, port, stop, pipe
+        self.log: EmulatorLog | None = None
 
-    def close(self) -> None:
-        """Ask the child to stop, then make sure it has."""
+    def close(self) -> EmulatorLog | None:
+        """Ask the child to stop, collect its :class:`EmulatorLog`, make sure it has ended."""
         self._stop.set()
+        if self.log is None and self._pipe.poll(5.0):
+            with contextlib.suppress(EOFError, OSError):
+                self.log = self._pipe.recv()
         self.process.join(timeout=2.0)
         if self.process.is_alive():
             self.process.terminate()
             self.process.join(timeout=2.0)
+        return self.log
 
     def __enter__(self) -> EmulatorProcess:
         return self
@@ -326,6 +366,7 @@ def _child(physics: RigPhysics, hardware: RigHardware | None, faults: FaultPlan 
     ports.send(emulator.start())
     stop.wait()
     emulator.close()
+    ports.send(emulator.log)
 
 
 def spawn_emulator(
@@ -347,4 +388,4 @@ def spawn_emulator(
     if not here.poll(timeout):
         proc.terminate()
         raise RuntimeError("the emulator process did not report its port")
-    return EmulatorProcess(proc, here.recv(), stop)
+    return EmulatorProcess(proc, here.recv(), stop, here)

@@ -8,13 +8,17 @@ units (s, m, N), independent of the back-end.
 from __future__ import annotations
 
 import csv
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+from toggle.params import tomllib
 
 #: Columns a planned profile CSV must have (the planner writes velocity etc. too).
 PROFILE_TIME = "time [s]"
@@ -42,7 +46,9 @@ class Sample:
     t: time since the start of the trajectory, s; x_cmd: commanded input-link
     (crosshead) position, m; platen: measured moving-platen position, m, in the
     back-end's frame (the encoder's zero); force: measured input force between
-    the drive and the input link, N, positive when the drive pushes; status.
+    the drive and the input link, N, positive when the drive pushes; status;
+    index: the back-end's sample counter (the MCU's telemetry index on the rig, the
+    step number on the FMU), so gaps and repeats are visible in the record.
     """
 
     t: float
@@ -50,6 +56,7 @@ class Sample:
     platen: float
     force: float
     status: Status = Status.OK
+    index: int = 0
 
 
 @dataclass(frozen=True)
@@ -92,17 +99,13 @@ class Trajectory:
         to start at zero.
         """
         path = Path(path)
-        try:
-            with path.open(newline="", encoding="utf-8") as fh:
-                header = [h.strip() for h in next(csv.reader(fh), [])]
-        except OSError as exc:
-            raise TrajectoryError(f"cannot read profile {path}: {exc}") from exc
+        lines, header = _profile_lines(path)
         missing = [c for c in (PROFILE_TIME, PROFILE_POSITION) if c not in header]
         if missing:
             raise TrajectoryError(f"profile {path} lacks column(s) {missing}; header is {header}")
         cols = (header.index(PROFILE_TIME), header.index(PROFILE_POSITION))
         try:
-            data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=cols, ndmin=2)
+            data = np.loadtxt(lines, delimiter=",", usecols=cols, ndmin=2)
         except ValueError as exc:
             raise TrajectoryError(f"profile {path}: {exc}") from exc
         if data.shape[0] < 2 or np.any(np.diff(data[:, 0]) <= 0):
@@ -127,3 +130,32 @@ class Trajectory:
     def duration(self) -> float:
         """Time from the first to the last sample, s."""
         return float(self.time[-1] - self.time[0])
+
+
+def _profile_lines(path: Path) -> tuple[list[str], list[str]]:
+    """(data lines, header columns) of a profile CSV; leading ``#`` lines are its settings."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TrajectoryError(f"cannot read profile {path}: {exc}") from exc
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        raise TrajectoryError(f"profile {path} is empty")
+    header = [h.strip() for h in next(csv.reader(lines[:1]))]
+    return lines[1:], header
+
+
+def profile_settings(path: str | Path) -> dict[str, Any]:
+    """The settings a planned profile was made with: its leading ``# key = value`` lines
+    (TOML values, SI units), as written by ``toggle plan --out``; {} for a bare CSV."""
+    path = Path(path)
+    try:
+        with path.open(encoding="utf-8") as fh:
+            head = list(itertools.takewhile(lambda ln: ln.lstrip().startswith("#"), fh))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TrajectoryError(f"cannot read profile {path}: {exc}") from exc
+    text = "\n".join(ln.lstrip()[1:].strip() for ln in head)
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise TrajectoryError(f"profile {path}: bad settings line ({exc})") from exc

@@ -27,6 +27,17 @@ from hil import protocol as p
 from hil.realtime import set_realtime
 
 ESTOP_REPEATS = 3  # an emergency stop is sent this many times back to back
+#: Host watchdog on telemetry arrival, s: a soft bound far above the host's scheduling
+#: jitter (measured on a loaded 2-core PC: p99.9 6 ms, max 14 ms). The hard real-time
+#: stops are the MCU's (docs/rig-protocol.md, section 7).
+DEFAULT_TELEMETRY_TIMEOUT = 0.1
+#: Largest allowed excess of the MCU's own clock between two received samples over their
+#: sample distance, s: a larger jump means the MCU missed periods (a stalled firmware).
+DEFAULT_CLOCK_SLACK = 2e-3
+#: Longest wait for the rig to reach a standstill after a stop, beyond the stop ramp, s.
+STANDSTILL_MARGIN = 0.5
+#: States in which the table may still move.
+MOVING_STATES = (p.State.RUNNING, p.State.STOPPING)
 
 
 class RigError(Exception):
@@ -43,6 +54,10 @@ class CommandError(RigError):
 
 class LinkTimeoutError(RigError):
     """The host-side watchdog saw no telemetry for longer than its timeout."""
+
+
+class RigStalledError(RigError):
+    """The MCU's own timestamps show that it missed periods (its firmware stalled)."""
 
 
 class LinkLostError(RigError):
@@ -98,12 +113,33 @@ class LinkStats:
 
     samples: int = 0
     lost_samples: int = 0  # gaps in the telemetry sample index
+    duplicates: int = 0  # telemetry frames received twice (dropped)
     queue_dropped: int = 0  # samples dropped because nobody consumed them
     retransmissions: int = 0
     bad_messages: int = 0  # valid frames with an unknown type or wrong length
     last_telemetry_rx: float = 0.0
+    max_arrival_gap: float = 0.0  # longest host-side silence between samples, s
+    max_clock_excess: float = 0.0  # largest MCU-clock excess between received samples, s
+    arrival_gaps_ms: list[int] = dataclasses.field(default_factory=lambda: [0] * 101)
     failed_at: float | None = None
     stop_sent_at: float | None = None
+
+    def record_gap(self, gap: float) -> None:
+        """Count one inter-arrival gap in 1 ms bins (the last bin holds >= 100 ms)."""
+        self.max_arrival_gap = max(self.max_arrival_gap, gap)
+        self.arrival_gaps_ms[min(int(gap * 1e3), 100)] += 1
+
+    def gap_percentile(self, q: float) -> float:
+        """Upper edge (s) of the 1 ms bin holding the q-quantile of the arrival gaps."""
+        total = sum(self.arrival_gaps_ms)
+        if not total:
+            return 0.0
+        acc = 0
+        for ms, n in enumerate(self.arrival_gaps_ms):
+            acc += n
+            if acc >= q * total:
+                return (ms + 1) * 1e-3
+        return self.max_arrival_gap
 
 
 class _Pending:
@@ -126,17 +162,24 @@ class SerialLink:
         retries: int = 5,
         heartbeat_period: float | None = 0.02,
         telemetry_timeout: float | None = None,
+        clock_slack: float = DEFAULT_CLOCK_SLACK,
         queue_size: int = 100_000,
         realtime: bool = False,
+        clear_faults_on_close: bool = True,
     ) -> None:
-        """``telemetry_timeout`` defaults to three telemetry periods; ``heartbeat_period``
-        None sends no heartbeats (only to test the MCU's watchdog); ``realtime`` asks for
-        SCHED_FIFO scheduling of the reader thread, which keeps the 3 ms watchdog honest
-        on a loaded host (best effort: ignored without the permission)."""
+        """``telemetry_timeout`` (default DEFAULT_TELEMETRY_TIMEOUT) bounds the silence of
+        the telemetry at the host; ``clock_slack`` bounds the MCU-clock jump between
+        received samples beyond their sample distance; ``heartbeat_period`` None sends no
+        heartbeats (only to test the MCU's watchdog); ``realtime`` asks for SCHED_FIFO
+        scheduling of the reader thread (best effort); ``clear_faults_on_close`` clears,
+        at the end of the session, faults that latched during it (never ESTOP, never a
+        fault found latched at open)."""
         self.url, self.baudrate = url, baudrate
         self.ack_timeout, self.retries = ack_timeout, retries
         self.heartbeat_period = heartbeat_period
         self.realtime = realtime
+        self.clock_slack = clock_slack
+        self.clear_faults_on_close = clear_faults_on_close
         self._telemetry_timeout = telemetry_timeout
         self.stats = LinkStats()
         self.decoder = p.FrameDecoder()
@@ -155,7 +198,13 @@ class SerialLink:
         self._pending: dict[int, _Pending] = {}
         self._failure: RigError | None = None
         self._last_sample: int | None = None
+        self._last_t_us: int | None = None
         self._faults_from = 0  # fault bits in samples before this index are already handled
+        self.status: p.Telemetry | None = None  # the latest sample (any state)
+        self.faults_at_open = p.Fault.NONE  # latched before this session
+        self._known_faults = 0  # fault bits already reported (latched at open)
+        self.config = p.Config()  # the MCU's limits: its defaults until configure()
+        self._run_first: int | None = None  # first sample of the run in progress
 
     # --- opening and closing --------------------------------------------------------------
 
@@ -174,12 +223,29 @@ class SerialLink:
         self._reader.start()
         try:
             self._handshake()
+            self.status = self._wait_status()
+            self.faults_at_open = p.Fault(self.status.faults)
+            self._known_faults = int(self.faults_at_open)
             if config is not None:
                 self.configure(config)
         except BaseException:
             self.close()
             raise
         return self.info
+
+    def _wait_status(self, timeout: float = 1.0) -> p.Telemetry:
+        """The first sample after the handshake: the rig's state, faults and position."""
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                item = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise HandshakeError(f"no telemetry from {self.url} within {timeout} s "
+                                     f"of the handshake") from None
+            if item is not None:
+                return item
+            if self._failure is not None:
+                raise self._failure
 
     def _handshake(self) -> None:
         nonce = random.getrandbits(32)
@@ -202,8 +268,11 @@ class SerialLink:
             raise HandshakeError("HELLO_REPLY echoes another session's nonce")
         self.scaling = Scaling(reply.step_nm / 1e9, reply.enc_nm / 1e9, reply.load_offset,
                                reply.load_gain_n, 1.0 / reply.telemetry_hz)
-        self._last_sample = None
+        self._last_sample = self._last_t_us = None
         self.stats.last_telemetry_rx = time.monotonic()
+        # what arrived before the session (a frame cut in two by opening the port mid-stream)
+        # is not a link error of this session
+        self.decoder.stats = p.DecoderStats()
         self.info = reply  # last: it arms the reader's watchdog and heartbeats
 
     @property
@@ -211,19 +280,22 @@ class SerialLink:
         """Host watchdog: longest allowed silence of the telemetry stream, s."""
         if self._telemetry_timeout is not None:
             return self._telemetry_timeout
-        return 3.0 / self.info.telemetry_hz if self.info else 1.0
+        return DEFAULT_TELEMETRY_TIMEOUT
 
     def close(self) -> None:
-        """Stop the rig if it may move, end the session, stop the reader, close the port.
+        """End the session cleanly and close the port; never raises, idempotent.
 
-        Never raises; safe to call more than once and after any failure.
+        STOP, wait for a standstill (the stop ramp plus STANDSTILL_MARGIN), clear the
+        faults that latched during this session (when ``clear_faults_on_close``; never
+        ESTOP), BYE, close. A rig that does not answer gets ESTOP and no more waiting, so
+        closing takes at most about the stop ramp plus 0.3 s.
         """
         if self._ser is None:
             return
         if self.info is not None and not isinstance(self._failure, LinkLostError):
-            self.stop_quietly()
             with contextlib.suppress(RigError):
-                self.command(p.Bye(), check=False)
+                if self.stop_quietly():
+                    self._end_session()
         self._closing.set()
         if self._reader is not None and self._reader is not threading.current_thread():
             self._reader.join(timeout=1.0)
@@ -240,13 +312,15 @@ class SerialLink:
 
     # --- commands -------------------------------------------------------------------------
 
-    def command(self, msg: p.Message, *, check: bool = True) -> p.Ack | p.HelloReply:
+    def command(self, msg: p.Message, *, check: bool = True,
+                retries: int | None = None) -> p.Ack | p.HelloReply:
         """Send ``msg``, wait for its ACK, retransmit on timeout; CommandError on NAK."""
+        retries = self.retries if retries is None else retries
         with self._cmd_lock:
             seq = self._next_seq()
             pending = self._pending[seq] = _Pending()
             try:
-                for attempt in range(self.retries + 1):
+                for attempt in range(retries + 1):
                     flags = p.FLAG_ACK_REQ | (p.FLAG_RETRY if attempt else 0)
                     self._write(p.encode_message(msg, seq, flags))
                     if pending.event.wait(self.ack_timeout):
@@ -256,7 +330,7 @@ class SerialLink:
                     self.stats.retransmissions += 1
                 else:
                     raise CommandError(f"{msg.TYPE.name} not acknowledged after "
-                                       f"{self.retries + 1} attempts")
+                                       f"{retries + 1} attempts")
             finally:
                 del self._pending[seq]
         reply = pending.reply
@@ -271,6 +345,7 @@ class SerialLink:
     def configure(self, config: p.Config) -> None:
         """Send limits (and a calibration, if its gain is not 0) in IDLE; the scaling follows."""
         self.command(config)
+        self.config = config
         if config.load_gain_n == 0:
             return
         self.scaling = dataclasses.replace(self.scaling, load_offset=config.load_offset,
@@ -293,7 +368,7 @@ class SerialLink:
     def clear_fault(self) -> None:
         """Leave FAULT/ESTOP; forget a RigFaultError failure."""
         ack = self.command(p.ClearFault())
-        self._faults_from = ack.sample + 1
+        self._faults_from, self._known_faults = ack.sample, 0
         if isinstance(self._failure, RigFaultError):
             self._failure = None
 
@@ -302,26 +377,68 @@ class SerialLink:
         self.command(p.SetPosition(steps, enc))
 
     def estop(self) -> bool:
-        """Emergency stop, sent at once even while another command waits; True if acked."""
+        """Emergency stop, sent at once even while another command waits; True if acked.
+
+        The repeats reuse the seq and carry RETRY, so the MCU answers each but halts once.
+        """
         seq = self._next_seq()
         pending = self._pending[seq] = _Pending()
         try:
-            for _ in range(ESTOP_REPEATS):
-                self._write(p.encode_message(p.EStop(), seq, p.FLAG_ACK_REQ))
-            return pending.event.wait(self.ack_timeout * (self.retries + 1))
+            for attempt in range(ESTOP_REPEATS):
+                flags = p.FLAG_ACK_REQ | (p.FLAG_RETRY if attempt else 0)
+                self._write(p.encode_message(p.EStop(), seq, flags))
+            return pending.event.wait(self.ack_timeout * 3)
         except LinkLostError:
             return False
         finally:
             self._pending.pop(seq, None)
 
-    def stop_quietly(self) -> None:
-        """STOP, or ESTOP if STOP is not acknowledged; never raises (for cleanup paths)."""
-        if isinstance(self._failure, LinkLostError):
-            return
+    def stop_quietly(self) -> bool:
+        """STOP, or ESTOP if STOP is not acknowledged; never raises (for cleanup paths).
+
+        True when the rig acknowledged the STOP (it answers commands).
+        """
+        if isinstance(self._failure, LinkLostError) or self._ser is None:
+            return False
         try:
-            self.command(p.Stop(), check=False)
+            self.command(p.Stop(), check=False, retries=2)
         except RigError:
             self.estop()
+            return False
+        return True
+
+    def wait_standstill(self, timeout: float | None = None) -> p.Telemetry | None:
+        """Wait until a sample shows the rig outside RUNNING/STOPPING; that sample or None.
+
+        Samples of a run in progress stay queued for :meth:`finish_run`.
+        """
+        deadline = time.monotonic() + (self._stop_time() if timeout is None else timeout)
+        while time.monotonic() < deadline:
+            status = self.status
+            if status is not None and status.state not in MOVING_STATES and (
+                    self._run_first is None or status.sample >= self._run_first):
+                return status
+            if isinstance(self._failure, (LinkLostError, RigResetError)):
+                return None
+            time.sleep(0.002)
+        return None
+
+    def _stop_time(self) -> float:
+        """Longest stop ramp at the configured deceleration plus STANDSTILL_MARGIN, s."""
+        cfg = self.config
+        v = cfg.max_step_delta * (self.info.telemetry_hz if self.info else 1000)
+        return v / cfg.decel_steps_s2 + STANDSTILL_MARGIN
+
+    def _end_session(self) -> None:
+        """After a stop: wait for the standstill, clear this session's faults, BYE."""
+        status = self.wait_standstill()
+        if status is None:
+            return  # still moving or silent: the MCU's heartbeat watchdog ends it
+        faults = p.Fault(status.faults)
+        if (faults and self.clear_faults_on_close and not self.faults_at_open
+                and not faults & p.Fault.ESTOP):
+            self.command(p.ClearFault(), check=False, retries=2)
+        self.command(p.Bye(), check=False, retries=2)
 
     def _next_seq(self) -> int:
         with self._write_lock:
@@ -404,13 +521,14 @@ class SerialLink:
 
         try:
             top_up(0)
-            first = self.start().sample
+            first = self._run_first = self.start().sample
             while True:
                 tel = self.next_sample(timeout=max(1.0, 10 * self.telemetry_timeout))
                 if tel.sample < first:
                     continue
                 yield tel
                 if tel.state == p.State.IDLE and tel.exec_index >= len(points):
+                    self._run_first = None  # complete: nothing left for finish_run
                     return
                 if tel.state != p.State.RUNNING:
                     raise RigError(f"run ended early in state {p.State(tel.state).name} "
@@ -419,6 +537,31 @@ class SerialLink:
         except BaseException:
             self.stop_quietly()
             raise
+
+    def finish_run(self) -> list[p.Telemetry]:
+        """The rest of a run that ended early: every sample of it queued or still arriving,
+        up to and including the first one at standstill (the fault sample included).
+
+        Call after :meth:`run_trajectory` raised; never raises. Empty after a complete run.
+        """
+        first, self._run_first = self._run_first, None
+        if first is None:
+            return []
+        out: list[p.Telemetry] = []
+        deadline = time.monotonic() + self._stop_time()
+        while True:
+            try:
+                item = self._queue.get(timeout=0.02)
+            except queue.Empty:
+                gone = isinstance(self._failure, (LinkLostError, RigResetError))
+                if gone or time.monotonic() > deadline or self._ser is None:
+                    return out
+                continue
+            if item is None or item.sample < first:
+                continue
+            out.append(item)
+            if item.state not in MOVING_STATES:
+                return out
 
     # --- reader thread --------------------------------------------------------------------
 
@@ -484,7 +627,8 @@ class SerialLink:
                 pending.event.set()
         elif isinstance(msg, p.FaultReport):
             self.fault_reports.append(msg)
-            if self.info is not None and msg.sample >= self._faults_from:
+            new = msg.fault & ~self._known_faults
+            if self.info is not None and new and msg.sample >= self._faults_from:
                 self._fail(RigFaultError(
                     f"rig fault {p.Fault(msg.fault).name} at sample {msg.sample}: value "
                     f"{msg.value}, limit {msg.limit} (MCU state {p.State(msg.state).name})",
@@ -502,19 +646,38 @@ class SerialLink:
                 f"{self._last_sample}; the rig's position reference is lost, re-home and "
                 f"open a new session"))
             return
-        if self._last_sample is not None and tel.sample > self._last_sample + 1:
-            self.stats.lost_samples += tel.sample - self._last_sample - 1
-        self._last_sample = tel.sample
-        self.stats.samples += 1
-        self.stats.last_telemetry_rx = now
+        stats, stalled = self.stats, None
+        if self._last_sample is not None:
+            distance = tel.sample - self._last_sample
+            if distance <= 0:
+                stats.duplicates += 1  # a repeated (or reordered) frame: recorded once
+                return
+            stats.lost_samples += distance - 1
+            elapsed = ((tel.t_us - self._last_t_us) & 0xFFFFFFFF) * 1e-6
+            excess = elapsed - distance / self.info.telemetry_hz
+            stats.max_clock_excess = max(stats.max_clock_excess, excess)
+            if excess > self.clock_slack:
+                stalled = RigStalledError(
+                    f"rig stalled: the MCU's clock jumped {elapsed * 1e3:.1f} ms between "
+                    f"samples {self._last_sample} and {tel.sample} (expected "
+                    f"{distance * 1e3 / self.info.telemetry_hz:.0f} ms): its firmware missed "
+                    f"periods")
+            stats.record_gap(now - stats.last_telemetry_rx)
+        self._last_sample, self._last_t_us = tel.sample, tel.t_us
+        stats.samples += 1
+        stats.last_telemetry_rx = now
+        self.status = tel
         try:
             self._queue.put_nowait(tel)
         except queue.Full:
-            self.stats.queue_dropped += 1
-        if tel.faults and tel.sample >= self._faults_from:
+            stats.queue_dropped += 1
+        new = tel.faults & ~self._known_faults
+        if new and tel.sample >= self._faults_from:
             faults = p.Fault(tel.faults)
             self._fail(RigFaultError(f"rig fault {faults.name} (state {p.State(tel.state).name}) "
-                                f"at sample {tel.sample}", faults))
+                                     f"at sample {tel.sample}", faults))
+        if stalled is not None:
+            self._fail(stalled)
 
     def _fail(self, error: RigError) -> None:
         """Record the first failure, stop the rig unless the link is gone, wake consumers."""

@@ -23,6 +23,7 @@ from hil.serial_link import (
     RigError,
     RigFaultError,
     RigResetError,
+    RigStalledError,
     SerialLink,
 )
 
@@ -76,10 +77,10 @@ def run_until_failure(link: SerialLink, points: list[tuple[int, int]]) -> tuple[
 
 def fail_by_injection(make: Callable[..., Rig], faults: FaultPlan, name: str,
                       attempts: int = 3) -> tuple[RigEmulator, SerialLink, list, RigError]:
-    """Run into the injected fault ``name`` with the default 3-period watchdog.
+    """Run into the injected fault ``name`` with the default host watchdog.
 
     Both sides run SCHED_FIFO when permitted. If the watchdog trips before the injection
-    (a genuine >3 ms silence caused by machine load) the attempt proves nothing about the
+    (a genuine >100 ms silence caused by machine load) the attempt proves nothing about the
     injected fault and is repeated.
     """
     for _ in range(attempts):
@@ -163,16 +164,26 @@ def test_retransmitted_commands_execute_once(rig: Callable[..., Rig]) -> None:
     assert emulator.mcu.next_index == 300 and list(emulator.mcu.points) == points
 
 
-def test_stall_stops_within_three_periods(rig: Callable[..., Rig]) -> None:
-    faults = FaultPlan(stall_at=0.05, stall_for=0.1)
+def test_short_stall_is_caught_by_the_mcu_clock_not_by_host_timing(
+        rig: Callable[..., Rig]) -> None:
+    # 50 ms is below the host's 100 ms silence watchdog: the MCU's own timestamps show it
+    faults = FaultPlan(stall_at=0.05, stall_for=0.05)
     emulator, link, samples, error = fail_by_injection(rig, faults, "stall")
-    assert link.telemetry_timeout == pytest.approx(3 * PERIOD)
-    assert isinstance(error, LinkTimeoutError) and "no telemetry" in str(error)
-    stats, last_rx = link.stats, samples[-1].rx_time  # the last sample before the failure
-    assert stats.stop_sent_at - last_rx <= 3 * PERIOD + SCHEDULING_SLACK
+    assert link.telemetry_timeout == pytest.approx(0.1)
+    assert isinstance(error, RigStalledError) and "stalled" in str(error)
+    assert "50.0 ms" in str(error) or "51.0 ms" in str(error)
     stop_rx = emulator.log.first_command(p.MsgType.STOP, after=emulator.log.injected["stall"])
     assert stop_rx is not None  # executed as soon as the MCU woke up
     assert wait_for(lambda: emulator.mcu.state == p.State.IDLE)
+
+
+def test_long_stall_trips_the_host_watchdog(rig: Callable[..., Rig]) -> None:
+    faults = FaultPlan(stall_at=0.05, stall_for=0.4)
+    emulator, link, samples, error = fail_by_injection(rig, faults, "stall")
+    assert isinstance(error, LinkTimeoutError) and "no telemetry" in str(error)
+    silence = link.stats.failed_at - samples[-1].rx_time
+    assert 0.1 <= silence <= 0.1 + 0.05  # the watchdog, plus scheduling on a loaded machine
+    assert wait_for(lambda: emulator.mcu.state in (p.State.IDLE, p.State.ESTOP))
 
 
 def test_disconnect_is_detected_and_closes_cleanly(rig: Callable[..., Rig]) -> None:

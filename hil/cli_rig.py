@@ -1,0 +1,157 @@
+"""``hil rig status|clear|home``: the operator's actions on a rig, and the emulator's options.
+
+A fault latched before a session (the host died, the rig's stop input, an ESTOP) is
+never cleared by ``hil run``: the operator looks at the rig and runs ``hil rig clear``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from hil import protocol as p
+from hil.backends import fault_names
+from hil.homing import home
+from hil.serial_link import CommandError, RigError, SerialLink
+
+#: A negative number as the value of an option (argparse takes '-1e-3' for an option).
+_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
+
+
+def join_negative_numbers(argv: list[str]) -> list[str]:
+    """``--opt -0.5e-3`` -> ``--opt=-0.5e-3``, so negative values in e-notation parse."""
+    out: list[str] = []
+    for token in argv:
+        if (out and _NEGATIVE.match(token) and out[-1].startswith("--")
+                and "=" not in out[-1]):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
+
+
+def _number(lo: float, hi: float, what: str) -> Callable[[str], float]:
+    """argparse type: a finite float in [lo, hi]."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise argparse.ArgumentTypeError(f"{what}, got {text!r}")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
+PROBABILITY = _number(0.0, 1.0, "must be a probability between 0 and 1")
+TIME = _number(0.0, 1e6, "must be a time >= 0 s")
+
+
+def add_emulator_options(e: argparse.ArgumentParser) -> None:
+    """Options of ``hil emulate``: the simulated clamp and the injected faults."""
+    e.add_argument("--preset", default="chang2021", help="mechanism preset")
+    e.add_argument("--delta-r8", type=_number(-5e-3, 5e-3, "must be an error below 5 mm (m)"),
+                   default=0.0, dest="delta_r8", help="length error of link 8, m (e.g. 0.5e-3)")
+    e.add_argument("--mu", type=_number(0.0, 1.0, "must be between 0 and 1"), default=None,
+                   help="pin friction (default: the preset's)")
+    e.add_argument("--x-contact", type=_number(-1.0, 1.0, "must be a position in m"),
+                   default=None, dest="x_contact",
+                   help="crosshead position at mold contact, m (default: no mold)")
+    e.add_argument("--drop-byte", type=PROBABILITY, default=0.0,
+                   help="fault: P(drop a byte) per frame")
+    e.add_argument("--flip-bit", type=PROBABILITY, default=0.0,
+                   help="fault: P(flip a bit) per frame")
+    e.add_argument("--junk", type=PROBABILITY, default=0.0,
+                   help="fault: P(junk before a frame)")
+    for name, what in (("stall", "the MCU hangs for 50 ms"), ("reset", "the MCU resets"),
+                       ("estop", "the rig's stop input latches ESTOP"),
+                       ("disconnect", "the link vanishes")):
+        e.add_argument(f"--{name}-at", type=TIME, default=None, dest=f"{name}_at",
+                       help=f"fault: {what}, s after the first START (default: never)")
+    e.add_argument("--seed", type=int, default=1, help="seed of the injected faults")
+
+
+def add_parser(subparsers: Any) -> None:
+    """Register ``rig`` on the ``hil`` command's sub-parsers."""
+    r = subparsers.add_parser("rig", help="the operator's actions on a rig: status, clear, home")
+    actions = r.add_subparsers(dest="action", required=True, metavar="ACTION")
+    for name, handler, text in (
+        ("status", status, "print the rig's state, latched faults, position and versions"),
+        ("clear", clear, "clear the rig's latched faults (after checking the rig)"),
+        ("home", home_rig, "reference the rig at its home switch (after a reset)"),
+    ):
+        a = actions.add_parser(name, help=text, description=text)
+        a.add_argument("--port", required=True, help="serial URL of the rig")
+        a.set_defaults(handler=handler)
+
+
+def _session(port: str) -> SerialLink:
+    """An open session that leaves every latched fault as it found it."""
+    link = SerialLink(port, clear_faults_on_close=False)
+    try:
+        link.open()
+    except RigError as exc:
+        raise RigCommandError(f"rig at {port}: {exc}") from exc
+    return link
+
+
+class RigCommandError(RuntimeError):
+    """A ``hil rig`` action that could not be done."""
+
+
+def _describe(link: SerialLink) -> str:
+    info, st, sc = link.info, link.status, link.scaling
+    flags = p.TelemetryFlag(st.flags)
+    return "\n".join((
+        f"rig at {link.url}: protocol {info.proto_major}.{info.proto_minor}, firmware "
+        f"{info.fw_version >> 8}.{info.fw_version & 0xFF}, boot id {info.boot_id:#010x}",
+        f"  state {p.State(st.state).name}; latched faults: {fault_names(st.faults)}",
+        f"  referenced: {'yes' if flags & p.TelemetryFlag.REFERENCED else 'no (home it)'}; "
+        f"home switch {'active' if flags & p.TelemetryFlag.HOME_SWITCH else 'inactive'}",
+        f"  table {st.steps} steps ({sc.x(st.steps) * 1e3:.4f} mm from step 0), platen "
+        f"{st.enc} counts ({sc.platen(st.enc) * 1e3:.3f} mm), force "
+        f"{sc.force(st.load_raw):.2f} N",
+    ))
+
+
+def status(args: argparse.Namespace) -> int:
+    with _session(args.port) as link:
+        print(_describe(link))
+        return 1 if link.faults_at_open else 0
+
+
+def clear(args: argparse.Namespace) -> int:
+    with _session(args.port) as link:
+        faults = fault_names(link.faults_at_open)
+        if not link.faults_at_open:
+            print(f"rig at {args.port}: no latched fault")
+            return 0
+        try:
+            link.clear_fault()
+        except (CommandError, RigError) as exc:
+            print(f"hil rig clear: {faults} not cleared: {exc} (the condition is still "
+                  f"present)", file=sys.stderr)
+            return 1
+        print(f"rig at {args.port}: cleared {faults}")
+        return 0
+
+
+def home_rig(args: argparse.Namespace) -> int:
+    with _session(args.port) as link:
+        if link.faults_at_open:
+            print(f"hil rig home: the rig has latched faults ({fault_names(link.faults_at_open)})"
+                  f"; clear them first", file=sys.stderr)
+            return 1
+        try:
+            distance = home(link)
+        except RigError as exc:
+            print(f"hil rig home: {exc}", file=sys.stderr)
+            return 1
+        print(f"rig at {args.port}: referenced at its home switch ({distance * 1e3:.3f} mm "
+              f"from where it was)")
+        return 0

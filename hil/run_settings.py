@@ -1,0 +1,198 @@
+"""The settings of ``hil run``: command line, ``--config`` file and profile, merged and checked.
+
+Precedence: the command line, then the --config file, then the settings a planned
+profile carries, then the defaults. Every --config key is applied or refused by name
+(unknown keys and wrong types are errors); a profile's settings that disagree with an
+explicit option are refused rather than silently replaced. Every check lives here, so
+a value is judged the same whether it was typed or read from a file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from hil.backends import MAX_SPEED
+from hil.samples import profile_settings
+from toggle.kinematics import stroke_limits
+from toggle.params import ParameterError, load_preset, tomllib
+
+#: Built-in defaults of every setting a --config file may hold.
+RUN_DEFAULTS: dict[str, Any] = {
+    "backend": "fmu", "port": None, "preset": "chang2021", "profile": None, "cycles": 3,
+    "speed": None, "delta_r8": 0.0, "mu": None, "x_contact": None, "force_limit": 400.0,
+    "out": None, "watchdog_ms": None, "max_duration": 3600.0,
+}
+#: The load cell's range, N: a force limit above it could never trip.
+LOAD_CELL_RANGE = 500.0
+#: Bytes of one samples.csv row (for the file-size estimate).
+BYTES_PER_SAMPLE = 52
+#: Profile settings that hil run applies to the simulated (or emulated) clamp.
+PROFILE_KEYS = ("preset", "x_contact", "mu", "delta_r8")
+
+_TEXT = ("backend", "port", "preset", "profile", "out")
+_INTEGER = ("cycles",)
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """Everything that shapes a ``hil run``, SI units."""
+
+    backend: str
+    port: str | None
+    preset: str
+    profile: Path | None
+    cycles: int
+    speed: float | None
+    delta_r8: float
+    mu: float | None
+    x_contact: float | None
+    force_limit: float
+    out: Path | None
+    watchdog_ms: float | None
+    max_duration: float
+    json: bool = False
+    quiet: bool = False
+    profile_sha256: str | None = None
+
+    def record(self) -> dict[str, Any]:
+        """JSON-ready copy for meta.json."""
+        return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()
+                if k not in ("json", "quiet")}
+
+
+def add_number_options(p: argparse.ArgumentParser) -> None:
+    """The numeric options of ``hil run`` (parsed as numbers; judged by :func:`check`)."""
+    p.add_argument("--delta-r8", type=float, default=None, dest="delta_r8",
+                   help="length error of link 8 of the simulated clamp, m, e.g. 0.5e-3 "
+                        "(default 0)")
+    p.add_argument("--mu", type=float, default=None,
+                   help="pin friction of the simulated clamp (default: the preset's)")
+    p.add_argument("--x-contact", type=float, default=None, dest="x_contact",
+                   help="crosshead position at mold contact, m (default: the planned mold "
+                        "for the default job, none with --speed)")
+    p.add_argument("--cycles", type=int, default=None,
+                   help="forward-backward cycles (default 3)")
+    p.add_argument("--speed", type=float, default=None,
+                   help="constant input speed of the reciprocating experiment, m/s, e.g. 5e-3 "
+                        "(default: the planned minimum-force profile)")
+    p.add_argument("--force-limit", type=float, default=None, dest="force_limit",
+                   help=f"stop when |input force| exceeds this, N (default "
+                        f"{RUN_DEFAULTS['force_limit']:g}; at most {LOAD_CELL_RANGE:g})")
+    p.add_argument("--watchdog-ms", type=float, default=None, dest="watchdog_ms",
+                   help="host watchdog on telemetry silence, ms (default 100; the MCU's own "
+                        "limits and heartbeat watchdog are the hard stops)")
+    p.add_argument("--max-duration", type=float, default=None, dest="max_duration",
+                   help=f"refuse runs longer than this, s (default "
+                        f"{RUN_DEFAULTS['max_duration']:g})")
+
+
+def read_config(path: Path) -> dict[str, Any]:
+    """The keys of a --config TOML file; unknown keys and wrong types are refused by name."""
+    try:
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ParameterError(f"cannot read config {path}: {exc}") from exc
+    unknown = sorted(set(table) - set(RUN_DEFAULTS))
+    if unknown:
+        raise ParameterError(f"config {path}: unknown key(s) {', '.join(unknown)}; known: "
+                             f"{', '.join(RUN_DEFAULTS)}")
+    for key, value in table.items():
+        if key in _TEXT:
+            ok = isinstance(value, str)
+        elif key in _INTEGER:
+            ok = isinstance(value, int) and not isinstance(value, bool)
+        else:
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if not ok:
+            raise ParameterError(f"config {path}: {key} = {value!r} has the wrong type")
+    return table
+
+
+def _option(key: str) -> str:
+    return "--" + key.replace("_", "-")
+
+
+def check(v: dict[str, Any]) -> None:
+    """Refuse a value that cannot run, naming its option."""
+    def bad(key: str, why: str) -> ParameterError:
+        return ParameterError(f"{_option(key)} ({key}) {why}, got {v[key]!r}")
+
+    if v["backend"] not in ("fmu", "real"):
+        raise bad("backend", "must be 'fmu' or 'real'")
+    if v["port"] is not None and v["backend"] != "real":
+        raise ParameterError("--port needs --real (or backend = \"real\" in the config): "
+                             "without it the simulated rig runs and the port is not used")
+    if v["backend"] == "real" and not v["port"]:
+        raise ParameterError("--real needs --port (a device, a pty, socket://host:port)")
+    if v["profile"] is not None and v["speed"] is not None:
+        raise ParameterError("give --profile or --speed, not both (a profile sets its speed)")
+    if v["cycles"] < 1:
+        raise bad("cycles", "must be at least 1")
+    for key, lo, hi, why in (
+        ("speed", 0.0, MAX_SPEED, f"must be > 0 and at most {MAX_SPEED:g} m/s"),
+        ("force_limit", 0.0, LOAD_CELL_RANGE,
+         f"must be > 0 and at most the load cell's {LOAD_CELL_RANGE:g} N"),
+        ("watchdog_ms", 0.0, 10_000.0, "must be > 0 and at most 10000 ms"),
+        ("max_duration", 0.0, math.inf, "must be > 0 s"),
+    ):
+        value = v[key]
+        if value is not None and not (math.isfinite(value) and lo < value <= hi):
+            raise bad(key, why)
+    if v["mu"] is not None and not (math.isfinite(v["mu"]) and 0.0 <= v["mu"] <= 1.0):
+        raise bad("mu", "must be between 0 and 1")
+    if not (math.isfinite(v["delta_r8"]) and abs(v["delta_r8"]) < 5e-3):
+        raise bad("delta_r8", "must be a finite error below 5 mm (in m)")
+    if v["x_contact"] is not None:
+        x_open, x_tp = stroke_limits(load_preset(v["preset"]).lower)
+        if not (math.isfinite(v["x_contact"]) and x_open < v["x_contact"] < x_tp):
+            raise bad("x_contact", f"must lie inside the stroke ({x_open:.6g}, {x_tp:.6g}) m")
+
+
+def _apply_profile(values: dict[str, Any], explicit: set[str]) -> str:
+    """Adopt the settings the profile was planned with; refuse a clash. Returns its hash."""
+    path = Path(values["profile"])
+    try:
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise ParameterError(f"cannot read profile {path}: {exc}") from exc
+    planned = profile_settings(path)
+    for key in PROFILE_KEYS:
+        if key not in planned:
+            continue
+        if key in explicit and values[key] != planned[key]:
+            raise ParameterError(
+                f"profile {path} was planned with {key} = {planned[key]!r}, but "
+                f"{_option(key)} gives {values[key]!r}; drop the option or re-plan")
+        values[key] = planned[key]
+    return digest
+
+
+def resolve_settings(args: argparse.Namespace) -> RunSettings:
+    """Merge the command line, the --config file, a profile's settings and the defaults."""
+    config = read_config(args.config) if args.config is not None else {}
+    cli = {k: getattr(args, k) for k in RUN_DEFAULTS if getattr(args, k, None) is not None}
+    values = {**RUN_DEFAULTS, **config, **cli}
+    explicit = set(config) | set(cli)
+    digest = None
+    if values["profile"] is not None:
+        digest = _apply_profile(values, explicit)
+    elif values["speed"] is None and values["x_contact"] is None:
+        # the default job clamps a mold: the plan's contact position (the preset's final
+        # tie-bar force) is the simulated mold height too
+        from controllers.planner import plan_config
+
+        values["x_contact"] = plan_config(values["preset"], mu=values["mu"]).x_contact
+    try:
+        load_preset(values["preset"])
+    except (ParameterError, OSError) as exc:
+        raise ParameterError(f"--preset (preset): {exc}") from exc
+    check(values)
+    for key in ("profile", "out"):
+        if values[key] is not None:
+            values[key] = Path(values[key])
+    return RunSettings(**values, json=args.json, quiet=args.quiet, profile_sha256=digest)
