@@ -201,10 +201,11 @@ class Mcu:
     physics: Callable[[float, float], tuple[float, float]]
     x_open: float
     noise_n: float = 0.2
+    future: bool = False  # act as a minor version 1.2 would (section 10, item 2)
     seed: int | None = None
     out: list[bytes] = field(default_factory=list)
     runs: list[Run] = field(default_factory=list)
-    log: deque[tuple[Any, ...]] = field(default_factory=lambda: deque(maxlen=400))
+    log: deque[tuple[Any, ...]] = field(default_factory=lambda: deque(maxlen=4000))
     stats: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -247,6 +248,8 @@ class Mcu:
         self.stats[key] = self.stats.get(key, 0) + 1
 
     def _send(self, msg_type: int, payload: bytes) -> None:
+        if self.future:
+            payload += b"\x5a\xa5\x00\x01"  # a later minor version's appended fields
         self.out.append(frame(msg_type, 0, self.mseq, payload))
         self.mseq = (self.mseq + 1) & 0xFFFF
 
@@ -267,6 +270,8 @@ class Mcu:
 
     def _set_state(self, new: int, reason: int) -> None:
         if new != self.state:
+            self.log.append((self.sample, "state", STATE_NAMES[self.state], STATE_NAMES[new],
+                             reason))
             self._send(STATE_MSG, STATE_FMT.pack(self.state, new, reason,
                                                  self.exec_index, self.sample))
             self.state = new
@@ -276,6 +281,7 @@ class Mcu:
         if self.faults & bit:
             return False
         self.faults |= bit
+        self.log.append((self.sample, "fault", bit, value, limit))
         self._send(FAULT_MSG, FAULT_FMT.pack(bit, self.sample, self.state,
                                              _i32(value), _i32(limit)))
         return True
@@ -328,7 +334,8 @@ class Mcu:
                 self.rx_skip = False
                 continue
             if not self.rx:
-                continue  # empty frame
+                self._count("empty_frames")
+                continue
             body = cobs_decode(bytes(self.rx))
             self.rx.clear()
             msg = parse_body(body) if body is not None else None
@@ -340,6 +347,8 @@ class Mcu:
 
     def _command(self, msg_type: int, flags: int, seq: int, payload: bytes) -> None:
         self._count(f"rx_{msg_type:#04x}")
+        self.log.append((self.sample, "rx", msg_type, flags, seq, payload[:64].hex(),
+                         self.steps, self.enc))
         if msg_type == HEARTBEAT:
             return
         reply_type = HELLO_REPLY if msg_type == HELLO else ACK
@@ -384,7 +393,7 @@ class Mcu:
         result = payload[2]
         if result != OK:
             self._count(f"result_{result}")
-        self.log.append((self.sample, "reply", reply_type, seq, result, self.state))
+        self.log.append((self.sample, "reply", reply_type, seq, result, STATE_NAMES[self.state]))
         if flags & ACK_REQ:
             self._send(reply_type, payload)
 
@@ -401,7 +410,8 @@ class Mcu:
             self.session = True
             if self.state == BOOT:
                 self._set_state(IDLE, R_COMMAND)
-        tail = HELLO_TAIL.pack(PROTO_MAJOR, PROTO_MINOR, FW_VERSION, self.boot_id, nonce,
+        minor = PROTO_MINOR + 1 if self.future else PROTO_MINOR
+        tail = HELLO_TAIL.pack(PROTO_MAJOR, minor, FW_VERSION, self.boot_id, nonce,
                                TELEMETRY_HZ, PERIOD_US, MAX_CHUNK_POINTS, BUFFER_CAPACITY,
                                STEP_NM, ENC_NM, self.load_offset, self.load_gain,
                                ADC_MIN, ADC_MAX)
@@ -622,6 +632,10 @@ class Mcu:
             flags |= FL_HOME
         if self.referenced:
             flags |= FL_REFERENCED
+        if self.future:
+            flags |= 0x80
+            if self.sample % 100 == 50:
+                self._send(0x85, struct.pack("<I", self.sample))  # a type this host lacks
         t_us = (self.sample * PERIOD_US) & 0xFFFFFFFF
         self._send(TELEMETRY, TELEMETRY_FMT.pack(
             self.boot_id, self.sample & 0xFFFFFFFF, t_us, self.steps, self.enc, self.load_raw,
@@ -634,14 +648,14 @@ def _i32(v: float) -> int:
 
 # --- serving it on a pseudo-terminal --------------------------------------------------
 
-def serve(conn: Connection, x_open: float, noise_n: float = 0.2) -> None:
+def serve(conn: Connection, x_open: float, noise_n: float = 0.2, future: bool = False) -> None:
     """Child-process main: run an Mcu on a pty with a 1 ms tick loop until told to quit."""
     from hil.rig_physics import ClampPhysics
 
     master, slave = os.openpty()
     tty.setraw(slave)
     os.set_blocking(master, False)
-    mcu = Mcu(ClampPhysics("chang2021", 0.0), x_open, noise_n=noise_n)
+    mcu = Mcu(ClampPhysics("chang2021", 0.0), x_open, noise_n=noise_n, future=future)
     pending: deque[bytes] = deque()
     conn.send(os.ttyname(slave))
     t0 = time.monotonic()
@@ -720,12 +734,12 @@ def _answer(mcu: Mcu, req: str) -> Any:
 class CleanroomRig:
     """Handle to a clean-room MCU served on a pty in a spawned process."""
 
-    def __init__(self, noise_n: float = 0.2) -> None:
+    def __init__(self, noise_n: float = 0.2, future: bool = False) -> None:
         from hil.backends import RigSetup
 
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=serve, args=(child, RigSetup().stroke[0], noise_n),
+        self._proc = ctx.Process(target=serve, args=(child, RigSetup().stroke[0], noise_n, future),
                                  daemon=True, name="cleanroom-rig")
         self._proc.start()
         child.close()
@@ -749,7 +763,7 @@ class CleanroomRig:
         return self._ask("stats")
 
     def log(self) -> list[tuple[Any, ...]]:
-        """The last replies: (sample, 'reply', type, seq, result, state)."""
+        """The last frames received and replies sent, oldest first."""
         return self._ask("log")
 
     def close(self) -> None:

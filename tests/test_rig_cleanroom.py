@@ -9,6 +9,8 @@ from __future__ import annotations
 import csv
 import json
 import os
+import time
+import tty
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,6 +18,7 @@ import pytest
 from cleanroom_rig import (
     ACK,
     ACK_FMT,
+    ACK_REQ,
     HELLO,
     HELLO_FMT,
     TELEMETRY,
@@ -124,3 +127,36 @@ def test_status_force_limit_stop_and_recovery(rig: CleanroomRig, tmp_path: Path,
     n = len(rig.runs())
     assert _run(rig, tmp_path / "after") == 0
     _check_complete_run(rig, tmp_path / "after", n)
+
+
+def test_host_works_with_a_later_minor_version(tmp_path: Path) -> None:
+    """Section 10: a 1.1 host ignores appended fields, new flag bits and new MCU types."""
+    with CleanroomRig(future=True) as rig:
+        assert main(["rig", "status", "--port", rig.port]) == 0
+        n = len(rig.runs())
+        assert _run(rig, tmp_path / "run") == 0
+        _check_complete_run(rig, tmp_path / "run", n)
+        meta = json.loads((tmp_path / "run" / "meta.json").read_text())
+        assert meta["plant"]["protocol"] == "1.2"
+
+
+def test_fault_left_by_a_dead_host_needs_rig_clear(rig: CleanroomRig, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """Section 8, "Who clears": HEARTBEAT_LOST from a vanished host blocks `hil run`."""
+    fd = os.open(rig.port, os.O_RDWR | os.O_NOCTTY)
+    try:
+        tty.setraw(fd)
+        os.write(fd, frame(HELLO, ACK_REQ, 100, HELLO_FMT.pack(1, 1, 42)))
+        time.sleep(0.45)  # no heartbeats: the MCU's 250 ms watchdog trips
+    finally:
+        os.close(fd)
+    stats = rig.stats()
+    assert stats["state"] == "FAULT" and stats["faults"] == 0x0040, stats
+    capsys.readouterr()
+    assert _run(rig, tmp_path / "refused") == 1
+    captured = capsys.readouterr()
+    assert "HEARTBEAT_LOST" in captured.out + captured.err
+    assert rig.stats()["faults"] == 0x0040  # not cleared by `hil run`
+    assert main(["rig", "clear", "--port", rig.port]) == 0
+    stats = rig.stats()
+    assert stats["faults"] == 0 and stats["state"] == "BOOT", stats
