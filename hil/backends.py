@@ -395,10 +395,15 @@ class RigPlant(Plant):
     def stop(self) -> list[Sample]:
         if self._link is None:
             return []
+        from hil import protocol as p
+
         self._link.stop_quietly()
         rest = self._link.finish_run()
         if rest and self._first is None:
             self._first = rest[0].sample
+        status = rest[-1] if rest else self._link.status
+        if status is None or status.state in (p.State.RUNNING, p.State.STOPPING):
+            self.notify("the rig did not report a standstill after the stop")
         return [self._sample(tel, self._total) for tel in rest]
 
     def describe(self) -> dict[str, object]:

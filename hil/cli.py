@@ -55,6 +55,7 @@ def _trajectory(s: RunSettings, guard: SignalGuard) -> tuple[Trajectory, str]:
             f"reciprocating at {s.speed * 1e3:g} mm/s")
     from controllers.planner import plan_default_profile
 
+    print(f"hil run: planning the default profile for {s.preset}", file=sys.stderr)
     forward = plan_default_profile(s.preset, period=period)
     guard.check()  # IPOPT swallows Ctrl-C: act on it before anything moves
     return profile_cycles(forward, s.cycles), "planned (minimum peak input force)"
@@ -103,13 +104,17 @@ def _print_summary(summary: dict, run_dir: Path, count: int, cycles: int, backen
         print("  (a spread of 0: the simulated rig is deterministic; the real rig's is not)")
     link = summary.get("link") or {}
     if link:
-        print(f"  link: {link['bad_frames']} bad frames, {link['lost_samples']} lost and "
-              f"{link['duplicate_samples']} duplicate samples, {link['retransmissions']} "
+        print(f"  link: {link_errors(link) or 'no errors'}, {link['retransmissions']} "
               f"retransmissions; telemetry arrival p99 {link['arrival_gap_p99_s'] * 1e3:.0f} ms, "
               f"max {link['arrival_gap_max_s'] * 1e3:.1f} ms")
-        if link["lost_samples"]:
-            print(f"hil run: warning: {link['lost_samples']} telemetry samples were lost on the "
-                  f"link and are not in samples.csv", file=sys.stderr)
+
+
+def link_errors(link: dict) -> str:
+    """'3 bad frames, 37 lost samples (not in samples.csv)', or '' for a clean link."""
+    parts = [f"{link[key]} {text}" for key, text in (
+        ("bad_frames", "bad frames"), ("lost_samples", "lost samples (not in samples.csv)"),
+        ("duplicate_samples", "duplicate samples (recorded once)")) if link.get(key)]
+    return ", ".join(parts)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -173,6 +178,10 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
         _print_summary(summary, rec.dir, rec.count, s.cycles, plant.name)
     if interrupted is not None:
         return interrupted.exit_code
+    if reason is None and link_errors(summary.get("link") or {}):
+        print(f"hil run: the run completed with link errors: {link_errors(summary['link'])}",
+              file=sys.stderr)
+        return 1
     return 1 if reason is not None else 0
 
 
@@ -185,12 +194,14 @@ def emulate(args: argparse.Namespace) -> int:
                      x_contact=args.x_contact)
     faults = FaultPlan(drop_byte=args.drop_byte, flip_bit=args.flip_bit, junk=args.junk,
                        stall_at=args.stall_at, reset_at=args.reset_at, estop_at=args.estop_at,
-                       disconnect_at=args.disconnect_at, seed=args.seed)
+                       disconnect_at=args.disconnect_at, seed=args.seed,
+                       reconnect_after=None if args.disconnect_at is None else 0.5)
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
     # an MCU's timer interrupt is hard real time: SCHED_FIFO when the OS permits it
     emulator = RigEmulator(physics, RigHardware(x_origin=setup.stroke[0]), faults,
                            realtime=True)
     print(emulator.open(), flush=True)
+    emulator.on_port = lambda port: print(port, flush=True)  # after a re-plugged disconnect
     guard = SignalGuard()
     try:
         with guard:

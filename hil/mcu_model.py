@@ -416,6 +416,8 @@ class McuModel:
         if fault & self.faults:
             return
         self._latch(fault, value, limit)
+        if fault == p.Fault.FOLLOWING_ERROR:
+            self.referenced = False  # the encoder may have missed counts: re-home
         if fault & HALTING_FAULTS:
             self._velocity = 0.0
             self._discard_buffer()

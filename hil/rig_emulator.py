@@ -11,6 +11,7 @@ Run it in a thread (:meth:`RigEmulator.start`) or in a process of its own
 from __future__ import annotations
 
 import contextlib
+import math
 import multiprocessing as mp
 import os
 import random
@@ -18,6 +19,7 @@ import select
 import threading
 import time
 import tty
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from hil import protocol as p
@@ -38,18 +40,27 @@ class FaultPlan:
     truncate: float = 0.0  # cut an outgoing frame short (its delimiter still follows)
     split: float = 0.0  # write an outgoing frame in two parts, 0.3 ms apart (harmless)
     junk: float = 0.0  # random bytes and a delimiter before an outgoing frame
+    drop_frame: float = 0.0  # an outgoing frame is not sent at all
+    duplicate: float = 0.0  # an outgoing frame is sent twice
+    noise_until: float = math.inf  # the probabilities above apply until then (s after START)
     rx_drop_byte: float = 0.0  # remove one byte of an incoming read
     rx_flip_bit: float = 0.0  # flip one bit of an incoming read
     stall_at: float | None = None  # the MCU hangs: no telemetry, no input processing
     stall_for: float = 0.05
     estop_at: float | None = None  # the rig's stop input latches ESTOP (operator's button)
     disconnect_at: float | None = None  # the link vanishes (pty closed)
+    reconnect_after: float | None = None  # then a new pty appears after this many s (re-plug)
     reset_at: float | None = None  # the MCU resets: new boot id, no session, counts at 0
     force_spike_at: float | None = None  # add force_spike_n to the load cell
     force_spike_n: float = 1000.0
     force_spike_samples: int = 3
     stuck_load_at: float | None = None  # the load-cell reading freezes
     stuck_encoder_at: float | None = None  # the encoder reading freezes
+    stuck_for: float | None = None  # a stuck reading recovers after this many s (None: never)
+
+
+#: A fault plan without link noise (what the link is once FaultPlan.noise_until has passed).
+CLEAN_LINK = FaultPlan()
 
 
 @dataclass
@@ -105,6 +116,8 @@ class RigEmulator:
         self._backlog: list[tuple[float, bytes, tuple[int, int, int, bool] | None]] = []
         self._master = self._slave = -1
         self.port = ""
+        self.on_port: Callable[[str], None] | None = None  # told the path of a re-plugged pty
+        self._reconnect_at: float | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._t0 = time.monotonic()
@@ -156,15 +169,27 @@ class RigEmulator:
     # --- main loop ------------------------------------------------------------------------
 
     def serve(self) -> None:
-        """Run the MCU until close() or an injected disconnect."""
+        """Run the MCU until close() or an injected disconnect (without a re-plug)."""
         if self._master < 0:
             self.open()
         if self._realtime:
             set_realtime()
         period = self.hw.period
         next_tick = time.monotonic()
-        while not self._stop.is_set() and self._master >= 0:
+        while not self._stop.is_set():
             now = time.monotonic()
+            if self._master < 0:
+                if self._reconnect_at is None:
+                    return
+                if now >= self._reconnect_at:
+                    self._reconnect_at = None
+                    self.open()
+                    if self.on_port is not None:
+                        self.on_port(self.port)
+                    next_tick = now
+                else:
+                    time.sleep(1e-3)
+                continue
             release = self._next_release()
             ready = release <= now  # something to write: wake when the pty can take it
             wait = max(0.0, min(next_tick, float("inf") if ready else release) - now)
@@ -209,7 +234,8 @@ class RigEmulator:
             return
         except OSError:  # the host side vanished; a pty then reports EIO
             data = b""
-        data = self._corrupt(data, self.faults.rx_drop_byte, self.faults.rx_flip_bit)
+        if self._noisy():
+            data = self._corrupt(data, self.faults.rx_drop_byte, self.faults.rx_flip_bit)
         now = time.monotonic()
         for frame in self._decoder.feed(data):
             self.log.commands.append((now, _msg_type(frame.msg_type)))
@@ -246,9 +272,12 @@ class RigEmulator:
 
     def _inject_disconnect(self) -> None:
         self._close_fds()
+        self._backlog.clear()
         self.mcu.link_lost()
         while self.mcu.state == p.State.STOPPING:  # the firmware completes its stop alone
             self.mcu.tick(time.monotonic(), 0)
+        if self.faults.reconnect_after is not None:
+            self._reconnect_at = time.monotonic() + self.faults.reconnect_after
 
     def _inject_reset(self) -> None:
         self.mcu.boot()
@@ -260,9 +289,24 @@ class RigEmulator:
 
     def _inject_stuck_load(self) -> None:
         self.mcu.sensors.load_stuck = True
+        self._schedule_recovery("load_stuck")
 
     def _inject_stuck_encoder(self) -> None:
         self.mcu.sensors.enc_stuck = True
+        self._schedule_recovery("enc_stuck")
+
+    def _schedule_recovery(self, attribute: str) -> None:
+        if self.faults.stuck_for is not None:
+            timer = threading.Timer(self.faults.stuck_for, setattr,
+                                    (self.mcu.sensors, attribute, False))
+            timer.daemon = True
+            timer.start()
+
+    def _noisy(self) -> bool:
+        """Whether the per-frame link faults still apply (FaultPlan.noise_until)."""
+        if self._run_tick is None:
+            return True
+        return (self._tick - self._run_tick) * self.hw.period < self.faults.noise_until
 
     def _corrupt(self, data: bytes, drop: float, flip: float) -> bytes:
         """Drop one byte and/or flip one bit of ``data`` with the given probabilities."""
@@ -285,6 +329,10 @@ class RigEmulator:
             self.log.tx_dropped += 1
             return
         f, rng, now = self.faults, self._rng, time.monotonic()
+        if not self._noisy():
+            f = CLEAN_LINK
+        if rng.random() < f.drop_frame:
+            return
         if rng.random() < f.junk:
             self._backlog.append((now, rng.randbytes(rng.randrange(1, 40)) + b"\x00", None))
         body = self._corrupt(original[:-1], f.drop_byte, f.flip_bit)
@@ -298,6 +346,8 @@ class RigEmulator:
             self._backlog += [(now, wire[:cut], None), (now + 3e-4, wire[cut:], tel)]
         else:
             self._backlog.append((now, wire, tel))
+        if rng.random() < f.duplicate:
+            self._backlog.append((now, wire, None))
 
     def _next_release(self) -> float:
         return self._backlog[0][0] if self._backlog else float("inf")
@@ -336,15 +386,28 @@ class EmulatorProcess:
 
     def __init__(self, process: mp.process.BaseProcess, port: str, stop: mp.synchronize.Event,
                  pipe: mp.connection.Connection) -> None:
-        self.process, self.port, self._stop, self._pipe = process, port, stop, pipe
+        self.process, self._port, self._stop, self._pipe = process, port, stop, pipe
         self.log: EmulatorLog | None = None
+
+    @property
+    def port(self) -> str:
+        """The pty path a host opens (a new one after a re-plugged disconnect)."""
+        while self.log is None and self._pipe.poll():
+            self._take(self._pipe.recv())
+        return self._port
+
+    def _take(self, item: object) -> None:
+        if isinstance(item, str):
+            self._port = item
+        elif isinstance(item, EmulatorLog):
+            self.log = item
 
     def close(self) -> EmulatorLog | None:
         """Ask the child to stop, collect its :class:`EmulatorLog`, make sure it has ended."""
         self._stop.set()
-        if self.log is None and self._pipe.poll(5.0):
-            with contextlib.suppress(EOFError, OSError):
-                self.log = self._pipe.recv()
+        with contextlib.suppress(EOFError, OSError):
+            while self.log is None and self._pipe.poll(5.0):
+                self._take(self._pipe.recv())
         self.process.join(timeout=2.0)
         if self.process.is_alive():
             self.process.terminate()
@@ -363,6 +426,7 @@ def _child(physics: RigPhysics, hardware: RigHardware | None, faults: FaultPlan 
            stop: mp.synchronize.Event) -> None:
     emulator = RigEmulator(physics, hardware, faults, time_origin=time_origin,
                            realtime=realtime)
+    emulator.on_port = ports.send
     ports.send(emulator.start())
     stop.wait()
     emulator.close()

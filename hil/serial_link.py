@@ -35,7 +35,7 @@ DEFAULT_TELEMETRY_TIMEOUT = 0.1
 #: sample distance, s: a larger jump means the MCU missed periods (a stalled firmware).
 DEFAULT_CLOCK_SLACK = 2e-3
 #: Longest wait for the rig to reach a standstill after a stop, beyond the stop ramp, s.
-STANDSTILL_MARGIN = 0.5
+STANDSTILL_MARGIN = 1.0
 #: States in which the table may still move.
 MOVING_STATES = (p.State.RUNNING, p.State.STOPPING)
 

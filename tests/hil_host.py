@@ -1,0 +1,96 @@
+"""Test helpers: the ``hil`` command as a separate process, and the emulator's own count.
+
+The host runs as a user runs it (``python -m hil.cli run ...`` in its own process, so
+signals and exit codes are real); the emulator runs in a process of its own and reports
+what it wrote to the pty, so a test compares the CSV against what was sent, not against
+what the host believes it received.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+from hil import protocol as p
+from hil.backends import RigSetup
+from hil.mcu_model import RigHardware
+from hil.rig_emulator import EmulatorLog, EmulatorProcess, FaultPlan, spawn_emulator
+from hil.rig_physics import ClampPhysics
+
+X_OPEN = RigSetup().stroke[0]
+#: A short experiment: one cycle at 25 mm/s (about 4 s of motion).
+SHORT_RUN = ("--speed", "25e-3", "--cycles", "1", "--quiet")
+#: A quicker one for checking that a rig is reusable (about 2.5 s).
+CHECK_RUN = ("--speed", "40e-3", "--cycles", "1", "--quiet")
+
+
+def spawn(faults: FaultPlan | None = None, delta_r8: float = 0.0) -> EmulatorProcess:
+    """The emulated rig of chang2021 in its own SCHED_FIFO process."""
+    return spawn_emulator(ClampPhysics("chang2021", delta_r8), RigHardware(x_origin=X_OPEN),
+                          faults, realtime=True)
+
+
+class Host:
+    """``hil ARGS`` in a child process; its stderr is collected line by line as it comes."""
+
+    def __init__(self, *args: str) -> None:
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        self.proc = subprocess.Popen([sys.executable, "-m", "hil.cli", *args], env=env,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.lines: list[str] = []
+        self.stdout: list[str] = []
+        self._readers = [threading.Thread(target=self._read, args=(stream, sink), daemon=True)
+                         for stream, sink in ((self.proc.stderr, self.lines),
+                                              (self.proc.stdout, self.stdout))]
+        for reader in self._readers:
+            reader.start()
+
+    @staticmethod
+    def _read(stream: object, sink: list[str]) -> None:
+        for line in stream:
+            sink.append(line.rstrip("\n"))
+
+    def wait_for(self, text: str, timeout: float = 60.0) -> None:
+        """Block until a stderr line contains ``text``."""
+        deadline = time.monotonic() + timeout
+        while not any(text in line for line in self.lines):
+            if time.monotonic() > deadline or self.proc.poll() is not None:
+                raise AssertionError(f"no {text!r} on stderr: {self.lines}")
+            time.sleep(0.005)
+
+    def finish(self, timeout: float = 120.0) -> tuple[int, str, str]:
+        """(exit code, stdout, stderr) once the process ended."""
+        self.proc.wait(timeout=timeout)
+        for reader in self._readers:
+            reader.join(timeout=5.0)
+        return self.proc.returncode, "\n".join(self.stdout), "\n".join(self.lines)
+
+
+def hil(*args: str, timeout: float = 120.0) -> tuple[int, str, str]:
+    """Run ``hil ARGS`` to completion: (exit code, stdout, stderr)."""
+    return Host(*args).finish(timeout)
+
+
+def recorded_samples(run_dir: Path) -> list[int]:
+    """The MCU sample indices in a run's samples.csv, in file order."""
+    with (run_dir / "samples.csv").open(newline="") as fh:
+        return [int(row["sample"]) for row in csv.DictReader(fh)]
+
+
+def sent_samples(log: EmulatorLog, first: int) -> list[int]:
+    """What the emulator sent intact for the run whose first sample is ``first``: from the
+    run's START to the first sample at standstill (docs/rig-protocol.md, section 11)."""
+    boot = next(b for b, s in log.run_starts if s == first)
+    out = []
+    for b, sample, state, intact in log.written:
+        if b != boot or sample < first or not intact:
+            continue
+        out.append(sample)
+        if state not in (p.State.RUNNING, p.State.STOPPING):
+            break
+    return out

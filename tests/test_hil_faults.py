@@ -1,0 +1,149 @@
+"""Fault matrix of ``hil run --real`` against the emulated rig, driven as a user drives it.
+
+For every fault: the exit code is non-zero, stderr names the cause, samples.csv holds
+exactly the samples the emulator wrote intact from the run's START to its standstill
+(counted by the emulator), and the rig is reusable: the next run on the same emulator
+succeeds (after the operator's ``hil rig clear`` where the fault demands one: ESTOP).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import pytest
+from hil_host import CHECK_RUN, SHORT_RUN, Host, hil, recorded_samples, sent_samples, spawn
+
+from hil.rig_emulator import FaultPlan
+
+AT = 0.6  # s after the first START (the homing move) when a scheduled fault strikes
+
+
+def signal_after(signum: int, delay: float = 0.8) -> Callable[[Host], None]:
+    def act(host: Host) -> None:
+        host.wait_for("run directory")
+        time.sleep(delay)
+        host.proc.send_signal(signum)
+    return act
+
+
+def freeze(host: Host) -> None:
+    """The host process stops for 0.4 s (a swap storm, a debugger): its heartbeats stop."""
+    host.wait_for("run directory")
+    time.sleep(0.6)
+    host.proc.send_signal(signal.SIGSTOP)
+    time.sleep(0.4)
+    host.proc.send_signal(signal.SIGCONT)
+
+
+@dataclass(frozen=True)
+class Case:
+    cause: str  # regex that stderr must match
+    faults: FaultPlan = field(default_factory=FaultPlan)
+    action: Callable[[Host], None] | None = None
+    code: int = 1
+    clear_first: bool = False  # the fault needs the operator (`hil rig clear`) before reuse
+    completes: bool = False  # link noise: the motion completes; the run fails on its data
+    in_flight: int = 0  # samples the host may never read (written just before a hang-up)
+
+
+NOISE = dict(seed=7, noise_until=2.0)
+NOISY = dict(completes=True)
+CASES = {
+    "bad CRC": Case(r"bad frames", FaultPlan(flip_bit=0.01, **NOISE), **NOISY),
+    "dropped bytes": Case(r"bad frames", FaultPlan(drop_byte=0.01, **NOISE), **NOISY),
+    "dropped frames": Case(r"lost samples", FaultPlan(drop_frame=0.01, **NOISE), **NOISY),
+    "duplicated frames": Case(r"duplicate samples", FaultPlan(duplicate=0.01, **NOISE), **NOISY),
+    "junk": Case(r"bad frames", FaultPlan(junk=0.02, **NOISE), **NOISY),
+    "stall": Case(r"rig stalled.*clock jumped", FaultPlan(stall_at=AT, stall_for=0.05)),
+    # the rig answers no STOP for 0.4 s: the host escalates to ESTOP, which only the
+    # operator clears
+    "long stall": Case(r"no telemetry for", FaultPlan(stall_at=AT, stall_for=0.4),
+                       clear_first=True),
+    "heartbeat loss": Case(r"HEARTBEAT_LOST", action=freeze),
+    "MCU reset": Case(r"MCU reset detected", FaultPlan(reset_at=AT)),
+    # a hang-up discards what is in flight in the pty: the last few written samples
+    "disconnect": Case(r"disconnected", FaultPlan(disconnect_at=AT, reconnect_after=0.3),
+                       in_flight=5),
+    "e-stop": Case(r"ESTOP", FaultPlan(estop_at=AT), clear_first=True),
+    "force limit": Case(r"FORCE_LIMIT", FaultPlan(force_spike_at=AT, force_spike_n=450.0)),
+    # a transient encoder fault: the MCU then drops REFERENCED and the next run re-homes
+    "following error": Case(r"FOLLOWING_ERROR",
+                            FaultPlan(stuck_encoder_at=AT, stuck_for=0.2)),
+    "Ctrl-C in motion": Case(r"interrupted by SIGINT", action=signal_after(signal.SIGINT),
+                             code=130),
+    "SIGTERM": Case(r"interrupted by SIGTERM", action=signal_after(signal.SIGTERM), code=143),
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_fault_stops_records_exactly_and_leaves_the_rig_reusable(name: str, tmp_path) -> None:
+    case = CASES[name]
+    out = tmp_path / "run"
+    with spawn(case.faults) as emu:
+        host = Host("run", "--real", "--port", emu.port, "--out", str(out), *SHORT_RUN)
+        if case.action is not None:
+            case.action(host)
+        code, stdout, stderr = host.finish()
+        assert code == case.code, stderr
+        assert re.search(case.cause, stderr), stderr
+        assert "Traceback" not in stderr
+        assert "cycles complete" in stdout  # the summary of what was measured is printed
+        time.sleep(0.4)  # a re-plugged port appears 0.3 s after the disconnect
+        if case.clear_first:
+            refused = out.parent / "refused"
+            code, _, stderr = hil("run", "--real", "--port", emu.port, "--out", str(refused),
+                                  *CHECK_RUN)
+            assert code == 1 and "hil rig clear" in stderr and "ESTOP" in stderr
+            assert not refused.exists()  # a refused run leaves no run directory
+            assert hil("rig", "clear", "--port", emu.port)[0] == 0
+        again = out.parent / "again"
+        code, _, stderr = hil("run", "--real", "--port", emu.port, "--out", str(again),
+                              *CHECK_RUN)
+        assert code == 0, stderr
+        assert json.loads((again / "summary.json").read_text())["cycles_complete"] == 1
+    log = emu.log
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["aborted"] is not case.completes
+    rows = recorded_samples(out)
+    sent = sent_samples(log, rows[0])
+    assert rows == sent[: len(rows)] and len(sent) - len(rows) <= case.in_flight
+    assert recorded_samples(again) == sent_samples(log, recorded_samples(again)[0])
+
+
+def test_ctrl_c_while_planning_moves_nothing(tmp_path) -> None:
+    with spawn() as emu:
+        host = Host("run", "--real", "--port", emu.port, "--out", str(tmp_path / "run"),
+                    "--quiet")  # the default job: plans first
+        host.wait_for("planning")
+        host.proc.send_signal(signal.SIGINT)
+        code, _, stderr = host.finish()
+        assert code == 130 and "SIGINT" in stderr and "nothing was recorded" in stderr
+        assert not (tmp_path / "run").exists()
+    assert emu.log.run_starts == []  # the rig never moved
+
+
+def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_path) -> None:
+    """IPOPT catches KeyboardInterrupt and returns its iterate: the guard remembers it."""
+    import controllers.planner as planner
+    from hil.cli import main
+    from hil.interrupts import Interrupted
+
+    real = planner.plan_default_profile
+
+    def swallowing(*args, **kw):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.1)
+        except Interrupted:
+            pass  # what CasADi does with the exception
+        return real(*args, **kw)
+
+    monkeypatch.setattr(planner, "plan_default_profile", swallowing)
+    assert main(["run", "--out", str(tmp_path / "r"), "--quiet"]) == 130
+    assert not (tmp_path / "r").exists()
