@@ -7,6 +7,24 @@ telemetry at 1 kHz and the home switch are all implemented here from the documen
 The only project code used is the mechanics (`hil.rig_physics.ClampPhysics`) and the
 open position of the stroke (`hil.backends.RigSetup().stroke[0]`).
 
+Readings taken where the document leaves a choice (see the clean-room report):
+
+* the sample of period i shows point i reached (steps = point i, exec_index = i + 1) and
+  compares enc with point i's enc_expected; the period that executes the last point
+  (FINAL) already reports IDLE, so a complete run of N points is N samples;
+* CONFIG with load_gain_n = 0 keeps the stored offset too (its load_offset is ignored);
+* a HELLO resets the stored seq whatever its result; ESTOP re-bases it only if newer;
+  BAD_LENGTH and UNKNOWN_TYPE answers do not touch the stored seq and reply;
+* "present position" in TRAJ_CHUNK rule 7 applies to point 0 of the trajectory only;
+* MOVING = steps changed in this period; DRIVER_ENABLED is off only in ESTOP;
+* a controlled stop loses decel_steps_s2 * T^2 steps/period of speed each period, and
+  the first period at zero speed is the standstill sample;
+* conditions "still present" for CLEAR_FAULT: force, travel and ADC rail on the last
+  reading; CLEAR_FAULT clears every bit, and is BAD_STATE in RUNNING and STOPPING;
+* HEARTBEAT_LOST keeps the session open (until BYE; a new HELLO takes it over); a pty has no
+  USB detach, so LINK_LOST is never sent;
+* stored calibration: load_offset 1500 counts, load_gain_n 1e-4 N/count (section 12).
+
 `Mcu` is the firmware logic without I/O (bytes in, frames out, one `tick` per period).
 `serve` runs it on a pseudo-terminal with a 1 ms tick loop, and `CleanroomRig` starts
 `serve` in a separate (spawned) process and talks to it over a pipe.
@@ -598,6 +616,7 @@ class Mcu:
                 err = self.enc - executed[1]
                 if abs(err) > cfg.following_error_counts:
                     self._latch(F_FOLLOWING, err, cfg.following_error_counts)
+                    self.referenced = False  # counts may be lost (doc revision of 10.6)
                     halt = True
             if self.stuck_count >= cfg.stuck_samples:
                 self._latch(F_STUCK, self.stuck_count, cfg.stuck_samples)
