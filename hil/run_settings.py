@@ -129,8 +129,6 @@ def check(v: dict[str, Any]) -> None:
                              "without it the simulated rig runs and the port is not used")
     if v["backend"] == "real" and not v["port"]:
         raise ParameterError("--real needs --port (a device, a pty, socket://host:port)")
-    if v["profile"] is not None and v["speed"] is not None:
-        raise ParameterError("give --profile or --speed, not both (a profile sets its speed)")
     if v["cycles"] < 1:
         raise bad("cycles", "must be at least 1")
     for key, lo, hi, why in (
@@ -178,20 +176,20 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     cli = {k: getattr(args, k) for k in RUN_DEFAULTS if getattr(args, k, None) is not None}
     values = {**RUN_DEFAULTS, **config, **cli}
     explicit = set(config) | set(cli)
-    digest = None
-    if values["profile"] is not None:
-        digest = _apply_profile(values, explicit)
-    elif values["speed"] is None and values["x_contact"] is None:
-        # the default job clamps a mold: the plan's contact position (the preset's final
-        # tie-bar force) is the simulated mold height too
-        from controllers.planner import plan_config
-
-        values["x_contact"] = plan_config(values["preset"], mu=values["mu"]).x_contact
+    if values["profile"] is not None and values["speed"] is not None:
+        raise ParameterError("give --profile or --speed, not both (a profile sets its speed)")
+    digest = _apply_profile(values, explicit) if values["profile"] is not None else None
     try:
         load_preset(values["preset"])
     except (ParameterError, OSError) as exc:
         raise ParameterError(f"--preset (preset): {exc}") from exc
     check(values)
+    if values["profile"] is None and values["speed"] is None and values["x_contact"] is None:
+        # the default job clamps a mold: the plan's contact position (the preset's final
+        # tie-bar force) is the simulated mold height too
+        from controllers.planner import plan_config
+
+        values["x_contact"] = plan_config(values["preset"], mu=values["mu"]).x_contact
     for key in ("profile", "out"):
         if values[key] is not None:
             values[key] = Path(values[key])

@@ -44,7 +44,7 @@ def test_real_backend_on_the_emulator_agrees_with_the_fmu(fmu_run, tmp_path):
     out = tmp_path / "rig"
     with emulator() as emu:
         assert main(["run", "--real", "--port", emu.port, "--speed", str(SPEED), "--cycles", "3",
-                     "--out", str(out), "--quiet", "--watchdog-ms", "50"]) == 0
+                     "--out", str(out), "--quiet"]) == 0
     sim, rig = summary(fmu_run), summary(out)
     assert rig["cycles_complete"] == sim["cycles_complete"] == 3
     # platen: the encoder's 1 um quantisation
@@ -79,7 +79,7 @@ def test_stall_mid_run_stops_and_keeps_every_sample(tmp_path):
     out = tmp_path / "stalled"
     with emulator(FaultPlan(stall_at=0.8, stall_for=0.5)) as emu:
         status = main(["run", "--real", "--port", emu.port, "--speed", str(SPEED),
-                       "--cycles", "2", "--out", str(out), "--quiet", "--watchdog-ms", "20"])
+                       "--cycles", "2", "--out", str(out), "--quiet"])
     assert status == 1
     meta = json.loads((out / "meta.json").read_text())
     assert meta["aborted"] and "stopped" in meta["abort_reason"] or "link" in meta["abort_reason"]
@@ -92,7 +92,7 @@ def test_reset_mid_run_aborts_with_a_clear_message(tmp_path, capsys):
     out = tmp_path / "reset"
     with emulator(FaultPlan(reset_at=0.5)) as emu:
         assert main(["run", "--real", "--port", emu.port, "--speed", str(SPEED), "--cycles", "1",
-                     "--out", str(out), "--quiet", "--watchdog-ms", "50"]) == 1
+                     "--out", str(out), "--quiet"]) == 1
     assert "reset" in capsys.readouterr().err.lower()
     assert read_samples(out / "samples.csv").t.size >= 400
 

@@ -1,0 +1,146 @@
+"""``hil run`` settings: every --config key honoured or refused, clear refusals, guards."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hil.cli import main
+from hil.recording import read_samples
+
+
+def test_config_force_limit_is_honoured(tmp_path, capsys) -> None:
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text("force_limit = 50.0\ncycles = 1\ndelta_r8 = 0.75e-3\nspeed = 25e-3\n")
+    out = tmp_path / "run"
+    assert main(["run", "--config", str(cfg), "--out", str(out), "--quiet"]) == 1
+    assert "force limit" in capsys.readouterr().err
+    force = read_samples(out / "samples.csv").force
+    assert np.all(np.abs(force[:-1]) <= 50.0) and abs(force[-1]) > 50.0  # stopped at 50 N
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["settings"]["force_limit"] == 50.0 and meta["settings"]["cycles"] == 1
+    assert meta["settings"]["delta_r8"] == 0.75e-3 and meta["aborted"]
+
+
+def test_command_line_wins_over_config(tmp_path) -> None:
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text("cycles = 5\nspeed = 40e-3\n")
+    out = tmp_path / "run"
+    assert main(["run", "--config", str(cfg), "--cycles", "1", "--out", str(out),
+                 "--quiet"]) == 0
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["settings"]["cycles"] == 1 and meta["settings"]["speed"] == 40e-3
+
+
+@pytest.mark.parametrize("text, message", [
+    ("force_limt = 50.0\n", "unknown key(s) force_limt"),
+    ('cycles = "3"\n', "cycles = '3' has the wrong type"),
+    ("force_limit = true\n", "wrong type"),
+    ('backend = "moon"\n', "backend"),
+    ("force_limit = 900.0\n", "load cell"),
+    ("force_limit = nan\n", "--force-limit"),
+])
+def test_bad_config_is_refused_by_name(tmp_path, capsys, text: str, message: str) -> None:
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text(text)
+    out = tmp_path / "run"
+    assert main(["run", "--config", str(cfg), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--port", "/dev/ttyACM0"], "--port needs --real"),
+    (["--real"], "--real needs --port"),
+    (["--cycles", "0"], "--cycles"),
+    (["--mu", "nan"], "--mu"),
+    (["--mu", "-1"], "--mu"),
+    (["--watchdog-ms", "0"], "--watchdog-ms"),
+    (["--watchdog-ms", "-5"], "--watchdog-ms"),
+    (["--x-contact", "1"], "--x-contact"),
+    (["--delta-r8", "1.0"], "--delta-r8"),
+    (["--speed", "0.2"], "--speed"),
+    (["--speed", "1e-6"], "--max-duration"),
+    (["--profile", "p.csv", "--speed", "5e-3"], "not both"),
+])
+def test_refused_runs_name_the_option_and_leave_nothing(tmp_path, capsys, argv, message) -> None:
+    out = tmp_path / "run"
+    assert main(["run", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_negative_values_in_e_notation_parse(tmp_path) -> None:
+    out = tmp_path / "run"
+    assert main(["run", "--delta-r8", "-0.25e-3", "--speed", "40e-3", "--cycles", "1",
+                 "--out", str(out), "--quiet"]) == 0
+    assert json.loads((out / "meta.json").read_text())["delta_r8"] == -0.25e-3
+
+
+def test_one_cycle_prints_a_summary_with_units(tmp_path, capsys) -> None:
+    assert main(["run", "--speed", "40e-3", "--cycles", "1", "--out", str(tmp_path / "r"),
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "1 of 1 cycles complete" in out and "one cycle: no spread" in out
+    assert " mm " in out and " N " in out
+
+
+def test_long_runs_are_announced(tmp_path, capsys) -> None:
+    # 8 cycles at 5 mm/s: about 2.5 min of motion; refused below that, announced above
+    argv = ["run", "--speed", "5e-3", "--cycles", "8", "--out", str(tmp_path / "r")]
+    assert main([*argv, "--max-duration", "60"]) == 2
+    err = capsys.readouterr().err
+    assert "min of motion" in err and "MB of samples" in err and "--max-duration" in err
+
+
+def test_meta_records_every_setting_that_shaped_the_run(tmp_path) -> None:
+    out = tmp_path / "run"
+    assert main(["run", "--speed", "40e-3", "--cycles", "1", "--mu", "0.1", "--x-contact",
+                 "0.045", "--force-limit", "300", "--out", str(out), "--quiet"]) == 0
+    meta = json.loads((out / "meta.json").read_text())
+    s = meta["settings"]
+    assert (s["mu"], s["x_contact"], s["force_limit"], s["backend"]) == (0.1, 0.045, 300.0,
+                                                                         "fmu")
+    assert meta["plant"]["backend"] == "fmu" and s["max_duration"] == 3600.0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["aborted"] is False and summary["link"] == {}
+
+
+def test_profile_settings_are_applied_and_clashes_refused(tmp_path, capsys) -> None:
+    profile = tmp_path / "p.csv"
+    x = np.linspace(-3.4386e-3, 51.5e-3, 2001)
+    rows = "\n".join(f"{i * 1e-3:.6f},{xi:.9f}" for i, xi in enumerate(x))
+    profile.write_text('# preset = "chang2021"\n# x_contact = 0.045\n# mu = 0.08\n'
+                       f"time [s],position [m]\n{rows}\n")
+    out = tmp_path / "run"
+    assert main(["run", "--profile", str(profile), "--cycles", "1", "--out", str(out),
+                 "--quiet"]) == 0
+    s = json.loads((out / "meta.json").read_text())["settings"]
+    assert (s["x_contact"], s["mu"]) == (0.045, 0.08)
+    assert len(s["profile_sha256"]) == 64
+    assert main(["run", "--profile", str(profile), "--mu", "0.05", "--out",
+                 str(tmp_path / "clash")]) == 2
+    assert "planned with mu = 0.08" in capsys.readouterr().err
+    assert not (tmp_path / "clash").exists()
+
+
+def test_profile_away_from_the_start_is_approached_and_a_too_fast_one_refused(
+        tmp_path, capsys) -> None:
+    profile = tmp_path / "jump.csv"
+    x = np.r_[np.full(10, 10e-3), np.linspace(10e-3, 11e-3, 100)]
+    profile.write_text("time [s],position [m]\n" + "\n".join(
+        f"{i * 1e-3:.6f},{xi:.9f}" for i, xi in enumerate(x)) + "\n")
+    out = tmp_path / "run"
+    # starts 13 mm from the open position: moved there at 5 mm/s first, not stepped
+    assert main(["run", "--profile", str(profile), "--cycles", "1", "--out", str(out),
+                 "--quiet"]) == 0
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time [s],position [m]\n0,0.0\n0.001,0.0001\n0.002,0.0002\n")
+    assert main(["run", "--profile", str(bad), "--out", str(tmp_path / "b")]) == 1
+    assert "mm/s" in capsys.readouterr().err
+    assert not Path(tmp_path / "b").exists()
