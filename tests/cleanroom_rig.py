@@ -671,6 +671,8 @@ def serve(conn: Connection, x_open: float, noise_n: float = 0.2, future: bool = 
     """Child-process main: run an Mcu on a pty with a 1 ms tick loop until told to quit."""
     from hil.rig_physics import ClampPhysics
 
+    with contextlib.suppress(OSError):  # an MCU is real-time: best effort, if allowed
+        os.setpriority(os.PRIO_PROCESS, 0, -10)
     master, slave = os.openpty()
     tty.setraw(slave)
     os.set_blocking(master, False)
