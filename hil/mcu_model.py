@@ -164,28 +164,33 @@ class McuModel:
     def handle(self, frame: p.Frame, now: float) -> list[p.Message]:
         """Execute one valid host frame received at ``now``; return the replies."""
         self.last_host_rx = now
+        if frame.msg_type >= 0x80:  # an MCU -> host type is no command
+            replies = ([self._ack(frame.seq, p.Result.UNKNOWN_TYPE)]
+                       if frame.flags & p.FLAG_ACK_REQ else [])
+            return replies + self._drain()
         try:
             msg = p.parse_message(frame)
         except p.MessageError:
             known = frame.msg_type in p.MESSAGES
             return [self._ack(frame.seq, p.Result.BAD_LENGTH if known else p.Result.UNKNOWN_TYPE)]
-        if frame.msg_type >= 0x80:  # an MCU -> host type is no command
-            replies = ([self._ack(frame.seq, p.Result.UNKNOWN_TYPE)]
-                       if frame.flags & p.FLAG_ACK_REQ else [])
-            return replies + self._drain()
         if isinstance(msg, p.Heartbeat):
             return self._drain()
-        stored = True
-        if isinstance(msg, (p.Hello, p.EStop)):
+        last = self.last_seq
+        if isinstance(msg, p.Hello):
             reply = self._execute(msg, frame.seq)
-        elif self.last_seq is not None and frame.seq == self.last_seq:
-            reply = self.last_reply  # a retransmission: answer again, do not execute again
-        elif self.last_seq is not None and p.seq_stale(frame.seq, self.last_seq):
-            reply = self._ack(frame.seq, p.Result.STALE)
-            stored = False  # a stale command must not re-base the stored seq
+            store = True  # a new host starts at a random seq, whatever the answer
+        elif last is not None and frame.seq == last:
+            reply, store = self.last_reply, False  # a retransmission: answer, do not redo
+        elif isinstance(msg, (p.EStop, p.Stop)):
+            # always executed (a stop must never be lost to the seq order); an older seq
+            # does not re-base the order
+            reply = self._execute(msg, frame.seq)
+            store = last is None or p.seq_newer(frame.seq, last)
+        elif last is not None and p.seq_stale(frame.seq, last):
+            reply, store = self._ack(frame.seq, p.Result.STALE), False
         else:
-            reply = self._execute(msg, frame.seq)
-        if stored and (not isinstance(reply, p.HelloReply) or reply.result == p.Result.OK):
+            reply, store = self._execute(msg, frame.seq), True
+        if store:
             self.last_seq, self.last_reply = frame.seq, reply
         replies = [reply] if reply is not None and frame.flags & p.FLAG_ACK_REQ else []
         return replies + self._drain()
@@ -232,6 +237,9 @@ class McuModel:
         )
         if not valid:
             return p.Result.BAD_VALUE
+        if not (msg.steps_min <= self.steps <= msg.steps_max
+                and msg.enc_min <= self.enc <= msg.enc_max):
+            return p.Result.OUT_OF_LIMITS  # limits that exclude the present position
         if msg.load_gain_n == 0:  # keep the stored calibration
             msg = dataclasses.replace(msg, load_offset=self.cfg.load_offset,
                                       load_gain_n=self.cfg.load_gain_n)

@@ -219,6 +219,8 @@ class SerialLink:
         except (AttributeError, serial.SerialException, OSError):
             self._fd = None
         self._ser.reset_input_buffer()
+        with contextlib.suppress(serial.SerialException, OSError):
+            self._ser.write(b"\x00")  # resynchronise the MCU's receiver (section 2)
         self._reader = threading.Thread(target=self._read_loop, name="rig-reader", daemon=True)
         self._reader.start()
         try:

@@ -114,6 +114,8 @@ def test_fault_stops_records_exactly_and_leaves_the_rig_reusable(name: str, tmp_
     sent = sent_samples(log, rows[0])
     assert rows == sent[: len(rows)] and len(sent) - len(rows) <= case.in_flight
     assert recorded_samples(again) == sent_samples(log, recorded_samples(again)[0])
+    # a complete run's last sample (IDLE, every point executed) is no "stopping" sample
+    assert (again / "samples.csv").read_text().splitlines()[-1].split(",")[4] == "ok"
 
 
 def test_ctrl_c_while_planning_moves_nothing(tmp_path) -> None:
