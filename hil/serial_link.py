@@ -205,6 +205,7 @@ class SerialLink:
         self._known_faults = 0  # fault bits already reported (latched at open)
         self.config = p.Config()  # the MCU's limits: its defaults until configure()
         self._run_first: int | None = None  # first sample of the run in progress
+        self._stopped = True  # a STOP was acknowledged since the last START
 
     # --- opening and closing --------------------------------------------------------------
 
@@ -361,7 +362,9 @@ class SerialLink:
 
     def start(self) -> p.Ack:
         """Start the buffered trajectory; the ACK's ``sample`` is the first sample of the run."""
-        return self.command(p.Start())
+        ack = self.command(p.Start())
+        self._stopped = False
+        return ack
 
     def stop(self) -> None:
         """Controlled stop (decelerate, discard the buffer)."""
@@ -402,11 +405,14 @@ class SerialLink:
         """
         if isinstance(self._failure, LinkLostError) or self._ser is None:
             return False
+        if self._stopped:
+            return True  # stopped since the last START: no STOP storm on cleanup paths
         try:
             self.command(p.Stop(), check=False, retries=2)
         except RigError:
             self.estop()
             return False
+        self._stopped = True
         return True
 
     def wait_standstill(self, timeout: float | None = None) -> p.Telemetry | None:

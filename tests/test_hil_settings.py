@@ -144,3 +144,21 @@ def test_profile_away_from_the_start_is_approached_and_a_too_fast_one_refused(
     assert main(["run", "--profile", str(bad), "--out", str(tmp_path / "b")]) == 1
     assert "mm/s" in capsys.readouterr().err
     assert not Path(tmp_path / "b").exists()
+
+
+def test_a_replayed_plan_reproduces_the_planners_peak(tmp_path, capsys) -> None:
+    """`toggle plan --out` carries the mold, preset and friction; `hil run --profile` uses them."""
+    from toggle.cli import main as toggle_main
+
+    profile = tmp_path / "p.csv"
+    assert toggle_main(["plan", "--preset", "chang2021", "--duration", "3", "--json",
+                        "--out", str(profile)]) == 0
+    plan = json.loads(capsys.readouterr().out)
+    out = tmp_path / "run"
+    assert main(["run", "--profile", str(profile), "--cycles", "1", "--out", str(out),
+                 "--quiet"]) == 0
+    data = read_samples(out / "samples.csv")
+    forward = data.force[data.t <= plan["duration"] + 1e-9]
+    assert forward.max() == pytest.approx(plan["peak_force"], rel=0.01)
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["settings"]["x_contact"] == pytest.approx(plan["x_contact"], rel=1e-9)
