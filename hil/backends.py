@@ -90,6 +90,7 @@ class Plant(ABC):
     def __init__(self) -> None:
         self.setup: RigSetup | None = None
         self.active = False
+        self.approach = 0.0  # distance of the last unrecorded move to a start, m
 
     def configure(self, setup: RigSetup) -> None:
         if self.active:
@@ -145,7 +146,7 @@ class Plant(ABC):
 
     def describe(self) -> dict[str, object]:
         """What identifies this back-end in a run's metadata (JSON-ready)."""
-        return {"backend": self.name}
+        return {"backend": self.name, "approach_m": self.approach}
 
     def link_report(self) -> dict[str, object]:
         """Statistics of the link to the plant (JSON-ready); none for the simulated rig."""
@@ -407,7 +408,7 @@ class RigPlant(Plant):
         return [self._sample(tel, self._total) for tel in rest]
 
     def describe(self) -> dict[str, object]:
-        info = {"backend": self.name, "port": self.port}
+        info = {**super().describe(), "port": self.port}
         link = self._link
         if link is not None and link.info is not None:
             i = link.info

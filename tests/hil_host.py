@@ -23,10 +23,8 @@ from hil.rig_emulator import EmulatorLog, EmulatorProcess, FaultPlan, spawn_emul
 from hil.rig_physics import ClampPhysics
 
 X_OPEN = RigSetup().stroke[0]
-#: A short experiment: one cycle at 25 mm/s (about 4 s of motion).
-SHORT_RUN = ("--speed", "25e-3", "--cycles", "1", "--quiet")
-#: A quicker one for checking that a rig is reusable (about 2.5 s).
-CHECK_RUN = ("--speed", "40e-3", "--cycles", "1", "--quiet")
+#: A short experiment: one cycle at 40 mm/s (about 2.5 s of motion).
+SHORT_RUN = ("--speed", "40e-3", "--cycles", "1", "--quiet")
 
 
 def spawn(faults: FaultPlan | None = None, delta_r8: float = 0.0) -> EmulatorProcess:

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import pytest
-from hil_host import CHECK_RUN, SHORT_RUN, Host, hil, recorded_samples, sent_samples, spawn
+from hil_host import SHORT_RUN, Host, hil, recorded_samples, sent_samples, spawn
 
 from hil.rig_emulator import FaultPlan
 
@@ -98,18 +98,19 @@ def test_fault_stops_records_exactly_and_leaves_the_rig_reusable(name: str, tmp_
         if case.clear_first:
             refused = out.parent / "refused"
             code, _, stderr = hil("run", "--real", "--port", emu.port, "--out", str(refused),
-                                  *CHECK_RUN)
+                                  *SHORT_RUN)
             assert code == 1 and "hil rig clear" in stderr and "ESTOP" in stderr
             assert not refused.exists()  # a refused run leaves no run directory
             assert hil("rig", "clear", "--port", emu.port)[0] == 0
         again = out.parent / "again"
         code, _, stderr = hil("run", "--real", "--port", emu.port, "--out", str(again),
-                              *CHECK_RUN)
+                              *SHORT_RUN)
         assert code == 0, stderr
         assert json.loads((again / "summary.json").read_text())["cycles_complete"] == 1
     log = emu.log
     meta = json.loads((out / "meta.json").read_text())
-    assert meta["aborted"] is not case.completes
+    assert meta["aborted"] is not case.completes and (out / "summary.json").is_file()
+    assert re.search(case.cause, meta["abort_reason"] or stderr)
     rows = recorded_samples(out)
     sent = sent_samples(log, rows[0])
     assert rows == sent[: len(rows)] and len(sent) - len(rows) <= case.in_flight
