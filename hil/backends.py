@@ -120,13 +120,15 @@ class Plant(ABC):
                 f"period); the rig's limit is {MAX_SPEED * 1e3:g} mm/s"
             )
 
-    def run(self, trajectory: Trajectory) -> Iterator[Sample]:
+    def run(self, trajectory: Trajectory,
+            check: Callable[[], None] = lambda: None) -> Iterator[Sample]:
         """Move to the trajectory's start (unrecorded), execute it, yield one sample per
-        period. Raises :class:`RunStoppedError`; then call :meth:`stop`."""
+        period. Raises :class:`RunStoppedError`; then call :meth:`stop`. ``check`` is
+        called during the unrecorded move and may raise to abandon it (Ctrl-C)."""
         if not self.active:
             raise RunStoppedError("activate the plant before running a trajectory")
         self.check(trajectory)
-        self.approach = self._move_to(float(trajectory.x_cmd[0]))
+        self.approach = self._move_to(float(trajectory.x_cmd[0]), check)
         for sample in self._run(trajectory):
             if abs(sample.force) > self.setup.force_limit:
                 yield Sample(sample.t, sample.x_cmd, sample.platen, sample.force, Status.FAULT,
@@ -172,7 +174,7 @@ class Plant(ABC):
     def _run(self, trajectory: Trajectory) -> Iterator[Sample]: ...
 
     @abstractmethod
-    def _move_to(self, x: float) -> float:
+    def _move_to(self, x: float, check: Callable[[], None]) -> float:
         """Move, unrecorded, to input position ``x`` (m) at APPROACH_SPEED; the distance."""
 
     @abstractmethod
@@ -256,11 +258,12 @@ class FmuPlant(Plant):
             platen, force = self._step(float(x), trajectory.period)
             yield Sample(float(t), float(x), platen, force, Status.OK, i)
 
-    def _move_to(self, x: float) -> float:
+    def _move_to(self, x: float, check: Callable[[], None]) -> float:
         if abs(x - self._x) <= START_TOLERANCE:
             return 0.0
         start, h = self._x, self.setup.period
         for xi in stroke_positions(start, x, APPROACH_SPEED, h)[1:]:
+            check()
             force = self._step(float(xi), h)[1]
             if abs(force) > self.setup.force_limit:
                 raise RunStoppedError(f"host force limit: |{force:.1f}| N during the move to "
@@ -348,12 +351,12 @@ class RigPlant(Plant):
             self._link = None
             raise
 
-    def _move_to(self, x: float) -> float:
+    def _move_to(self, x: float, check: Callable[[], None]) -> float:
         from hil.homing import move_to
         from hil.serial_link import RigError
 
         try:
-            distance = move_to(self._link, x, self._x0)
+            distance = move_to(self._link, x, self._x0, check=check)
         except RigError as exc:
             raise RunStoppedError(f"rig fault while moving to the start x = {x:.6g} m: "
                                   f"{exc}") from exc

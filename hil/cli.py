@@ -149,7 +149,10 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
         print(f"run directory: {rec.dir}", file=sys.stderr)
         bar = tqdm(total=s.cycles, unit="cycle", desc=f"hil run ({plant.name})",
                    disable=s.quiet)
-        samples = plant.run(trajectory)
+        # from here a signal only gets noted; the loop acts on it between samples, so the
+        # recording and the link are never cut mid-operation
+        guard.shield = True
+        samples = plant.run(trajectory, guard.check)
         try:
             for sample in samples:
                 rec.append(sample)

@@ -9,6 +9,7 @@ count 0 is x_open and encoder count 0 is the platen there.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 from hil import protocol as p
 from hil.experiment import stroke_positions
@@ -81,11 +82,12 @@ def home(link: SerialLink) -> float:
 
 
 def move_to(link: SerialLink, x_target: float, x_origin: float,
-            speed: float = APPROACH_SPEED) -> float:
+            speed: float = APPROACH_SPEED, check: Callable[[], None] = lambda: None) -> float:
     """Move the table to ``x_target`` (m) with a jerk-limited stroke at ``speed``; not recorded.
 
-    ``x_origin`` is the input position at step 0. Returns the distance moved (0 when the
-    rig is already within START_TOLERANCE).
+    ``x_origin`` is the input position at step 0; ``check`` is called every sample and may
+    raise to abandon the move (the rig then stops). Returns the distance moved (0 when
+    the rig is already within START_TOLERANCE).
     """
     sc = link.scaling
     x_now = sc.x(link.status.steps, x_origin)
@@ -93,9 +95,11 @@ def move_to(link: SerialLink, x_target: float, x_origin: float,
         return 0.0
     x = stroke_positions(x_now, x_target, speed, sc.period)[1:]
     points = [(sc.steps(float(xi), x_origin), p.NO_CHECK) for xi in x]
+    run = link.run_trajectory(points)
     try:
-        for _ in link.run_trajectory(points):
-            pass
+        for _ in run:
+            check()
     finally:
+        run.close()  # stops the rig if it is still moving
         link.finish_run()
     return abs(x_target - x_now)

@@ -35,7 +35,7 @@ class SignalGuard:
 
     def __init__(self) -> None:
         self.received: int | None = None
-        self.shield = False  # set while stopping and recording: signals only get noted
+        self.shield = False  # set once the run records: signals only get noted, check() acts
         self._previous: dict[int, object] = {}
 
     def _handle(self, signum: int, _frame: FrameType | None) -> None:
