@@ -4,9 +4,11 @@
 ``socket://host:port``, ``loop://``), runs a reader thread that decodes frames, sends
 heartbeats and watches the telemetry, and offers commands with acknowledgement and
 retransmission, the version handshake, streamed trajectories with flow control, a
-telemetry queue, stop and emergency stop. Any failure (watchdog timeout, disconnect,
-MCU reset, rig fault) is raised from the next :meth:`SerialLink.next_sample` call,
-after every sample received before it.
+telemetry queue, stop and emergency stop. Any failure (watchdog timeout, MCU stall,
+disconnect, MCU reset, rig fault) is raised from the next :meth:`SerialLink.next_sample`
+call, after every sample received before it; :meth:`SerialLink.finish_run` then returns
+the rest of the run up to the standstill, and :meth:`SerialLink.close` ends the session
+cleanly (docs/rig-protocol.md, sections 7, 10 and 11).
 """
 
 from __future__ import annotations
@@ -510,6 +512,7 @@ class SerialLink:
             raise ValueError("a trajectory needs at least one point")
         capacity, size = self.info.buffer_capacity, self.info.max_chunk_points
         sent = 0
+        self.drain()  # idle samples from before this run
 
         def top_up(executed: int) -> int:
             nonlocal sent
