@@ -117,6 +117,42 @@ def link_errors(link: dict) -> str:
     return ", ".join(parts)
 
 
+def _record(plant: Plant, trajectory: Trajectory, rec: RunRecorder, guard: SignalGuard,
+            s: RunSettings, counter: CycleCounter) -> tuple[str | None, Interrupted | None]:
+    """Run the trajectory into the recorder; stop and keep the rest on every ending.
+
+    Returns why the run ended early (None when complete) and the signal, if one ended it.
+    """
+    from tqdm import tqdm
+
+    reason, interrupted = None, None
+    print(f"run directory: {rec.dir}", file=sys.stderr)
+    bar = tqdm(total=s.cycles, unit="cycle", desc=f"hil run ({plant.name})", disable=s.quiet)
+    # from here a signal only gets noted; the loop acts on it between samples, so the
+    # recording and the link are never cut mid-operation
+    guard.shield = True
+    samples = plant.run(trajectory, guard.check)
+    try:
+        for sample in samples:
+            rec.append(sample)
+            if counter.update(sample.x_cmd):
+                bar.update(1)
+            guard.check()
+    except (RunStoppedError, TrajectoryError) as exc:
+        reason = str(exc)
+    except Interrupted as exc:
+        reason, interrupted = str(exc), exc
+    finally:
+        samples.close()
+        for sample in plant.stop():
+            rec.append(sample)
+        rec.annotate(plant=plant.describe(), link=plant.link_report())
+        if reason is not None:
+            rec.abort(reason)
+        bar.close()
+    return reason, interrupted
+
+
 def run(args: argparse.Namespace) -> int:
     s = resolve_settings(args)
     guard = SignalGuard()
@@ -140,38 +176,16 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
     meta = RunMeta.for_experiment(nominal, backend=plant.name, cycles=s.cycles,
                                   delta_r8=s.delta_r8, period=setup.period, speed=s.speed,
                                   profile=source, settings=s.record())
-    from tqdm import tqdm
-
-    x_open, x_tp = setup.stroke
-    counter = CycleCounter(x_open, x_tp)
-    reason, interrupted = None, None
-    with plant, RunRecorder(meta, s.out) as rec:
-        print(f"run directory: {rec.dir}", file=sys.stderr)
-        bar = tqdm(total=s.cycles, unit="cycle", desc=f"hil run ({plant.name})",
-                   disable=s.quiet)
-        # from here a signal only gets noted; the loop acts on it between samples, so the
-        # recording and the link are never cut mid-operation
-        guard.shield = True
-        samples = plant.run(trajectory, guard.check)
-        try:
-            for sample in samples:
-                rec.append(sample)
-                if counter.update(sample.x_cmd):
-                    bar.update(1)
-                guard.check()
-        except (RunStoppedError, TrajectoryError) as exc:
-            reason = str(exc)
-        except Interrupted as exc:
-            reason, interrupted = str(exc), exc
-        finally:
-            guard.shield = True  # stopping and recording must not be interrupted
-            samples.close()
-            for sample in plant.stop():
-                rec.append(sample)
-            rec.annotate(plant=plant.describe(), link=plant.link_report())
-            if reason is not None:
-                rec.abort(reason)
-            bar.close()
+    counter = CycleCounter(*setup.stroke)
+    plant.activate()  # before the run directory: a refused start leaves none
+    try:
+        with RunRecorder(meta, s.out) as rec:
+            try:
+                reason, interrupted = _record(plant, trajectory, rec, guard, s, counter)
+            finally:
+                plant.deactivate()  # end the session before the summary and the plots
+    finally:
+        plant.deactivate()
     summary = rec.summary
     if reason is not None:
         print(f"hil run: stopped: {reason}", file=sys.stderr)
