@@ -223,7 +223,10 @@ class FmuPlant(Plant):
 
         s = self.setup
         x_open = s.stroke[0]
-        self._dir = extract(str(ensure_fmu(self.fmu_path)), tempfile.mkdtemp(prefix="toggle_hil_"))
+        path = ensure_fmu() if self.fmu_path is None else Path(self.fmu_path)
+        if not path.is_file():
+            raise RunStoppedError(f"no FMU at {path}")
+        self._dir = extract(str(path), tempfile.mkdtemp(prefix="toggle_hil_"))
         start = {"preset": s.preset, "delta_r8": s.delta_r8, "x_cmd": x_open}
         if s.mu is not None:
             start["mu"] = s.mu

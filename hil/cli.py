@@ -66,7 +66,7 @@ def _backend(s: RunSettings) -> Plant:
         timeout = s.watchdog_ms * 1e-3 if s.watchdog_ms is not None else None
         return RigPlant(s.port, telemetry_timeout=timeout,
                         notify=lambda msg: print(f"hil run: {msg}", file=sys.stderr))
-    return FmuPlant()
+    return FmuPlant(s.fmu)
 
 
 def _guard_duration(trajectory: Trajectory, s: RunSettings) -> None:
@@ -251,6 +251,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="planned profile CSV (toggle plan --out); replayed forward and back, "
                         "with the preset, mold and friction it was planned for")
     p.add_argument("--out", type=Path, default=None, help="run directory (default runs/<time>)")
+    p.add_argument("--fmu", type=Path, default=None,
+                   help="the simulated rig's FMU (default build/ToggleClamp.fmu, built when "
+                        "missing or older than the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=run)

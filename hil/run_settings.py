@@ -25,7 +25,7 @@ from toggle.params import ParameterError, load_preset, tomllib
 RUN_DEFAULTS: dict[str, Any] = {
     "backend": "fmu", "port": None, "preset": "chang2021", "profile": None, "cycles": 3,
     "speed": None, "delta_r8": 0.0, "mu": None, "x_contact": None, "force_limit": 400.0,
-    "out": None, "watchdog_ms": None, "max_duration": 3600.0,
+    "out": None, "watchdog_ms": None, "max_duration": 3600.0, "fmu": None,
 }
 #: The load cell's range, N: a force limit above it could never trip.
 LOAD_CELL_RANGE = 500.0
@@ -34,7 +34,7 @@ BYTES_PER_SAMPLE = 52
 #: Profile settings that hil run applies to the simulated (or emulated) clamp.
 PROFILE_KEYS = ("preset", "x_contact", "mu", "delta_r8")
 
-_TEXT = ("backend", "port", "preset", "profile", "out")
+_TEXT = ("backend", "port", "preset", "profile", "out", "fmu")
 _INTEGER = ("cycles",)
 
 
@@ -55,6 +55,7 @@ class RunSettings:
     out: Path | None
     watchdog_ms: float | None
     max_duration: float
+    fmu: Path | None
     json: bool = False
     quiet: bool = False
     profile_sha256: str | None = None
@@ -129,6 +130,8 @@ def check(v: dict[str, Any]) -> None:
                              "without it the simulated rig runs and the port is not used")
     if v["backend"] == "real" and not v["port"]:
         raise ParameterError("--real needs --port (a device, a pty, socket://host:port)")
+    if v["fmu"] is not None and v["backend"] == "real":
+        raise ParameterError("--fmu selects the simulated rig's FMU; it cannot go with --real")
     if v["cycles"] < 1:
         raise bad("cycles", "must be at least 1")
     for key, lo, hi, why in (
@@ -190,7 +193,7 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
         from controllers.planner import plan_config
 
         values["x_contact"] = plan_config(values["preset"], mu=values["mu"]).x_contact
-    for key in ("profile", "out"):
+    for key in ("profile", "out", "fmu"):
         if values[key] is not None:
             values[key] = Path(values[key])
     return RunSettings(**values, json=args.json, quiet=args.quiet, profile_sha256=digest)

@@ -162,3 +162,15 @@ def test_a_replayed_plan_reproduces_the_planners_peak(tmp_path, capsys) -> None:
     assert forward.max() == pytest.approx(plan["peak_force"], rel=0.01)
     meta = json.loads((out / "meta.json").read_text())
     assert meta["settings"]["x_contact"] == pytest.approx(plan["x_contact"], rel=1e-9)
+
+
+def test_an_explicit_fmu_gives_the_same_run(tmp_path) -> None:
+    from hil.backends import default_fmu_path
+
+    argv = ["run", "--speed", "40e-3", "--cycles", "1", "--quiet"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 0
+    assert main([*argv, "--fmu", str(default_fmu_path()), "--out", str(tmp_path / "b")]) == 0
+    a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in "ab")
+    assert a["force_forward_max"] == b["force_forward_max"] and a["stroke"] == b["stroke"]
+    assert main([*argv, "--fmu", str(tmp_path / "none.fmu"), "--out", str(tmp_path / "c")]) == 1
+    assert not (tmp_path / "c").exists()
