@@ -28,6 +28,7 @@ from hil.run_settings import (
     resolve_settings,
 )
 from hil.samples import Trajectory, TrajectoryError
+from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset
 
 #: Printed rows of a run summary: (key, label, scale to the printed unit, unit).
@@ -48,9 +49,11 @@ def _trajectory(s: RunSettings, guard: SignalGuard) -> tuple[Trajectory, str]:
     period = RigSetup.period
     if s.profile is not None:
         forward = Trajectory.from_csv(s.profile, period=period)
-        return profile_cycles(forward, s.cycles), f"profile {s.profile}"
+        return _guarded(profile_cycles(forward, s.cycles), s), f"profile {s.profile}"
     if s.speed is not None:
         nominal = load_preset(s.preset)
+        x_open, x_tp = stroke_limits(nominal.lower)
+        _guard_duration(2 * s.cycles * (x_tp - x_open) / s.speed, s)  # before building it
         return reciprocating_trajectory(nominal, s.speed, s.cycles, period), (
             f"reciprocating at {s.speed * 1e3:g} mm/s")
     from controllers.planner import plan_default_profile
@@ -58,7 +61,12 @@ def _trajectory(s: RunSettings, guard: SignalGuard) -> tuple[Trajectory, str]:
     print(f"hil run: planning the default profile for {s.preset}", file=sys.stderr)
     forward = plan_default_profile(s.preset, period=period)
     guard.check()  # IPOPT swallows Ctrl-C: act on it before anything moves
-    return profile_cycles(forward, s.cycles), "planned (minimum peak input force)"
+    return _guarded(profile_cycles(forward, s.cycles), s), "planned (minimum peak input force)"
+
+
+def _guarded(trajectory: Trajectory, s: RunSettings) -> Trajectory:
+    _guard_duration(trajectory.duration, s)
+    return trajectory
 
 
 def _backend(s: RunSettings) -> Plant:
@@ -69,16 +77,16 @@ def _backend(s: RunSettings) -> Plant:
     return FmuPlant(s.fmu)
 
 
-def _guard_duration(trajectory: Trajectory, s: RunSettings) -> None:
-    """Refuse runs longer than --max-duration; announce long ones with their file size."""
-    duration = trajectory.duration
-    size_mb = len(trajectory) * BYTES_PER_SAMPLE / 1e6
+def _guard_duration(duration: float, s: RunSettings) -> None:
+    """Refuse runs longer than --max-duration (s); announce long ones with their file size."""
+    samples = round(duration / RigSetup.period) + 1
+    size_mb = samples * BYTES_PER_SAMPLE / 1e6
     text = f"{_duration_text(duration)} of motion, about {size_mb:.3g} MB of samples"
     if duration > s.max_duration:
         raise ParameterError(f"the run would take {text}, longer than --max-duration "
                              f"{s.max_duration:g} s; raise --max-duration to run it")
     if duration > ANNOUNCE_AFTER:
-        print(f"hil run: {len(trajectory)} samples, {text}", file=sys.stderr)
+        print(f"hil run: {samples} samples, {text}", file=sys.stderr)
 
 
 def _duration_text(seconds: float) -> str:
@@ -166,7 +174,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(s: RunSettings, guard: SignalGuard) -> int:
     trajectory, source = _trajectory(s, guard)
-    _guard_duration(trajectory, s)
     setup = RigSetup(preset=s.preset, delta_r8=s.delta_r8, mu=s.mu, x_contact=s.x_contact,
                      force_limit=s.force_limit)
     plant = _backend(s)

@@ -26,7 +26,10 @@ from hil import protocol as p
 from hil.mcu_model import McuModel, RigHardware, RigPhysics
 from hil.realtime import set_realtime
 
-RESYNC_AFTER = 0.1  # s behind schedule after which missed ticks are skipped, not caught up
+#: s behind schedule after which missed ticks are skipped, not caught up. Shorter lags (a
+#: loaded or paused virtual machine) are caught up: the emulated MCU's clock is its tick
+#: count, so its timestamps and watchdogs do not see the emulator's own scheduling.
+RESYNC_AFTER = 1.0
 TX_BACKLOG_MAX = 16_384  # bytes queued for a host that does not read; further frames drop
 
 
@@ -220,7 +223,7 @@ class RigEmulator:
             nominal += hung
             now = time.monotonic()
         t_us = round((nominal - self._origin) * 1e6)
-        for msg in self.mcu.tick(now, t_us):
+        for msg in self.mcu.tick(nominal, t_us):
             if isinstance(msg, p.Telemetry) and self._record:
                 self.log.sent_telemetry[(msg.boot_id, msg.sample)] = msg
             self._send(msg)

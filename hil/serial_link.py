@@ -36,6 +36,11 @@ DEFAULT_TELEMETRY_TIMEOUT = 0.1
 #: Largest allowed excess of the MCU's own clock between two received samples over their
 #: sample distance, s: a larger jump means the MCU missed periods (a stalled firmware).
 DEFAULT_CLOCK_SLACK = 2e-3
+#: A host thread that wakes this much later than it asked was itself not running (a loaded
+#: or paused machine, s): that time is not counted against the rig.
+HOST_LATE = 0.025
+#: At most this many command attempts are repeated, uncounted, for host lateness.
+LATE_RETRIES = 20
 #: Longest wait for the rig to reach a standstill after a stop, beyond the stop ramp, s.
 STANDSTILL_MARGIN = 1.0
 #: States in which the table may still move.
@@ -123,6 +128,7 @@ class LinkStats:
     max_arrival_gap: float = 0.0  # longest host-side silence between samples, s
     max_clock_excess: float = 0.0  # largest MCU-clock excess between received samples, s
     arrival_gaps_ms: list[int] = dataclasses.field(default_factory=lambda: [0] * 101)
+    host_late: int = 0  # times the reader woke more than HOST_LATE after it asked
     failed_at: float | None = None
     stop_sent_at: float | None = None
 
@@ -325,17 +331,24 @@ class SerialLink:
             seq = self._next_seq()
             pending = self._pending[seq] = _Pending()
             try:
-                for attempt in range(retries + 1):
-                    flags = p.FLAG_ACK_REQ | (p.FLAG_RETRY if attempt else 0)
+                attempt = late = 0
+                while True:
+                    flags = p.FLAG_ACK_REQ | (p.FLAG_RETRY if attempt or late else 0)
                     self._write(p.encode_message(msg, seq, flags))
+                    sent = time.monotonic()
                     if pending.event.wait(self.ack_timeout):
                         break
                     if isinstance(self._failure, LinkLostError):
                         raise self._failure
                     self.stats.retransmissions += 1
-                else:
-                    raise CommandError(f"{msg.TYPE.name} not acknowledged after "
-                                       f"{retries + 1} attempts")
+                    if (time.monotonic() - sent > self.ack_timeout + HOST_LATE
+                            and late < LATE_RETRIES):
+                        late += 1  # the host itself was not running: not the rig's fault
+                        continue
+                    attempt += 1
+                    if attempt > retries:
+                        raise CommandError(f"{msg.TYPE.name} not acknowledged after "
+                                           f"{retries + 1} attempts")
             finally:
                 del self._pending[seq]
         reply = pending.reply
@@ -583,13 +596,19 @@ class SerialLink:
         while not self._closing.is_set():
             now = time.monotonic()
             heartbeat_due = next_heartbeat if self.info and self.heartbeat_period else now + 1
-            wake = min(heartbeat_due, self._watchdog_deadline()) - now
+            wait = max(0.0, min(min(heartbeat_due, self._watchdog_deadline()) - now, 0.05))
             try:
-                data = self._read(max(0.0, min(wake, 0.05)))
+                data = self._read(wait)
             except (serial.SerialException, OSError) as exc:
                 self._fail(LinkLostError(f"{self.url} disconnected: {exc}"))
                 return
-            now = time.monotonic()
+            before, now = now, time.monotonic()
+            if now - before > wait + HOST_LATE:
+                # the reader was not running (a loaded or paused machine): the silence
+                # watchdog counts only time in which the host could have seen telemetry
+                self.stats.host_late += 1
+                self.stats.last_telemetry_rx = max(self.stats.last_telemetry_rx,
+                                                   now - (wait + HOST_LATE))
             for frame in self.decoder.feed(data):
                 self._dispatch(frame, now)
             if self.info and self.heartbeat_period and now >= next_heartbeat:
