@@ -460,7 +460,12 @@ class SerialLink:
         faults = p.Fault(status.faults)
         if (faults and self.clear_faults_on_close and not self.faults_at_open
                 and not faults & p.Fault.ESTOP):
-            self.command(p.ClearFault(), check=False, retries=2)
+            # the halt itself can hold the condition for a few periods (the force of
+            # stopping dead): retry while it settles
+            deadline = time.monotonic() + STANDSTILL_MARGIN
+            while (self.command(p.ClearFault(), check=False, retries=2).result
+                   == p.Result.FAULT_ACTIVE and time.monotonic() < deadline):
+                time.sleep(0.02)
         self.command(p.Bye(), check=False, retries=2)
 
     def _next_seq(self) -> int:
