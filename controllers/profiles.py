@@ -12,6 +12,7 @@ unlimited) and the jerk-limited S-curve, each stretched to a given duration.
 from __future__ import annotations
 
 import csv
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -167,11 +168,20 @@ def predict(profile: Profile, cfg: PlantConfig, period: float = 1e-3) -> Profile
                           np.asarray(out.platen_position, float) * np.ones_like(t))
 
 
-def write_profile_csv(path: str | Path, samples: ProfileSamples) -> Path:
-    """Write the samples with the units in the header (:data:`CSV_COLUMNS`)."""
+def write_profile_csv(path: str | Path, samples: ProfileSamples,
+                      settings: dict[str, str | float | None] | None = None) -> Path:
+    """Write the samples with the units in the header (:data:`CSV_COLUMNS`).
+
+    ``settings`` (SI) go first as ``# key = value`` lines (TOML values; None is left
+    out): what the plan was made for, so a replay (``hil run --profile``) clamps the
+    same mold with the same friction (:func:`hil.samples.profile_settings` reads them).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="", encoding="utf-8") as fh:
+        for key, value in (settings or {}).items():
+            if value is not None:
+                fh.write(f"# {key} = {json.dumps(value)}\n")
         writer = csv.writer(fh)
         writer.writerow(CSV_COLUMNS)
         writer.writerows([f"{value:.12g}" for value in row] for row in zip(*samples))
@@ -183,11 +193,12 @@ def read_profile_csv(path: str | Path) -> ProfileSamples:
     path = Path(path)
     try:
         with path.open(newline="", encoding="utf-8") as fh:
-            header = [h.strip() for h in next(csv.reader(fh), [])]
+            lines = [ln for ln in fh if ln.strip() and not ln.startswith("#")]
+        header = [h.strip() for h in next(csv.reader(lines[:1]), [])]
         missing = [c for c in CSV_COLUMNS if c not in header]
         if missing:
             raise ProfileError(f"profile {path} lacks column(s) {missing}")
-        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2,
+        data = np.loadtxt(lines[1:], delimiter=",", ndmin=2,
                           usecols=[header.index(c) for c in CSV_COLUMNS])
     except (OSError, ValueError) as exc:
         if isinstance(exc, ProfileError):

@@ -64,7 +64,13 @@ def run(args: argparse.Namespace) -> int:
         plan = planner.solve(args.duration or default_duration(planner), args.objective)
     base = baselines(cfg, limits, plan.duration)
     if args.out:
-        write_profile_csv(args.out, plan.samples)
+        write_profile_csv(args.out, plan.samples, {
+            "preset": args.preset, "x_contact": cfg.x_contact, "mu": cfg.friction,
+            "objective": plan.objective, "duration": plan.duration,
+            "force_limit": args.force_limit if args.min_time else None,
+            "v_max": limits.velocity, "a_max": limits.acceleration, "j_max": limits.jerk,
+            "torque_max": limits.torque,
+        })
     peak = plan.peak_force
     trap, scurve = base["trapezoidal"].peak_force, base["s_curve"].peak_force
     result = {
