@@ -31,6 +31,7 @@ from controllers.profiles import (
     s_curve,
     write_profile_csv,
 )
+from hil.samples import profile_settings
 from toggle.cli import main
 from toggle.elastics import ClampingError
 from toggle.fmu_build import build_fmu
@@ -294,7 +295,10 @@ def test_cli_writes_the_profile_and_the_json(tmp_path, capsys):
                 "reduction_percent", "solve_time", "iterations"):
         assert math.isfinite(report[key])
     assert report["reduction_percent"] > 0 and report["s_curve_reduction_percent"] > 0
-    assert out.read_text().splitlines()[0] == ",".join(CSV_COLUMNS)
+    lines = out.read_text().splitlines()
+    header = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
+    assert lines[header] == ",".join(CSV_COLUMNS)
+    assert profile_settings(out)["x_contact"] == pytest.approx(report["x_contact"], rel=1e-12)
     samples = read_profile_csv(out)
     assert samples.peak_force == pytest.approx(report["peak_force"], rel=1e-9)
     copy = write_profile_csv(tmp_path / "copy.csv", samples)
