@@ -106,12 +106,12 @@ def test_estop_repeats_reuse_the_seq_and_carry_retry() -> None:
 def test_a_dead_rig_is_left_without_a_stop_storm() -> None:
     """A rig that stopped answering gets STOP 3 times, then ESTOP 3 times, and no BYE
     (the MCU's heartbeat watchdog ends that session)."""
-    emulator = RigEmulator(flat, faults=FaultPlan(stall_at=0.0, stall_for=0.6))
+    emulator = RigEmulator(flat, faults=FaultPlan(stall_at=0.02, stall_for=0.6))
     link = SerialLink(emulator.start(), telemetry_timeout=5.0)
     try:
         link.open()
         link.send_chunk(0, [(i, p.NO_CHECK) for i in range(30)], final=True)
-        link.start()  # the MCU hangs from its first period on
+        link.start()  # the MCU hangs 20 ms later (its START acknowledged)
         time.sleep(0.05)
         closing = time.monotonic()
         link.close()
