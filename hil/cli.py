@@ -200,6 +200,10 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
         print(json.dumps({"run_dir": str(rec.dir), "samples": rec.count, **summary}, indent=2))
     else:
         _print_summary(summary, rec.dir, rec.count, s.cycles, plant.name)
+    if interrupted is None and guard.received is not None:  # while summarising: after the run
+        interrupted = Interrupted(guard.received)
+        print(f"hil run: {interrupted} after the run completed; its record is whole",
+              file=sys.stderr)
     if interrupted is not None:
         return interrupted.exit_code
     if reason is None and link_errors(summary.get("link") or {}):
