@@ -221,7 +221,11 @@ def _model() -> ca.Function:
 
 
 def _dims_vector(dims: HalfDims | Any) -> Any:
-    return np.array(dims.as_tuple()) if isinstance(dims, HalfDims) else dims
+    if isinstance(dims, HalfDims):
+        return np.array(dims.as_tuple())
+    if isinstance(dims, tuple) and is_symbolic(*dims):  # eight symbolic dimensions
+        return ca.vertcat(*dims)
+    return dims
 
 
 def asymmetry(

@@ -192,7 +192,11 @@ def motion_terms(x: Any, dims: HalfDims) -> tuple[Any, Any, Any]:
     No assembly check: symbolic callers (the plant, the planner) keep x inside
     :func:`assemblable_range` themselves.
     """
-    p = np.array(dims.as_tuple())
+    values = _values(dims)
+    if is_symbolic(*values):  # symbolic dimensions (the native FMU's parameters)
+        L, dL, d2L, _ = _motion_function()(x, ca.vertcat(*values))
+        return L, dL, d2L
+    p = np.array(values)
     if is_symbolic(x):
         L, dL, d2L, _ = _motion_function()(x, p)
         return L, dL, d2L
