@@ -1,4 +1,8 @@
-"""``toggle build-fmu``: write build/ToggleClamp.fmu (FMI 2.0 Co-Simulation)."""
+"""``toggle build-fmu``: write build/ToggleClamp.fmu (FMI 2.0 Co-Simulation).
+
+``--native`` writes build/ToggleClampNative.fmu instead: the plant generated
+to C, no Python at run time (:mod:`toggle.native_fmu`).
+"""
 
 from __future__ import annotations
 
@@ -9,11 +13,20 @@ from toggle.fmu_build import build_fmu
 
 
 def run(args: argparse.Namespace) -> int:
-    print(build_fmu(args.out))
+    if args.native:
+        from toggle.native_fmu import build_native_fmu
+
+        print(build_native_fmu(args.out, args.preset))
+    else:
+        print(build_fmu(args.out))
     return 0
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("build-fmu", help="build the FMI 2.0 Co-Simulation FMU into build/")
     p.add_argument("--out", type=Path, default=Path("build"), help="output folder (default build)")
+    p.add_argument("--native", action="store_true",
+                   help="build ToggleClampNative.fmu: generated C, no Python at run time")
+    p.add_argument("--preset", default="chang2021",
+                   help="preset of the native FMU (default chang2021)")
     p.set_defaults(handler=run)
