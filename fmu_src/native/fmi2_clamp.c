@@ -59,15 +59,22 @@ static uint64_t checksum(const State *s) {
     return h;
 }
 
+/* Log a formatted message; it is passed as the logger's format with every % doubled,
+ * as loggers that do not read varargs (fmpy's) print the format as it is. */
 static void logf_(Instance *c, fmi2Status status, const char *fmt, ...) {
-    char msg[512];
+    char msg[512], escaped[1024];
+    size_t j = 0;
     va_list ap;
-    if (!c->logging && status < fmi2Error) return;
+    if (!c->cb.logger || (!c->logging && status < fmi2Error)) return;
     va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
-    if (c->cb.logger) c->cb.logger(c->cb.componentEnvironment, c->name, status,
-                                   status >= fmi2Error ? "logStatusError" : "", "%s", msg);
+    for (size_t i = 0; msg[i] && j + 2 < sizeof escaped; i++) {
+        if (msg[i] == '%') escaped[j++] = '%';
+        escaped[j++] = msg[i];
+    }
+    escaped[j] = '\0';
+    c->cb.logger(c->cb.componentEnvironment, c->name, status, "logStatusError", escaped);
 }
 
 /* One generated function evaluated on this instance's work arrays; outputs go to y. */
@@ -227,26 +234,31 @@ static fmi2Status initialise(Instance *c) {
     return fmi2OK;
 }
 
-/* exp(A h) of the 2x2 drive lag A = [0 1; -w^2 -2 zeta w]: scaling, Taylor, squaring. */
+/* exp(A h) of the drive lag A = [0 1; -w^2 -2 zeta w] in closed form, to a few ulps:
+ * exp(A h) = e^m (c I + s (A h - m I)), m = -zeta w h, q^2 = (w h)^2 (zeta^2 - 1),
+ * c = cosh q, s = sinh(q) / q (cos and sin for q^2 < 0; their series for small |q|). */
 static void lag_expm(double w, double zeta, double h, double p[4]) {
-    double a[4] = {0.0, h, -w * w * h, -2.0 * zeta * w * h}, t[4], q[4];
-    double norm = fmax(fabs(a[0]) + fabs(a[1]), fabs(a[2]) + fabs(a[3]));
-    int squarings = 0;
-    while (norm > 0.25) { norm *= 0.5; squarings++; }
-    for (int i = 0; i < 4; i++) a[i] = ldexp(a[i], -squarings);
-    p[0] = 1.0; p[1] = 0.0; p[2] = 0.0; p[3] = 1.0;
-    memcpy(t, p, sizeof t);
-    for (int k = 1; k <= 18; k++) {  /* 0.25^18 / 18! is far below the double epsilon */
-        q[0] = (t[0] * a[0] + t[1] * a[2]) / k; q[1] = (t[0] * a[1] + t[1] * a[3]) / k;
-        q[2] = (t[2] * a[0] + t[3] * a[2]) / k; q[3] = (t[2] * a[1] + t[3] * a[3]) / k;
-        memcpy(t, q, sizeof t);
-        for (int i = 0; i < 4; i++) p[i] += t[i];
+    double wh = w * h, q2 = wh * wh * (zeta - 1.0) * (zeta + 1.0), c, s;
+    if (fabs(q2) < 1e-2) {
+        double term = 1.0;
+        c = 1.0; s = 1.0;
+        for (int k = 1; k <= 8; k++) {  /* q2^k / (2k)! and q2^k / (2k+1)! */
+            term *= q2 / ((2.0 * k - 1.0) * (2.0 * k));
+            c += term;
+            s += term / (2.0 * k + 1.0);
+        }
+    } else if (q2 > 0) {
+        double q = sqrt(q2);
+        c = cosh(q); s = sinh(q) / q;
+    } else {
+        double q = sqrt(-q2);
+        c = cos(q); s = sin(q) / q;
     }
-    while (squarings--) {
-        q[0] = p[0] * p[0] + p[1] * p[2]; q[1] = p[0] * p[1] + p[1] * p[3];
-        q[2] = p[2] * p[0] + p[3] * p[2]; q[3] = p[2] * p[1] + p[3] * p[3];
-        memcpy(p, q, sizeof q);
-    }
+    double e = exp(-zeta * wh);
+    p[0] = e * (c + s * zeta * wh);
+    p[1] = e * s * h;
+    p[2] = -e * s * w * wh;
+    p[3] = e * (c - s * zeta * wh);
 }
 
 /* The drive's motion after a step h toward u (toggle.plant.follow). */

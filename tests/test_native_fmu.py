@@ -1,0 +1,356 @@
+"""ToggleClampNative.fmu: the plant generated to C behind a small FMI 2.0 wrapper.
+
+Checked against the pythonfmu ToggleClamp (same variables; every output to 1e-9
+relative over a closing and opening stroke with mold contact), against
+:func:`toggle.plant.follow` (variable steps), for its state, reset and error
+handling, and in three masters: fmpy, libcosim (two instances) and a C host
+compiled here that loads the binary with dlopen and no Python environment.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import textwrap
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import extract, read_model_description, simulate_fmu
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2Error
+from fmu_support import close_slave, run_libcosim, validator_problems
+
+from toggle.fmu_build import build_fmu
+from toggle.fmu_host import release_native_runtime, start_slave
+from toggle.kinematics import stroke_limits
+from toggle.native_fmu import build_native_fmu, fmi2_headers, slave_variables
+from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
+
+VARIABLES = slave_variables()[0]
+OUTPUTS = list(PlantOutputs._fields)
+X_OPEN, X_TOGGLE = stroke_limits(configure("chang2021").mechanism.lower)
+X_CONTACT = X_TOGGLE - 1e-3  # m: mold contact 1 mm of crosshead travel before the toggle
+REL = 1e-9
+
+
+@pytest.fixture(scope="module")
+def native(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_native_fmu(tmp_path_factory.mktemp("native"))
+
+
+@pytest.fixture(scope="module")
+def unzipped(native: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return Path(extract(str(native), str(tmp_path_factory.mktemp("native_unzipped"))))
+
+
+@pytest.fixture(scope="module")
+def python_fmu(tmp_path_factory: pytest.TempPathFactory):
+    """The pythonfmu ToggleClamp, extracted; its runtime released after the module."""
+    fmu = build_fmu(tmp_path_factory.mktemp("pythonfmu"))
+    directory = Path(extract(str(fmu), str(tmp_path_factory.mktemp("pythonfmu_unzipped"))))
+    yield directory
+    release_native_runtime(directory)
+
+
+def _outputs(slave, refs) -> list[float]:
+    return slave.getReal([refs[n] for n in OUTPUTS])
+
+
+def _run(slave, refs, steps, t: float = 0.0) -> list[list[float]]:
+    out = []
+    for x_cmd, h in steps:
+        slave.setReal([refs["x_cmd"]], [x_cmd])
+        slave.doStep(t, h)
+        t += h
+        out.append(_outputs(slave, refs))
+    return out
+
+
+def _reference(x, v, a, x_contact: float, **errors: float) -> PlantOutputs:
+    """plant_outputs (numpy) of chang2021 with these parameters; floats for float input."""
+    cfg = configure("chang2021", x_contact=x_contact, errors=errors)
+    out = plant_outputs(x, v, a, cfg)
+    return PlantOutputs(*map(float, out)) if np.ndim(x) == 0 else out
+
+
+# ---- the FMU as a file ----------------------------------------------------------------------
+
+
+def test_fmpy_and_fmutool_find_no_problem(native: Path):
+    assert validator_problems(native) == []
+
+
+def test_variables_are_the_pythonfmu_slaves(native: Path):
+    md = read_model_description(str(native))
+    by_name = {v.name: v for v in md.modelVariables}
+    assert list(by_name) == [v.name for v in VARIABLES]
+    for spec in VARIABLES:
+        v = by_name[spec.name]
+        assert (v.causality, v.description) == (spec.causality, spec.description)
+        if not spec.is_string:
+            assert v.unit == spec.unit
+        if spec.start is not None:
+            assert (v.start if spec.is_string else float(v.start)) == spec.start
+    assert [u.variable.name for u in md.outputs] == OUTPUTS
+    assert not md.coSimulation.needsExecutionTool
+    assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
+
+
+def test_archive_has_the_sources_to_rebuild_and_no_fmi_headers(native: Path):
+    names = set(zipfile.ZipFile(native).namelist())
+    assert {"binaries/linux64/ToggleClampNative.so", "sources/buildDescription.xml",
+            "sources/fmi2_clamp.c", "sources/clamp_model.c", "sources/clamp_model.h",
+            "sources/clamp_model_data.h"} <= names
+    assert not any("fmi2Functions" in n or "win64" in n for n in names)
+    undefined = subprocess.run(["nm", "-D", "--undefined-only", str(_library(native))],
+                               capture_output=True, text=True, check=True).stdout
+    assert "Py" not in undefined and "python" not in undefined.lower()
+
+
+def _library(native: Path) -> Path:
+    folder = native.parent / "lib"
+    folder.mkdir(exist_ok=True)
+    zipfile.ZipFile(native).extract("binaries/linux64/ToggleClampNative.so", folder)
+    return folder / "binaries" / "linux64" / "ToggleClampNative.so"
+
+
+# ---- agreement with the pythonfmu FMU ------------------------------------------------------
+
+STOP_TIME = 1.0  # s: close in 0.4 s, hold, open in 0.4 s, hold
+
+
+def _stroke() -> np.ndarray:
+    t = np.linspace(0.0, STOP_TIME, 1001)
+    smooth = lambda s: s**3 * (10 - 15 * s + 6 * s**2)  # noqa: E731
+    s_close, s_open = np.clip(t / 0.4, 0, 1), np.clip((t - 0.5) / 0.4, 0, 1)
+    x = X_OPEN + (X_TOGGLE - X_OPEN) * (smooth(s_close) - smooth(s_open))
+    return np.array(list(zip(t, x)), dtype=[("time", float), ("x_cmd", float)])
+
+
+def _both(unzipped: Path, python_fmu: Path, **start: float) -> list:
+    start = {"x_cmd": X_OPEN, "x_contact": X_CONTACT, **start}
+    return [simulate_fmu(str(d), stop_time=STOP_TIME, step_size=1e-3, input=_stroke(),
+                         start_values=start, output=OUTPUTS) for d in (unzipped, python_fmu)]
+
+
+@pytest.mark.parametrize("delta_r8", [0.0, 0.5e-3])
+def test_native_and_pythonfmu_agree_over_the_stroke(unzipped: Path, python_fmu: Path,
+                                                    delta_r8: float):
+    native, python = _both(unzipped, python_fmu, delta_r8=delta_r8)
+    for name in OUTPUTS:
+        want = python[name]
+        np.testing.assert_allclose(native[name], want, rtol=REL,
+                                   atol=REL * 1e-3 * float(np.max(np.abs(want))), err_msg=name)
+    assert native["clamp_force"].max() > 100.0  # N: the mold was reached
+    assert native["x"][-1] == pytest.approx(X_OPEN, abs=1e-6)  # and left again
+    assert (abs(native["asymmetry"]).max() > 1e-4) == (delta_r8 != 0)
+
+
+def test_lagging_drive_agrees_to_rounding_and_the_plant_exactly(unzipped: Path,
+                                                                python_fmu: Path):
+    """With a 20 Hz drive lag the two FMUs' motions differ by rounding only (their ZOH
+    matrices by an ulp: closed form here, scipy's expm there); the input force is so
+    sensitive to the velocity near standstill (the unequal halves' friction sign has a
+    1e-6 m/s width) that such differences reach 1e-7 N, so the outputs are checked
+    against the plant at the native FMU's own motion."""
+    native, python = _both(unzipped, python_fmu, delta_r8=0.5e-3, drive_bandwidth=20.0)
+    for name in ("x", "velocity", "acceleration"):
+        scale = float(np.max(np.abs(python[name])))
+        np.testing.assert_allclose(native[name], python[name], rtol=0, atol=1e-12 * scale)
+    want = _reference(native["x"], native["velocity"], native["acceleration"], X_CONTACT,
+                      r8=0.5e-3)
+    for name in OUTPUTS:  # numpy's evaluation of the plant against CasADi's: 1e-9 of peak
+        got, ref = native[name], np.broadcast_to(getattr(want, name), native[name].shape)
+        if name == "mechanical_advantage":  # 1/|q| is ill-conditioned at the toggle: use q
+            got, ref = 1.0 / got, 1.0 / ref
+        np.testing.assert_allclose(got, ref, rtol=0, atol=REL * float(np.max(np.abs(ref))),
+                                   err_msg=name)
+    assert native["clamp_force"].max() > 100.0
+
+
+@pytest.mark.parametrize("bandwidth", [0.0, 20.0])
+def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: float):
+    steps = [(X_OPEN + 1e-3, 1e-3), (X_OPEN + 2e-3, 1e-4), (X_OPEN + 2e-2, 3e-2),
+             (X_CONTACT + 5e-4, 0.2), (X_CONTACT + 5e-4, 7e-4), (X_OPEN, 1e-2)]
+    slave, refs = start_slave(unzipped, "steps", {"x_cmd": X_OPEN, "x_contact": X_CONTACT,
+                                                  "drive_bandwidth": bandwidth})
+    out = _run(slave, refs, steps)
+    close_slave(slave)
+    drive = DriveState(X_OPEN, 0.0, 0.0)
+    for (x_cmd, h), got in zip(steps, out, strict=True):
+        drive = follow(drive, x_cmd, h, bandwidth, 0.7)
+        assert got[:3] == pytest.approx(tuple(drive), rel=1e-12, abs=1e-12)  # a: w^2 (u - x)
+        assert got == pytest.approx(list(_reference(*got[:3], X_CONTACT)), rel=REL, abs=1e-12)
+
+
+# ---- state, reset, errors -------------------------------------------------------------------
+
+APPROACH = [(X_OPEN + k * 4.2e-3, 1e-3) for k in range(1, 14)]  # ends past the contact
+
+
+def test_state_get_set_serialize_and_reset_reproduce_outputs(unzipped: Path):
+    slave, refs = start_slave(unzipped, "state", {"x_cmd": X_OPEN, "x_contact": X_CONTACT,
+                                                  "drive_bandwidth": 20.0})
+    _run(slave, refs, APPROACH[:5])
+    state = slave.getFMUstate()
+    saved = slave.serializeFMUstate(state)
+    first = _run(slave, refs, APPROACH[5:], t=5e-3)
+    slave.setFMUstate(state)
+    second = _run(slave, refs, APPROACH[5:], t=5e-3)
+    restored = slave.deSerializeFMUstate(saved)
+    slave.setFMUstate(restored)
+    third = _run(slave, refs, APPROACH[5:], t=5e-3)
+    corrupt = bytearray(saved)
+    corrupt[40] ^= 1
+    with pytest.raises(FMICallException):
+        slave.deSerializeFMUstate(bytes(corrupt))
+    slave.reset()
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    for name, value in {"x_cmd": X_OPEN, "x_contact": X_CONTACT, "drive_bandwidth": 20.0}.items():
+        slave.setReal([refs[name]], [value])
+    slave.exitInitializationMode()
+    fourth = _run(slave, refs, APPROACH)[5:]
+    close_slave(slave, state, restored)
+    assert first == second == third == fourth
+    assert first[0][OUTPUTS.index("velocity")] != 0  # the saved state had internal motion
+
+
+@pytest.mark.parametrize(
+    ("start", "named"),
+    [
+        ({"delta_r4b": 1.0}, "triangular link 4"),
+        ({"x_contact": -1.0}, "x_contact"),
+        ({"m_platen": math.inf}, "m_platen"),
+        ({"mu": math.inf}, "mu"),
+        ({"mu": -0.2}, "mu"),
+        ({"delta_r8": math.nan}, "delta_r8"),
+        ({"x_cmd": 0.5}, "x = 0.5"),
+        ({"delta_r7b": 1.0}, "upper"),
+        ({"drive_bandwidth": 10.0, "drive_damping": -1.0}, "drive_damping"),
+    ],
+)
+def test_bad_parameter_fails_initialisation_with_a_message(unzipped: Path, start, named):
+    log: list[tuple[int, str]] = []
+    with pytest.raises(FMICallException) as failed:
+        start_slave(unzipped, "bad", start, log=lambda s, text: log.append((s, text)))
+    assert failed.value.status == fmi2Error
+    errors = [text for status, text in log if status == fmi2Error]
+    assert errors and errors[0].startswith("initialisation failed") and named in errors[0], log
+
+
+def test_a_preset_other_than_the_built_one_is_refused(unzipped: Path):
+    with pytest.raises(FMICallException) as refused:
+        start_slave(unzipped, "preset", {"preset": "dong2022"})
+    assert refused.value.status == fmi2Error
+
+
+@pytest.mark.parametrize("x_cmd", [0.09, -0.09, math.nan])
+def test_input_outside_the_stroke_is_an_error_that_changes_nothing(unzipped: Path, x_cmd):
+    log: list[tuple[int, str]] = []
+    slave, refs = start_slave(unzipped, "range", {"x_cmd": X_OPEN},
+                              log=lambda s, text: log.append((s, text)))
+    before = _run(slave, refs, APPROACH[:2])[-1]
+    slave.setReal([refs["x_cmd"]], [x_cmd])
+    with pytest.raises(FMICallException) as refused:
+        slave.doStep(2e-3, 1e-3)
+    after = _outputs(slave, refs)
+    again = _run(slave, refs, APPROACH[2:3], t=2e-3)[-1]
+    close_slave(slave)
+    assert refused.value.status == fmi2Error and after == before
+    assert any("outside the assemblable range" in text for s, text in log if s == fmi2Error)
+    assert again[0] == APPROACH[2][0]
+
+
+# ---- other masters --------------------------------------------------------------------------
+
+
+def test_two_instances_run_in_libcosim(native: Path, tmp_path: Path):
+    x = X_CONTACT + 5e-4
+    initial = [(name, var, value) for name in ("nominal", "long_r8")
+               for var, value in (("x_cmd", x), ("x_contact", X_CONTACT))]
+    result = run_libcosim(tmp_path, {"nominal": native, "long_r8": native},
+                          {n: OUTPUTS for n in ("nominal", "long_r8")},
+                          initial=[*initial, ("long_r8", "delta_r8", 0.5e-3)], stop_time=0.05)
+    assert result["ok"]
+    for name, errors in (("nominal", {}), ("long_r8", {"r8": 0.5e-3})):
+        want = _reference(x, 0.0, 0.0, X_CONTACT, **errors)
+        got = result["last"][name]
+        assert [got[n] for n in OUTPUTS] == pytest.approx(list(want), rel=REL, abs=1e-12)
+    assert result["last"]["long_r8"]["input_force"] != result["last"]["nominal"]["input_force"]
+
+
+C_HOST = textwrap.dedent(
+    r"""
+    #include <dlfcn.h>
+    #include <stdio.h>
+    #include <stdlib.h>
+    #include "fmi2Functions.h"
+
+    static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
+                       fmi2String category, fmi2String message, ...) {
+        (void)env; (void)category;
+        fprintf(stderr, "%s [%d]: %s\n", name, (int)status, message);
+    }
+    #define LOAD(f) f##TYPE *f = (f##TYPE *)dlsym(lib, #f); if (!f) return 3
+    int main(int argc, char **argv) {
+        if (argc != 8) return 2;
+        void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+        if (!lib) { fprintf(stderr, "%s\n", dlerror()); return 3; }
+        LOAD(fmi2Instantiate); LOAD(fmi2SetupExperiment); LOAD(fmi2EnterInitializationMode);
+        LOAD(fmi2ExitInitializationMode); LOAD(fmi2SetReal); LOAD(fmi2GetReal);
+        LOAD(fmi2DoStep); LOAD(fmi2Terminate); LOAD(fmi2FreeInstance);
+        fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
+        fmi2ValueReference x_cmd = atoi(argv[4]), x_contact = atoi(argv[5]),
+                           force = atoi(argv[6]), clamp = atoi(argv[7]);
+        double x0 = -3.4386e-3, x1 = 0.051, xc = 0.050566, y[2];
+        fmi2Component c = fmi2Instantiate("host", fmi2CoSimulation, argv[2], argv[3], &cb,
+                                          fmi2False, fmi2False);
+        if (!c) return 4;
+        if (fmi2SetupExperiment(c, fmi2False, 0, 0, fmi2False, 0) != fmi2OK) return 5;
+        if (fmi2EnterInitializationMode(c) != fmi2OK) return 5;
+        if (fmi2SetReal(c, &x_cmd, 1, &x0) != fmi2OK) return 5;
+        if (fmi2SetReal(c, &x_contact, 1, &xc) != fmi2OK) return 5;
+        if (fmi2ExitInitializationMode(c) != fmi2OK) return 5;
+        for (int k = 1; k <= 500; k++) {
+            double x = x0 + (x1 - x0) * k / 500.0;
+            if (fmi2SetReal(c, &x_cmd, 1, &x) != fmi2OK) return 6;
+            if (fmi2DoStep(c, (k - 1) * 1e-3, 1e-3, fmi2True) != fmi2OK) return 6;
+        }
+        fmi2ValueReference out[2] = {force, clamp};
+        if (fmi2GetReal(c, out, 2, y) != fmi2OK) return 7;
+        printf("%.17g %.17g\n", y[0], y[1]);
+        if (fmi2Terminate(c) != fmi2OK) return 8;
+        fmi2FreeInstance(c);
+        return dlclose(lib) == 0 ? 0 : 9;
+    }
+    """
+)
+
+
+def test_a_c_host_runs_the_binary_without_python(native: Path, unzipped: Path, tmp_path: Path):
+    source, host = tmp_path / "host.c", tmp_path / "host"
+    source.write_text(C_HOST)
+    subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(fmi2_headers()),
+                    str(source), "-o", str(host), "-ldl"], check=True, capture_output=True)
+    md = read_model_description(str(unzipped))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith("PYTHON") and k not in ("LD_PRELOAD", "LD_LIBRARY_PATH",
+                                                        "VIRTUAL_ENV")}
+    env["PATH"] = "/usr/bin:/bin"
+    run = subprocess.run(
+        [str(host), str(_library(native)), md.guid, (unzipped / "resources").as_uri(),
+         *(str(refs[n]) for n in ("x_cmd", "x_contact", "input_force", "clamp_force"))],
+        capture_output=True, text=True, env=env, timeout=30)
+    assert run.returncode == 0, run.stderr
+    force, clamp = map(float, run.stdout.split())
+    drive = DriveState(-3.4386e-3, 0.0, 0.0)
+    for k in range(1, 501):  # the host's ramp, in the same floating-point operations
+        drive = follow(drive, -3.4386e-3 + (0.051 + 3.4386e-3) * k / 500.0, 1e-3)
+    want = _reference(*drive, 0.050566)
+    assert (force, clamp) == pytest.approx((want.input_force, want.clamp_force), rel=1e-12)
+    assert clamp > 0
