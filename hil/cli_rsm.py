@@ -67,9 +67,13 @@ def run(args: argparse.Namespace) -> int:
         payload["printed_equations"] = _printed_comparison(paper)
     cos8 = toggle_cos_theta8(load_preset(args.preset)) if args.preset else None
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "rsm.json").write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
-        payload["figures"] = [str(p) for p in plot_rsm(fit, args.out, cos_theta8=cos8)]
+        try:
+            args.out.mkdir(parents=True, exist_ok=True)
+            (args.out / "rsm.json").write_text(json.dumps(payload, indent=2) + "\n",
+                                               encoding="utf-8")
+            payload["figures"] = [str(p) for p in plot_rsm(fit, args.out, cos_theta8=cos8)]
+        except OSError as exc:
+            raise RsmError(f"--out {args.out}: cannot write there ({exc.strerror})") from exc
     if args.json:
         print(json.dumps(payload, indent=2))
         return 0

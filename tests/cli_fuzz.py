@@ -1,0 +1,109 @@
+"""Generated command lines from an argparse definition, and the contract every answer keeps.
+
+:func:`invocations` walks a parser's sub-commands and options and draws command lines
+with bad and edge values (0, negative, NaN, inf, huge, empty, wrong type, unwritable
+paths, missing and malformed files); :func:`check_answer` runs one in-process and asserts
+what a user may rely on: no traceback, exit code 0, 1 (runtime failure) or 2 (usage),
+an error named on one line, and no output left behind by a refused command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from hypothesis import strategies as st
+
+NUMBERS = ["0", "-1", "1", "3", "nan", "inf", "-inf", "1e308", "-0.5e-3", "0.5e-3", "25e-3",
+           "", "abc", "1e-300", "2", "0.999"]
+TEXTS = ["", "chang2021", "nope", "/tmp", "li_micro/6", "lin2003_sm55", "loop://"]
+
+
+def path_values(root: Path) -> list[str]:
+    """Paths a user gets wrong: unwritable, under a regular file, missing, malformed, a dir."""
+    regular = root / "regular.txt"
+    regular.write_text("not a directory\n")
+    malformed = root / "malformed.toml"
+    malformed.write_text("this is = = not toml\n\x00")
+    csv = root / "bad.csv"
+    csv.write_text("time [s],position [m]\n0,abc\n")
+    return ["/sys/toggle/x", str(regular / "sub"), str(root / "missing.csv"), str(malformed),
+            str(csv), str(root), ""]
+
+
+def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            return dict(action.choices)
+    return {}
+
+
+def commands(parser: argparse.ArgumentParser, prefix: tuple[str, ...] = ()
+             ) -> dict[tuple[str, ...], argparse.ArgumentParser]:
+    """Every leaf command (its words) and its parser."""
+    subs = _subparsers(parser)
+    if not subs:
+        return {prefix: parser}
+    out = {}
+    for name, sub in subs.items():
+        out.update(commands(sub, (*prefix, name)))
+    return out
+
+
+def _values(action: argparse.Action, paths: list[str]) -> st.SearchStrategy[list[str]]:
+    if action.nargs == 0:
+        return st.just([])
+    if action.choices is not None:
+        pool = [*map(str, action.choices), "nope", ""]
+    elif action.type in (float, int) or getattr(action.type, "__name__", "") == "number":
+        pool = NUMBERS
+    elif action.type is Path:
+        pool = paths
+    else:
+        pool = TEXTS + paths[:3]
+    many = action.nargs in ("*", "+") or isinstance(action.nargs, int)
+    return st.lists(st.sampled_from(pool), min_size=1, max_size=3 if many else 1)
+
+
+@st.composite
+def invocations(draw: st.DrawFn, parser: argparse.ArgumentParser, paths: list[str],
+                extra: Callable[[tuple[str, ...]], list[str]] = lambda _words: []
+                ) -> list[str]:
+    """One command line: a leaf command, some of its options (and positionals) with values
+    drawn from the edge pools, then ``extra(words)`` (caps that keep a run cheap)."""
+    table = commands(parser)
+    words = draw(st.sampled_from(sorted(table)))
+    argv = list(words)
+    for action in table[words]._actions:  # noqa: SLF001
+        if action.help == argparse.SUPPRESS or isinstance(action, argparse._HelpAction):  # noqa: SLF001
+            continue
+        if not action.option_strings:  # a positional (optional when nargs allows none)
+            if action.nargs not in ("*", "?") or draw(st.booleans()):
+                argv += draw(_values(action, paths))
+        elif action.required or draw(st.booleans()):
+            argv += [action.option_strings[-1], *draw(_values(action, paths))]
+    return argv + extra(words)
+
+
+def check_answer(main: Callable[[Sequence[str]], int], argv: list[str],
+                 outputs: Sequence[Path]) -> tuple[int, str]:
+    """Run ``main(argv)`` in-process; assert the CLI contract; return (exit code, stderr)."""
+    before = {p: p.exists() for p in outputs}
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse's usage errors
+            code = exc.code if isinstance(exc.code, int) else 1
+    text = err.getvalue()
+    assert "Traceback" not in text, (argv, text)
+    assert code in (0, 1, 2), (argv, code, text)
+    if code:
+        errors = [ln for ln in text.splitlines() if "error" in ln]
+        assert errors, (argv, text)  # the failure is named
+        for p in outputs:
+            assert p.exists() == before[p], (argv, p, text)  # a refused command left nothing
+    return code, text

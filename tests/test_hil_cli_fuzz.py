@@ -1,0 +1,52 @@
+"""Every ``hil`` command answers generated bad input with a clear line (tests/cli_fuzz.py).
+
+Runs stay cheap: ``hil run`` gets a tiny --max-duration (every valid run is refused after
+all its settings are checked, before anything moves), the default plan is a canned
+profile, the emulator does not serve, and rig ports fail at once.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from cli_fuzz import check_answer, invocations, path_values
+from hypothesis import HealthCheck, given, settings
+
+from hil.cli import build_parser, main
+from hil.samples import Trajectory
+
+ROOT = Path(tempfile.mkdtemp(prefix="hil_fuzz_"))
+PATHS = path_values(ROOT)
+OUT = ROOT / "out"
+
+
+def caps(words: tuple[str, ...]) -> list[str]:
+    if words == ("run",):
+        return ["--max-duration", "1e-9", "--out", str(OUT)]
+    return []
+
+
+@pytest.fixture(autouse=True, scope="module")
+def cheap(monkeypatch_module) -> None:
+    import controllers.planner as planner
+    from hil.rig_emulator import RigEmulator
+
+    canned = Trajectory.from_positions(np.linspace(-3.4386e-3, 51.5e-3, 50), 1e-3)
+    monkeypatch_module.setattr(planner, "plan_default_profile", lambda *a, **k: canned)
+    monkeypatch_module.setattr(RigEmulator, "serve", lambda self: None)
+
+
+@pytest.fixture(scope="module")
+def monkeypatch_module():
+    with pytest.MonkeyPatch.context() as mp:
+        yield mp
+
+
+@settings(max_examples=2000, derandomize=True, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(argv=invocations(build_parser(), PATHS, caps))
+def test_every_hil_command_answers_bad_input_with_one_clear_line(argv: list[str]) -> None:
+    check_answer(main, argv, [OUT])
