@@ -354,3 +354,30 @@ def test_a_c_host_runs_the_binary_without_python(native: Path, unzipped: Path, t
     want = _reference(*drive, 0.050566)
     assert (force, clamp) == pytest.approx((want.input_force, want.clamp_force), rel=1e-12)
     assert clamp > 0
+
+
+def _closing_input(path: Path) -> Path:
+    """CSV input of the FMI Compliance Checker: close to the toggle, hold, open, hold."""
+    rows = [f"{float(t)!r},{float(x)!r}" for t, x in _stroke()]
+    path.write_text('"time","x_cmd"\n' + "\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("closing", [False, True])
+def test_fmi_compliance_checker_finds_no_problem(native: Path, tmp_path: Path, closing: bool):
+    """The default experiment, and a 1 ms closing stroke from an input file."""
+    checker = os.environ.get("FMUCHECK")
+    if not checker:
+        pytest.skip("set FMUCHECK to an fmuCheck.linux64 built from "
+                    "modelica-tools/FMUComplianceChecker (see docs/fmu-native.md)")
+    log, out = tmp_path / "check.log", tmp_path / "out.csv"
+    args = ["-h", "1e-3", "-s", "1.0", "-n", "0", "-i",
+            str(_closing_input(tmp_path / "in.csv"))] if closing else []
+    run = subprocess.run([checker, "-l", "3", "-e", str(log), "-o", str(out), *args,
+                          str(native)], capture_output=True, text=True, timeout=120)
+    text = log.read_text()
+    assert run.returncode == 0, text
+    assert "0 warning(s) and error(s)" in text and "0 Warning(s)" in text
+    assert "0 Error(s)" in text
+    result = np.genfromtxt(out, delimiter=",", names=True)
+    assert result["x"].max() == pytest.approx(X_TOGGLE if closing else X_OPEN, abs=1e-7)

@@ -46,6 +46,7 @@ typedef struct {
     double w[CLAMP_SZ_W + 1];
     const double *arg[CLAMP_SZ_ARG + 1];
     double *res[CLAMP_SZ_RES + 1];
+    double lag_key[3], lag[4];   /* exp(A h) for (bandwidth, damping, h): not state, a cache */
 } Instance;
 
 typedef int (*PlantFn)(const double **, double **, casadi_int *, double *, int);
@@ -262,16 +263,20 @@ static void lag_expm(double w, double zeta, double h, double p[4]) {
 }
 
 /* The drive's motion after a step h toward u (toggle.plant.follow). */
-static void follow(const State *s, double u, double h, double out[3]) {
+static void follow(Instance *c, double u, double h, double out[3]) {
+    const State *s = &c->s;
     double bw = s->r[VR_BANDWIDTH], zeta = s->r[VR_DAMPING];
-    const double *d = s->drive;
+    const double *d = s->drive, *p = c->lag;
     if (bw <= 0) {
         double v = (u - d[0]) / h;
         out[0] = u; out[1] = v; out[2] = (v - d[1]) / h;
         return;
     }
-    double w = 2.0 * PI * bw, p[4];
-    lag_expm(w, zeta, h, p);
+    double w = 2.0 * PI * bw;
+    if (c->lag_key[0] != bw || c->lag_key[1] != zeta || c->lag_key[2] != h) {
+        lag_expm(w, zeta, h, c->lag);
+        c->lag_key[0] = bw; c->lag_key[1] = zeta; c->lag_key[2] = h;
+    }
     /* the input column of the augmented exponential: (I - P) [1 0]^T, as A [1 0]^T = -B/w^2 */
     out[0] = p[0] * d[0] + p[1] * d[1] + (1.0 - p[0]) * u;
     out[1] = p[2] * d[0] + p[3] * d[1] - p[2] * u;
@@ -412,7 +417,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean ne
         logf_(c, fmi2Error, "step at t=%g s rejected: step size must be > 0, got %g s", t, h);
         return fmi2Error;
     }
-    follow(&c->s, c->s.r[VR_X_CMD], h, drive);
+    follow(c, c->s.r[VR_X_CMD], h, drive);
     if (!(c->s.x_lo <= drive[0] && drive[0] <= c->s.x_hi)) {
         logf_(c, fmi2Error, "step at t=%g s rejected: input position x = %g m outside the "
               "assemblable range [%g, %g] m", t, drive[0], c->s.x_lo, c->s.x_hi);
