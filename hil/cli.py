@@ -17,6 +17,7 @@ from pathlib import Path
 
 from hil import cli_rig, cli_rsm
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
+from hil.cli_args import join_negative_numbers, path
 from hil.experiment import CycleCounter, profile_cycles, reciprocating_trajectory
 from hil.interrupts import Interrupted, SignalGuard
 from hil.recording import RecordingError, RunMeta, RunRecorder
@@ -250,7 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "--config (command line wins). Defaults: "
                                    + ", ".join(f"{k} {v}" for k, v in RUN_DEFAULTS.items()
                                                if v is not None))
-    p.add_argument("--config", type=Path, default=None,
+    p.add_argument("--config", type=path, default=None,
                    help="TOML file with any of these options (keys with underscores)")
     p.add_argument("--real", action="store_const", const="real", dest="backend", default=None,
                    help="use the real rig (or an emulator) on --port instead of the FMU")
@@ -258,11 +259,11 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "socket://host:port (needs --real)")
     p.add_argument("--preset", default=None, help="mechanism preset (default chang2021)")
     add_number_options(p)
-    p.add_argument("--profile", type=Path, default=None,
+    p.add_argument("--profile", type=path, default=None,
                    help="planned profile CSV (toggle plan --out); replayed forward and back, "
                         "with the preset, mold and friction it was planned for")
-    p.add_argument("--out", type=Path, default=None, help="run directory (default runs/<time>)")
-    p.add_argument("--fmu", type=Path, default=None,
+    p.add_argument("--out", type=path, default=None, help="run directory (default runs/<time>)")
+    p.add_argument("--fmu", type=path, default=None,
                    help="the simulated rig's FMU (default build/ToggleClamp.fmu, built when "
                         "missing or older than the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -280,7 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``hil`` script."""
     parser = build_parser()
-    args = parser.parse_args(cli_rig.join_negative_numbers(
+    args = parser.parse_args(join_negative_numbers(
         sys.argv[1:] if argv is None else list(argv)))
     try:
         return int(args.handler(args) or 0)

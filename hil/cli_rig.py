@@ -7,59 +7,24 @@ never cleared by ``hil run``: the operator looks at the rig and runs ``hil rig c
 from __future__ import annotations
 
 import argparse
-import math
-import re
 import sys
-from collections.abc import Callable
 from typing import Any
 
 from hil import protocol as p
 from hil.backends import fault_names
+from hil.cli_args import PROBABILITY, TIME, number
 from hil.homing import home
 from hil.serial_link import CommandError, RigError, SerialLink
-
-#: A negative number as the value of an option (argparse takes '-1e-3' for an option).
-_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
-
-
-def join_negative_numbers(argv: list[str]) -> list[str]:
-    """``--opt -0.5e-3`` -> ``--opt=-0.5e-3``, so negative values in e-notation parse."""
-    out: list[str] = []
-    for token in argv:
-        if (out and _NEGATIVE.match(token) and out[-1].startswith("--")
-                and "=" not in out[-1]):
-            out[-1] = f"{out[-1]}={token}"
-        else:
-            out.append(token)
-    return out
-
-
-def _number(lo: float, hi: float, what: str) -> Callable[[str], float]:
-    """argparse type: a finite float in [lo, hi]."""
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if not (math.isfinite(value) and lo <= value <= hi):
-            raise argparse.ArgumentTypeError(f"{what}, got {text!r}")
-        return value
-    parse.__name__ = "number"
-    return parse
-
-
-PROBABILITY = _number(0.0, 1.0, "must be a probability between 0 and 1")
-TIME = _number(0.0, 1e6, "must be a time >= 0 s")
 
 
 def add_emulator_options(e: argparse.ArgumentParser) -> None:
     """Options of ``hil emulate``: the simulated clamp and the injected faults."""
     e.add_argument("--preset", default="chang2021", help="mechanism preset")
-    e.add_argument("--delta-r8", type=_number(-5e-3, 5e-3, "must be an error below 5 mm (m)"),
+    e.add_argument("--delta-r8", type=number(-5e-3, 5e-3, "must be an error below 5 mm (m)"),
                    default=0.0, dest="delta_r8", help="length error of link 8, m (e.g. 0.5e-3)")
-    e.add_argument("--mu", type=_number(0.0, 1.0, "must be between 0 and 1"), default=None,
+    e.add_argument("--mu", type=number(0.0, 1.0, "must be between 0 and 1"), default=None,
                    help="pin friction (default: the preset's)")
-    e.add_argument("--x-contact", type=_number(-1.0, 1.0, "must be a position in m"),
+    e.add_argument("--x-contact", type=number(-1.0, 1.0, "must be a position in m"),
                    default=None, dest="x_contact",
                    help="crosshead position at mold contact, m (default: no mold)")
     e.add_argument("--drop-byte", type=PROBABILITY, default=0.0,

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 from typing import Any
 
+from hil.cli_args import path
 from hil.rsm import (
     RESPONSES,
     TERMS,
@@ -36,7 +36,7 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--preset", default=None,
                    help="nominal mechanism: plot against the platen error at the toggle "
                         "dL_TP (as the paper's Figures 17-20) instead of delta_r8")
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("--out", type=path, default=None,
                    help="directory for rsm.json and the contour maps (PNG)")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.set_defaults(handler=run)

@@ -60,7 +60,7 @@ def _values(action: argparse.Action, paths: list[str]) -> st.SearchStrategy[list
         pool = [*map(str, action.choices), "nope", ""]
     elif action.type in (float, int) or getattr(action.type, "__name__", "") == "number":
         pool = NUMBERS
-    elif action.type is Path:
+    elif action.type is Path or getattr(action.type, "__name__", "") == "path":
         pool = paths
     else:
         pool = TEXTS + paths[:3]

@@ -37,6 +37,7 @@ def cheap(monkeypatch_module) -> None:
     canned = Trajectory.from_positions(np.linspace(-3.4386e-3, 51.5e-3, 50), 1e-3)
     monkeypatch_module.setattr(planner, "plan_default_profile", lambda *a, **k: canned)
     monkeypatch_module.setattr(RigEmulator, "serve", lambda self: None)
+    monkeypatch_module.chdir(ROOT)  # what a command writes by default lands here
 
 
 @pytest.fixture(scope="module")
