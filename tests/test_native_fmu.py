@@ -110,6 +110,23 @@ def test_archive_has_the_sources_to_rebuild_and_no_fmi_headers(native: Path):
     assert "Py" not in undefined and "python" not in undefined.lower()
 
 
+def test_sources_rebuild_the_binary_as_an_importing_tool_would(native: Path, tmp_path: Path):
+    """gcc on the sources listed in the description, with the tool's own FMI headers."""
+    folder = Path(extract(str(native), str(tmp_path / "fmu")))
+    md = read_model_description(str(folder))
+    sources = md.buildConfigurations[0].sourceFileSets[0].sourceFiles
+    library = folder / "binaries" / "linux64" / "ToggleClampNative.so"
+    library.unlink()
+    subprocess.run(["gcc", "-std=c99", "-shared", "-fPIC", "-O2", "-I", str(folder / "sources"),
+                    "-I", str(fmi2_headers()), *(str(folder / "sources" / f) for f in sources),
+                    "-o", str(library), "-lm"], check=True, capture_output=True)
+    res = simulate_fmu(str(folder), stop_time=0.01, step_size=1e-3,
+                       start_values={"x_cmd": X_CONTACT + 5e-4, "x_contact": X_CONTACT})
+    want = _reference(X_CONTACT + 5e-4, 0.0, 0.0, X_CONTACT)
+    assert want.clamp_force > 0
+    assert res["clamp_force"][-1] == pytest.approx(want.clamp_force, rel=REL)
+
+
 def _library(native: Path) -> Path:
     folder = native.parent / "lib"
     folder.mkdir(exist_ok=True)
