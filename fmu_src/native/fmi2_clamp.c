@@ -25,7 +25,7 @@
 #define N_IN 6
 #define PI 3.14159265358979323846
 
-typedef enum { INSTANTIATED, INITIALISING, STEPPING, FAILED } Phase;
+typedef enum { INSTANTIATED, INITIALISING, STEPPING, FAILED, TERMINATED } Phase;
 
 /* Everything a saved state holds: plain data, no pointers. */
 typedef struct {
@@ -341,7 +341,10 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     return fmi2OK;
 }
 
-fmi2Status fmi2Terminate(fmi2Component c) { (void)c; return fmi2OK; }
+fmi2Status fmi2Terminate(fmi2Component c) {
+    ((Instance *)c)->s.phase = TERMINATED;
+    return fmi2OK;
+}
 
 fmi2Status fmi2Reset(fmi2Component comp) {
     Instance *c = comp;
@@ -409,8 +412,8 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean ne
     double drive[3], y[CLAMP_N_OUT];
     (void)new_step;
     if (c->s.phase != STEPPING) {
-        logf_(c, fmi2Error, "doStep refused: %s", c->s.phase == FAILED
-              ? "initialisation failed" : "not initialised");
+        logf_(c, fmi2Error, "doStep refused: %s", c->s.phase == FAILED ? "initialisation failed"
+              : c->s.phase == TERMINATED ? "terminated" : "not initialised");
         return fmi2Error;
     }
     if (!(h > 0) || !isfinite(h)) {
