@@ -83,4 +83,5 @@ def release_native_runtime(unzip_dir: Path) -> None:
     md = read_model_description(str(unzip_dir))
     name = md.coSimulation.modelIdentifier + sharedLibraryExtension
     library = ctypes.CDLL(str(Path(unzip_dir, "binaries", platform, name)))
-    library.finalizePythonInterpreter()
+    if hasattr(library, "finalizePythonInterpreter"):  # a native FMU has no Python runtime
+        library.finalizePythonInterpreter()
