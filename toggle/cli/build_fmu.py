@@ -7,6 +7,7 @@ to C, no Python at run time (:mod:`toggle.native_fmu`).
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from toggle.fmu_build import build_fmu
@@ -16,7 +17,11 @@ def run(args: argparse.Namespace) -> int:
     if args.native:
         from toggle.native_fmu import build_native_fmu
 
-        print(build_native_fmu(args.out, args.preset))
+        print(build_native_fmu(args.out, args.preset or "chang2021"))
+    elif args.preset is not None:
+        print("toggle build-fmu: error: --preset needs --native (ToggleClamp.fmu takes the "
+              "preset as a parameter)", file=sys.stderr)
+        return 2
     else:
         print(build_fmu(args.out))
     return 0
@@ -27,6 +32,5 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("build"), help="output folder (default build)")
     p.add_argument("--native", action="store_true",
                    help="build ToggleClampNative.fmu: generated C, no Python at run time")
-    p.add_argument("--preset", default="chang2021",
-                   help="preset of the native FMU (default chang2021)")
+    p.add_argument("--preset", help="preset of the native FMU (default chang2021)")
     p.set_defaults(handler=run)
