@@ -398,3 +398,12 @@ def test_fmi_compliance_checker_finds_no_problem(native: Path, tmp_path: Path, c
     assert "0 Error(s)" in text
     result = np.genfromtxt(out, delimiter=",", names=True)
     assert result["x"].max() == pytest.approx(X_TOGGLE if closing else X_OPEN, abs=1e-7)
+
+
+def test_command_line_builds_the_native_fmu(tmp_path: Path, capsys: pytest.CaptureFixture):
+    from toggle.cli import main
+
+    assert main(["build-fmu", "--native", "--preset", "chang2021", "--out", str(tmp_path)]) == 0
+    assert capsys.readouterr().out.strip() == str(tmp_path / "ToggleClampNative.fmu")
+    assert main(["build-fmu", "--preset", "chang2021", "--out", str(tmp_path)]) == 2
+    assert "--preset needs --native" in capsys.readouterr().err
