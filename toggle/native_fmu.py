@@ -124,7 +124,8 @@ def _roles(variables: Sequence[Var]) -> dict[str, int]:
     """C macro name -> value reference of every Real variable the wrapper must know."""
     reals = real_variables(variables)
     vr = {v.name: i for i, v in enumerate(reals)}
-    errors = [f"delta_{n}" for half in HALVES for n in PAPER_NAMES[half].values()]
+    # dims[8 * half + i] = nominal + delta of DIMENSIONS[i] of that half, in the wrapper
+    errors = [f"delta_{PAPER_NAMES[half][dim]}" for half in HALVES for dim in DIMENSIONS]
     known = {"mu", "x_contact", *MASS_FIELDS, "drive_bandwidth", "drive_damping", "x_cmd",
              *errors, *PlantOutputs._fields}
     unknown = sorted(set(vr) - known)

@@ -374,7 +374,7 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
     Instance *c = comp;
     for (size_t i = 0; i < n; i++) {
         int is_input = vr[i] == VR_X_CMD;
-        if (vr[i] >= CLAMP_N_REAL || vr[i] >= VR_OUT0 ||
+        if (vr[i] >= CLAMP_N_REAL || (vr[i] >= VR_OUT0 && vr[i] < VR_OUT0 + CLAMP_N_OUT) ||
             (!is_input && c->s.phase != INSTANTIATED && c->s.phase != INITIALISING)) {
             logf_(c, fmi2Error, "setReal: value reference %u cannot be set now", vr[i]);
             return fmi2Error;
