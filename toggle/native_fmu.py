@@ -300,8 +300,8 @@ def generate_sources(folder: Path, preset: str) -> list[str]:
     for f in (*functions, geometry_function()):
         gen.add(f)
     gen.generate(str(folder) + "/")
-    guid = str(uuid.uuid5(uuid.NAMESPACE_URL, f"toggle-clamp/{MODEL}/{preset}/"
-                          + (folder / f"{GENERATED}.c").read_text()))
+    guid = str(uuid.uuid5(uuid.NAMESPACE_URL, f"toggle-clamp/{MODEL}/{preset}/{variables!r}/"
+                          + (folder / f"{GENERATED}.c").read_text()))  # same model, same GUID
     (folder / "clamp_model_data.h").write_text(
         model_header(cfg, preset, variables, guid, functions))
     shutil.copy2(WRAPPER, folder / WRAPPER.name)
