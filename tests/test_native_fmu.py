@@ -21,6 +21,7 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error
+from fmpy.model_description import read_build_description
 from fmu_support import close_slave, run_libcosim, validator_problems
 
 from toggle.fmu_build import build_fmu
@@ -105,6 +106,8 @@ def test_archive_has_the_sources_to_rebuild_and_no_fmi_headers(native: Path):
             "sources/fmi2_clamp.c", "sources/clamp_model.c", "sources/clamp_model.h",
             "sources/clamp_model_data.h"} <= names
     assert not any("fmi2Functions" in n or "win64" in n for n in names)
+    build = read_build_description(str(native), validate=True)  # against the FMI 3.0 schema
+    assert build[0].sourceFileSets[0].sourceFiles == ["fmi2_clamp.c", "clamp_model.c"]
     undefined = subprocess.run(["nm", "-D", "--undefined-only", str(_library(native))],
                                capture_output=True, text=True, check=True).stdout
     assert "Py" not in undefined and "python" not in undefined.lower()

@@ -290,8 +290,11 @@ def slave_variables() -> tuple[tuple[Var, ...], str, Any]:
     return slave.VARIABLES, slave.description, slave.default_experiment
 
 
-def generate_sources(folder: Path, preset: str) -> list[str]:
-    """Write the C sources (generated model, its data header, the wrapper) into ``folder``."""
+def generate_sources(folder: Path, preset: str) -> tuple[list[str], str]:
+    """Write the C sources (generated model, data header, wrapper) into ``folder``.
+
+    Returns the names of the files to compile and the model's GUID.
+    """
     variables, _, _ = slave_variables()
     cfg = configure(preset)
     functions = plant_functions(cfg)
@@ -305,7 +308,7 @@ def generate_sources(folder: Path, preset: str) -> list[str]:
     (folder / "clamp_model_data.h").write_text(
         model_header(cfg, preset, variables, guid, functions))
     shutil.copy2(WRAPPER, folder / WRAPPER.name)
-    return [WRAPPER.name, f"{GENERATED}.c"]
+    return [WRAPPER.name, f"{GENERATED}.c"], guid
 
 
 def _run(cmd: list[str]) -> None:
@@ -343,9 +346,7 @@ def build_native_fmu(out_dir: Path, preset: str = "chang2021") -> Path:
     with tempfile.TemporaryDirectory(prefix="toggle_native_") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
-        sources = generate_sources(src, preset)
-        guid = next(line.split('"')[1] for line in (src / "clamp_model_data.h").read_text()
-                    .splitlines() if line.startswith("#define CLAMP_GUID"))
+        sources, guid = generate_sources(src, preset)
         library = Path(tmp) / f"{MODEL}.so"
         compile_library(src, sources, library)
         stop = experiment.stop_time if math.isfinite(experiment.stop_time) else 10.0
