@@ -10,8 +10,8 @@ of the native FMU in libcosim (libcosimpy, fixed 1 ms step, one and two
 instances, median of runs in a fresh process), and the cost of a step called
 from C (a loop compiled here, no fmpy). libcosim steps its instances on worker
 threads: on this 2-core VM its rate is bound by their wake-up latency, not by
-the FMU (one and two instances run at the same rate), about 17 000 steps/s on
-an idle machine and 120 000-155 000 with the other core busy.
+the FMU (one and two instances run at the same rate, about 17 000 steps/s on
+an idle machine), so it is also measured with the master on one CPU.
 
 Run: python benchmarks/bench_native_fmu.py [--steps N] [--runs R] [--cosim-steps N]
 """
@@ -128,10 +128,17 @@ def c_loop_us(unzip_dir: Path, work: Path, bandwidth: float) -> float:
     return float(run.stdout)
 
 
-def libcosim_rates(fmu: Path, steps: int, runs: int, start: dict[str, float]) -> dict[str, float]:
-    """Co-simulation steps per second (all instances stepped once per step) by instance count."""
-    run = subprocess.run([sys.executable, "-c", LIBCOSIM_RATE, str(fmu), str(steps), str(runs),
-                          json.dumps(start)], capture_output=True, text=True, check=True)
+def libcosim_rates(fmu: Path, steps: int, runs: int, start: dict[str, float],
+                   pinned: bool) -> dict[str, float]:
+    """Co-simulation steps per second (all instances stepped once per step) by instance count.
+
+    ``pinned`` runs the master on one CPU (taskset -c 0): its worker threads then hand
+    over on that core instead of waking an idle one.
+    """
+    pin = ["taskset", "-c", "0"] if pinned else []
+    run = subprocess.run([*pin, sys.executable, "-c", LIBCOSIM_RATE, str(fmu), str(steps),
+                          str(runs), json.dumps(start)], capture_output=True, text=True,
+                         check=True)
     return json.loads(run.stdout.strip().splitlines()[-1])
 
 
@@ -166,7 +173,9 @@ def main() -> None:
         finally:
             for kind in ("trivial", "python"):
                 release_native_runtime(dirs[kind])
-        rates = libcosim_rates(native, args.cosim_steps, args.runs, {**start, "x_cmd": 0.0})
+        rates = {pinned: libcosim_rates(native, args.cosim_steps, args.runs,
+                                        {**start, "x_cmd": 0.0}, pinned)
+                 for pinned in (False, True)}
         c_us = {bw: statistics.median(c_loop_us(dirs["native"], work, bw) for _ in range(3))
                 for bw in (0.0, 20.0)}
     base = statistics.median(times["trivial pythonfmu"])
@@ -178,9 +187,10 @@ def main() -> None:
     for bw, us in c_us.items():
         print(f"  native clamp from C, {'ideal' if bw == 0 else '20 Hz'}: {us:.3f} us "
               "(no fmpy; median of 3 runs x 1e6 steps)")
-    for n, rate in rates.items():
-        print(f"libcosim, {n} native instance(s), 1 ms step: {rate:,.0f} steps/s "
-              f"(median of {args.runs} runs x {args.cosim_steps} steps)")
+    for pinned, by_count in rates.items():
+        for n, rate in by_count.items():
+            print(f"libcosim{' on one CPU' if pinned else ''}, {n} native instance(s), 1 ms "
+                  f"step: {rate:,.0f} steps/s (median of {args.runs} runs x {args.cosim_steps})")
 
 
 if __name__ == "__main__":
