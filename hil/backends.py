@@ -232,9 +232,15 @@ class FmuPlant(Plant):
             start["mu"] = s.mu
         if s.x_contact is not None:
             start["x_contact"] = s.x_contact
-        self._slave, self._refs = start_slave(
-            Path(self._dir), "hil", start, log=lambda status, msg: self.log.append(msg)
-        )
+        from fmpy.fmi1 import FMICallException
+
+        try:
+            self._slave, self._refs = start_slave(
+                Path(self._dir), "hil", start, log=lambda status, msg: self.log.append(msg)
+            )
+        except FMICallException as exc:  # fmi2Error from a strict FMU (the native one)
+            raise RunStoppedError(f"the FMU rejected the setup: "
+                                  f"{self.log[-1] if self.log else exc}") from exc
         if any("initialisation failed" in m for m in self.log):
             raise RunStoppedError(f"the FMU rejected the setup: {self.log[-1]}")
         self._out = [self._refs[n] for n in ("platen_position", "input_force")]
@@ -243,11 +249,15 @@ class FmuPlant(Plant):
 
     def _step(self, x: float, h: float) -> tuple[float, float]:
         """Command ``x`` (m) for one step of ``h`` s; (platen from its zero m, force N)."""
+        from fmpy.fmi1 import FMICallException
         from fmpy.fmi2 import fmi2Discard
 
         slave = self._slave
         slave.setReal([self._refs["x_cmd"]], [x])
-        status = slave.fmi2DoStep(slave.component, self._time, h, 1)
+        try:
+            status = slave.fmi2DoStep(slave.component, self._time, h, 1)
+        except FMICallException:
+            status = fmi2Discard
         if status == fmi2Discard:
             raise RunStoppedError(f"the FMU rejected the step at x = {x:.6g} m: "
                                   f"{self.log[-1] if self.log else 'no message'}")
