@@ -73,6 +73,18 @@ LIBCOSIM = textwrap.dedent(
 )
 
 
+def run_steps(slave, refs: Mapping[str, int], commands_and_steps, read, t: float = 0.0
+              ) -> list:
+    """Set x_cmd and doStep for each (x_cmd, h); ``read(slave, refs)`` after each step."""
+    out = []
+    for x_cmd, h in commands_and_steps:
+        slave.setReal([refs["x_cmd"]], [x_cmd])
+        slave.doStep(t, h)
+        t += h
+        out.append(read(slave, refs))
+    return out
+
+
 def close_slave(slave, *states) -> None:
     """Free saved FMU states, terminate and free an fmpy slave."""
     for state in states:

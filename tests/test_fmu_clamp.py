@@ -22,6 +22,7 @@ from fmu_support import (
     load_module,
     run_fresh,
     run_libcosim,
+    run_steps,
     validator_problems,
     variable_table,
 )
@@ -78,15 +79,9 @@ def _outputs(slave, refs) -> dict[str, float]:
     return dict(zip(OUTPUTS, slave.getReal([refs[n] for n in OUTPUTS])))
 
 
-def _run(slave, refs, commands_and_steps, t: float = 0.0) -> list[dict[str, float]]:
-    """Set x_cmd, doStep for each (x_cmd, h); return the outputs after each step."""
-    out = []
-    for x_cmd, h in commands_and_steps:
-        slave.setReal([refs["x_cmd"]], [x_cmd])
-        slave.doStep(t, h)
-        t += h
-        out.append(_outputs(slave, refs))
-    return out
+def _run(slave, refs, commands_and_steps, t: float = 0.0) -> list:
+    """Set x_cmd, doStep for each (x_cmd, h); the outputs after each step."""
+    return run_steps(slave, refs, commands_and_steps, _outputs, t)
 
 
 def _logger(log: list[tuple[int, str]]):

@@ -22,7 +22,7 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error
 from fmpy.model_description import read_build_description
-from fmu_support import close_slave, run_libcosim, validator_problems
+from fmu_support import close_slave, run_libcosim, run_steps, validator_problems
 
 from toggle.fmu_build import build_fmu
 from toggle.fmu_host import release_native_runtime, start_slave
@@ -60,14 +60,9 @@ def _outputs(slave, refs) -> list[float]:
     return slave.getReal([refs[n] for n in OUTPUTS])
 
 
-def _run(slave, refs, steps, t: float = 0.0) -> list[list[float]]:
-    out = []
-    for x_cmd, h in steps:
-        slave.setReal([refs["x_cmd"]], [x_cmd])
-        slave.doStep(t, h)
-        t += h
-        out.append(_outputs(slave, refs))
-    return out
+def _run(slave, refs, commands_and_steps, t: float = 0.0) -> list:
+    """Set x_cmd, doStep for each (x_cmd, h); the outputs after each step."""
+    return run_steps(slave, refs, commands_and_steps, _outputs, t)
 
 
 def _reference(x, v, a, x_contact: float, **errors: float) -> PlantOutputs:
