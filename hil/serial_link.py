@@ -462,11 +462,25 @@ class SerialLink:
                 and not faults & p.Fault.ESTOP):
             # the halt itself can hold the condition for a few periods (the force of
             # stopping dead): retry while it settles
+            # the halt itself can hold (or re-latch) the condition for a few periods: clear
+            # until a sample taken after the clear shows no fault
             deadline = time.monotonic() + STANDSTILL_MARGIN
-            while (self.command(p.ClearFault(), check=False, retries=2).result
-                   == p.Result.FAULT_ACTIVE and time.monotonic() < deadline):
+            while time.monotonic() < deadline and not self._cleared():
                 time.sleep(0.02)
-        self.command(p.Bye(), check=False, retries=2)
+        self.command(p.Bye(), check=False)
+
+    def _cleared(self) -> bool:
+        """CLEAR_FAULT, then True once a later sample shows no latched fault."""
+        ack = self.command(p.ClearFault(), check=False)
+        if ack.result != p.Result.OK:
+            return False
+        deadline = time.monotonic() + 0.05
+        while time.monotonic() < deadline:
+            status = self.status
+            if status is not None and status.sample > ack.sample:
+                return not status.faults
+            time.sleep(0.002)
+        return False
 
     def _next_seq(self) -> int:
         with self._write_lock:
