@@ -53,22 +53,24 @@ DISPLAY_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
 }
 
 
-def _number(value: float) -> str:
+def number_text(value: float) -> str:
+    """A float as modelDescription.xml writes it (repr: round-trips exactly)."""
     return repr(float(value))
 
 
-def _unit_definitions(units: Iterable[str]) -> Element:
+def unit_definitions(units: Iterable[str]) -> Element:
+    """UnitDefinitions with BaseUnit and display units of each unit used."""
     node = Element("UnitDefinitions")
     for name in sorted(units):
         unit = SubElement(node, "Unit", name=name)
         if UNITS[name]:
             SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
         for display, factor in DISPLAY_UNITS.get(name, ()):
-            SubElement(unit, "DisplayUnit", name=display, factor=_number(factor))
+            SubElement(unit, "DisplayUnit", name=display, factor=number_text(factor))
     return node
 
 
-def _model_structure(variables: Sequence[Var]) -> Element:
+def model_structure(variables: Sequence[Var]) -> Element:
     """Outputs with their direct input dependencies; InitialUnknowns = all outputs."""
     index = {v.name: i + 1 for i, v in enumerate(variables)}  # 1-based ModelVariables order
     node = Element("ModelStructure")
@@ -116,7 +118,7 @@ def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
         real.set("unit", var.unit)
         for attr in ("min", "max"):
             if getattr(var, attr) is not None:
-                real.set(attr, _number(getattr(var, attr)))
+                real.set(attr, number_text(getattr(var, attr)))
 
     experiment = root.find("DefaultExperiment")
     if experiment is None or experiment.get("stepSize") is None:
@@ -126,10 +128,10 @@ def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
     cosim.set("canGetAndSetFMUstate", "true")
     cosim.set("canSerializeFMUstate", "true")
     units = {v.unit for v in variables if not v.is_string}
-    root.insert(list(root).index(cosim) + 1, _unit_definitions(units))
+    root.insert(list(root).index(cosim) + 1, unit_definitions(units))
 
     root.remove(root.find("ModelStructure"))
-    root.append(_model_structure(variables))
+    root.append(model_structure(variables))
 
 
 def fmu_module_name(slave_file: Path) -> str:

@@ -30,7 +30,13 @@ from xml.etree.ElementTree import Element, SubElement, indent, tostring
 import casadi as ca
 import numpy as np
 
-from toggle.fmu_build import DEFAULT_SLAVE, DISPLAY_UNITS, UNITS, check_variables
+from toggle.fmu_build import (
+    DEFAULT_SLAVE,
+    check_variables,
+    model_structure,
+    unit_definitions,
+)
+from toggle.fmu_build import number_text as _number
 from toggle.fmu_slave import Var
 from toggle.kinematics import half_pose
 from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES, load_preset
@@ -184,10 +190,6 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
     return "\n".join(lines)
 
 
-def _number(value: float) -> str:
-    return repr(float(value))
-
-
 def model_description(variables: Sequence[Var], guid: str, sources: Sequence[str],
                       description: str, step_size: float, stop_time: float) -> bytes:
     """modelDescription.xml of the native FMU (the same variables as the pythonfmu FMU)."""
@@ -205,21 +207,14 @@ def model_description(variables: Sequence[Var], guid: str, sources: Sequence[str
     files = SubElement(cosim, "SourceFiles")
     for name in sources:
         SubElement(files, "File", name=name)
-    units = SubElement(root, "UnitDefinitions")
-    for name in sorted({v.unit for v in variables if not v.is_string}):
-        unit = SubElement(units, "Unit", name=name)
-        if UNITS[name]:
-            SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
-        for display, factor in DISPLAY_UNITS.get(name, ()):
-            SubElement(unit, "DisplayUnit", name=display, factor=_number(factor))
+    root.append(unit_definitions({v.unit for v in variables if not v.is_string}))
     cats = SubElement(root, "LogCategories")
     SubElement(cats, "Category", name="logStatusError", description="Errors and rejected input")
     SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=_number(stop_time),
                stepSize=_number(step_size))
     scalars = SubElement(root, "ModelVariables")
-    index, real_vr = {}, 0
-    for i, var in enumerate(variables, start=1):
-        index[var.name] = i
+    real_vr = 0
+    for var in variables:
         attrib = {"name": var.name, "causality": var.causality,
                   "variability": var.variability or ("fixed" if var.causality == "parameter"
                                                      else "continuous"),
@@ -241,17 +236,7 @@ def model_description(variables: Sequence[Var], guid: str, sources: Sequence[str
         if var.start is not None:
             real["start"] = _number(var.start)
         SubElement(node, "Real", real)
-    structure = SubElement(root, "ModelStructure")
-    outputs = [v for v in variables if v.causality == "output"]
-    out_node = SubElement(structure, "Outputs")
-    for var in outputs:
-        attrib = {"index": str(index[var.name])}
-        if var.depends_on is not None:
-            attrib["dependencies"] = " ".join(str(index[n]) for n in var.depends_on)
-        SubElement(out_node, "Unknown", attrib)
-    init_node = SubElement(structure, "InitialUnknowns")
-    for var in outputs:
-        SubElement(init_node, "Unknown", index=str(index[var.name]))
+    root.append(model_structure(variables))
     indent(root, "  ")
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"
 
