@@ -26,6 +26,8 @@ from types import TracebackType
 from typing import TYPE_CHECKING
 
 import numpy as np
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2Discard
 
 from hil.experiment import stroke_positions
 from hil.homing import APPROACH_SPEED, START_TOLERANCE
@@ -232,8 +234,6 @@ class FmuPlant(Plant):
             start["mu"] = s.mu
         if s.x_contact is not None:
             start["x_contact"] = s.x_contact
-        from fmpy.fmi1 import FMICallException
-
         try:
             self._slave, self._refs = start_slave(
                 Path(self._dir), "hil", start, log=lambda status, msg: self.log.append(msg)
@@ -249,9 +249,6 @@ class FmuPlant(Plant):
 
     def _step(self, x: float, h: float) -> tuple[float, float]:
         """Command ``x`` (m) for one step of ``h`` s; (platen from its zero m, force N)."""
-        from fmpy.fmi1 import FMICallException
-        from fmpy.fmi2 import fmi2Discard
-
         slave = self._slave
         slave.setReal([self._refs["x_cmd"]], [x])
         try:

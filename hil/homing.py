@@ -31,6 +31,21 @@ class HomingError(RigError):
     """The home switch was not found, or the rig faulted while referencing."""
 
 
+def _unrecorded(link: SerialLink, points: list[tuple[int, int]],
+                until: Callable[[p.Telemetry], bool]) -> p.Telemetry | None:
+    """Stream ``points`` until ``until(sample)`` holds (that sample) or they end (None).
+
+    On every exit the rig is stopped if it still moves and the rest of the run is read,
+    so the link is ready for the next command.
+    """
+    run = link.run_trajectory(points)
+    try:
+        return next((tel for tel in run if until(tel)), None)
+    finally:
+        run.close()  # stops the rig if it is still moving
+        link.finish_run()
+
+
 def _move_until(link: SerialLink, direction: int, speed: float, switch: bool) -> p.Telemetry:
     """Move at constant ``speed`` (m/s) until the home switch reads ``switch``; then stop.
 
@@ -41,16 +56,8 @@ def _move_until(link: SerialLink, direction: int, speed: float, switch: bool) ->
     per_period = direction * speed * sc.period / sc.step_m
     count = math.ceil(SEARCH_RANGE / (speed * sc.period))
     points = [(start + round(per_period * (i + 1)), p.NO_CHECK) for i in range(count)]
-    hit = None
-    run = link.run_trajectory(points)
-    try:
-        for tel in run:
-            if bool(tel.flags & p.TelemetryFlag.HOME_SWITCH) == switch:
-                hit = tel
-                break
-    finally:
-        run.close()  # stops the rig if it is still moving
-        link.finish_run()
+    hit = _unrecorded(link, points,
+                       lambda tel: bool(tel.flags & p.TelemetryFlag.HOME_SWITCH) == switch)
     if hit is None:
         state = "active" if switch else "inactive"
         raise HomingError(f"the home switch did not become {state} within "
@@ -95,11 +102,5 @@ def move_to(link: SerialLink, x_target: float, x_origin: float,
         return 0.0
     x = stroke_positions(x_now, x_target, speed, sc.period)[1:]
     points = [(sc.steps(float(xi), x_origin), p.NO_CHECK) for xi in x]
-    run = link.run_trajectory(points)
-    try:
-        for _ in run:
-            check()
-    finally:
-        run.close()  # stops the rig if it is still moving
-        link.finish_run()
+    _unrecorded(link, points, lambda _tel: check() or False)
     return abs(x_target - x_now)
