@@ -422,7 +422,7 @@ def load_mechanism(path: str | Path, group: str | int | None = None) -> Mechanis
 
 def preset_names() -> list[str]:
     """Names of the presets shipped with the package."""
-    folder = resources.files("toggle") / "presets"
+    folder = resources.files(__package__) / "presets"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
@@ -438,7 +438,7 @@ def preset_table(name: str) -> tuple[dict[str, Any], str]:
     """Parsed TOML of a shipped preset or of a file, and the origin used in messages."""
     if name.endswith(".toml") or Path(name).is_file():
         return _read_toml(Path(name)), name
-    resource = resources.files("toggle") / "presets" / f"{name}.toml"
+    resource = resources.files(__package__) / "presets" / f"{name}.toml"
     if not resource.is_file():
         raise UnknownPresetError(f"unknown preset {name!r}; shipped: {', '.join(preset_names())}")
     return tomllib.loads(resource.read_text(encoding="utf-8")), f"preset {name}"

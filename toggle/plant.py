@@ -222,14 +222,15 @@ class CompiledPlant:
 
 
 def configure(
-    preset: str,
+    preset: str | Mechanism,
     *,
     mu: float | None = None,
     x_contact: float | None = None,
     masses: dict[str, float] | None = None,
     errors: dict[str, float] | None = None,
 ) -> PlantConfig:
-    """A plant from a preset, with overrides named as the FMU names its parameters.
+    """A plant from a preset (a name, a TOML path or a loaded :class:`Mechanism`), with
+    overrides named as the FMU names its parameters.
 
     ``masses`` overrides fields of the preset's [dynamics] (crosshead, links,
     platen, guide_damping); ``errors`` adds dimensional errors by seed 000's
@@ -237,7 +238,7 @@ def configure(
     A contact position at or beyond the toggle means no mold. Every bad value
     raises :class:`ParameterError` naming it.
     """
-    mech = load_preset(preset)
+    mech = preset if isinstance(preset, Mechanism) else load_preset(preset)
     changed = []
     for name, delta in (errors or {}).items():
         if not math.isfinite(delta):
