@@ -22,7 +22,6 @@ from bench_fmu_trivial import TRIVIAL_SLAVE, time_step
 from fmpy import extract
 
 from toggle.fmu_build import build_fmu
-from toggle.fmu_host import release_native_runtime
 from toggle.kinematics import stroke_limits
 from toggle.plant import PlantOutputs, configure
 
@@ -61,15 +60,11 @@ def main() -> None:
                                         str(work / "trivial_x"))),
                 "clamp": Path(extract(str(clamp_fmu), str(work / "clamp_x")))}
         times: dict[str, list[float]] = {name: [] for name in cases}
-        try:
-            for _ in range(args.runs):
-                for name, (start_values, ins, outs) in cases.items():
-                    folder = dirs[name.split(",")[0]]
-                    times[name].append(time_step(folder, ins, outs, STEP, args.steps, 1,
-                                                 start_values))
-        finally:
-            for folder in dirs.values():
-                release_native_runtime(folder)
+        for _ in range(args.runs):
+            for name, (start_values, ins, outs) in cases.items():
+                folder = dirs[name.split(",")[0]]
+                times[name].append(time_step(folder, ins, outs, STEP, args.steps, 1,
+                                             start_values))
     base = statistics.median(times["trivial"])
     print(f"us per set-inputs + doStep + get-outputs in fmpy "
           f"(median of {args.runs} runs x {args.steps} steps):")

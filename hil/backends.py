@@ -281,8 +281,6 @@ class FmuPlant(Plant):
         return abs(x - start)
 
     def _deactivate(self) -> None:
-        from toggle.fmu_host import release_native_runtime
-
         try:
             if self._slave is not None:
                 self._slave.terminate()
@@ -290,7 +288,6 @@ class FmuPlant(Plant):
         finally:
             self._slave = None
             if self._dir is not None:
-                release_native_runtime(Path(self._dir))
                 shutil.rmtree(self._dir, ignore_errors=True)
                 self._dir = None
 

@@ -25,7 +25,7 @@ from fmpy.model_description import read_build_description
 from fmu_support import close_slave, run_libcosim, run_steps, validator_problems
 
 from toggle.fmu_build import build_fmu
-from toggle.fmu_host import release_native_runtime, start_slave
+from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
 from toggle.native_fmu import build_native_fmu, fmi2_headers, slave_variables
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
@@ -51,9 +51,7 @@ def unzipped(native: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
 def python_fmu(tmp_path_factory: pytest.TempPathFactory):
     """The pythonfmu ToggleClamp, extracted; its runtime released after the module."""
     fmu = build_fmu(tmp_path_factory.mktemp("pythonfmu"))
-    directory = Path(extract(str(fmu), str(tmp_path_factory.mktemp("pythonfmu_unzipped"))))
-    yield directory
-    release_native_runtime(directory)
+    return Path(extract(str(fmu), str(tmp_path_factory.mktemp("pythonfmu_unzipped"))))
 
 
 def _outputs(slave, refs) -> list[float]:
