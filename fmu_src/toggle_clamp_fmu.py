@@ -107,10 +107,11 @@ class ToggleClamp(DeclaredSlave):
 
     def initialize(self) -> None:
         self._build_plant()
-        self._drive = DriveState(self.x_cmd, 0.0, 0.0)
+        self._drive = DriveState.at_rest(self.x_cmd)
         self._publish()
 
     def step(self, current_time: float, step_size: float) -> None:
+        self._plant.check_input(self.x_cmd)  # before the drive: a position error, not a speed
         drive = follow(self._drive, self.x_cmd, step_size, self.drive_bandwidth,
                        self.drive_damping)
         self._publish(drive)

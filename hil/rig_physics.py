@@ -42,8 +42,8 @@ class ClampPhysics:
                             errors={"r8": self.delta_r8})
             self._plant = CompiledPlant(cfg)
         if self._state is None:
-            self._state = DriveState(x, 0.0, 0.0)
+            self._state = DriveState.at_rest(x)
         else:
             self._state = follow(self._state, x, self.period)
-        out = self._plant(*self._state)
+        out = self._plant(self._state.x, self._state.v, self._state.a)
         return out.platen_position, out.input_force

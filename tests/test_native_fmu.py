@@ -192,10 +192,10 @@ def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: f
                                                   "drive_bandwidth": bandwidth})
     out = _run(slave, refs, steps)
     close_slave(slave)
-    drive = DriveState(X_OPEN, 0.0, 0.0)
+    drive = DriveState.at_rest(X_OPEN)
     for (x_cmd, h), got in zip(steps, out, strict=True):
         drive = follow(drive, x_cmd, h, bandwidth, 0.7)
-        assert got[:3] == pytest.approx(tuple(drive), rel=1e-12, abs=1e-12)  # a: w^2 (u - x)
+        assert got[:3] == pytest.approx(tuple(drive[:3]), rel=1e-12, abs=1e-12)  # a: w^2 (u - x)
         assert got == pytest.approx(list(_reference(*got[:3], X_CONTACT)), rel=REL, abs=1e-12)
 
 
@@ -361,7 +361,7 @@ def test_a_c_host_runs_the_binary_without_python(native: Path, unzipped: Path, t
         capture_output=True, text=True, env=env, timeout=30)
     assert run.returncode == 0, run.stderr
     force, clamp = map(float, run.stdout.split())
-    drive = DriveState(-3.4386e-3, 0.0, 0.0)
+    drive = DriveState.at_rest(-3.4386e-3)
     for k in range(1, 501):  # the host's ramp, in the same floating-point operations
         drive = follow(drive, -3.4386e-3 + (0.051 + 3.4386e-3) * k / 500.0, 1e-3)
     want = _reference(*drive, 0.050566)

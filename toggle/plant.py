@@ -206,12 +206,16 @@ class CompiledPlant:
         self._buffer.set_arg(0, memoryview(self._arg))
         self._buffer.set_res(0, memoryview(self._res))
 
-    def __call__(self, x: float, v: float, a: float) -> PlantOutputs:
+    def check_input(self, x: float) -> None:
+        """Raise :class:`PlantError` unless the input position ``x`` (m) assembles."""
         if not (self.x_min <= x <= self.x_max):
             raise PlantError(
                 f"input position x = {x!r} m outside the assemblable range "
                 f"[{self.x_min:.6g}, {self.x_max:.6g}] m"
             )
+
+    def __call__(self, x: float, v: float, a: float) -> PlantOutputs:
+        self.check_input(x)
         self._arg[:] = (x, v, a)
         self._eval()
         values = self._res.tolist()
@@ -267,45 +271,87 @@ def configure(
 
 
 class DriveState(NamedTuple):
-    """Input-link motion: position (m), velocity (m/s), acceleration (m/s^2)."""
+    """Input-link motion: position (m), velocity (m/s), acceleration (m/s^2), and the
+    command (m) and step size (s) of the last step, which the next step interpolates from."""
 
     x: float
     v: float
     a: float
+    u: float
+    h: float = 0.0  # 0: no step yet (at rest)
+
+    @classmethod
+    def at_rest(cls, x: float) -> DriveState:
+        return cls(x, 0.0, 0.0, x)
 
 
-@functools.lru_cache(maxsize=64)
-def _lag_matrices(
-    bandwidth: float, damping: float, h: float
-) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Exact zero-order-hold discretisation of x'' = w^2 (u - x) - 2 zeta w x' (as floats)."""
-    from scipy.linalg import expm
+#: Bounds of a commanded motion (an input link, not a projectile): beyond them the
+#: command is a step or a glitch of the master, refused rather than turned into 1e19 N.
+MAX_INPUT_SPEED = 10.0  # m/s
+MAX_INPUT_ACCELERATION = 1e4  # m/s^2
 
-    w = 2 * math.pi * bandwidth
-    A = np.array([[0.0, 1.0], [-w * w, -2 * damping * w]])
-    B = np.array([0.0, w * w])
-    M = expm(np.block([[A, B[:, None]], [np.zeros((1, 3))]]) * h)
-    return tuple(float(v) for v in M[:2, :2].ravel()), (float(M[0, 2]), float(M[1, 2]))
+
+def lag_transition(w: float, zeta: float, h: float) -> tuple[float, float, float, float]:
+    """exp(A h) of the drive lag A = [0 1; -w^2 -2 zeta w], in closed form.
+
+    exp(A h) = e^m (c I + s (A h - m I)) with m = -zeta w h, q^2 = (w h)^2 (zeta^2 - 1),
+    c = cosh q, s = sinh(q)/q (cos and sin for q^2 < 0; their series near q = 0, where
+    the damping is close to critical). A few floating-point operations per step, for
+    any step size (no matrix exponential, no cache).
+    """
+    wh = w * h
+    q2 = wh * wh * (zeta - 1.0) * (zeta + 1.0)
+    if abs(q2) < 1e-2:
+        c = s = term = 1.0
+        for k in range(1, 9):  # q2^k / (2k)! and q2^k / (2k+1)!
+            term *= q2 / ((2.0 * k - 1.0) * (2.0 * k))
+            c += term
+            s += term / (2.0 * k + 1.0)
+    elif q2 > 0:
+        q = math.sqrt(q2)
+        c, s = math.cosh(q), math.sinh(q) / q
+    else:
+        q = math.sqrt(-q2)
+        c, s = math.cos(q), math.sin(q) / q
+    e = math.exp(-zeta * wh)
+    return e * (c + s * zeta * wh), e * s * h, -e * s * w * wh, e * (c - s * zeta * wh)
 
 
 def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
            damping: float = 0.7) -> DriveState:
     """Advance the drive by h toward the commanded position.
 
-    ``bandwidth`` 0 is an ideal position source (velocity and acceleration by
-    backward differences); otherwise a second-order tracking lag with that
-    natural frequency (Hz) and damping ratio, discretised exactly.
+    The command is taken as linear in time between the last command and
+    ``x_cmd`` (first-order hold), so results depend on the communication
+    steps only through that interpolation. ``bandwidth`` 0 is an ideal position
+    source: the input link is at the command, with velocity and acceleration
+    of the parabola through the last three commands (exact for a constant
+    acceleration, whatever the step sizes). Otherwise a second-order tracking
+    lag with that natural frequency (Hz) and damping ratio, solved exactly for
+    the ramp input. A command beyond :data:`MAX_INPUT_SPEED` or
+    :data:`MAX_INPUT_ACCELERATION` raises :class:`PlantError`.
     """
-    if not h > 0:
+    if not (h > 0 and math.isfinite(h)):
         raise PlantError(f"step size must be > 0, got {h!r} s")
+    rate = (x_cmd - state.u) / h  # the command's slope over the step
     if bandwidth <= 0:
-        v = (x_cmd - state.x) / h
-        return DriveState(x_cmd, v, (v - state.v) / h)
-    (p00, p01, p10, p11), (g0, g1) = _lag_matrices(bandwidth, damping, h)
-    x = p00 * state.x + p01 * state.v + g0 * x_cmd
-    v = p10 * state.x + p11 * state.v + g1 * x_cmd
-    w = 2 * math.pi * bandwidth
-    return DriveState(x, v, w * w * (x_cmd - x) - 2 * damping * w * v)
+        slope_before = state.v - state.a * state.h / 2  # the last step's mean velocity
+        a = 2 * (rate - slope_before) / (state.h + h)
+        new = DriveState(x_cmd, rate + a * h / 2, a, x_cmd, h)
+    else:
+        w = 2 * math.pi * bandwidth
+        p00, p01, p10, p11 = lag_transition(w, damping, h)
+        lag = 2 * damping * rate / w  # how far the lag trails a ramp in steady state
+        e0, e1 = state.x - (state.u - lag), state.v - rate
+        x = x_cmd - lag + p00 * e0 + p01 * e1
+        v = rate + p10 * e0 + p11 * e1
+        new = DriveState(x, v, w * w * (x_cmd - x) - 2 * damping * w * v, x_cmd, h)
+    if not (abs(new.v) <= MAX_INPUT_SPEED and abs(new.a) <= MAX_INPUT_ACCELERATION):
+        raise PlantError(
+            f"the command x_cmd = {x_cmd!r} m after {h!r} s asks for {new.v:.3g} m/s and "
+            f"{new.a:.3g} m/s^2; an input link moves within {MAX_INPUT_SPEED:g} m/s and "
+            f"{MAX_INPUT_ACCELERATION:g} m/s^2")
+    return new
 
 
 __all__ = [
