@@ -186,8 +186,8 @@ def test_lagging_drive_agrees_to_rounding_and_the_plant_exactly(unzipped: Path,
 
 @pytest.mark.parametrize("bandwidth", [0.0, 20.0])
 def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: float):
-    steps = [(X_OPEN + 1e-3, 1e-3), (X_OPEN + 2e-3, 1e-4), (X_OPEN + 2e-2, 3e-2),
-             (X_CONTACT + 5e-4, 0.2), (X_CONTACT + 5e-4, 7e-4), (X_OPEN, 1e-2)]
+    steps = [(X_OPEN + 1e-3, 1e-3), (X_OPEN + 2e-3, 1e-3), (X_OPEN + 2e-2, 3e-2),
+             (X_CONTACT + 5e-4, 0.2), (X_CONTACT + 5e-4, 7e-4), (X_OPEN, 3e-2)]
     slave, refs = start_slave(unzipped, "steps", {"x_cmd": X_OPEN, "x_contact": X_CONTACT,
                                                   "drive_bandwidth": bandwidth})
     out = _run(slave, refs, steps)
@@ -235,14 +235,14 @@ def test_state_get_set_serialize_and_reset_reproduce_outputs(unzipped: Path):
 @pytest.mark.parametrize(
     ("start", "named"),
     [
-        ({"delta_r4b": 1.0}, "triangular link 4"),
+        ({"delta_r4b": 1.0}, "delta_r4b = 1 is outside [-0.005, 0.005]"),
         ({"x_contact": -1.0}, "x_contact"),
         ({"m_platen": math.inf}, "m_platen"),
         ({"mu": math.inf}, "mu"),
         ({"mu": -0.2}, "mu"),
         ({"delta_r8": math.nan}, "delta_r8"),
-        ({"x_cmd": 0.5}, "x = 0.5"),
-        ({"delta_r7b": 1.0}, "upper"),
+        ({"x_cmd": 0.5}, "x_cmd = 0.5 is outside"),
+        ({"delta_r7b": 1.0}, "delta_r7b"),
         ({"drive_bandwidth": 10.0, "drive_damping": -1.0}, "drive_damping"),
     ],
 )
@@ -364,7 +364,7 @@ def test_a_c_host_runs_the_binary_without_python(native: Path, unzipped: Path, t
     drive = DriveState.at_rest(-3.4386e-3)
     for k in range(1, 501):  # the host's ramp, in the same floating-point operations
         drive = follow(drive, -3.4386e-3 + (0.051 + 3.4386e-3) * k / 500.0, 1e-3)
-    want = _reference(*drive, 0.050566)
+    want = _reference(*drive[:3], 0.050566)
     assert (force, clamp) == pytest.approx((want.input_force, want.clamp_force), rel=1e-12)
     assert clamp > 0
 
