@@ -271,14 +271,16 @@ def configure(
 
 
 class DriveState(NamedTuple):
-    """Input-link motion: position (m), velocity (m/s), acceleration (m/s^2), and the
-    command (m) and step size (s) of the last step, which the next step interpolates from."""
+    """Input-link motion: position (m), velocity (m/s), acceleration (m/s^2); and the
+    last command (m), its mean slope over the last step (m/s) and that step (s), from
+    which the next step interpolates the command."""
 
     x: float
     v: float
     a: float
     u: float
-    h: float = 0.0  # 0: no step yet (at rest)
+    slope: float = 0.0
+    h: float = 0.0  # 0: no step yet
 
     @classmethod
     def at_rest(cls, x: float) -> DriveState:
@@ -321,37 +323,41 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
            damping: float = 0.7) -> DriveState:
     """Advance the drive by h toward the commanded position.
 
-    The command is taken as linear in time between the last command and
-    ``x_cmd`` (first-order hold), so results depend on the communication
-    steps only through that interpolation. ``bandwidth`` 0 is an ideal position
-    source: the input link is at the command, with velocity and acceleration
-    of the parabola through the last three commands (exact for a constant
-    acceleration, whatever the step sizes). Otherwise a second-order tracking
-    lag with that natural frequency (Hz) and damping ratio, solved exactly for
-    the ramp input. A command beyond :data:`MAX_INPUT_SPEED` or
-    :data:`MAX_INPUT_ACCELERATION` raises :class:`PlantError`.
+    Between communication points the command is the parabola through the last
+    three commands, so a command of constant acceleration is followed exactly
+    whatever the step sizes (a master's variable steps change nothing).
+    ``bandwidth`` 0 is an ideal position source: the input link is at the
+    command, with the parabola's velocity and acceleration. Otherwise a
+    second-order tracking lag with that natural frequency (Hz) and damping
+    ratio, solved exactly for that command. A command beyond
+    :data:`MAX_INPUT_SPEED` or :data:`MAX_INPUT_ACCELERATION` raises
+    :class:`PlantError`.
     """
     if not (h > 0 and math.isfinite(h)):
         raise PlantError(f"step size must be > 0, got {h!r} s")
-    rate = (x_cmd - state.u) / h  # the command's slope over the step
+    rate = (x_cmd - state.u) / h  # the command's mean slope over the step
+    curvature = 2 * (rate - state.slope) / (state.h + h)  # the parabola's 2nd derivative
+    du1 = rate + curvature * h / 2  # the command's slope at the end of the step
     if bandwidth <= 0:
-        slope_before = state.v - state.a * state.h / 2  # the last step's mean velocity
-        a = 2 * (rate - slope_before) / (state.h + h)
-        new = DriveState(x_cmd, rate + a * h / 2, a, x_cmd, h)
+        x, v, a = x_cmd, du1, curvature
     else:
+        # x_p = u - k1 u' + k2 u'' solves x'' + 2 zeta w x' + w^2 x = w^2 u for a parabola
+        # u; the deviation from it decays as exp(A h)
         w = 2 * math.pi * bandwidth
+        k1, k2 = 2 * damping / w, (4 * damping * damping - 1) / (w * w)
+        du0 = rate - curvature * h / 2
+        e0 = state.x - (state.u - k1 * du0 + k2 * curvature)
+        e1 = state.v - (du0 - k1 * curvature)
         p00, p01, p10, p11 = lag_transition(w, damping, h)
-        lag = 2 * damping * rate / w  # how far the lag trails a ramp in steady state
-        e0, e1 = state.x - (state.u - lag), state.v - rate
-        x = x_cmd - lag + p00 * e0 + p01 * e1
-        v = rate + p10 * e0 + p11 * e1
-        new = DriveState(x, v, w * w * (x_cmd - x) - 2 * damping * w * v, x_cmd, h)
-    if not (abs(new.v) <= MAX_INPUT_SPEED and abs(new.a) <= MAX_INPUT_ACCELERATION):
+        x = x_cmd - k1 * du1 + k2 * curvature + p00 * e0 + p01 * e1
+        v = du1 - k1 * curvature + p10 * e0 + p11 * e1
+        a = w * w * (x_cmd - x) - 2 * damping * w * v
+    if not (abs(v) <= MAX_INPUT_SPEED and abs(a) <= MAX_INPUT_ACCELERATION):
         raise PlantError(
-            f"the command x_cmd = {x_cmd!r} m after {h!r} s asks for {new.v:.3g} m/s and "
-            f"{new.a:.3g} m/s^2; an input link moves within {MAX_INPUT_SPEED:g} m/s and "
+            f"the command x_cmd = {x_cmd!r} m after {h!r} s asks for {v:.3g} m/s and "
+            f"{a:.3g} m/s^2; an input link moves within {MAX_INPUT_SPEED:g} m/s and "
             f"{MAX_INPUT_ACCELERATION:g} m/s^2")
-    return new
+    return DriveState(x, v, a, x_cmd, rate, h)
 
 
 __all__ = [

@@ -20,7 +20,7 @@
 #include "clamp_model.h"
 #include "clamp_model_data.h"
 
-#define STATE_VERSION 2u
+#define STATE_VERSION 3u
 #define GRID 4001
 #define N_IN 6
 #define PI 3.14159265358979323846
@@ -32,7 +32,7 @@ typedef struct {
     uint32_t version, size;
     int32_t phase, mold, unequal, spare;  /* spare: no padding in the checksum */
     double r[CLAMP_N_REAL];      /* every Real variable, by value reference */
-    double drive[5];             /* x, v, a of the input link; last command u and step h */
+    double drive[6];             /* x, v, a of the input link; last command, its slope, step */
     double dims[2 * CLAMP_N_DIMS], mu, masses[4], x_lo, x_hi;
     uint64_t checksum;           /* FNV-1a of everything before it */
 } State;
@@ -208,7 +208,7 @@ static fmi2Status initialise(Instance *c) {
               "outside the assemblable range [%g, %g] m", xc, s->x_lo, s->x_hi);
         return fmi2Error;
     }
-    double x0 = s->r[VR_X_CMD], xva[5] = {x0, 0.0, 0.0, x0, 0.0};
+    double x0 = s->r[VR_X_CMD], xva[6] = {x0, 0.0, 0.0, x0, 0.0, 0.0};
     if (!(s->x_lo <= x0 && x0 <= s->x_hi)) {
         logf_(c, fmi2Error, "initialisation failed: input position x = %g m outside the "
               "assemblable range [%g, %g] m", x0, s->x_lo, s->x_hi);
@@ -250,33 +250,34 @@ static void lag_expm(double w, double zeta, double h, double p[4]) {
     p[3] = e * (c - s * zeta * wh);
 }
 
-/* The drive's motion after a step h toward u (toggle.plant.follow): 0 and a message in
- * `why` if the command asks for more than MAX_SPEED or MAX_ACCELERATION. */
+/* The drive's motion after a step h toward u (toggle.plant.follow); 0 if the command asks
+ * for more than MAX_SPEED or MAX_ACCELERATION. */
 #define MAX_SPEED 10.0
 #define MAX_ACCELERATION 1e4
-static int follow(Instance *c, double u, double h, double out[5]) {
+static int follow(Instance *c, double u, double h, double out[6]) {
     const State *s = &c->s;
     double bw = s->r[VR_BANDWIDTH], zeta = s->r[VR_DAMPING];
     const double *d = s->drive, *p = c->lag;
-    double rate = (u - d[3]) / h;
+    double rate = (u - d[3]) / h, curvature = 2 * (rate - d[4]) / (d[5] + h);
+    double du1 = rate + curvature * h / 2;
     if (bw <= 0) {
-        double slope_before = d[1] - d[2] * d[4] / 2;
-        double a = 2 * (rate - slope_before) / (d[4] + h);
-        out[0] = u; out[1] = rate + a * h / 2; out[2] = a;
+        out[0] = u; out[1] = du1; out[2] = curvature;
     } else {
         double w = 2.0 * PI * bw;
         if (c->lag_key[0] != bw || c->lag_key[1] != zeta || c->lag_key[2] != h) {
             lag_expm(w, zeta, h, c->lag);
             c->lag_key[0] = bw; c->lag_key[1] = zeta; c->lag_key[2] = h;
         }
-        /* exact for the command linear over the step: the deviation from the ramp's
-         * steady state (trailing by 2 zeta rate / w) decays as exp(A h) */
-        double lag = 2 * zeta * rate / w, e0 = d[0] - (d[3] - lag), e1 = d[1] - rate;
-        out[0] = u - lag + p[0] * e0 + p[1] * e1;
-        out[1] = rate + p[2] * e0 + p[3] * e1;
+        /* exact for the parabola command: the deviation from x_p = u - k1 u' + k2 u''
+         * decays as exp(A h) */
+        double k1 = 2 * zeta / w, k2 = (4 * zeta * zeta - 1) / (w * w);
+        double du0 = rate - curvature * h / 2;
+        double e0 = d[0] - (d[3] - k1 * du0 + k2 * curvature), e1 = d[1] - (du0 - k1 * curvature);
+        out[0] = u - k1 * du1 + k2 * curvature + p[0] * e0 + p[1] * e1;
+        out[1] = du1 - k1 * curvature + p[2] * e0 + p[3] * e1;
         out[2] = w * w * (u - out[0]) - 2.0 * zeta * w * out[1];
     }
-    out[3] = u; out[4] = h;
+    out[3] = u; out[4] = rate; out[5] = h;
     return fabs(out[1]) <= MAX_SPEED && fabs(out[2]) <= MAX_ACCELERATION;
 }
 
@@ -406,7 +407,7 @@ fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size
 
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean new_step) {
     Instance *c = comp;
-    double drive[5], y[CLAMP_N_OUT];
+    double drive[6], y[CLAMP_N_OUT];
     (void)new_step;
     if (c->s.phase != STEPPING) {
         logf_(c, fmi2Error, "doStep refused: %s", c->s.phase == FAILED ? "initialisation failed"
