@@ -177,6 +177,9 @@ class DeclaredSlave(Fmi2Slave):
             self.log(self.failure, Fmi2Status.error)
             return False
         self.failure, self._stale = None, False
+        self.log("initialised: " + ", ".join(
+            f"{v.name} = {getattr(self, v.name)!r}" for v in self.VARIABLES
+            if v.causality == "parameter"))
         return True
 
     def do_step(self, current_time: float, step_size: float) -> bool:

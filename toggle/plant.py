@@ -327,7 +327,9 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
     three commands, so a command of constant acceleration is followed exactly
     whatever the step sizes (a master's variable steps change nothing).
     ``bandwidth`` 0 is an ideal position source: the input link is at the
-    command, with the parabola's velocity and acceleration. Otherwise a
+    command, with the parabola's acceleration and its velocity limited to the
+    sign of the step's mean slope and twice its size (so a stop, mean slope 0,
+    has velocity 0 rather than the parabola's overshoot). Otherwise a
     second-order tracking lag with that natural frequency (Hz) and damping
     ratio, solved exactly for that command. A command beyond
     :data:`MAX_INPUT_SPEED` or :data:`MAX_INPUT_ACCELERATION` raises
@@ -338,8 +340,8 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
     rate = (x_cmd - state.u) / h  # the command's mean slope over the step
     curvature = 2 * (rate - state.slope) / (state.h + h)  # the parabola's 2nd derivative
     du1 = rate + curvature * h / 2  # the command's slope at the end of the step
-    if bandwidth <= 0:
-        x, v, a = x_cmd, du1, curvature
+    if bandwidth <= 0:  # a command that stops is not read as a reversal (nor doubles back)
+        x, v, a = x_cmd, min(max(du1, min(0.0, 2 * rate)), max(0.0, 2 * rate)), curvature
     else:
         # x_p = u - k1 u' + k2 u'' solves x'' + 2 zeta w x' + w^2 x = w^2 u for a parabola
         # u; the deviation from it decays as exp(A h)

@@ -261,7 +261,8 @@ static int follow(Instance *c, double u, double h, double out[6]) {
     double rate = (u - d[3]) / h, curvature = 2 * (rate - d[4]) / (d[5] + h);
     double du1 = rate + curvature * h / 2;
     if (bw <= 0) {
-        out[0] = u; out[1] = du1; out[2] = curvature;
+        double lo = fmin(0.0, 2 * rate), hi = fmax(0.0, 2 * rate);  /* a stop is no reversal */
+        out[0] = u; out[1] = fmin(fmax(du1, lo), hi); out[2] = curvature;
     } else {
         double w = 2.0 * PI * bw;
         if (c->lag_key[0] != bw || c->lag_key[1] != zeta || c->lag_key[2] != h) {
