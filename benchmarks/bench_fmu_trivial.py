@@ -30,15 +30,17 @@ def time_step(
     unzip_dir: Path,
     inputs: Mapping[str, Sequence[float]],
     outputs: Sequence[str],
-    step_size: float,
+    step_size: float | Sequence[float],
     steps: int,
     runs: int,
     start_values: Mapping[str, float | str] | None = None,
 ) -> float:
     """Median over ``runs`` fresh instances of µs per set-inputs + doStep + get-outputs.
 
-    ``inputs`` maps each input name to a sequence of values, cycled step by step.
+    ``inputs`` maps each input name to a sequence of values, cycled step by step;
+    a sequence of step sizes is cycled too.
     """
+    sizes = [step_size] if isinstance(step_size, float) else list(step_size)
     per_run = []
     for run in range(runs):
         slave, refs = start_slave(unzip_dir, f"bench{run}", start_values)
@@ -49,9 +51,10 @@ def time_step(
         start = time.perf_counter()
         for k in range(steps):
             slave.setReal(in_refs, series[k % len(series)])
-            slave.doStep(t, step_size)
+            h = sizes[k % len(sizes)]
+            slave.doStep(t, h)
             slave.getReal(out_refs)
-            t += step_size
+            t += h
         per_run.append((time.perf_counter() - start) / steps * 1e6)
         slave.terminate()
         slave.freeInstance()

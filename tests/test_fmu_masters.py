@@ -407,3 +407,16 @@ def test_fmi_compliance_checker_finds_no_problem(fmu: Path, tmp_path: Path, clos
     assert "0 warning(s) and error(s)" in text and "0 Warning(s)" in text and "0 Error(s)" in text
     result = np.genfromtxt(out, delimiter=",", names=True)
     assert result["x"][-1] == pytest.approx(X_TOGGLE if closing else X_OPEN, abs=1e-9)
+
+
+def test_one_fmu_per_preset_with_its_values_as_start_values(tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture):
+    from toggle.cli import main
+
+    assert main(["build-fmu", "--preset", "lin2003_sm55", "--out", str(tmp_path)]) == 0
+    md = read_model_description(capsys.readouterr().out.strip())
+    start = {v.name: v.start for v in md.modelVariables}
+    dyn = configure("lin2003_sm55").dynamics
+    assert start["preset"] == "lin2003_sm55" and float(start["m_platen"]) == dyn.platen
+    assert main(["build-fmu", "--preset", "li_micro", "--out", str(tmp_path)]) == 2
+    assert "no [dynamics] section" in capsys.readouterr().err
