@@ -190,13 +190,16 @@ def run_libcosim(
 
 def variable_table(variables: Sequence[Var]) -> str:
     """Markdown table of a slave's variables (docs/fmu.md embeds ToggleClamp's)."""
-    rows = ["| Name | Causality | Unit | Start | Description |", "|---|---|---|---|---|"]
+    rows = ["| Name | Causality | Unit | Start | Min | Max | Description |",
+            "|---|---|---|---|---|---|---|"]
     for var in variables:
         if var.is_string:
             start, unit = f'`"{var.start}"`', ""
         else:
             start, unit = ("" if var.start is None else f"{var.start:g}"), var.unit
-        rows.append(f"| `{var.name}` | {var.causality} | {unit} | {start} | {var.description} |")
+        low, high = ("" if b is None else f"{b:g}" for b in (var.min, var.max))
+        rows.append(f"| `{var.name}` | {var.causality} | {unit} | {start} | {low} | {high} | "
+                    f"{var.description} |")
     return "\n".join(rows) + "\n"
 
 
