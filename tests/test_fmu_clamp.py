@@ -160,9 +160,14 @@ def test_stroke_outputs_equal_the_library(unzipped: Path, bandwidth: float):
 def test_ideal_drive_puts_the_input_link_at_the_command(unzipped: Path):
     res = _simulate_stroke(unzipped, **MOLD)
     np.testing.assert_array_equal(res["x"], res["x_cmd"])
-    x, h = res["x"], 1e-3  # velocity: slope of the parabola through the last three commands
-    np.testing.assert_allclose(res["velocity"][2:], (3 * x[2:] - 4 * x[1:-1] + x[:-2]) / (2 * h),
-                               rtol=1e-9, atol=1e-12)
+    # velocity: slope of the parabola through the last three commands, within [0, 2 x mean
+    # slope of the step] (or [2 x, 0] backwards)
+    x, h = res["x"], 1e-3
+    rate = np.diff(x)[1:] / h
+    parabola = (3 * x[2:] - 4 * x[1:-1] + x[:-2]) / (2 * h)
+    want = np.clip(parabola, np.minimum(0, 2 * rate), np.maximum(0, 2 * rate))
+    np.testing.assert_allclose(res["velocity"][2:], want, rtol=1e-9, atol=1e-12)
+    assert np.mean(want == parabola) > 0.6  # the limit acts at the ends of the stroke only
     assert res["x"][-1] == pytest.approx(X_TOGGLE, abs=1e-12)
 
 

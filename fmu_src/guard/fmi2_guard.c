@@ -29,15 +29,15 @@
 #include "fmi2Functions.h"
 #include "guard_table.h"
 
-#define FORWARD(name) static name##TYPE *in_##name
-FORWARD(fmi2Instantiate); FORWARD(fmi2FreeInstance); FORWARD(fmi2SetDebugLogging);
-FORWARD(fmi2SetupExperiment); FORWARD(fmi2EnterInitializationMode);
-FORWARD(fmi2ExitInitializationMode); FORWARD(fmi2Terminate); FORWARD(fmi2Reset);
-FORWARD(fmi2GetReal); FORWARD(fmi2GetString); FORWARD(fmi2SetReal); FORWARD(fmi2SetString);
-FORWARD(fmi2GetFMUstate); FORWARD(fmi2SetFMUstate); FORWARD(fmi2FreeFMUstate);
-FORWARD(fmi2SerializedFMUstateSize); FORWARD(fmi2SerializeFMUstate);
-FORWARD(fmi2DeSerializeFMUstate); FORWARD(fmi2DoStep); FORWARD(fmi2GetStatus);
-FORWARD(fmi2GetRealStatus);
+/* The functions forwarded to pythonfmu's library: declared once, loaded once. */
+#define INNER(X) X(fmi2Instantiate) X(fmi2FreeInstance) X(fmi2SetDebugLogging) \
+    X(fmi2SetupExperiment) X(fmi2EnterInitializationMode) X(fmi2ExitInitializationMode) \
+    X(fmi2Terminate) X(fmi2Reset) X(fmi2GetReal) X(fmi2GetString) X(fmi2SetReal) \
+    X(fmi2SetString) X(fmi2GetFMUstate) X(fmi2SetFMUstate) X(fmi2FreeFMUstate) \
+    X(fmi2SerializedFMUstateSize) X(fmi2SerializeFMUstate) X(fmi2DeSerializeFMUstate) \
+    X(fmi2DoStep) X(fmi2GetStatus) X(fmi2GetRealStatus)
+#define DECLARE(f) static f##TYPE *in_##f;
+INNER(DECLARE)
 
 typedef enum { INSTANTIATED, INITIALISING, STEPPING, TERMINATED } Phase;
 
@@ -136,15 +136,8 @@ static int load(const fmi2CallbackFunctions *cb, fmi2String name, const char *re
                    "cannot load pythonfmu-export.so next to the guard");
         return 0;
     }
-#define LOAD(f) if (!(in_##f = (f##TYPE *)dlsym(library, #f))) return 0
-    LOAD(fmi2Instantiate); LOAD(fmi2FreeInstance); LOAD(fmi2SetDebugLogging);
-    LOAD(fmi2SetupExperiment); LOAD(fmi2EnterInitializationMode);
-    LOAD(fmi2ExitInitializationMode); LOAD(fmi2Terminate); LOAD(fmi2Reset);
-    LOAD(fmi2GetReal); LOAD(fmi2GetString); LOAD(fmi2SetReal); LOAD(fmi2SetString);
-    LOAD(fmi2GetFMUstate); LOAD(fmi2SetFMUstate); LOAD(fmi2FreeFMUstate);
-    LOAD(fmi2SerializedFMUstateSize); LOAD(fmi2SerializeFMUstate);
-    LOAD(fmi2DeSerializeFMUstate); LOAD(fmi2DoStep); LOAD(fmi2GetStatus);
-    LOAD(fmi2GetRealStatus);
+#define LOAD(f) if (!(in_##f = (f##TYPE *)dlsym(library, #f))) return 0;
+    INNER(LOAD)
     return 1;
 }
 
