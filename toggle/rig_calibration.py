@@ -27,6 +27,7 @@ from toggle.calibration import PAPER_TABLES
 from toggle.kinematics import AssemblyError
 from toggle.params import Mechanism, PinRadii, tomllib
 from toggle.rig_tables import (
+    CHANG2021_READING,
     FORCE_STATISTICS,
     RigReading,
     RigStatistics,
@@ -41,7 +42,7 @@ FORCE_FITTABLE = {
     "drive_stiffness": "log", "mu": "log", "rate_strengthening": "log",
     "hersey_transition": "log", "slip_distance": "log", "pin_radius": "log",
     "guide_friction": "log", "takeup_return": "logit",
-    "toggle_band": "log",
+    "toggle_latency": "log",
 }
 MAX_FORCE_FITTED = 6
 STATISTICS = (*FORCE_STATISTICS, "stroke")
@@ -90,11 +91,11 @@ class RigModel:
 
     params: AsymmetryParams = AsymmetryParams()
     guide_friction: float | None = None  # N; None: the preset's
-    reading: RigReading = RigReading()
+    reading: RigReading = CHANG2021_READING
 
     def value(self, name: str) -> float:
-        if name == "toggle_band":
-            return self.reading.toggle_band
+        if name == "toggle_latency":
+            return self.reading.toggle_latency
         if name == "pin_radius":
             return self.params.pins.C
         if name == "guide_friction":
@@ -104,8 +105,8 @@ class RigModel:
     def with_values(self, values: dict[str, float]) -> RigModel:
         changes = dict(values)
         guide = changes.pop("guide_friction", self.guide_friction)
-        reading = replace(self.reading, toggle_band=changes.pop("toggle_band",
-                                                                 self.reading.toggle_band))
+        reading = replace(self.reading, toggle_latency=changes.pop(
+            "toggle_latency", self.reading.toggle_latency))
         if "pin_radius" in changes:
             r = changes.pop("pin_radius")
             changes["pins"] = PinRadii(B=r, C=r, D=r)
@@ -234,11 +235,11 @@ def _fit_stroke(tables: PaperTables, nominal: Mechanism, model: RigModel,
     """The stroke is linear in the reading's (datum, lever, compliance): weighted linear
     least squares (weights: the printed 3 sigma)."""
     names = ("datum", "lever", "compliance")
-    band = model.reading.toggle_band
-    units = [replace(model, reading=RigReading(toggle_band=band,
+    latency = model.reading.toggle_latency
+    units = [replace(model, reading=RigReading(toggle_latency=latency,
                                                **{n: 1.0 if n == m else 0.0 for n in names}))
              for m in names]
-    base = replace(model, reading=RigReading(toggle_band=band))
+    base = replace(model, reading=RigReading(toggle_latency=latency))
     a, b = [], []
     for i in rows:
         for j, d in enumerate(tables.errors):
@@ -251,7 +252,7 @@ def _fit_stroke(tables: PaperTables, nominal: Mechanism, model: RigModel,
     coef, *_ = np.linalg.lstsq(A, y, rcond=None)
     res = y - A @ coef
     cov = _covariance(A, float(res @ res) / max(len(y) - len(names), 1))
-    reading = RigReading(toggle_band=band, **{n: float(c) for n, c in zip(names, coef)})
+    reading = RigReading(toggle_latency=latency, **{n: float(c) for n, c in zip(names, coef)})
     return replace(model, reading=reading), {n: float(math.sqrt(max(cov[k, k], 0.0)))
                                              for k, n in enumerate(names)}
 

@@ -33,9 +33,10 @@ from toggle.plant import PlantConfig, plant_outputs
 #: The encoder's resolution, m: F_TP is read where the platen first comes this close to
 #: its end position (the rig's 1 um optical encoder, hil.mcu_model).
 TOGGLE_BAND = 1e-6
-#: The band within which the prototype's rig read F_TP, m: fitted (``toggle tables``) on
-#: Tables 6-7, docs/unequal-halves.md section 9. Used by the HIL run summaries too.
-F_TP_BAND = 13.4e-6
+#: How long before the encoder reached the toggle the prototype's rig sampled F_TP, s:
+#: fitted (``toggle tables``) on Tables 6-7, docs/unequal-halves.md section 9. The HIL
+#: run summaries read F_TP the same way.
+F_TP_LATENCY = 0.06205
 #: Points per stroke of the quasi-static evaluation (RMS converged to 0.1 %).
 POINTS = 801
 FORCE_STATISTICS = ("force_forward_max", "force_forward_rms", "force_backward_min",
@@ -50,8 +51,10 @@ class RigError(ValueError):
 class RigReading:
     """How the rig reads F_TP and the stroke, beyond the plant (SI).
 
-    toggle_band: F_TP is the force at the first forward reading within this distance of
-    the platen's end position (m; at least the encoder's 1 um resolution).
+    toggle_latency: F_TP is the force sampled this long (s) before the encoder reading
+    reached the toggle (within its 1 um resolution of the platen's end position): the
+    rig's force sample and position report are not simultaneous (a USB DAQ and a motion
+    card polled by one LabVIEW loop), so at speed v the force is read v * latency early.
 
     datum: offset of the reading between the open and the toggle end (m): the encoder's
     reference taken at the open position with the platen not yet seated against the links
@@ -66,16 +69,20 @@ class RigReading:
     datum: float = 0.0
     lever: float = 0.0
     compliance: float = 0.0  # m/N: the frame carrying the scale, read as platen travel
-    toggle_band: float = F_TP_BAND
+    toggle_latency: float = F_TP_LATENCY
 
     def __post_init__(self) -> None:
-        for name in ("datum", "lever", "compliance", "toggle_band"):
+        for name in ("datum", "lever", "compliance", "toggle_latency"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value)):
                 raise RigError(f"rig reading {name} must be finite, got {value!r}")
-        if not TOGGLE_BAND <= self.toggle_band <= 1e-3:
-            raise RigError(f"toggle_band must lie in [{TOGGLE_BAND:g}, 1e-3] m, "
-                           f"got {self.toggle_band!r}")
+        if not 0.0 <= self.toggle_latency <= 1.0:
+            raise RigError(f"toggle_latency must lie in [0, 1] s, got {self.toggle_latency!r}")
+
+
+#: The prototype's reading, fitted with the force model on Tables 3-4 and 6-7
+#: (``toggle tables --fit ...``, docs/unequal-halves.md section 9).
+CHANG2021_READING = RigReading(datum=0.4584e-3, lever=2.126, compliance=2.602e-6)
 
 
 class RigStatistics(NamedTuple):
@@ -126,8 +133,9 @@ def rig_statistics(cfg: PlantConfig, speed: float, reading: RigReading = RigRead
     fwd = np.asarray(plant_outputs(xs, speed, 0.0, cfg, slip_state=z_fwd).input_force)
     back = np.asarray(plant_outputs(xs, -speed, 0.0, cfg, slip_state=z_back).input_force)
     end = float(_platen(x_tp, cfg))
-    band = reading.toggle_band
-    x_read = brentq(lambda x: float(_platen(x, cfg)) - (end - band), x_open, x_tp, xtol=1e-12)
+    x_band = brentq(lambda x: float(_platen(x, cfg)) - (end - TOGGLE_BAND), x_open, x_tp,
+                    xtol=1e-12)
+    x_read = max(x_band - speed * reading.toggle_latency, x_open)
     z_read = float(slip_state_along(np.array([x_open, x_read]), z_back_end, slip)[-1])
     f_tp = float(plant_outputs(x_read, speed, 0.0, cfg, slip_state=z_read).input_force)
     mismatch = [float(half_pose(x, cfg.mechanism.upper).L - half_pose(x, cfg.mechanism.lower).L)
