@@ -46,6 +46,8 @@ FORCE_FITTABLE = {
 }
 MAX_FORCE_FITTED = 6
 STATISTICS = (*FORCE_STATISTICS, "stroke")
+#: Speeds (m/s) of the rows the shipped defaults were fitted on (Tables 3-4, 6-7).
+SHIPPED_FIT_SPEEDS = (5e-3, 15e-3)
 #: Relative acceptance of a prediction (issue 18); the weight scale of the fit.
 RELATIVE = 0.25
 
@@ -133,7 +135,7 @@ class Fit(NamedTuple):
     stroke_std_error: dict[str, float]
     speeds: tuple[float, ...]  # m/s of the rows fitted
     statistics: tuple[str, ...]
-    cost: float  # mean squared residual (acceptance units)
+    cost: float  # mean squared residual (units of the printed 3 sigma)
 
 
 #: Scale of the linear (signed length) coordinates, m.
@@ -158,7 +160,7 @@ def _slope(kind: str, value: float) -> float:
 
 
 def _weights(tables: PaperTables, stat: str) -> np.ndarray:
-    return np.maximum(tables.three_sigma[stat], RELATIVE * np.abs(tables.mean[stat]))
+    return tables.three_sigma[stat]
 
 
 def calibrate_rig(

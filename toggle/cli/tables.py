@@ -19,6 +19,7 @@ from toggle.rig_calibration import (
     FORCE_FITTABLE,
     MAX_FORCE_FITTED,
     STATISTICS,
+    SHIPPED_FIT_SPEEDS,
     RigModel,
     calibrate_rig,
     compare_tables,
@@ -41,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
         model = fit.model
     simulated = simulate_tables(tables, nominal, model)
     rows = compare_tables(tables, simulated)
-    fitted_speeds = set(fit.speeds) if fit else set()
+    fitted_speeds = set(fit.speeds) if fit else set(SHIPPED_FIT_SPEEDS)
     if args.plot is not None:
         for path in plot_tables(tables, simulated, args.plot):
             print(f"wrote {path}")
