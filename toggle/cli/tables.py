@@ -18,8 +18,8 @@ from toggle.cli.common import MM, add_json_argument, add_preset_argument, mechan
 from toggle.rig_calibration import (
     FORCE_FITTABLE,
     MAX_FORCE_FITTED,
-    STATISTICS,
     SHIPPED_FIT_SPEEDS,
+    STATISTICS,
     RigModel,
     calibrate_rig,
     compare_tables,
