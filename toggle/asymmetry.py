@@ -27,6 +27,12 @@ speed to pin load): mu = mu_b(v_s) exp(-(h / h_s)^2). The two make the rate depe
 of Tables 6-8: F_TP rises with speed where the pins are heavily loaded (link 8 off by
 0.5-0.75 mm) and falls where they are lightly loaded (0.25 mm).
 
+Issue 18 (docs/unequal-halves.md section 9): all of that friction acts through a
+hysteretic slip state z (Dahl's law in the crosshead travel, :func:`advance_slip_state`),
+friction = z D; of the take-up work dU/dx only a share lambda (``takeup_return``) is
+stored and returned, the rest is lost in friction-locked slip and joins D. In steady
+sliding z = sgn v: the stateless ``force``.
+
 The model is written once, with numpy ufuncs on the output of ``half_pose``,
 and compiled to a CasADi function of (x, v, lower dims, upper dims, params), so
 it evaluates on floats, numpy arrays and CasADi SX alike; ``extra_input_force``
