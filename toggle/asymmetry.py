@@ -74,9 +74,10 @@ class AsymmetryError(ValueError):
 class AsymmetryParams:
     """Physical parameters of the forced-agreement model, SI.
 
-    Defaults: the desktop clamp of Chang et al. 2021, calibrated on Tables 6 and 7
-    (free_play, contact_stiffness, hersey_transition) with the rest from its materials
-    and sizes (docs/unequal-halves.md, section 4).
+    Defaults: the desktop clamp of Chang et al. 2021, fitted on every force statistic of
+    Tables 6 and 7 (contact_stiffness, drive_stiffness, rate_strengthening, takeup_return;
+    free_play went to 0, boundary friction) with the rest from its materials and sizes
+    (docs/unequal-halves.md, sections 4 and 9).
     """
 
     free_play: float = 0.0  # delta0, m: platen tilt in the bushings + pin clearances

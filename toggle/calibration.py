@@ -116,7 +116,7 @@ def calibrate(
 
 def _start_value(start: AsymmetryParams, name: str) -> float:
     """A positive, finite start for a log-coordinate fit (free play may be 0, the Hersey
-    transition infinite: then the shipped default)."""
+    transition infinite: then a finite start)."""
     value = getattr(start, name)
     return max(value if math.isfinite(value) else _FINITE_START.get(name, 1.0), 1e-9)
 
