@@ -19,7 +19,7 @@ from pythonfmu import DefaultExperiment
 from toggle.fmu_slave import DeclaredSlave, Var
 from toggle.kinematics import stroke_limits
 from toggle.params import PAPER_NAMES, Mechanism, load_preset
-from toggle.plant import CompiledPlant, DriveState, PlantConfig, configure, follow
+from toggle.plant import DriveState, HystereticPlant, PlantConfig, configure, follow
 
 _PRESET_FILE = Path(__file__).with_name("preset.toml")
 #: The preset this FMU is built for, read once at import (no file is read later).
@@ -76,6 +76,11 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
     )
 
 
+def _finite_list(values: object, n: int) -> bool:
+    return (isinstance(values, list) and len(values) == n
+            and all(isinstance(v, float) and math.isfinite(v) for v in values))
+
+
 class ToggleClamp(DeclaredSlave):
     """Nine-link double-toggle clamp driven by position; see the module doc."""
 
@@ -102,37 +107,41 @@ class ToggleClamp(DeclaredSlave):
         """Compile the plant of the current parameters, unless it is already that one."""
         key = tuple(getattr(self, name) for name in self._PARAMETERS)
         if getattr(self, "_plant_key", None) != key:
-            self._plant = CompiledPlant(self._config())
+            self._plant = HystereticPlant(self._config())
             self._plant_key = key
 
     def initialize(self) -> None:
         self._build_plant()
+        self._plant.state = (None, 0.0)  # the pin friction's slip state starts relaxed
         self._drive = DriveState.at_rest(self.x_cmd)
         self._publish()
 
     def step(self, current_time: float, step_size: float) -> None:
-        self._plant.check_input(self.x_cmd)  # before the drive: a position error, not a speed
+        self._plant.plant.check_input(self.x_cmd)  # a position error first, not a speed
         drive = follow(self._drive, self.x_cmd, step_size, self.drive_bandwidth,
                        self.drive_damping)
         self._publish(drive)
 
     def model_state(self) -> dict:
-        drive = getattr(self, "_drive", None)
-        return {"drive": None if drive is None else list(drive)}
+        if getattr(self, "_drive", None) is None:
+            return {"drive": None, "slip": None}
+        return {"drive": list(self._drive), "slip": list(self._plant.state)}
 
     def restore_model_state(self, state: dict) -> None:
-        drive = state["drive"]
+        drive, slip = state["drive"], state["slip"]
         if drive is None:
             return
-        if not (isinstance(drive, list) and len(drive) == len(DriveState._fields)
-                and all(isinstance(v, float) and math.isfinite(v) for v in drive)):
-            raise ValueError(f"drive state must be {len(DriveState._fields)} finite numbers")
+        if not (_finite_list(drive, len(DriveState._fields)) and isinstance(slip, list)
+                and len(slip) == 2 and (slip[0] is None or _finite_list(slip[:1], 1))
+                and _finite_list(slip[1:], 1) and abs(slip[1]) <= 1.0):
+            raise ValueError("the drive or slip state is not a list of finite numbers")
         self._check_ranges()
         self._build_plant()
         self._drive = DriveState(*drive)
+        self._plant.state = (slip[0], slip[1])
 
     def _publish(self, drive: DriveState | None = None) -> None:
         drive = drive or self._drive
-        outputs = self._plant(drive.x, drive.v, drive.a)  # raises outside the range
+        outputs = self._plant(drive)  # raises outside the range, before any change
         self._drive = drive
         self.__dict__.update(zip(outputs._fields, outputs))  # the output variables

@@ -284,13 +284,15 @@ class Dynamics:
     all toggle links together, lumped half at the crosshead and half at the
     platen (kg); platen: the moving platen with its mold half (kg);
     guide_damping: viscous friction of the crosshead and platen guides,
-    referred to the input link (N s/m).
+    referred to the input link (N s/m); guide_friction: their Coulomb friction
+    (and the ball screw's), referred to the input link (N).
     """
 
     crosshead: float
     links: float
     platen: float
     guide_damping: float = 0.0
+    guide_friction: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -34,7 +34,12 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 
-from toggle.asymmetry import AsymmetryParams, extra_input_force
+from toggle.asymmetry import (
+    AsymmetryParams,
+    advance_slip_state,
+    asymmetry,
+    hysteretic_force,
+)
 from toggle.drive import motor_torque
 from toggle.elastics import clamp_state
 from toggle.kinematics import (
@@ -130,14 +135,17 @@ class PlantConfig:
         return replace(self, **changes)
 
 
-def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = None
-                  ) -> PlantOutputs:
+def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = None,
+                  slip_state: Any = None) -> PlantOutputs:
     """Plant outputs at input position x, velocity v and acceleration a.
 
     Floats, arrays or CasADi symbols; no assembly check (see
     :class:`CompiledPlant` for the checked numeric form). ``x_contact``, if
     given, replaces ``cfg.x_contact`` and may be a CasADi symbol: the planner
     keeps the mold height a parameter of its problem (no numeric check here).
+    ``slip_state`` z in [-1, 1] is the hysteretic friction state of the guides and
+    of the unequal halves (:func:`toggle.asymmetry.advance_slip_state`, carried by the
+    caller); None: steady sliding (z = the smooth sign of v), the stateless plant.
     """
     mech, dyn = cfg.mechanism, cfg.dynamics
     x_contact = cfg.x_contact if x_contact is None else x_contact
@@ -165,9 +173,12 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
         q = force_ratios(x, mech.lower, mech.clamp.pins, cfg.friction, direction).thrust
         ma = 1.0 / np.maximum(np.fabs(q), 1.0 / MA_CAP)
     inertia = m_in * a + moving * m_out * g * (g * a + gp * v * v)
-    force = inertia + dyn.guide_damping * v + thrust
+    guide = direction if slip_state is None else slip_state
+    force = inertia + dyn.guide_damping * v + dyn.guide_friction * guide + thrust
     if not mech.symmetric:  # a parameter decision: equal halves add exactly nothing
-        force = force + extra_input_force(x, v, mech.lower, mech.upper, cfg.asymmetry)
+        extra = asymmetry(x, v, mech.lower, mech.upper, cfg.asymmetry)
+        force = force + (extra.force if slip_state is None
+                         else hysteretic_force(extra, slip_state))
     theta4 = half_pose(x, mech.lower, check=False).theta4
     return PlantOutputs(
         x=x, velocity=v, acceleration=a,
@@ -197,14 +208,18 @@ class CompiledPlant:
     def __init__(self, cfg: PlantConfig) -> None:
         self.config = cfg
         self.x_min, self.x_max = cfg.input_range
-        sym = ca.SX.sym("xva", 3)
-        outs = plant_outputs(sym[0], sym[1], sym[2], cfg)
-        self._fn = ca.Function("plant", [sym], [ca.vertcat(*[ca.SX(o) for o in outs])],
-                               {"cse": True})
-        self._arg, self._res = np.zeros(3), np.zeros(len(PlantOutputs._fields))
-        self._buffer, self._eval = self._fn.buffer()
-        self._buffer.set_arg(0, memoryview(self._arg))
-        self._buffer.set_res(0, memoryview(self._res))
+        sym = ca.SX.sym("xvaz", 4)
+        self._calls = {}
+        for stateful in (False, True):
+            outs = plant_outputs(sym[0], sym[1], sym[2], cfg,
+                                 slip_state=sym[3] if stateful else None)
+            fn = ca.Function("plant", [sym], [ca.vertcat(*[ca.SX(o) for o in outs])],
+                             {"cse": True})
+            arg, res = np.zeros(4), np.zeros(len(PlantOutputs._fields))
+            buffer, evaluate = fn.buffer()
+            buffer.set_arg(0, memoryview(arg))
+            buffer.set_res(0, memoryview(res))
+            self._calls[stateful] = (arg, res, buffer, evaluate)
 
     def check_input(self, x: float) -> None:
         """Raise :class:`PlantError` unless the input position ``x`` (m) assembles."""
@@ -214,15 +229,42 @@ class CompiledPlant:
                 f"[{self.x_min:.6g}, {self.x_max:.6g}] m"
             )
 
-    def __call__(self, x: float, v: float, a: float) -> PlantOutputs:
+    def __call__(self, x: float, v: float, a: float,
+                 slip_state: float | None = None) -> PlantOutputs:
+        """Outputs at (x, v, a); ``slip_state``: the friction state (None: steady sliding)."""
         self.check_input(x)
-        self._arg[:] = (x, v, a)
-        self._eval()
-        values = self._res.tolist()
+        arg, res, _, evaluate = self._calls[slip_state is not None]
+        arg[:] = (x, v, a, 0.0 if slip_state is None else slip_state)
+        evaluate()
+        values = res.tolist()
         if not all(map(math.isfinite, values)):
             bad = [n for n, val in zip(PlantOutputs._fields, values) if not math.isfinite(val)]
             raise PlantError(f"no finite plant solution at x = {x!r} m ({', '.join(bad)})")
         return PlantOutputs(*values)
+
+
+class HystereticPlant:
+    """A :class:`CompiledPlant` stepped along a drive path, carrying the slip state.
+
+    What the rig emulator uses, and what an FMU must do to show the hysteresis: keep
+    (x, z) from the previous step, advance z by the crosshead move with
+    :func:`toggle.asymmetry.advance_slip_state`, evaluate the plant in that state.
+    """
+
+    def __init__(self, cfg: PlantConfig, slip_state: float = 0.0) -> None:
+        self.plant = CompiledPlant(cfg)
+        self.slip_distance = cfg.asymmetry.slip_distance
+        #: (last position m or None before the first call, slip state): what a saved
+        #: state (the FMU's) must hold besides the drive
+        self.state: tuple[float | None, float] = (None, slip_state)
+
+    def __call__(self, drive: DriveState) -> PlantOutputs:
+        x_last, z = self.state
+        if x_last is not None:
+            z = float(advance_slip_state(z, drive.x - x_last, self.slip_distance))
+        out = self.plant(drive.x, drive.v, drive.a, z)  # raises before the state changes
+        self.state = (drive.x, z)
+        return out
 
 
 def configure(
@@ -363,6 +405,7 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
 
 
 __all__ = [
-    "AssemblyError", "CompiledPlant", "DriveState", "PlantConfig", "PlantError", "PlantOutputs",
+    "AssemblyError", "CompiledPlant", "DriveState", "HystereticPlant", "PlantConfig",
+    "PlantError", "PlantOutputs",
     "configure", "follow", "plant_outputs",
 ]
