@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.backends import MAX_SPEED
+from hil.cli_args import check_writable_dir
 from hil.samples import profile_settings
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset, tomllib
@@ -196,4 +197,9 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     for key in ("profile", "out", "fmu"):
         if values[key] is not None:
             values[key] = Path(values[key])
+    if values["out"] is not None:
+        try:
+            check_writable_dir(values["out"], "--out")
+        except OSError as exc:
+            raise ParameterError(str(exc)) from exc
     return RunSettings(**values, json=args.json, quiet=args.quiet, profile_sha256=digest)

@@ -42,6 +42,7 @@ from toggle.params import (
     PinRadii,
     load_preset,
     preset_groups,
+    split_group,
 )
 from toggle.statics import mechanical_advantage
 
@@ -264,14 +265,18 @@ def study_groups(groups: Mapping[str, HalfDims], alphas: Any) -> list[GroupResul
 def preset_halves(preset: str, half: str = "lower") -> tuple[dict[str, HalfDims], str]:
     """One half of every group of a preset family (or of a single preset) and the baseline.
 
-    The baseline is the family's default group (seed 004: group 1, the actual machine).
+    The baseline is the group ``preset`` names (``li_micro/6``), else the family's default
+    group (seed 004: group 1, the actual machine).
     """
-    names = preset_groups(preset)
+    family, group = split_group(preset)
+    names = preset_groups(family)
     if not names:
         mech = load_preset(preset)
         return {mech.name: mech.half(half)}, mech.name
-    default = load_preset(preset).name.rpartition("/")[2]
-    return {g: load_preset(preset, group=g).half(half) for g in names}, default
+    baseline = group if group is not None else load_preset(family).name.rpartition("/")[2]
+    if baseline not in names:
+        raise ParameterError(f"{family} has no group {baseline!r}; groups: {', '.join(names)}")
+    return {g: load_preset(family, group=g).half(half) for g in names}, baseline
 
 
 def _places(scores: Mapping[str, float]) -> dict[str, int]:
