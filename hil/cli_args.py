@@ -48,14 +48,15 @@ def number(lo: float, hi: float, what: str) -> Callable[[str], float]:
     return parse
 
 
-def positive(what: str, hi: float = 1e12) -> Callable[[str], float]:
-    """argparse type: a finite float in (0, hi]; ``what`` names the quantity and its unit."""
-    inner = number(0.0, hi, f"must be a {what} > 0")
+def positive(what: str, hi: float = 1e12, lo: float = 0.0) -> Callable[[str], float]:
+    """argparse type: a finite float in (lo, hi]; ``what`` names the quantity and its unit."""
+    why = f"must be a {what} > {lo:g}" + (f" and <= {hi:g}" if hi < 1e12 else "")
+    inner = number(lo, hi, why)
 
     def parse(text: str) -> float:
         value = inner(text)
-        if value <= 0:
-            raise argparse.ArgumentTypeError(f"must be a {what} > 0, got {text!r}")
+        if value <= lo:
+            raise argparse.ArgumentTypeError(f"{why}, got {text!r}")
         return value
     parse.__name__ = "number"
     return parse

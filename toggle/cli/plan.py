@@ -153,7 +153,6 @@ def plot(args: argparse.Namespace) -> int:
     return 0
 
 
-_positive = positive("positive number", 1e12)
 
 
 def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
@@ -163,35 +162,36 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
     mold = p.add_mutually_exclusive_group()
     mold.add_argument("--x-contact", type=POSITION, default=None,
                       help="crosshead position at mold contact, m (the mold height)")
-    mold.add_argument("--clamp-force", type=_positive, default=None,
+    mold.add_argument("--clamp-force", type=positive("force in N", 1e9), default=None,
                       help="clamp force held in the locked position, N "
                            "(default: the preset's final tie-bar force)")
     p.add_argument("--masses", default=None,
                    help="override or supply [dynamics]: crosshead=kg,links=kg,platen=kg"
                         "[,guide_damping=N s/m]")
-    p.add_argument("--v-max", type=_positive, default=None,
+    p.add_argument("--v-max", type=positive("speed in m/s", 10.0, 1e-4), default=None,
                    help="crosshead speed limit, m/s (default: the preset's drive)")
-    p.add_argument("--a-max", type=_positive, default=None,
+    p.add_argument("--a-max", type=positive("acceleration in m/s^2", 1e3, 1e-4), default=None,
                    help="acceleration limit, m/s^2 (default: the preset's drive)")
-    p.add_argument("--j-max", type=_positive, default=None,
+    p.add_argument("--j-max", type=positive("jerk in m/s^3", 1e6, 1e-4), default=None,
                    help="jerk limit, m/s^3 (default: the preset's drive)")
-    p.add_argument("--torque-max", type=_positive, default=None,
+    p.add_argument("--torque-max", type=positive("torque in N m", 1e5, 1e-4), default=None,
                    help="motor torque limit, N m (default: the preset's drive)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plan", help="plan the clamp stroke that minimises the drive force")
     _add_plant_arguments(p)
-    p.add_argument("--duration", type=_positive, default=None,
+    p.add_argument("--duration", type=positive("duration in s", 1e4), default=None,
                    help="stroke duration, s (default: twice the kinematic minimum)")
     p.add_argument("--min-time", action="store_true",
                    help="plan the fastest stroke under --force-limit instead")
-    p.add_argument("--force-limit", type=_positive, default=None,
+    p.add_argument("--force-limit", type=positive("force in N", 1e9), default=None,
                    help="input-force limit of --min-time, N (default: the torque limit's)")
     p.add_argument("--objective", choices=OBJECTIVES, default="peak",
                    help="minimise the peak input force or the integral of its square "
                         "(default peak)")
-    p.add_argument("--contact-speed", type=_positive, default=CONTACT_SPEED,
+    p.add_argument("--contact-speed", type=positive("speed in m/s", 1.0, 1e-6),
+                   default=CONTACT_SPEED,
                    help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
     p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
                    default=INTERVALS,

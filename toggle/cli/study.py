@@ -256,8 +256,9 @@ def _plot_study(args: argparse.Namespace) -> int:
 
 
 def _plot_sweep(args: argparse.Namespace) -> int:
-    title = f"{args.preset} ({args.half} half): criteria over {args.dim[0][0]} and {args.dim[1][0]}"
-    print(plot_sweep(_run_sweep(args), title, args.out / "sweep.png"))
+    result = _run_sweep(args)  # checks --dim first
+    title = f"{args.preset} ({args.half} half): criteria over {' and '.join(result.names)}"
+    print(plot_sweep(result, title, args.out / "sweep.png"))
     return 0
 
 
