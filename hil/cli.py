@@ -264,7 +264,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use the real rig (or an emulator) on --port instead of the FMU")
     p.add_argument("--port", default=None, help="serial URL of the rig: /dev/ttyACM0, a pty, "
                                                 "socket://host:port (needs --real)")
-    p.add_argument("--preset", default=None, help="mechanism preset (default chang2021)")
+    p.add_argument("--preset", default=None,
+                   help="clamp preset with [dynamics] masses: chang2021, lin2003_sm55 or a TOML "
+                        "file (li_micro has no masses, dong2022 is a press; default chang2021)")
     add_number_options(p)
     p.add_argument("--profile", type=path, default=None,
                    help="planned profile CSV (toggle plan --out); replayed forward and back, "

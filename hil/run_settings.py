@@ -184,9 +184,12 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
         raise ParameterError("give --profile or --speed, not both (a profile sets its speed)")
     digest = _apply_profile(values, explicit) if values["profile"] is not None else None
     try:
-        load_preset(values["preset"])
+        mech = load_preset(values["preset"])
     except (ParameterError, OSError) as exc:
         raise ParameterError(f"--preset (preset): {exc}") from exc
+    if mech.dynamics is None:  # the rig's model needs masses; hil run has no option for them
+        raise ParameterError(f"--preset (preset) {values['preset']}: hil run needs a preset "
+                             "with [dynamics] masses (chang2021, or a TOML file that has them)")
     check(values)
     if values["profile"] is None and values["speed"] is None and values["x_contact"] is None:
         # the default job clamps a mold: the plan's contact position (the preset's final
