@@ -124,9 +124,11 @@ def _print_ranking(data: dict[str, Any], alpha_max: float, alpha_lock: float) ->
 def run_study(args: argparse.Namespace) -> int:
     data = study_payload(args)
     if not any(g["valid"] for g in data["groups"]):
-        reasons = "; ".join(f"group {g['group']}: {g['error']}" for g in data["groups"])
-        raise ParameterError(f"no group of {args.preset} is valid over {args.alpha_lock:g} to "
-                             f"{args.alpha_max:g} deg ({reasons})")
+        reached = ", ".join(
+            f"{g['group']}: {math.degrees(g['alpha_limit']):.1f} deg" if g["alpha_limit"]
+            is not None else f"{g['group']}: {g['error']}" for g in data["groups"])
+        raise ParameterError(f"no group of {args.preset} opens to --alpha-max "
+                             f"{args.alpha_max:g} deg (largest toggle angle of each: {reached})")
     if args.json:
         print_json(data)
         return 0
