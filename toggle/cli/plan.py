@@ -162,7 +162,7 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
     mold = p.add_mutually_exclusive_group()
     mold.add_argument("--x-contact", type=POSITION, default=None,
                       help="crosshead position at mold contact, m (the mold height)")
-    mold.add_argument("--clamp-force", type=positive("force in N", 1e9), default=None,
+    mold.add_argument("--clamp-force", type=positive("force in N", 1e15), default=None,
                       help="clamp force held in the locked position, N "
                            "(default: the preset's final tie-bar force)")
     p.add_argument("--masses", default=None,
