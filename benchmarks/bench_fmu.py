@@ -22,7 +22,6 @@ from bench_fmu_trivial import TRIVIAL_SLAVE, time_step
 from fmpy import extract
 
 from toggle.fmu_build import build_fmu
-from toggle.fmu_host import release_native_runtime
 from toggle.kinematics import stroke_limits
 from toggle.plant import PlantOutputs, configure
 
@@ -46,13 +45,16 @@ def main() -> None:
     parser.add_argument("--fmu", type=Path, help="ToggleClamp.fmu to time (default: build one)")
     args = parser.parse_args()
     inputs, start = clamp_case()
-    cases = {  # name: (start values, inputs, outputs)
-        "trivial": ({}, {"u": [0.1, 0.2, 0.3]}, ["y", "x"]),
+    lag = {**start, "drive_bandwidth": 20.0}
+    varying = np.random.default_rng(1).uniform(0.5e-3, 1.5e-3, 97).tolist()  # a new h each step
+    outputs = list(PlantOutputs._fields)
+    cases = {  # name: (start values, inputs, outputs, step size or sizes)
+        "trivial": ({}, {"u": [0.1, 0.2, 0.3]}, ["y", "x"], STEP),
         # the cost of moving 12 outputs through pythonfmu and fmpy, without a model
-        "trivial, 12 reads": ({}, {"u": [0.1, 0.2, 0.3]}, ["y", "x"] * 6),
-        "clamp, ideal drive": (start, inputs, list(PlantOutputs._fields)),
-        "clamp, 20 Hz drive": ({**start, "drive_bandwidth": 20.0}, inputs,
-                               list(PlantOutputs._fields)),
+        "trivial, 12 reads": ({}, {"u": [0.1, 0.2, 0.3]}, ["y", "x"] * 6, STEP),
+        "clamp, ideal drive": (start, inputs, outputs, STEP),
+        "clamp, 20 Hz drive": (lag, inputs, outputs, STEP),
+        "clamp, 20 Hz, varying h": (lag, inputs, outputs, varying),
     }
     with tempfile.TemporaryDirectory(prefix="bench_fmu_") as tmp:
         work = Path(tmp)
@@ -61,15 +63,11 @@ def main() -> None:
                                         str(work / "trivial_x"))),
                 "clamp": Path(extract(str(clamp_fmu), str(work / "clamp_x")))}
         times: dict[str, list[float]] = {name: [] for name in cases}
-        try:
-            for _ in range(args.runs):
-                for name, (start_values, ins, outs) in cases.items():
-                    folder = dirs[name.split(",")[0]]
-                    times[name].append(time_step(folder, ins, outs, STEP, args.steps, 1,
-                                                 start_values))
-        finally:
-            for folder in dirs.values():
-                release_native_runtime(folder)
+        for _ in range(args.runs):
+            for name, (start_values, ins, outs, h) in cases.items():
+                folder = dirs[name.split(",")[0]]
+                times[name].append(time_step(folder, ins, outs, h, args.steps, 1,
+                                             start_values))
     base = statistics.median(times["trivial"])
     print(f"us per set-inputs + doStep + get-outputs in fmpy "
           f"(median of {args.runs} runs x {args.steps} steps):")

@@ -20,7 +20,7 @@ from pathlib import Path
 from fmpy import extract
 
 from toggle.fmu_build import build_fmu
-from toggle.fmu_host import release_native_runtime, start_slave
+from toggle.fmu_host import start_slave
 
 REPO = Path(__file__).resolve().parents[1]
 TRIVIAL_SLAVE = REPO / "tests" / "fmu_fixtures" / "trivial_slave.py"
@@ -30,15 +30,17 @@ def time_step(
     unzip_dir: Path,
     inputs: Mapping[str, Sequence[float]],
     outputs: Sequence[str],
-    step_size: float,
+    step_size: float | Sequence[float],
     steps: int,
     runs: int,
     start_values: Mapping[str, float | str] | None = None,
 ) -> float:
     """Median over ``runs`` fresh instances of µs per set-inputs + doStep + get-outputs.
 
-    ``inputs`` maps each input name to a sequence of values, cycled step by step.
+    ``inputs`` maps each input name to a sequence of values, cycled step by step;
+    a sequence of step sizes is cycled too.
     """
+    sizes = [step_size] if isinstance(step_size, float) else list(step_size)
     per_run = []
     for run in range(runs):
         slave, refs = start_slave(unzip_dir, f"bench{run}", start_values)
@@ -49,9 +51,10 @@ def time_step(
         start = time.perf_counter()
         for k in range(steps):
             slave.setReal(in_refs, series[k % len(series)])
-            slave.doStep(t, step_size)
+            h = sizes[k % len(sizes)]
+            slave.doStep(t, h)
             slave.getReal(out_refs)
-            t += step_size
+            t += h
         per_run.append((time.perf_counter() - start) / steps * 1e6)
         slave.terminate()
         slave.freeInstance()
@@ -62,10 +65,7 @@ def trivial_baseline(work_dir: Path, steps: int, runs: int) -> float:
     """µs per step of the trivial FMU, built and extracted under ``work_dir``."""
     fmu = build_fmu(work_dir, TRIVIAL_SLAVE)
     unzip_dir = Path(extract(str(fmu), str(work_dir / "trivial")))
-    try:
-        return time_step(unzip_dir, {"u": [0.1, 0.2, 0.3]}, ["y", "x"], 1e-3, steps, runs)
-    finally:
-        release_native_runtime(unzip_dir)
+    return time_step(unzip_dir, {"u": [0.1, 0.2, 0.3]}, ["y", "x"], 1e-3, steps, runs)
 
 
 def main() -> None:

@@ -32,7 +32,6 @@ from bench_fmu_trivial import TRIVIAL_SLAVE, time_step
 from fmpy import extract
 
 from toggle.fmu_build import build_fmu
-from toggle.fmu_host import release_native_runtime
 from toggle.native_fmu import build_native_fmu
 from toggle.plant import PlantOutputs
 
@@ -165,14 +164,10 @@ def main() -> None:
                 "python": build_fmu(work / "python"), "native": native}
         dirs = {k: Path(extract(str(f), str(work / f"{k}_x"))) for k, f in fmus.items()}
         times: dict[str, list[float]] = {name: [] for name in cases}
-        try:
-            for _ in range(args.runs):
-                for name, (kind, start_values, ins, outs) in cases.items():
-                    times[name].append(time_step(dirs[kind], ins, outs, STEP, args.steps, 1,
-                                                 start_values))
-        finally:
-            for kind in ("trivial", "python"):
-                release_native_runtime(dirs[kind])
+        for _ in range(args.runs):
+            for name, (kind, start_values, ins, outs) in cases.items():
+                times[name].append(time_step(dirs[kind], ins, outs, STEP, args.steps, 1,
+                                             start_values))
         rates = {pinned: libcosim_rates(native, args.cosim_steps, args.runs,
                                         {**start, "x_cmd": 0.0}, pinned)
                  for pinned in (False, True)}

@@ -4,21 +4,29 @@ A thin shell: the physics is :mod:`toggle.plant` (which composes the one
 model of :mod:`toggle`); this file only declares the interface, mirroring
 the test rig: the drive commands the input-link position ``x_cmd``, the
 linear encoder reads ``platen_position``, the load cell reads ``input_force``.
-Build with ``toggle build-fmu`` (writes build/ToggleClamp.fmu).
+
+One FMU is one preset: ``toggle build-fmu [--preset NAME]`` puts the
+preset's TOML next to this file in the FMU (``preset.toml``); its values are
+the parameters' start values, and the declared min/max are physical bounds.
+Outside an FMU (tests, the native builder) the module reads chang2021.
 """
 
 import math
+from pathlib import Path
 
 from pythonfmu import DefaultExperiment
 
 from toggle.fmu_slave import DeclaredSlave, Var
-from toggle.params import PAPER_NAMES
-from toggle.plant import CompiledPlant, DriveState, configure, follow
+from toggle.kinematics import stroke_limits
+from toggle.params import PAPER_NAMES, Mechanism, load_preset
+from toggle.plant import DriveState, HystereticPlant, PlantConfig, configure, follow
 
-#: Parameter value that means "the preset's value".
-PRESET = -1.0
+_PRESET_FILE = Path(__file__).with_name("preset.toml")
+#: The preset this FMU is built for, read once at import (no file is read later).
+MECHANISM = load_preset(str(_PRESET_FILE) if _PRESET_FILE.is_file() else "chang2021")
 #: Dimensional errors, one parameter per dimension of each half (seed 000's names).
 ERRORS = tuple(name for half in ("lower", "upper") for name in PAPER_NAMES[half].values())
+MAX_ERROR = 5e-3  # m: a dimensional error, not a redesign
 MASSES = {"m_crosshead": "crosshead", "m_links": "links", "m_platen": "platen",
           "guide_damping": "guide_damping"}
 OUTPUTS = (
@@ -37,69 +45,103 @@ OUTPUTS = (
 )
 
 
+def variables(mech: Mechanism) -> tuple[Var, ...]:
+    """The variable table of the FMU built for ``mech``: its values as start values."""
+    cfg = PlantConfig(mech)
+    x_open, x_toggle = stroke_limits(mech.lower)
+    x_lo, x_hi = cfg.input_range
+    dyn = mech.dynamics
+    mass_max = 100 * max(dyn.crosshead, dyn.links, dyn.platen, 1.0)
+    return (
+        Var("preset", "parameter", "", "Preset this FMU is built for (fixed; build another "
+            "with toggle build-fmu --preset)", start=mech.name),
+        Var("mu", "parameter", "1", "Kinetic pin friction coefficient", start=cfg.friction,
+            min=0.0, max=1.0),
+        Var("x_contact", "parameter", "m", "Crosshead position at mold contact; the toggle "
+            "position (start and max): no mold", start=x_toggle, min=x_open, max=x_toggle),
+        *(Var(name, "parameter", "N.s/m" if field == "guide_damping" else "kg",
+              "Viscous guide friction referred to the input link" if field == "guide_damping"
+              else f"{field.capitalize()} mass", start=float(getattr(dyn, field)), min=0.0,
+              max=mass_max * (1e3 if field == "guide_damping" else 1.0))
+          for name, field in MASSES.items()),
+        Var("drive_bandwidth", "parameter", "Hz",
+            "Drive tracking bandwidth; 0: ideal position source", start=0.0, min=0.0, max=1e3),
+        Var("drive_damping", "parameter", "1", "Drive tracking damping ratio", start=0.7,
+            min=0.0, max=10.0),
+        *(Var(f"delta_{n}", "parameter", "m", f"Dimensional error of {n}", start=0.0,
+              min=-MAX_ERROR, max=MAX_ERROR) for n in ERRORS),
+        Var("x_cmd", "input", "m", "Commanded input-link position", start=x_open, min=x_lo,
+            max=x_hi),
+        *(Var(name, "output", unit, text, depends_on=()) for name, unit, text in OUTPUTS),
+    )
+
+
+def _finite_list(values: object, n: int) -> bool:
+    return (isinstance(values, list) and len(values) == n
+            and all(isinstance(v, float) and math.isfinite(v) for v in values))
+
+
 class ToggleClamp(DeclaredSlave):
     """Nine-link double-toggle clamp driven by position; see the module doc."""
 
     author = "toggle-clamp"
     description = "Double-toggle mold/die clamp: kinematics, pin friction, elastics, inertia"
     default_experiment = DefaultExperiment(start_time=0.0, stop_time=10.0, step_size=1e-3)
-    STATE_EXCLUDE = frozenset({"_plant"})
     ATOMIC_STEP = True  # _publish assigns only after CompiledPlant returned finite outputs
-    VARIABLES = (
-        Var("preset", "parameter", "", "Shipped preset name or TOML path", start="chang2021"),
-        Var("mu", "parameter", "1", "Pin friction coefficient; -1: the preset's",
-            start=PRESET),
-        Var("x_contact", "parameter", "m",
-            "Crosshead position at mold contact; at or beyond the toggle: no mold", start=1.0),
-        Var("m_crosshead", "parameter", "kg", "Crosshead mass; -1: the preset's", start=PRESET),
-        Var("m_links", "parameter", "kg", "Lumped link mass; -1: the preset's", start=PRESET),
-        Var("m_platen", "parameter", "kg", "Moving-platen mass; -1: the preset's", start=PRESET),
-        Var("guide_damping", "parameter", "N.s/m", "Viscous guide friction; -1: the preset's",
-            start=PRESET),
-        Var("drive_bandwidth", "parameter", "Hz",
-            "Drive tracking bandwidth; 0: ideal position source", start=0.0, min=0.0),
-        Var("drive_damping", "parameter", "1", "Drive tracking damping ratio", start=0.7,
-            min=0.0),
-        *(Var(f"delta_{n}", "parameter", "m", f"Dimensional error of {n}", start=0.0)
-          for n in ERRORS),
-        Var("x_cmd", "input", "m", "Commanded input-link position", start=-3.4386e-3),
-        *(Var(name, "output", unit, text, depends_on=()) for name, unit, text in OUTPUTS),
-    )
+    VARIABLES = variables(MECHANISM)
+    _PARAMETERS = tuple(v.name for v in VARIABLES if v.causality == "parameter")
 
-    def _given(self, name: str) -> float | None:
-        """A parameter's value, None for the preset's (-1); anything else must be >= 0."""
-        value = getattr(self, name)
-        if value == PRESET:
-            return None
-        if not (math.isfinite(value) and value >= 0):
-            raise ValueError(f"parameter {name} must be >= 0 (or -1 for the preset's), "
-                             f"got {value!r}")
-        return value
-
-    def initialize(self) -> None:
-        for name in ("drive_bandwidth", "drive_damping"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"parameter {name} must be finite and >= 0, got {value!r}")
-        masses = {field: self._given(name) for name, field in MASSES.items()}
-        cfg = configure(
-            self.preset,
-            mu=self._given("mu"),
+    def _config(self) -> PlantConfig:
+        if self.preset != MECHANISM.name:
+            raise ValueError(f"parameter preset: this FMU is built for {MECHANISM.name!r}, "
+                             f"not {self.preset!r}; build one with toggle build-fmu --preset")
+        return configure(
+            MECHANISM,
+            mu=self.mu,
             x_contact=self.x_contact,
-            masses={k: v for k, v in masses.items() if v is not None},
+            masses={field: getattr(self, name) for name, field in MASSES.items()},
             errors={n: getattr(self, f"delta_{n}") for n in ERRORS},
         )
-        self._plant = CompiledPlant(cfg)
-        self._drive = DriveState(self.x_cmd, 0.0, 0.0)
+
+    def _build_plant(self) -> None:
+        """Compile the plant of the current parameters, unless it is already that one."""
+        key = tuple(getattr(self, name) for name in self._PARAMETERS)
+        if getattr(self, "_plant_key", None) != key:
+            self._plant = HystereticPlant(self._config())
+            self._plant_key = key
+
+    def initialize(self) -> None:
+        self._build_plant()
+        self._plant.state = (None, 0.0)  # the pin friction's slip state starts relaxed
+        self._drive = DriveState.at_rest(self.x_cmd)
         self._publish()
 
     def step(self, current_time: float, step_size: float) -> None:
+        self._plant.plant.check_input(self.x_cmd)  # a position error first, not a speed
         drive = follow(self._drive, self.x_cmd, step_size, self.drive_bandwidth,
                        self.drive_damping)
         self._publish(drive)
 
+    def model_state(self) -> dict:
+        if getattr(self, "_drive", None) is None:
+            return {"drive": None, "slip": None}
+        return {"drive": list(self._drive), "slip": list(self._plant.state)}
+
+    def restore_model_state(self, state: dict) -> None:
+        drive, slip = state["drive"], state["slip"]
+        if drive is None:
+            return
+        if not (_finite_list(drive, len(DriveState._fields)) and isinstance(slip, list)
+                and len(slip) == 2 and (slip[0] is None or _finite_list(slip[:1], 1))
+                and _finite_list(slip[1:], 1) and abs(slip[1]) <= 1.0):
+            raise ValueError("the drive or slip state is not a list of finite numbers")
+        self._check_ranges()
+        self._build_plant()
+        self._drive = DriveState(*drive)
+        self._plant.state = (slip[0], slip[1])
+
     def _publish(self, drive: DriveState | None = None) -> None:
         drive = drive or self._drive
-        outputs = self._plant(*drive)  # raises outside the range
+        outputs = self._plant(drive)  # raises outside the range, before any change
         self._drive = drive
         self.__dict__.update(zip(outputs._fields, outputs))  # the output variables

@@ -183,24 +183,28 @@ class Plant(ABC):
     def _deactivate(self) -> None: ...
 
 
-def default_fmu_path() -> Path:
-    """build/ToggleClamp.fmu of the project checkout (or the current folder)."""
+def default_fmu_path(preset: str = "chang2021") -> Path:
+    """build/ToggleClamp.fmu of the project checkout (or the current folder) for chang2021;
+    build/<preset>/ToggleClamp.fmu for another preset (one FMU per preset)."""
     from toggle.fmu_build import PACKAGE_DIR
 
     root = PACKAGE_DIR.parent
-    base = root if (root / "pyproject.toml").is_file() else Path.cwd()
-    return base / "build" / "ToggleClamp.fmu"
+    base = (root if (root / "pyproject.toml").is_file() else Path.cwd()) / "build"
+    return (base if preset == "chang2021" else base / preset) / "ToggleClamp.fmu"
 
 
-def ensure_fmu(path: Path | None = None) -> Path:
-    """The FMU at ``path``, built first if it is missing or older than the model sources."""
+def ensure_fmu(path: Path | None = None, preset: str = "chang2021") -> Path:
+    """The FMU of ``preset`` at ``path``, built first if it is missing or older than the
+    model sources."""
     from toggle.fmu_build import DEFAULT_SLAVE, PACKAGE_DIR, build_fmu
+    from toggle.fmu_guard import GUARD_SOURCE
 
-    path = Path(path) if path is not None else default_fmu_path()
-    sources = [*PACKAGE_DIR.rglob("*.py"), *PACKAGE_DIR.rglob("*.toml"), DEFAULT_SLAVE]
+    path = Path(path) if path is not None else default_fmu_path(preset)
+    sources = [*PACKAGE_DIR.rglob("*.py"), *PACKAGE_DIR.rglob("*.toml"), DEFAULT_SLAVE,
+               GUARD_SOURCE]
     newest = max(p.stat().st_mtime for p in sources if p.is_file())
     if not path.is_file() or path.stat().st_mtime < newest:
-        built = build_fmu(path.parent)
+        built = build_fmu(path.parent, preset=preset)
         if built != path:
             shutil.move(built, path)
     return path
@@ -225,7 +229,7 @@ class FmuPlant(Plant):
 
         s = self.setup
         x_open = s.stroke[0]
-        path = ensure_fmu() if self.fmu_path is None else Path(self.fmu_path)
+        path = ensure_fmu(preset=s.preset) if self.fmu_path is None else Path(self.fmu_path)
         if not path.is_file():
             raise RunStoppedError(f"no FMU at {path}")
         self._dir = extract(str(path), tempfile.mkdtemp(prefix="toggle_hil_"))
@@ -281,8 +285,6 @@ class FmuPlant(Plant):
         return abs(x - start)
 
     def _deactivate(self) -> None:
-        from toggle.fmu_host import release_native_runtime
-
         try:
             if self._slave is not None:
                 self._slave.terminate()
@@ -290,7 +292,6 @@ class FmuPlant(Plant):
         finally:
             self._slave = None
             if self._dir is not None:
-                release_native_runtime(Path(self._dir))
                 shutil.rmtree(self._dir, ignore_errors=True)
                 self._dir = None
 

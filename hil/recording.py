@@ -21,7 +21,10 @@ sample standard deviations, None with a single cycle), following section 5.1:
 * stroke_error dS = S - stroke_theory (the nominal stroke, 45.003 mm for chang2021);
 * force_forward_max / force_forward_rms: max and RMS of the force over the forward stroke;
 * force_backward_min / force_backward_rms: min and RMS over the backward stroke;
-* force_toggle F_TP: the force at the toggle sample (first sample at the largest command).
+* force_toggle F_TP: the force as the encoder passes the toggle in motion, read as the
+  prototype's rig read it (:class:`toggle.rig_tables.RigReading`): the force sampled
+  :data:`toggle.rig_tables.F_TP_LATENCY` before the first forward sample whose platen
+  reading is within the encoder's resolution of the platen at the toggle sample.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from hil.experiment import DEFAULT_END_TOL, Cycle, segment_cycles
 from hil.samples import Sample
 from toggle.kinematics import stroke, stroke_limits
 from toggle.params import Mechanism
+from toggle.rig_tables import F_TP_LATENCY, TOGGLE_BAND
 
 CSV_COLUMNS = ("time [s]", "x_cmd [m]", "platen [m]", "force [N]", "status", "sample")
 #: The header of run directories written before the sample column existed (still read).
@@ -271,10 +275,14 @@ def cycle_statistics(data: RunData, cycles: list[Cycle], stroke_theory: float,
         si = data.platen[c.start] - platen_zero
         sf = data.platen[c.toggle] - platen_zero
         fwd, bwd = data.force[c.forward], data.force[c.backward]
+        reached = c.start + int(np.argmax(data.platen[c.forward]
+                                          >= data.platen[c.toggle] - TOGGLE_BAND))
+        passing = c.start + int(np.searchsorted(data.t[c.start:reached + 1],
+                                                data.t[reached] - F_TP_LATENCY))
         for key, value in zip(STATISTICS, (
             si, sf, sf - si, sf - si - stroke_theory,
             fwd.max(), math.sqrt(np.mean(fwd * fwd)), bwd.min(), math.sqrt(np.mean(bwd * bwd)),
-            data.force[c.toggle],
+            data.force[passing],
         )):
             per[key].append(float(value))
     return {k: _stat(v) for k, v in per.items()}

@@ -3,8 +3,9 @@
 Implements :class:`hil.mcu_model.RigPhysics` for the emulator: the MCU model
 passes the commanded input position once per telemetry period; velocity and
 acceleration follow by backward differences over that period, as in the FMU's
-ideal drive. The MCU's trajectory clock, not the host's jittery wall clock,
-is what the drive follows, so the differences use the nominal period.
+ideal drive; the plant carries the hysteretic slip state of the friction
+(:class:`toggle.plant.HystereticPlant`). The MCU's trajectory clock, not the
+host's jittery wall clock, is what the drive follows, so the differences use the nominal period.
 Picklable (the model is compiled on first use), so the emulator can run it in
 its own process.
 """
@@ -14,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from toggle.plant import CompiledPlant, DriveState, configure, follow
+from toggle.plant import DriveState, HystereticPlant, configure, follow
 
 
 @dataclass
@@ -40,10 +41,10 @@ class ClampPhysics:
         if self._plant is None:
             cfg = configure(self.preset, mu=self.mu, x_contact=self.x_contact,
                             errors={"r8": self.delta_r8})
-            self._plant = CompiledPlant(cfg)
+            self._plant = HystereticPlant(cfg)
         if self._state is None:
-            self._state = DriveState(x, 0.0, 0.0)
+            self._state = DriveState.at_rest(x)
         else:
             self._state = follow(self._state, x, self.period)
-        out = self._plant(*self._state)
+        out = self._plant(self._state)
         return out.platen_position, out.input_force

@@ -2,8 +2,9 @@
 
 Both runners start a fresh Python (one that has not imported this project)
 with a script that takes a JSON spec, and return the JSON the script prints
-last. ``run_fresh`` simulates with fmpy and reports where ``toggle`` was
-imported from (it must be the FMU's own ``resources/``); ``run_libcosim`` runs
+last (the process must also exit with 0). ``run_fresh`` simulates with fmpy and
+reports where the FMU's bundled package was imported from (it must be the FMU's
+own ``resources/``) and whether a top-level ``toggle`` was imported; ``run_libcosim`` runs
 any number of FMU instances in one libcosimpy (DNV libcosim) execution.
 """
 
@@ -23,11 +24,10 @@ from toggle.fmu_slave import Var
 
 FRESH_PROCESS = textwrap.dedent(
     """
-    import ctypes, json, sys
+    import json, sys
     from pathlib import Path
     import numpy as np
-    from fmpy import extract, platform, read_model_description, sharedLibraryExtension
-    from fmpy import simulate_fmu
+    from fmpy import extract, simulate_fmu
     spec = json.loads(sys.argv[1])
     unzip = Path(spec["unzip"])
     extract(spec["fmu"], str(unzip))
@@ -35,12 +35,11 @@ FRESH_PROCESS = textwrap.dedent(
     signal = np.array(list(zip(times, values)), dtype=[("time", float), (name, float)])
     res = simulate_fmu(str(unzip), stop_time=spec["stop_time"], step_size=spec["step_size"],
                        input=signal, start_values=spec["start_values"], output=spec["output"])
-    toggle_file = sys.modules["toggle"].__file__
-    model = read_model_description(str(unzip)).coSimulation.modelIdentifier
-    lib = unzip / "binaries" / platform / (model + sharedLibraryExtension)
-    ctypes.CDLL(str(lib)).finalizePythonInterpreter()  # pythonfmu 0.7 exit-time double free
+    bundled = [m.__file__ for n, m in sys.modules.items() if n.startswith("toggle_")
+               and "." not in n and str(getattr(m, "__file__", "")).endswith("__init__.py")]
     print(json.dumps({"last": {n: float(res[n][-1]) for n in spec["output"]},
-                      "toggle": toggle_file}))
+                      "toggle": bundled[0] if bundled else None,
+                      "host_toggle": "toggle" in sys.modules}))
     """
 )
 
@@ -69,11 +68,6 @@ LIBCOSIM = textwrap.dedent(
                                                              [refs[name][n] for n in names])))
             for name, names in spec["observe"].items()}
     print(json.dumps({"ok": ok, "last": last}), flush=True)
-    # pythonfmu 0.7's runtime can double-free at process exit inside libcosim ("corrupted
-    # double-linked list", issue 15): that is the FMU's exit bug, tested on its own there;
-    # here the co-simulation results are under test, so leave without static destructors
-    import os
-    os._exit(0)
     """
 )
 
@@ -196,13 +190,16 @@ def run_libcosim(
 
 def variable_table(variables: Sequence[Var]) -> str:
     """Markdown table of a slave's variables (docs/fmu.md embeds ToggleClamp's)."""
-    rows = ["| Name | Causality | Unit | Start | Description |", "|---|---|---|---|---|"]
+    rows = ["| Name | Causality | Unit | Start | Min | Max | Description |",
+            "|---|---|---|---|---|---|---|"]
     for var in variables:
         if var.is_string:
             start, unit = f'`"{var.start}"`', ""
         else:
             start, unit = ("" if var.start is None else f"{var.start:g}"), var.unit
-        rows.append(f"| `{var.name}` | {var.causality} | {unit} | {start} | {var.description} |")
+        low, high = ("" if b is None else f"{b:g}" for b in (var.min, var.max))
+        rows.append(f"| `{var.name}` | {var.causality} | {unit} | {start} | {low} | {high} | "
+                    f"{var.description} |")
     return "\n".join(rows) + "\n"
 
 

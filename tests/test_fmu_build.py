@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import zipfile
 from pathlib import Path
 
@@ -10,11 +9,11 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import fmi2Discard, fmi2Error
+from fmpy.fmi2 import fmi2Error
 from fmu_support import close_slave, load_module, run_fresh, run_libcosim, validator_problems
 
-from toggle.fmu_build import build_fmu, extend_model_description, fmu_module_name
-from toggle.fmu_host import release_native_runtime, start_slave
+from toggle.fmu_build import build_fmu, extend_model_description
+from toggle.fmu_host import start_slave
 from toggle.fmu_slave import Var
 
 SLAVE_FILE = Path(__file__).parent / "fmu_fixtures" / "trivial_slave.py"
@@ -28,10 +27,8 @@ def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def unzipped(fmu: Path, tmp_path_factory: pytest.TempPathFactory):
-    """The FMU extracted once; its native runtime is released after the module's tests."""
-    directory = Path(extract(str(fmu), str(tmp_path_factory.mktemp("unzipped"))))
-    yield directory
-    release_native_runtime(directory)
+    """The FMU extracted once."""
+    return Path(extract(str(fmu), str(tmp_path_factory.mktemp("unzipped"))))
 
 
 def _run(slave, refs, u_and_dt) -> list[tuple[float, float]]:
@@ -46,11 +43,6 @@ def _run(slave, refs, u_and_dt) -> list[tuple[float, float]]:
 
 
 # ---- build and model description ---------------------------------------------------
-
-
-def test_module_name_is_project_unique():
-    assert fmu_module_name(SLAVE_FILE) == "toggle_fmu_trivial_slave"
-    assert fmu_module_name(Path("fmu_src/toggle_clamp_fmu.py")) == "toggle_clamp_fmu"
 
 
 def test_fmpy_and_fmutool_find_no_problem(fmu: Path):
@@ -78,13 +70,22 @@ def test_description_carries_units_limits_and_structure(fmu: Path):
     assert {u.variable.name for u in md.initialUnknowns} == {"y", "x"}
     assert md.defaultExperiment.stepSize == "0.001"
     assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
+    assert md.version and md.license == "MIT" and md.copyright
+
+
+def test_bundle_is_the_slave_and_the_modules_it_uses_under_a_name_of_their_own(fmu: Path):
+    """No top-level ``toggle`` (it would be shared with the host's and other FMUs'), only
+    the modules the slave imports, and no binary for a platform no test loads."""
     with zipfile.ZipFile(fmu) as archive:
         names = set(archive.namelist())
-    assert {
-        "resources/toggle/__init__.py",
-        "resources/toggle/fmu_slave.py",
-        "resources/toggle_fmu_trivial_slave.py",
-    } <= names
+        stub = archive.read("resources/slavemodule.txt").decode().strip()
+    package = stub.removesuffix("_slave")
+    assert package.startswith("toggle_") and len(package) == len("toggle_") + 12
+    assert {f"resources/{stub}.py", f"resources/{package}/__init__.py",
+            f"resources/{package}/fmu_slave.py", f"resources/{package}/trivial_slave.py",
+            "binaries/linux64/TrivialGain.so", "binaries/linux64/pythonfmu-export.so"} <= names
+    assert not any(n.startswith(("resources/toggle/", "binaries/win64")) for n in names)
+    assert not any(n.startswith(f"resources/{package}/cli") for n in names)
 
 
 def test_output_dependencies_are_written_as_indices():
@@ -175,19 +176,21 @@ def test_state_rollback_reproduces_outputs(unzipped: Path):
     assert first[-1][1] != pytest.approx(0.09)  # the internal integral did advance
 
 
-def test_invalid_parameter_is_logged_and_every_step_discarded(unzipped: Path):
+@pytest.mark.parametrize("logging", [True, False])
+def test_invalid_parameter_fails_initialisation_with_an_error_always_logged(
+        unzipped: Path, logging: bool):
+    """fmi2Error from exitInitializationMode; the message reaches the logger even with
+    logging off; the instance keeps finite values and refuses to step."""
     log: list[tuple[int, str]] = []
-    slave, refs = start_slave(unzipped, "bad", {"gain": -1.0}, log=lambda *entry: log.append(entry))
     with pytest.raises(FMICallException) as failure:
-        slave.doStep(0.0, 1e-3)
-    values = slave.getReal([refs["y"], refs["x"]])
-    close_slave(slave)
-    assert failure.value.status == fmi2Discard
-    assert any(status == fmi2Error and "gain" in text for status, text in log), log
-    assert all(math.isfinite(v) for v in values)
+        start_slave(unzipped, "bad", {"gain": -1.0}, log=lambda *entry: log.append(entry),
+                    logging=logging)
+    assert failure.value.status == fmi2Error
+    assert any(status == fmi2Error and "gain = -1.0" in text and "[0, 1000]" in text
+               for status, text in log), log
 
 
-def test_out_of_range_input_discards_step_and_keeps_state(unzipped: Path):
+def test_out_of_range_input_fails_the_step_and_keeps_state(unzipped: Path):
     log: list[tuple[int, str]] = []
     slave, refs = start_slave(unzipped, "range", log=lambda *entry: log.append(entry))
     before = _run(slave, refs, [(0.5, 0.1)])[-1]
@@ -199,8 +202,8 @@ def test_out_of_range_input_discards_step_and_keeps_state(unzipped: Path):
     slave.doStep(0.1, 0.1)
     recovered = slave.getReal([refs["x"]])[0]
     close_slave(slave)
-    assert failure.value.status == fmi2Discard
-    assert any(status == fmi2Discard and "u = 5" in text for status, text in log), log
+    assert failure.value.status == fmi2Error
+    assert any(status == fmi2Error and "u = 5" in text for status, text in log), log
     assert after_discard == before
     assert recovered == pytest.approx(0.1)
 
@@ -214,6 +217,7 @@ def test_fmu_runs_in_a_fresh_process_from_its_bundled_files(fmu: Path, tmp_path:
     assert result["last"]["y"] == 1.0
     assert result["last"]["x"] == pytest.approx(0.005, rel=1e-12)
     assert Path(result["toggle"]).is_relative_to(Path(result["unzip"], "resources"))  # not dev
+    assert not result["host_toggle"]
 
 
 def test_two_instances_run_in_libcosim(fmu: Path, tmp_path: Path):

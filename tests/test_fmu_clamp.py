@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import fmi2Discard, fmi2Error
+from fmpy.fmi2 import fmi2Error
 from fmu_support import (
     close_slave,
     load_module,
@@ -30,7 +30,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from toggle.fmu_build import DEFAULT_SLAVE, build_fmu
-from toggle.fmu_host import release_native_runtime, start_slave
+from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
@@ -51,10 +51,8 @@ def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def unzipped(fmu: Path, tmp_path_factory: pytest.TempPathFactory):
-    """The FMU extracted once; its native runtime is released after the module's tests."""
-    directory = Path(extract(str(fmu), str(tmp_path_factory.mktemp("unzipped"))))
-    yield directory
-    release_native_runtime(directory)
+    """The FMU extracted once."""
+    return Path(extract(str(fmu), str(tmp_path_factory.mktemp("unzipped"))))
 
 
 def _reference(x, v, a, **start) -> PlantOutputs:
@@ -116,7 +114,14 @@ def test_description_has_units_starts_and_structure(fmu: Path):
     assert [u.variable.name for u in md.initialUnknowns] == outputs
     assert float(md.defaultExperiment.stepSize) == 1e-3
     assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
-    assert float(by_name["drive_bandwidth"].min) == 0.0
+    for spec in SLAVE.VARIABLES:  # every Real parameter and input has physical bounds
+        if spec.causality != "output" and not spec.is_string:
+            v = by_name[spec.name]
+            assert float(v.min) <= float(v.start) <= float(v.max), spec.name
+    assert (float(by_name["drive_bandwidth"].min), float(by_name["drive_bandwidth"].max)) == (
+        0.0, 1e3)
+    assert float(by_name["m_platen"].start) == configure("chang2021").dynamics.platen
+    assert float(by_name["x_contact"].start) == X_TOGGLE  # no mold
 
 
 def test_doc_variable_table_matches_the_slave():
@@ -155,7 +160,14 @@ def test_stroke_outputs_equal_the_library(unzipped: Path, bandwidth: float):
 def test_ideal_drive_puts_the_input_link_at_the_command(unzipped: Path):
     res = _simulate_stroke(unzipped, **MOLD)
     np.testing.assert_array_equal(res["x"], res["x_cmd"])
-    np.testing.assert_allclose(res["velocity"][1:], np.diff(res["x"]) / 1e-3, rtol=1e-12)
+    # velocity: slope of the parabola through the last three commands, within [0, 2 x mean
+    # slope of the step] (or [2 x, 0] backwards)
+    x, h = res["x"], 1e-3
+    rate = np.diff(x)[1:] / h
+    parabola = (3 * x[2:] - 4 * x[1:-1] + x[:-2]) / (2 * h)
+    want = np.clip(parabola, np.minimum(0, 2 * rate), np.maximum(0, 2 * rate))
+    np.testing.assert_allclose(res["velocity"][2:], want, rtol=1e-9, atol=1e-12)
+    assert np.mean(want == parabola) > 0.6  # the limit acts at the ends of the stroke only
     assert res["x"][-1] == pytest.approx(X_TOGGLE, abs=1e-12)
 
 
@@ -194,16 +206,17 @@ def test_state_rollback_reproduces_outputs(unzipped: Path):
 
 @pytest.mark.parametrize("bandwidth", [0.0, 20.0])
 def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: float):
-    steps = [*APPROACH[:3], (X_OPEN + 1e-2, 1e-4), (X_OPEN + 2e-2, 3e-2), *FUTURE]
+    steps = [*APPROACH[:3], (X_OPEN + 1e-2, 1e-3), (X_OPEN + 2e-2, 3e-2),
+             (X_CONTACT - 2e-3, 5e-2), *FUTURE]
     slave, refs = start_slave(unzipped, "steps", {"drive_bandwidth": bandwidth,
                                                   "x_cmd": X_OPEN, **MOLD})
     out = _run(slave, refs, steps)
     close_slave(slave)
-    drive = DriveState(X_OPEN, 0.0, 0.0)
+    drive = DriveState.at_rest(X_OPEN)
     for (x_cmd, h), got in zip(steps, out, strict=True):
         drive = follow(drive, x_cmd, h, bandwidth, 0.7)
         assert (got["x"], got["velocity"], got["acceleration"]) == pytest.approx(
-            tuple(drive), rel=1e-12, abs=1e-15)
+            tuple(drive[:3]), rel=1e-12, abs=1e-15)
     columns = {n: [o[n] for o in out] for n in OUTPUTS}
     _assert_outputs_match(columns, _reference(columns["x"], columns["velocity"],
                                               columns["acceleration"], **MOLD))
@@ -218,31 +231,27 @@ def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: f
         ({"m_platen": math.inf}, "platen"),
         ({"mu": math.inf}, "mu"),
         ({"delta_r8": math.nan}, "delta_r8"),
-        ({"x_cmd": 0.5}, "x = 0.5"),
+        ({"x_cmd": 0.5}, "x_cmd = 0.5 m is outside"),
         ({"delta_r7b": 1.0}, "delta_r7b"),
         ({"drive_bandwidth": 10.0, "drive_damping": -1.0}, "drive_damping"),
         ({"mu": -0.2}, "mu"),
         ({"m_platen": float("nan")}, "m_platen"),
     ],
 )
-def test_invalid_parameter_fails_initialisation_and_every_step(unzipped: Path, start, named):
+def test_invalid_parameter_fails_initialisation_with_the_parameter_named(unzipped: Path, start,
+                                                                          named):
+    """fmi2Error from exitInitializationMode, and the message reaches the logger although
+    logging is off (the default of fmpy, libcosim and the Compliance Checker)."""
     log: list[tuple[int, str]] = []
-    slave, refs = start_slave(unzipped, "bad", start, log=_logger(log))
-    statuses = []
-    for t, h in [(0.0, 1e-3), (1e-3, 1e-2)]:
-        with pytest.raises(FMICallException) as refused:
-            slave.doStep(t, h)
-        statuses.append(refused.value.status)
-    values = _outputs(slave, refs)
-    close_slave(slave)
+    with pytest.raises(FMICallException) as refused:
+        start_slave(unzipped, "bad", start, log=_logger(log), logging=False)
     errors = [text for status, text in log if status == fmi2Error]
+    assert refused.value.status == fmi2Error
     assert errors and errors[0].startswith("initialisation failed") and named in errors[0], log
-    assert statuses == [fmi2Discard, fmi2Discard]
-    assert all(math.isfinite(v) for v in values.values())
 
 
 @pytest.mark.parametrize("x_cmd", [0.09, -0.09, math.nan])
-def test_input_outside_the_range_discards_the_step_and_keeps_working(unzipped: Path, x_cmd):
+def test_input_outside_the_range_fails_the_step_and_keeps_working(unzipped: Path, x_cmd):
     log: list[tuple[int, str]] = []
     slave, refs = start_slave(unzipped, "range", {"x_cmd": X_OPEN, **MOLD}, log=_logger(log))
     before = _run(slave, refs, APPROACH[:2])[-1]
@@ -252,8 +261,8 @@ def test_input_outside_the_range_discards_the_step_and_keeps_working(unzipped: P
     after_discard = _outputs(slave, refs)
     recovered = _run(slave, refs, APPROACH[2:4], t=1e-2)
     close_slave(slave)
-    assert refused.value.status == fmi2Discard
-    assert any(status == fmi2Discard and "assemblable range" in text for status, text in log), log
+    assert refused.value.status == fmi2Error
+    assert any(status == fmi2Error and "assemblable range" in text for status, text in log), log
     assert after_discard == before
     assert recovered[0]["velocity"] == pytest.approx(2.5e-3 / 5e-3)  # from the kept state
     columns = {n: [o[n] for o in recovered] for n in OUTPUTS}
@@ -268,7 +277,7 @@ def test_input_outside_the_range_discards_the_step_and_keeps_working(unzipped: P
     st.sampled_from([0.0, 5.0]),
 )
 def test_outputs_are_finite_for_any_command_sequence(unzipped: Path, commands, bandwidth):
-    """Every step either succeeds with finite outputs or is discarded leaving them unchanged."""
+    """Every step either succeeds with finite outputs or fails leaving them unchanged."""
     slave, refs = start_slave(unzipped, "any", {"drive_bandwidth": bandwidth, "x_cmd": X_OPEN,
                                                 **MOLD})
     t, previous = 0.0, _outputs(slave, refs)
@@ -279,7 +288,7 @@ def test_outputs_are_finite_for_any_command_sequence(unzipped: Path, commands, b
                 slave.doStep(t, h)
                 t += h
             except FMICallException as refused:
-                assert refused.status == fmi2Discard
+                assert refused.status == fmi2Error
                 assert _outputs(slave, refs) == previous
             previous = _outputs(slave, refs)
             assert all(math.isfinite(v) for v in previous.values())

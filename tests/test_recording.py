@@ -26,10 +26,14 @@ from hil.recording import (
     summarize_run,
 )
 from hil.samples import Sample, Status
+from toggle.rig_tables import F_TP_LATENCY
 
 X_OPEN, X_TP = -0.0034, 0.0516
 STROKE_THEORY = 0.045
 N = 40  # samples per stroke
+#: The forward sample whose force is F_TP: F_TP_LATENCY before the toggle sample (the first
+#: within the encoder's resolution of the end), the rig's reading (issue 18)
+TP_INDEX = max(0, N - 1 - round(F_TP_LATENCY / 1e-3))
 
 
 def meta(**kw) -> RunMeta:
@@ -43,14 +47,15 @@ def synthetic_stream(si, sf, fmax, ftp, bmin, zero=0.2):
 
     Each stroke has N samples and the ends are held for two samples (at the toggle the
     forward stroke's last sample and the backward stroke's first one). Forward force
-    alternates +-fmax except ftp at the toggle sample; backward force alternates +-|bmin|.
+    alternates +-fmax except ftp at TP_INDEX, where the rig reads F_TP; backward force
+    alternates +-|bmin|.
     """
     u = np.linspace(0.0, 1.0, N)
     alt = np.where(np.arange(N) % 2 == 0, 1.0, -1.0)
     samples, t = [], 0.0
     for k in range(len(si)):
         fwd_force = fmax[k] * alt
-        fwd_force[-1] = ftp[k]
+        fwd_force[TP_INDEX] = ftp[k]
         nxt = si[k + 1] if k + 1 < len(si) else si[k]
         strokes = (
             (X_OPEN + (X_TP - X_OPEN) * u, zero + si[k] + (sf[k] - si[k]) * u, fwd_force),

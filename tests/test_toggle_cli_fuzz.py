@@ -52,7 +52,7 @@ def cheap(monkeypatch_module) -> None:
     import toggle.cli.build_fmu as build_cli
     import toggle.native_fmu as native
 
-    def fake_build(out: Path, *_args: object) -> Path:
+    def fake_build(out: Path, *_args: object, **_kwargs: object) -> Path:
         path = Path(out) / "ToggleClamp.fmu"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(b"PK")

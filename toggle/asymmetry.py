@@ -27,6 +27,12 @@ speed to pin load): mu = mu_b(v_s) exp(-(h / h_s)^2). The two make the rate depe
 of Tables 6-8: F_TP rises with speed where the pins are heavily loaded (link 8 off by
 0.5-0.75 mm) and falls where they are lightly loaded (0.25 mm).
 
+Issue 18 (docs/unequal-halves.md section 9): all of that friction acts through a
+hysteretic slip state z (Dahl's law in the crosshead travel, :func:`advance_slip_state`),
+friction = z D; of the take-up work dU/dx only a share lambda (``takeup_return``) is
+stored and returned, the rest is lost in friction-locked slip and joins D. In steady
+sliding z = sgn v: the stateless ``force``.
+
 The model is written once, with numpy ufuncs on the output of ``half_pose``,
 and compiled to a CasADi function of (x, v, lower dims, upper dims, params), so
 it evaluates on floats, numpy arrays and CasADi SX alike; ``extra_input_force``
@@ -68,25 +74,31 @@ class AsymmetryError(ValueError):
 class AsymmetryParams:
     """Physical parameters of the forced-agreement model, SI.
 
-    Defaults: the desktop clamp of Chang et al. 2021, calibrated on Tables 6 and 7
-    (free_play, contact_stiffness, hersey_transition) with the rest from its materials
-    and sizes (docs/unequal-halves.md, section 4).
+    Defaults: the desktop clamp of Chang et al. 2021, fitted on every force statistic of
+    Tables 6 and 7 (contact_stiffness, drive_stiffness, rate_strengthening, takeup_return;
+    free_play went to 0, boundary friction) with the rest from its materials and sizes
+    (docs/unequal-halves.md, sections 4 and 9).
     """
 
-    free_play: float = 0.1250e-3  # delta0, m: platen tilt in the bushings + pin clearances
-    contact_stiffness: float = 8.675e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
+    free_play: float = 0.0  # delta0, m: platen tilt in the bushings + pin clearances
+    contact_stiffness: float = 2.715e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
     series_stiffness: float = 3.3e7  # k_s, N/m: links 4b and 5 of both halves in series (A6061)
-    drive_stiffness: float = 1.0e5  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
+    drive_stiffness: float = 7.089e4  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
     mu: float = 0.3  # pin friction coefficient at the reference slip speed (SUS304 pin in A6061)
-    rate_strengthening: float = 0.02  # a - b of the steady-state rate-and-state law
+    rate_strengthening: float = 0.04342  # a - b of the steady-state rate-and-state law
     reference_slip: float = 1.0e-3  # v_ref, m/s: slip speed at which the coefficient is mu
     slip_velocity: float = 1.0e-6  # v_c, m/s: regularises the log law at rest
     #: h_s, m/(s N): Hersey ratio (pin slip speed / pin load) at which the lubricant film has
     #: lowered the friction to 1/e of boundary friction; inf = boundary lubrication only.
-    hersey_transition: float = 8.732e-7
+    hersey_transition: float = math.inf
     pins: PinRadii = PinRadii(B=4.0e-3, C=4.0e-3, D=4.0e-3)
     #: Internal force above which the halves cannot be forced together elastically (yield), N.
     max_internal_force: float = 2.0e4
+    #: lambda, 1: share of the take-up work the clamp gives back (1: the take-up is elastic,
+    #: the stateless model of issue 8; 0: it is all lost in friction-locked slip)
+    takeup_return: float = 0.2786
+    #: x_s, m: crosshead travel over which the slip state turns after a reversal (Dahl)
+    slip_distance: float = 0.1e-3
 
     def __post_init__(self) -> None:
         ranges = {
@@ -100,6 +112,8 @@ class AsymmetryParams:
             "slip_velocity": (1e-12, 1.0),
             "hersey_transition": (1e-12, math.inf),
             "max_internal_force": (1.0, 1e9),
+            "takeup_return": (0.0, 1.0),
+            "slip_distance": (1e-9, 1e-2),
         }
         for name, (lo, hi) in ranges.items():
             value = getattr(self, name)
@@ -125,17 +139,19 @@ class AsymmetryParams:
         return np.array([self.free_play, self.contact_stiffness, self.series_stiffness,
                          self.drive_stiffness, self.mu, self.rate_strengthening,
                          self.reference_slip, self.slip_velocity,
-                         self.pins.B, self.pins.C, self.pins.D, 1 / self.hersey_transition])
+                         self.pins.B, self.pins.C, self.pins.D, 1 / self.hersey_transition,
+                         self.takeup_return])
 
 
 class Asymmetry(NamedTuple):
     """Model output at (x, v): forces in N, mismatch in m."""
 
-    force: Any  # extra input force, N (positive pushes the crosshead towards the toggle)
+    force: Any  # extra input force in steady sliding (slip state = sign of v), N
     friction: Any  # its dissipative part, N (sign of v)
-    elastic: Any  # its conservative part dU/dx, N
+    elastic: Any  # its conservative part lambda dU/dx, N
     internal_force: Any  # N, the force pair between the halves and the platen
     mismatch: Any  # L_U - L_L, m
+    dissipation: Any  # D >= 0, N: pin friction plus the lost take-up, friction = z D
 
 
 # --- the model, written once -------------------------------------------------------------
@@ -191,10 +207,10 @@ def _internal_force(excess: Any, compliance: Any, k_contact: Any) -> Any:
 
 @functools.cache
 def _model() -> ca.Function:
-    """CasADi function (x, v, lower[8], upper[8], q[12]) -> force, friction, elastic, N, dL."""
+    """CasADi function (x, v, lower[8], upper[8], q[13]) -> force, friction, elastic, N, dL, D."""
     x, v = ca.SX.sym("x"), ca.SX.sym("v")
     pl, pu = ca.SX.sym("lower", len(DIMENSIONS)), ca.SX.sym("upper", len(DIMENSIONS))
-    q = ca.SX.sym("q", 12)
+    q = ca.SX.sym("q", 13)
     dims_l = [pl[i] for i in range(len(DIMENSIONS))]
     dims_u = [pu[i] for i in range(len(DIMENSIONS))]
     free_play, k_contact, k_series, k_drive = q[0], q[1], q[2], q[3]
@@ -207,14 +223,49 @@ def _model() -> ca.Function:
     compliance = 1 / k_series + (slope_l * slope_l + slope_u * slope_u) / k_drive
     n = _internal_force(excess, compliance, k_contact)
     # dU/dx at equilibrium: dU/ds_e = N, dU/dc at fixed s_e = -N^2 / 2 (envelope theorem)
-    elastic = n * ca.jacobian(excess, x) - 0.5 * n * n * ca.jacobian(compliance, x)
-    power = _friction_power(x, v, dims_l, n, q) + _friction_power(x, v, dims_u, n, q)
-    friction = v / np.sqrt(v * v + _SIGN_EPS**2) * power
+    takeup = n * ca.jacobian(excess, x) - 0.5 * n * n * ca.jacobian(compliance, x)
+    # the take-up: a share lambda is stored and returned (conservative), the rest is lost in
+    # friction-locked slip, against the motion in either direction (docs/unequal-halves.md)
+    returned = q[12]
+    elastic = returned * takeup
+    power = (_friction_power(x, v, dims_l, n, q) + _friction_power(x, v, dims_u, n, q)
+             + (1 - returned) * np.fabs(takeup))
+    friction = steady_slip_state(v) * power
     return ca.Function("asymmetry", [x, v, pl, pu, q],
-                       [friction + elastic, friction, elastic, n, mismatch],
+                       [friction + elastic, friction, elastic, n, mismatch, power],
                        ["x", "v", "lower", "upper", "q"],
-                       ["force", "friction", "elastic", "internal_force", "mismatch"],
+                       ["force", "friction", "elastic", "internal_force", "mismatch",
+                        "dissipation"],
                        {"cse": True})
+
+
+# --- the slip state (hysteresis) -----------------------------------------------------------
+
+
+def steady_slip_state(v: Any) -> Any:
+    """Slip state in steady sliding at speed v (m/s): a smooth sign, 0 at rest."""
+    return v / np.sqrt(v * v + _SIGN_EPS**2)
+
+
+def advance_slip_state(z: Any, dx: Any, slip_distance: float) -> Any:
+    """Slip state after a monotone crosshead move dx (m) from state z (Dahl's law, exact).
+
+    dz/dx = (sgn(dx) - z) / x_s: after a reversal the friction turns over a travel of a
+    few x_s instead of at once, and it holds while the crosshead stands still.
+    """
+    target = np.sign(dx)
+    return target - (target - z) * np.exp(-np.fabs(dx) / slip_distance)
+
+
+def slip_state_along(x: np.ndarray, z0: float, slip_distance: float) -> np.ndarray:
+    """Slip state at every point of a monotone path x (m) that starts in state z0."""
+    x = np.asarray(x, dtype=float)
+    return advance_slip_state(z0, x - x[0], slip_distance)
+
+
+def hysteretic_force(out: Asymmetry, z: Any) -> Any:
+    """Extra input force (N) in slip state z: z D + lambda dU/dx (z = sign v: ``out.force``)."""
+    return z * out.dissipation + out.elastic
 
 
 # --- public API ----------------------------------------------------------------------------

@@ -29,6 +29,8 @@ PAPER_TABLES = Path(__file__).with_name("data") / "chang2021_tables.toml"
 FITTABLE = ("free_play", "contact_stiffness", "series_stiffness", "drive_stiffness", "mu",
             "rate_strengthening", "hersey_transition")
 MAX_FITTED = 3
+#: Starts for parameters whose value may be infinite (boundary friction only), SI.
+_FINITE_START = {"hersey_transition": 3e-6}
 
 
 @dataclass(frozen=True)
@@ -124,9 +126,9 @@ def calibrate(
 
 def _start_value(start: AsymmetryParams, name: str) -> float:
     """A positive, finite start for a log-coordinate fit (free play may be 0, the Hersey
-    transition infinite: then the shipped default)."""
+    transition infinite: then a finite start)."""
     value = getattr(start, name)
-    return max(value if math.isfinite(value) else getattr(AsymmetryParams(), name), 1e-9)
+    return max(value if math.isfinite(value) else _FINITE_START.get(name, 1.0), 1e-9)
 
 
 class Comparison(NamedTuple):

@@ -5,16 +5,21 @@ InitialUnknowns, so fmpy's validator rejects its FMUs.
 :func:`extend_model_description` (called from
 :meth:`toggle.fmu_slave.DeclaredSlave.to_xml`) completes the description from
 the slave's :class:`~toggle.fmu_slave.Var` table; :func:`build_fmu` bundles the
-``toggle`` package, gives the slave module a project-unique name and refuses
-to write an FMU that fmpy does not validate.
+modules of ``toggle`` that the slave uses under a name unique to their code,
+puts the FMI guard (:mod:`toggle.fmu_guard`) in front of pythonfmu's binary and
+refuses to write an FMU that fmpy does not validate.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
-import shutil
+import os
+import re
+import subprocess
 import sys
 import tempfile
+import zipfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement
@@ -25,6 +30,8 @@ from toggle.fmu_slave import Var
 PACKAGE_DIR = Path(toggle.__file__).resolve().parent
 DEFAULT_SLAVE = PACKAGE_DIR.parent / "fmu_src" / "toggle_clamp_fmu.py"
 MODULE_PREFIX = "toggle_"
+#: resources/ file listing the site-packages of the Python the FMU was built with.
+PYTHON_PATHS = "python_paths.txt"
 
 # SI units: exponents of the FMI base units, and display units as (name, factor)
 # with display value = factor * value.
@@ -58,13 +65,22 @@ def number_text(value: float) -> str:
     return repr(float(value))
 
 
+def project_version() -> str:
+    """The installed project's version (the FMU's modelDescription ``version``)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("toggle-clamp")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def unit_definitions(units: Iterable[str]) -> Element:
     """UnitDefinitions with BaseUnit and display units of each unit used."""
     node = Element("UnitDefinitions")
     for name in sorted(units):
-        unit = SubElement(node, "Unit", name=name)
-        if UNITS[name]:
-            SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
+        unit = SubElement(node, "Unit", name=name)  # "1": a BaseUnit with no exponents
+        SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
         for display, factor in DISPLAY_UNITS.get(name, ()):
             SubElement(unit, "DisplayUnit", name=display, factor=number_text(factor))
     return node
@@ -107,6 +123,9 @@ def check_variables(variables: Sequence[Var]) -> None:
 def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
     """Complete pythonfmu's modelDescription tree in place from the variable table."""
     check_variables(variables)
+    root.set("version", project_version())
+    root.set("copyright", "Copyright (c) the toggle-clamp authors")
+    root.set("license", "MIT")
     scalars = root.find("ModelVariables")
     names = [sv.get("name") for sv in scalars]
     if names != [v.name for v in variables]:
@@ -134,48 +153,158 @@ def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
     root.append(model_structure(variables))
 
 
-def fmu_module_name(slave_file: Path) -> str:
-    """Module name of the slave inside the FMU: prefixed so it is unique to this project.
+_SITE_HEADER = f"""\
+# pythonfmu 0.7's findClass releases a reference to this module's dict that it does not
+# own, once per fmi2Instantiate, after running this text again: each run keeps one more.
+globals().setdefault("_pythonfmu_dict_refs", []).append(globals())
 
-    pythonfmu imports the slave by module name into the host's ``sys.modules``;
-    two FMUs with the same module name in one process would share one module.
+# A host that embeds Python (a C master) starts without the site-packages of the Python
+# this FMU was built with: append them (the host's own come first).
+import pathlib as _pathlib
+import sys as _sys
+
+_paths = _pathlib.Path(__file__).with_name({PYTHON_PATHS!r})
+for _path in (_paths.read_text().splitlines() if _paths.is_file() else ()):
+    if _path and _path not in _sys.path:
+        _sys.path.append(_path)
+"""
+_IMPORT = re.compile(r"^(\s*)(from|import)\s+toggle(?=[\s.])", re.MULTILINE)
+
+
+def bundled_modules(slave_file: Path) -> tuple[list[str], str]:
+    """The ``toggle`` modules the slave imports, and its slave class (in a fresh interpreter)."""
+    code = ("import importlib.util, sys\n"
+            "from pythonfmu import Fmi2Slave\n"
+            f"spec = importlib.util.spec_from_file_location('_slave', {str(slave_file)!r})\n"
+            "module = importlib.util.module_from_spec(spec)\n"
+            "spec.loader.exec_module(module)\n"
+            "print(' '.join(sorted(m for m in sys.modules "
+            "if m == 'toggle' or m.startswith('toggle.'))))\n"
+            "print(' '.join(k for k, v in vars(module).items() if isinstance(v, type) "
+            "and issubclass(v, Fmi2Slave) and v.__module__ == '_slave'))")
+    env = {**os.environ, "PYTHONPATH": str(PACKAGE_DIR.parent)}
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            env=env, cwd=PACKAGE_DIR.parent)
+    if result.returncode:
+        raise RuntimeError(f"the slave {slave_file} does not import:\n{result.stderr}")
+    modules, classes = result.stdout.splitlines()
+    if len(classes.split()) != 1:
+        raise ValueError(f"{slave_file} must define one Fmi2Slave class, found {classes!r}")
+    return modules.split(), classes
+
+
+def stage_sources(slave_file: Path, preset: str | None, stage: Path) -> tuple[Path, list[Path]]:
+    """Copy the slave and the modules it uses into ``stage`` under a name unique to the code.
+
+    The bundled package is ``toggle_<hash of the bundled sources>``, with its
+    imports rewritten to that name and the slave module inside it, so an FMU
+    never shares Python modules with another version of the project or with a
+    ``toggle`` installed in the host (pythonfmu imports into the host's
+    ``sys.modules``). pythonfmu's entry script is a generated stub that imports
+    the slave class: pythonfmu executes that script's text again at every
+    fmi2Instantiate, when an earlier extraction of the FMU may be deleted, so
+    it must read no file. Returns the stub and the files for ``resources/``.
     """
-    stem = slave_file.stem
-    return stem if stem.startswith(MODULE_PREFIX) else f"{MODULE_PREFIX}fmu_{stem}"
+    modules, slave_class = bundled_modules(slave_file)
+    files = {}
+    for module in modules:
+        relative = Path(*module.split(".")[1:])
+        source = PACKAGE_DIR / relative / "__init__.py"
+        if not source.is_file():
+            source = (PACKAGE_DIR / relative).with_suffix(".py")
+        files[source.relative_to(PACKAGE_DIR)] = source.read_text(encoding="utf-8")
+    files[Path(f"{slave_file.stem}.py")] = slave_file.read_text(encoding="utf-8")
+    if preset is not None:
+        files[Path("preset.toml")] = preset_table_text(preset)
+    digest = hashlib.sha256(repr(sorted(files.items())).encode()).hexdigest()[:12]
+    package = f"{MODULE_PREFIX}{digest}"
+    for relative, text in files.items():
+        target = stage / package / relative
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(_IMPORT.sub(rf"\1\2 {package}", text), encoding="utf-8")
+    script = stage / f"{package}_slave.py"
+    script.write_text(f'"""pythonfmu entry point written by toggle build-fmu."""\n{_SITE_HEADER}'
+                      f"from {package}.{slave_file.stem} import {slave_class}  # noqa: E402\n",
+                      encoding="utf-8")
+    (stage / PYTHON_PATHS).write_text("\n".join(python_paths()) + "\n")
+    return script, [stage / package, stage / PYTHON_PATHS]
+
+
+def python_paths() -> list[str]:
+    """This Python's import path inside its installation (standard library, extension
+    modules, site-packages); not the working directory or a project checkout."""
+    prefixes = tuple({sys.prefix, sys.base_prefix})
+    return [p for p in dict.fromkeys(sys.path) if p.startswith(prefixes) and Path(p).is_dir()]
+
+
+def preset_table_text(preset: str) -> str:
+    """The TOML text of a preset that the FMU can run (it needs [dynamics] and [drive])."""
+    from toggle.params import load_preset, preset_table
+    from toggle.plant import PlantConfig
+
+    PlantConfig(load_preset(preset))  # names what the preset lacks
+    table, _ = preset_table(preset)
+    if "groups" in table or "/" in preset:
+        raise ValueError(f"preset {preset!r}: build the FMU from a single mechanism")
+    path = PACKAGE_DIR / "presets" / f"{preset}.toml"
+    return (path if path.is_file() else Path(preset)).read_text(encoding="utf-8")
 
 
 def build_fmu(
     out_dir: Path,
     slave_file: Path = DEFAULT_SLAVE,
-    project_files: Iterable[Path] = (PACKAGE_DIR,),
+    preset: str | None = "chang2021",
 ) -> Path:
     """Build ``<out_dir>/<ModelName>.fmu`` from a slave file; return its path.
 
-    The ``toggle`` package is bundled in ``resources/`` so the FMU runs in a
-    Python that has numpy and casadi but not this project. Raises RuntimeError
-    if fmpy's validator finds problems in the result.
+    The modules of ``toggle`` that the slave uses are bundled in ``resources/``
+    under a name unique to their code (see :func:`stage_sources`), with the
+    preset's TOML for the clamp slave; the binary is the FMI guard
+    (:mod:`toggle.fmu_guard`) in front of pythonfmu's library. The FMU runs in
+    the Python it was built with (docs/fmu.md). Raises RuntimeError if the
+    guard does not compile or fmpy's validator finds problems in the result.
     """
+    from fmpy import extract
     from fmpy.validation import validate_fmu
     from pythonfmu import FmuBuilder
+
+    from toggle.fmu_guard import INNER_LIBRARY, PLATFORM, compile_guard
 
     slave_file = Path(slave_file).resolve()
     if not slave_file.is_file():
         raise FileNotFoundError(f"no slave file {slave_file}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    module = fmu_module_name(slave_file)
     with tempfile.TemporaryDirectory(prefix="toggle_fmu_") as tmp:
-        script = Path(tmp) / f"{module}.py"
-        shutil.copy2(slave_file, script)
+        stage = Path(tmp) / "stage"
+        stage.mkdir()
+        script, project = stage_sources(slave_file, preset if slave_file == DEFAULT_SLAVE
+                                        else None, stage)
         try:
-            fmu = FmuBuilder.build_FMU(
-                script, dest=out_dir, project_files=[Path(p) for p in project_files]
-            )
+            built = Path(FmuBuilder.build_FMU(script, dest=tmp, project_files=project))
         finally:  # FmuBuilder imports the script and leaves it on sys.path/sys.modules
-            sys.modules.pop(module, None)
-            while tmp in sys.path:
-                sys.path.remove(tmp)
+            for name in [m for m in sys.modules
+                         if m.split(".")[0] in (script.stem, project[0].name)]:
+                sys.modules.pop(name, None)
+            while str(stage) in sys.path:
+                sys.path.remove(str(stage))
+        unzipped = Path(extract(str(built), str(Path(tmp) / "unzipped")))
+        guard = Path(tmp) / "guard" / "guard.so"
+        guard.parent.mkdir()
+        compile_guard(unzipped, guard)
+        fmu = out_dir / built.name
+        binary = f"binaries/{PLATFORM}/{built.stem}.so"
+        with zipfile.ZipFile(built) as src, zipfile.ZipFile(fmu.with_suffix(".tmp"), "w",
+                                                            zipfile.ZIP_DEFLATED) as dst:
+            for item in src.infolist():
+                if item.filename == binary:
+                    dst.writestr(f"binaries/{PLATFORM}/{INNER_LIBRARY}", src.read(item))
+                    dst.write(guard, binary)
+                elif not item.filename.startswith("binaries/") or item.filename.startswith(
+                        f"binaries/{PLATFORM}/"):  # no binary that no test loads (win64)
+                    dst.writestr(item, src.read(item))
+        fmu.with_suffix(".tmp").replace(fmu)
     problems = validate_fmu(str(fmu))
     if problems:
         raise RuntimeError(f"{fmu} is not a valid FMU:\n" + "\n".join(problems))
-    return Path(fmu)
+    return fmu

@@ -1,17 +1,15 @@
 """Host-side helpers for running this project's FMUs in-process with fmpy.
 
 Used by the FMU tests and benchmarks (and any Python master that drives the
-FMU directly): start an initialised Co-Simulation instance, capture its log,
-and release pythonfmu's native runtime before the process exits.
+FMU directly): start an initialised Co-Simulation instance and capture its log.
 """
 
 from __future__ import annotations
 
-import ctypes
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
-from fmpy import calloc, free, platform, read_model_description, sharedLibraryExtension
+from fmpy import calloc, free, read_model_description
 from fmpy.fmi2 import (
     FMU2Slave,
     fmi2CallbackAllocateMemoryTYPE,
@@ -45,11 +43,14 @@ def start_slave(
     start_values: Mapping[str, float | str] | None = None,
     log: LogSink | None = None,
     start_time: float = 0.0,
+    logging: bool | None = None,
 ) -> tuple[FMU2Slave, dict[str, int]]:
     """Instantiate and initialise an extracted FMU; return it and its name→valueReference map.
 
-    Initialisation problems are reported through ``log`` (see
-    :class:`toggle.fmu_slave.DeclaredSlave`), not raised here.
+    ``logging`` is the instance's loggingOn (default: on when ``log`` is given);
+    error messages reach ``log`` either way. A bad parameter raises fmpy's
+    FMICallException (fmi2Error) from exitInitializationMode, with the message in
+    ``log``.
     """
     md = read_model_description(str(unzip_dir))
     refs = {v.name: v.valueReference for v in md.modelVariables}
@@ -60,7 +61,8 @@ def start_slave(
         instanceName=instance_name,
     )
     callbacks = None if log is None else log_callbacks(log)
-    slave.instantiate(callbacks=callbacks, loggingOn=log is not None)
+    slave.instantiate(callbacks=callbacks,
+                      loggingOn=log is not None if logging is None else logging)
     slave.setupExperiment(startTime=start_time)
     slave.enterInitializationMode()
     for name, value in (start_values or {}).items():
@@ -70,18 +72,3 @@ def start_slave(
             slave.setReal([refs[name]], [value])
     slave.exitInitializationMode()
     return slave, refs
-
-
-def release_native_runtime(unzip_dir: Path) -> None:
-    """Release pythonfmu's native runtime of an FMU; call after freeing all its instances.
-
-    pythonfmu 0.7's library keeps a static ``shared_ptr`` that C++ destroys at
-    process exit before the library's unload hook resets it again: a double free
-    that randomly aborts the process ("corrupted double-linked list") after all
-    work is done. Resetting it here, while it is still valid, avoids that.
-    """
-    md = read_model_description(str(unzip_dir))
-    name = md.coSimulation.modelIdentifier + sharedLibraryExtension
-    library = ctypes.CDLL(str(Path(unzip_dir, "binaries", platform, name)))
-    if hasattr(library, "finalizePythonInterpreter"):  # a native FMU has no Python runtime
-        library.finalizePythonInterpreter()

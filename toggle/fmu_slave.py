@@ -3,17 +3,24 @@
 A slave declares its interface once, as a table of :class:`Var` rows, and
 implements two hooks: :meth:`DeclaredSlave.initialize` (check parameters,
 compute the outputs) and :meth:`DeclaredSlave.step` (advance one
-communication step). The base class supplies what pythonfmu 0.7 does not:
+communication step), plus :meth:`DeclaredSlave.model_state` and
+:meth:`DeclaredSlave.restore_model_state` for what it holds besides its
+variables. The base class supplies what pythonfmu 0.7 does not:
 
 * no exception escapes to the native layer (pythonfmu turns any escaping
   exception into fmi2Fatal and frees the Python instance). A failed
-  initialisation is logged with status fmi2Error and every later doStep
-  returns fmi2Discard; a failed step is rolled back, logged and returns
-  fmi2Discard (the only non-fatal status pythonfmu 0.7 can return);
-* outputs are checked to be finite after every step (never a NaN);
-* the FMU state is the whole instance ``__dict__`` (minus pythonfmu's own
-  bookkeeping), so get/set FMU state restores all internal state, not only
-  the registered variables;
+  initialisation or step is rolled back and logged with status fmi2Error,
+  which the FMI guard (fmu_src/guard/fmi2_guard.c) returns as the call's
+  status and delivers whatever the logging state;
+* every Real parameter and input is checked against its declared min/max
+  (and to be finite) when initialisation ends; outputs are checked to be
+  finite after every step (never a NaN);
+* outputs read in Initialization Mode are computed from the values set so far;
+* the FMU state is plain data (:mod:`toggle.fmu_state`): every variable plus
+  :meth:`model_state`, serialised as checksummed JSON, never pickle;
+* the variables' getters hold the instance weakly, so freeing the instance
+  frees everything it holds at once (no reference cycle left for the
+  garbage collector to find at interpreter exit);
 * units, descriptions, min/max and ModelStructure dependencies reach
   modelDescription.xml (see :mod:`toggle.fmu_build`).
 
@@ -24,15 +31,16 @@ rollback snapshot can be a cheap shallow copy.
 
 from __future__ import annotations
 
-import copy
 import math
-import pickle
+import weakref
 from dataclasses import dataclass
 from typing import Any, ClassVar
 from xml.etree.ElementTree import Element
 
 from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real, String
 from pythonfmu.enums import Fmi2Status
+
+from toggle import fmu_state
 
 _DEFAULT_VARIABILITY = {"parameter": "fixed", "input": "continuous", "output": "continuous"}
 
@@ -84,45 +92,46 @@ class Var:
         """Attribute value before initialisation (0.0 for outputs, finite)."""
         return 0.0 if self.start is None else self.start
 
-    def to_pythonfmu(self) -> Real | String:
-        """The pythonfmu variable object registered for this row."""
+    def to_pythonfmu(self, owner: weakref.ref) -> Real | String:
+        """The pythonfmu variable object registered for this row, reading ``owner()``."""
         kind = String if self.is_string else Real
         initial = {"parameter": Fmi2Initial.exact, "output": Fmi2Initial.calculated}
+        name = self.name
         return kind(
-            self.name,
+            name,
             causality=Fmi2Causality[self.causality],
             variability=Fmi2Variability[self.variability or _DEFAULT_VARIABILITY[self.causality]],
             initial=initial.get(self.causality),
             description=self.description,
+            getter=lambda: getattr(owner(), name),
+            setter=lambda value: owner()._set(name, value),
         )
 
 
 class DeclaredSlave(Fmi2Slave):
     """pythonfmu slave built from a :class:`Var` table; see the module doc.
 
-    Subclasses set ``VARIABLES``, ``default_experiment`` (a pythonfmu
-    ``DefaultExperiment`` with a step size) and optionally ``STATE_EXCLUDE``
-    (attribute names of immutable objects that need not be saved with the FMU
-    state, e.g. a compiled model), and implement :meth:`initialize` and
-    :meth:`step`.
+    Subclasses set ``VARIABLES`` and ``default_experiment`` (a pythonfmu
+    ``DefaultExperiment`` with a step size), and implement :meth:`initialize`,
+    :meth:`step` and, when they hold more than their variables,
+    :meth:`model_state` and :meth:`restore_model_state`.
     """
 
     VARIABLES: ClassVar[tuple[Var, ...]] = ()
-    STATE_EXCLUDE: ClassVar[frozenset[str]] = frozenset()
     #: True when :meth:`step` assigns nothing before it can fail and assigns only
     #: finite outputs: the base class then skips its per-step snapshot and check.
     ATOMIC_STEP: ClassVar[bool] = False
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
-        # pythonfmu's bookkeeping (vars, log_queue, ...) is not model state; the
-        # native layer also holds a reference to log_queue, so it is never replaced.
-        self._not_state = frozenset(self.__dict__) | {"_not_state"} | self.STATE_EXCLUDE
         self.failure: str | None = None
+        self._phase = "instantiated"
+        self._stale = True  # outputs not computed from the values set since
         self._outputs = tuple(v.name for v in self.VARIABLES if v.causality == "output")
+        owner = weakref.ref(self)
         for var in self.VARIABLES:
             setattr(self, var.name, var.initial_value)
-            self.register_variable(var.to_pythonfmu())
+            self.register_variable(var.to_pythonfmu(owner))
 
     # ---- hooks for subclasses -------------------------------------------------
     def initialize(self) -> None:
@@ -132,16 +141,46 @@ class DeclaredSlave(Fmi2Slave):
         """Advance the model by one communication step; raise to reject the step."""
         raise NotImplementedError
 
+    def model_state(self) -> dict[str, Any]:
+        """What the slave holds besides its variables, as JSON-able plain data."""
+        return {}
+
+    def restore_model_state(self, state: dict[str, Any]) -> None:
+        """Rebuild what :meth:`model_state` saved (the variables are already set)."""
+
     # ---- pythonfmu entry points (never raise) ----------------------------------
+    def _set(self, name: str, value: Any) -> None:
+        setattr(self, name, value)
+        self._stale = True
+
+    def enter_initialization_mode(self) -> None:
+        self._phase = "initialising"
+
     def exit_initialization_mode(self) -> None:
+        if self._initialise():
+            self._phase = "stepping"
+
+    def get_real(self, vrs: list[int]) -> list[float]:
+        if self._phase == "initialising" and self._stale:
+            self._initialise()  # outputs of the values set so far (FMI InitialUnknowns)
+        return super().get_real(vrs)
+
+    def _initialise(self) -> bool:
         snapshot = dict(self.__dict__)
         try:
+            self._check_ranges()
             self.initialize()
             self._check_outputs_finite()
         except Exception as exc:  # any exception escaping to pythonfmu becomes fmi2Fatal
             self.__dict__.update(snapshot)  # outputs stay at their finite pre-init values
             self.failure = f"initialisation failed: {exc}"
             self.log(self.failure, Fmi2Status.error)
+            return False
+        self.failure, self._stale = None, False
+        self.log("initialised: " + ", ".join(
+            f"{v.name} = {getattr(self, v.name)!r}" for v in self.VARIABLES
+            if v.causality == "parameter"))
+        return True
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         if self.failure is not None:
@@ -155,42 +194,77 @@ class DeclaredSlave(Fmi2Slave):
         except Exception as exc:  # reject the step instead of fmi2Fatal
             if snapshot is not None:
                 self.__dict__.update(snapshot)
-            self.log(f"step at t={current_time:g} s rejected: {exc}", Fmi2Status.discard)
+            self.log(f"step at t={current_time:g} s rejected: {exc}", Fmi2Status.error)
             return False
         return True
 
-    def log(
-        self, msg: str, status: Fmi2Status = Fmi2Status.ok, category: str | None = None
-    ) -> None:
-        """Queue a message for the host's logger (escaped: FMI loggers printf-format it)."""
-        super().log(msg.replace("%", "%%"), status, category)
+    def terminate(self) -> None:
+        self._phase = "terminated"
+
+    def _check_ranges(self) -> None:
+        """Every Real parameter and input finite and within its declared min/max."""
+        for var in self.VARIABLES:
+            if var.causality == "output" or var.is_string:
+                continue
+            value = getattr(self, var.name)
+            low = -math.inf if var.min is None else var.min
+            high = math.inf if var.max is None else var.max
+            if not (math.isfinite(value) and low <= value <= high):
+                unit = "" if var.unit == "1" else f" {var.unit}"
+                raise ValueError(f"{var.causality} {var.name} = {value!r}{unit} is outside "
+                                 f"[{low:g}, {high:g}]{unit}")
 
     def _check_outputs_finite(self) -> None:
         bad = [name for name in self._outputs if not math.isfinite(getattr(self, name))]
         if bad:
             raise ValueError(f"non-finite output(s): {', '.join(bad)}")
 
-    # ---- FMU state: everything the instance holds -----------------------------
+    # ---- FMU state: every variable and the model's own data --------------------
     def _get_fmu_state(self) -> dict[str, Any]:
-        return copy.deepcopy({k: v for k, v in self.__dict__.items() if k not in self._not_state})
+        return {"values": {v.name: getattr(self, v.name) for v in self.VARIABLES},
+                "phase": self._phase, "failure": self.failure, "model": self.model_state()}
 
     def _set_fmu_state(self, state: dict[str, Any]) -> None:
-        # Deep copy: the host may restore the same saved state several times.
-        self.__dict__.update(copy.deepcopy(state))
+        snapshot = dict(self.__dict__)
+        try:
+            if "invalid" in state:
+                raise fmu_state.StateError(state["invalid"])
+            values = state["values"]
+            for var in self.VARIABLES:
+                value = values[var.name]
+                if var.is_string != isinstance(value, str):
+                    raise fmu_state.StateError(f"{var.name} has the wrong type in the state")
+                setattr(self, var.name,
+                        value if var.is_string else fmu_state.finite(value, var.name))
+            if state["phase"] not in ("initialising", "stepping", "terminated"):
+                raise fmu_state.StateError(f"unknown phase {state['phase']!r} in the state")
+            self._phase, self.failure = state["phase"], state["failure"]
+            self.restore_model_state(state["model"])
+        except Exception as exc:  # (KeyError, TypeError, StateError, a plant that fails)
+            self.__dict__.update(snapshot)
+            self.log(f"FMU state refused: {exc!r}" if isinstance(exc, KeyError)
+                     else f"FMU state refused: {exc}", Fmi2Status.error)
+            return
+        self._stale = False
 
     @staticmethod
     def _fmu_state_to_bytes(state: dict[str, Any]) -> bytes:
-        return pickle.dumps(state)
+        return fmu_state.pack(state)
 
     @staticmethod
-    def _fmu_state_from_bytes(state: bytes) -> dict[str, Any]:
-        return pickle.loads(state)  # only bytes this FMU serialised
+    def _fmu_state_from_bytes(data: bytes) -> dict[str, Any]:
+        try:  # never raise: pythonfmu would return fmi2Fatal and free the instance
+            return fmu_state.unpack(data)
+        except fmu_state.StateError as exc:
+            return {"invalid": str(exc)}
 
     # ---- model description -----------------------------------------------------
     def to_xml(self, model_options: dict[str, str] | None = None) -> Element:
         """pythonfmu's description extended with units, limits and dependencies."""
-        from toggle.fmu_build import extend_model_description  # build time only
+        import importlib
 
+        # build time only, in the building Python: by a name the bundling leaves alone
+        fmu_build = importlib.import_module("toggle.fmu_build")
         root = super().to_xml(model_options or {})
-        extend_model_description(root, self.VARIABLES)
+        fmu_build.extend_model_description(root, self.VARIABLES)
         return root

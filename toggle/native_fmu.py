@@ -19,6 +19,7 @@ import dataclasses
 import math
 import shutil
 import subprocess
+import sys
 import tempfile
 import uuid
 import zipfile
@@ -161,7 +162,7 @@ def _c_string(text: str) -> str:
 def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: str,
                  functions: Sequence[ca.Function]) -> str:
     """clamp_model_data.h: the preset's constants, the variable table and work sizes."""
-    mech, dyn = cfg.mechanism, cfg.dynamics
+    mech = cfg.mechanism
     reals = real_variables(variables)
     roles = _roles(variables)
     sizes = {k: max(getattr(f, k)() for f in functions) for k in ("sz_arg", "sz_res", "sz_iw",
@@ -178,9 +179,10 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         *(f"#define CLAMP_{k.upper()} {v}" for k, v in sizes.items()),
         f"static const double CLAMP_NOMINAL[2 * CLAMP_N_DIMS] = "
         f"{_c_array(mech.lower.as_tuple() + mech.upper.as_tuple())};",
-        f"static const double CLAMP_PRESET_MU = {cfg.friction!r};",
-        f"static const double CLAMP_PRESET_MASSES[4] = "
-        f"{_c_array([getattr(dyn, f) for f in MASS_FIELDS.values()])};",
+        "static const double CLAMP_MIN[CLAMP_N_REAL] = "
+        f"{_c_array([-sys.float_info.max if v.min is None else v.min for v in reals])};",
+        "static const double CLAMP_MAX[CLAMP_N_REAL] = "
+        f"{_c_array([sys.float_info.max if v.max is None else v.max for v in reals])};",
         "static const double CLAMP_START[CLAMP_N_REAL] = "
         f"{_c_array([v.initial_value for v in reals])};",
         "static const char *const CLAMP_NAMES[CLAMP_N_REAL] = {"
@@ -264,15 +266,16 @@ def fmi2_headers() -> Path:
     return folder
 
 
-def slave_variables() -> tuple[tuple[Var, ...], str, Any]:
-    """VARIABLES, description and default experiment of the pythonfmu ToggleClamp slave."""
+def slave_variables(preset: str = "chang2021") -> tuple[tuple[Var, ...], str, Any]:
+    """Variables (for ``preset``), description and default experiment of the pythonfmu
+    ToggleClamp slave: both FMUs of a preset have the same variables."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("toggle_native_slave_table", DEFAULT_SLAVE)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     slave = module.ToggleClamp
-    return slave.VARIABLES, slave.description, slave.default_experiment
+    return module.variables(load_preset(preset)), slave.description, slave.default_experiment
 
 
 def generate_sources(folder: Path, preset: str) -> tuple[list[str], str]:
@@ -280,7 +283,7 @@ def generate_sources(folder: Path, preset: str) -> tuple[list[str], str]:
 
     Returns the names of the files to compile and the model's GUID.
     """
-    variables, _, _ = slave_variables()
+    variables, _, _ = slave_variables(preset)
     cfg = configure(preset)
     functions = plant_functions(cfg)
     gen = ca.CodeGenerator(f"{GENERATED}.c", {"with_header": True, "with_export": False,
@@ -321,10 +324,7 @@ def build_native_fmu(out_dir: Path, preset: str = "chang2021") -> Path:
     """
     from fmpy.validation import validate_fmu
 
-    variables, description, experiment = slave_variables()
-    variables = tuple(dataclasses.replace(v, start=preset) if v.is_string else v
-                      for v in variables)
-    load_preset(preset)  # a bad name fails here, before any code is generated
+    variables, description, experiment = slave_variables(preset)  # a bad name fails here
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     fmu = out_dir / f"{MODEL}.fmu"

@@ -293,13 +293,15 @@ class Dynamics:
     all toggle links together, lumped half at the crosshead and half at the
     platen (kg); platen: the moving platen with its mold half (kg);
     guide_damping: viscous friction of the crosshead and platen guides,
-    referred to the input link (N s/m).
+    referred to the input link (N s/m); guide_friction: their Coulomb friction
+    (and the ball screw's), referred to the input link (N).
     """
 
     crosshead: float
     links: float
     platen: float
     guide_damping: float = 0.0
+    guide_friction: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -441,7 +443,7 @@ def load_mechanism(path: str | Path, group: str | int | None = None) -> Mechanis
 
 def preset_names() -> list[str]:
     """Names of the presets shipped with the package."""
-    folder = resources.files("toggle") / "presets"
+    folder = resources.files(__package__) / "presets"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
@@ -466,7 +468,7 @@ def preset_table(name: str) -> tuple[dict[str, Any], str]:
         raise ParameterError(f"{name} is a directory, not a preset TOML file")
     if name.endswith(".toml") or Path(name).is_file():
         return _read_toml(Path(name)), name
-    resource = resources.files("toggle") / "presets" / f"{name}.toml"
+    resource = resources.files(__package__) / "presets" / f"{name}.toml"
     if not resource.is_file():
         raise UnknownPresetError(f"unknown preset {name!r}; shipped: {', '.join(preset_names())}")
     return tomllib.loads(resource.read_text(encoding="utf-8")), f"preset {name}"

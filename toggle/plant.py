@@ -34,7 +34,12 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 
-from toggle.asymmetry import AsymmetryParams, extra_input_force
+from toggle.asymmetry import (
+    AsymmetryParams,
+    advance_slip_state,
+    asymmetry,
+    hysteretic_force,
+)
 from toggle.drive import motor_torque
 from toggle.elastics import clamp_state
 from toggle.kinematics import (
@@ -130,14 +135,17 @@ class PlantConfig:
         return replace(self, **changes)
 
 
-def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = None
-                  ) -> PlantOutputs:
+def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = None,
+                  slip_state: Any = None) -> PlantOutputs:
     """Plant outputs at input position x, velocity v and acceleration a.
 
     Floats, arrays or CasADi symbols; no assembly check (see
     :class:`CompiledPlant` for the checked numeric form). ``x_contact``, if
     given, replaces ``cfg.x_contact`` and may be a CasADi symbol: the planner
     keeps the mold height a parameter of its problem (no numeric check here).
+    ``slip_state`` z in [-1, 1] is the hysteretic friction state of the guides and
+    of the unequal halves (:func:`toggle.asymmetry.advance_slip_state`, carried by the
+    caller); None: steady sliding (z = the smooth sign of v), the stateless plant.
     """
     mech, dyn = cfg.mechanism, cfg.dynamics
     x_contact = cfg.x_contact if x_contact is None else x_contact
@@ -165,9 +173,12 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
         q = force_ratios(x, mech.lower, mech.clamp.pins, cfg.friction, direction).thrust
         ma = 1.0 / np.maximum(np.fabs(q), 1.0 / MA_CAP)
     inertia = m_in * a + moving * m_out * g * (g * a + gp * v * v)
-    force = inertia + dyn.guide_damping * v + thrust
+    guide = direction if slip_state is None else slip_state
+    force = inertia + dyn.guide_damping * v + dyn.guide_friction * guide + thrust
     if not mech.symmetric:  # a parameter decision: equal halves add exactly nothing
-        force = force + extra_input_force(x, v, mech.lower, mech.upper, cfg.asymmetry)
+        extra = asymmetry(x, v, mech.lower, mech.upper, cfg.asymmetry)
+        force = force + (extra.force if slip_state is None
+                         else hysteretic_force(extra, slip_state))
     theta4 = half_pose(x, mech.lower, check=False).theta4
     return PlantOutputs(
         x=x, velocity=v, acceleration=a,
@@ -197,39 +208,75 @@ class CompiledPlant:
     def __init__(self, cfg: PlantConfig) -> None:
         self.config = cfg
         self.x_min, self.x_max = cfg.input_range
-        sym = ca.SX.sym("xva", 3)
-        outs = plant_outputs(sym[0], sym[1], sym[2], cfg)
-        self._fn = ca.Function("plant", [sym], [ca.vertcat(*[ca.SX(o) for o in outs])],
-                               {"cse": True})
-        self._arg, self._res = np.zeros(3), np.zeros(len(PlantOutputs._fields))
-        self._buffer, self._eval = self._fn.buffer()
-        self._buffer.set_arg(0, memoryview(self._arg))
-        self._buffer.set_res(0, memoryview(self._res))
+        sym = ca.SX.sym("xvaz", 4)
+        self._calls = {}
+        for stateful in (False, True):
+            outs = plant_outputs(sym[0], sym[1], sym[2], cfg,
+                                 slip_state=sym[3] if stateful else None)
+            fn = ca.Function("plant", [sym], [ca.vertcat(*[ca.SX(o) for o in outs])],
+                             {"cse": True})
+            arg, res = np.zeros(4), np.zeros(len(PlantOutputs._fields))
+            buffer, evaluate = fn.buffer()
+            buffer.set_arg(0, memoryview(arg))
+            buffer.set_res(0, memoryview(res))
+            self._calls[stateful] = (arg, res, buffer, evaluate)
 
-    def __call__(self, x: float, v: float, a: float) -> PlantOutputs:
+    def check_input(self, x: float) -> None:
+        """Raise :class:`PlantError` unless the input position ``x`` (m) assembles."""
         if not (self.x_min <= x <= self.x_max):
             raise PlantError(
                 f"input position x = {x!r} m outside the assemblable range "
                 f"[{self.x_min:.6g}, {self.x_max:.6g}] m"
             )
-        self._arg[:] = (x, v, a)
-        self._eval()
-        values = self._res.tolist()
+
+    def __call__(self, x: float, v: float, a: float,
+                 slip_state: float | None = None) -> PlantOutputs:
+        """Outputs at (x, v, a); ``slip_state``: the friction state (None: steady sliding)."""
+        self.check_input(x)
+        arg, res, _, evaluate = self._calls[slip_state is not None]
+        arg[:] = (x, v, a, 0.0 if slip_state is None else slip_state)
+        evaluate()
+        values = res.tolist()
         if not all(map(math.isfinite, values)):
             bad = [n for n, val in zip(PlantOutputs._fields, values) if not math.isfinite(val)]
             raise PlantError(f"no finite plant solution at x = {x!r} m ({', '.join(bad)})")
         return PlantOutputs(*values)
 
 
+class HystereticPlant:
+    """A :class:`CompiledPlant` stepped along a drive path, carrying the slip state.
+
+    What the rig emulator uses, and what an FMU must do to show the hysteresis: keep
+    (x, z) from the previous step, advance z by the crosshead move with
+    :func:`toggle.asymmetry.advance_slip_state`, evaluate the plant in that state.
+    """
+
+    def __init__(self, cfg: PlantConfig, slip_state: float = 0.0) -> None:
+        self.plant = CompiledPlant(cfg)
+        self.slip_distance = cfg.asymmetry.slip_distance
+        #: (last position m or None before the first call, slip state): what a saved
+        #: state (the FMU's) must hold besides the drive
+        self.state: tuple[float | None, float] = (None, slip_state)
+
+    def __call__(self, drive: DriveState) -> PlantOutputs:
+        x_last, z = self.state
+        if x_last is not None:
+            z = float(advance_slip_state(z, drive.x - x_last, self.slip_distance))
+        out = self.plant(drive.x, drive.v, drive.a, z)  # raises before the state changes
+        self.state = (drive.x, z)
+        return out
+
+
 def configure(
-    preset: str,
+    preset: str | Mechanism,
     *,
     mu: float | None = None,
     x_contact: float | None = None,
     masses: dict[str, float] | None = None,
     errors: dict[str, float] | None = None,
 ) -> PlantConfig:
-    """A plant from a preset, with overrides named as the FMU names its parameters.
+    """A plant from a preset (a name, a TOML path or a loaded :class:`Mechanism`), with
+    overrides named as the FMU names its parameters.
 
     ``masses`` overrides fields of the preset's [dynamics] (crosshead, links,
     platen, guide_damping); ``errors`` adds dimensional errors by seed 000's
@@ -237,7 +284,7 @@ def configure(
     A contact position at or beyond the toggle means no mold. Every bad value
     raises :class:`ParameterError` naming it.
     """
-    mech = load_preset(preset)
+    mech = preset if isinstance(preset, Mechanism) else load_preset(preset)
     changed = []
     for name, delta in (errors or {}).items():
         if not math.isfinite(delta):
@@ -266,48 +313,99 @@ def configure(
 
 
 class DriveState(NamedTuple):
-    """Input-link motion: position (m), velocity (m/s), acceleration (m/s^2)."""
+    """Input-link motion: position (m), velocity (m/s), acceleration (m/s^2); and the
+    last command (m), its mean slope over the last step (m/s) and that step (s), from
+    which the next step interpolates the command."""
 
     x: float
     v: float
     a: float
+    u: float
+    slope: float = 0.0
+    h: float = 0.0  # 0: no step yet
+
+    @classmethod
+    def at_rest(cls, x: float) -> DriveState:
+        return cls(x, 0.0, 0.0, x)
 
 
-@functools.lru_cache(maxsize=64)
-def _lag_matrices(
-    bandwidth: float, damping: float, h: float
-) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Exact zero-order-hold discretisation of x'' = w^2 (u - x) - 2 zeta w x' (as floats)."""
-    from scipy.linalg import expm
+#: Bounds of a commanded motion (an input link, not a projectile): beyond them the
+#: command is a step or a glitch of the master, refused rather than turned into 1e19 N.
+MAX_INPUT_SPEED = 10.0  # m/s
+MAX_INPUT_ACCELERATION = 1e4  # m/s^2
 
-    w = 2 * math.pi * bandwidth
-    A = np.array([[0.0, 1.0], [-w * w, -2 * damping * w]])
-    B = np.array([0.0, w * w])
-    M = expm(np.block([[A, B[:, None]], [np.zeros((1, 3))]]) * h)
-    return tuple(float(v) for v in M[:2, :2].ravel()), (float(M[0, 2]), float(M[1, 2]))
+
+def lag_transition(w: float, zeta: float, h: float) -> tuple[float, float, float, float]:
+    """exp(A h) of the drive lag A = [0 1; -w^2 -2 zeta w], in closed form.
+
+    exp(A h) = e^m (c I + s (A h - m I)) with m = -zeta w h, q^2 = (w h)^2 (zeta^2 - 1),
+    c = cosh q, s = sinh(q)/q (cos and sin for q^2 < 0; their series near q = 0, where
+    the damping is close to critical). A few floating-point operations per step, for
+    any step size (no matrix exponential, no cache).
+    """
+    wh = w * h
+    q2 = wh * wh * (zeta - 1.0) * (zeta + 1.0)
+    if abs(q2) < 1e-2:
+        c = s = term = 1.0
+        for k in range(1, 9):  # q2^k / (2k)! and q2^k / (2k+1)!
+            term *= q2 / ((2.0 * k - 1.0) * (2.0 * k))
+            c += term
+            s += term / (2.0 * k + 1.0)
+    elif q2 > 0:
+        q = math.sqrt(q2)
+        c, s = math.cosh(q), math.sinh(q) / q
+    else:
+        q = math.sqrt(-q2)
+        c, s = math.cos(q), math.sin(q) / q
+    e = math.exp(-zeta * wh)
+    return e * (c + s * zeta * wh), e * s * h, -e * s * w * wh, e * (c - s * zeta * wh)
 
 
 def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
            damping: float = 0.7) -> DriveState:
     """Advance the drive by h toward the commanded position.
 
-    ``bandwidth`` 0 is an ideal position source (velocity and acceleration by
-    backward differences); otherwise a second-order tracking lag with that
-    natural frequency (Hz) and damping ratio, discretised exactly.
+    Between communication points the command is the parabola through the last
+    three commands, so a command of constant acceleration is followed exactly
+    whatever the step sizes (a master's variable steps change nothing).
+    ``bandwidth`` 0 is an ideal position source: the input link is at the
+    command, with the parabola's acceleration and its velocity limited to the
+    sign of the step's mean slope and twice its size (so a stop, mean slope 0,
+    has velocity 0 rather than the parabola's overshoot). Otherwise a
+    second-order tracking lag with that natural frequency (Hz) and damping
+    ratio, solved exactly for that command. A command beyond
+    :data:`MAX_INPUT_SPEED` or :data:`MAX_INPUT_ACCELERATION` raises
+    :class:`PlantError`.
     """
-    if not h > 0:
+    if not (h > 0 and math.isfinite(h)):
         raise PlantError(f"step size must be > 0, got {h!r} s")
-    if bandwidth <= 0:
-        v = (x_cmd - state.x) / h
-        return DriveState(x_cmd, v, (v - state.v) / h)
-    (p00, p01, p10, p11), (g0, g1) = _lag_matrices(bandwidth, damping, h)
-    x = p00 * state.x + p01 * state.v + g0 * x_cmd
-    v = p10 * state.x + p11 * state.v + g1 * x_cmd
-    w = 2 * math.pi * bandwidth
-    return DriveState(x, v, w * w * (x_cmd - x) - 2 * damping * w * v)
+    rate = (x_cmd - state.u) / h  # the command's mean slope over the step
+    curvature = 2 * (rate - state.slope) / (state.h + h)  # the parabola's 2nd derivative
+    du1 = rate + curvature * h / 2  # the command's slope at the end of the step
+    if bandwidth <= 0:  # a command that stops is not read as a reversal (nor doubles back)
+        x, v, a = x_cmd, min(max(du1, min(0.0, 2 * rate)), max(0.0, 2 * rate)), curvature
+    else:
+        # x_p = u - k1 u' + k2 u'' solves x'' + 2 zeta w x' + w^2 x = w^2 u for a parabola
+        # u; the deviation from it decays as exp(A h)
+        w = 2 * math.pi * bandwidth
+        k1, k2 = 2 * damping / w, (4 * damping * damping - 1) / (w * w)
+        du0 = rate - curvature * h / 2
+        e0 = state.x - (state.u - k1 * du0 + k2 * curvature)
+        e1 = state.v - (du0 - k1 * curvature)
+        p00, p01, p10, p11 = lag_transition(w, damping, h)
+        x = x_cmd - k1 * du1 + k2 * curvature + p00 * e0 + p01 * e1
+        v = du1 - k1 * curvature + p10 * e0 + p11 * e1
+        a = w * w * (x_cmd - x) - 2 * damping * w * v
+    if not (abs(v) <= MAX_INPUT_SPEED and abs(a) <= MAX_INPUT_ACCELERATION):
+        raise PlantError(
+            f"the command x_cmd = {x_cmd!r} m after {h!r} s asks for {v:.3g} m/s and "
+            f"{a:.3g} m/s^2; an input link moves within {MAX_INPUT_SPEED:g} m/s and "
+            f"{MAX_INPUT_ACCELERATION:g} m/s^2")
+    return DriveState(x, v, a, x_cmd, rate, h)
 
 
 __all__ = [
-    "AssemblyError", "CompiledPlant", "DriveState", "PlantConfig", "PlantError", "PlantOutputs",
+    "AssemblyError", "CompiledPlant", "DriveState", "HystereticPlant", "PlantConfig",
+    "PlantError", "PlantOutputs",
     "configure", "follow", "plant_outputs",
 ]

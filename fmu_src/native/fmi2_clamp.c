@@ -20,7 +20,7 @@
 #include "clamp_model.h"
 #include "clamp_model_data.h"
 
-#define STATE_VERSION 1u
+#define STATE_VERSION 3u
 #define GRID 4001
 #define N_IN 6
 #define PI 3.14159265358979323846
@@ -32,7 +32,7 @@ typedef struct {
     uint32_t version, size;
     int32_t phase, mold, unequal, spare;  /* spare: no padding in the checksum */
     double r[CLAMP_N_REAL];      /* every Real variable, by value reference */
-    double drive[3];             /* x, v, a of the input link */
+    double drive[6];             /* x, v, a of the input link; last command, its slope, step */
     double dims[2 * CLAMP_N_DIMS], mu, masses[4], x_lo, x_hi;
     uint64_t checksum;           /* FNV-1a of everything before it */
 } State;
@@ -148,14 +148,18 @@ static int half_limits(Instance *c, const double *dims, double *x_tp, double *lo
     return 1;
 }
 
-/* A "-1: the preset's" parameter; 0 and an error message if it is neither -1 nor >= 0. */
-static int given(Instance *c, int vr, double preset, double *out) {
-    double v = c->s.r[vr];
-    if (v == -1.0) { *out = preset; return 1; }
-    if (isfinite(v) && v >= 0) { *out = v; return 1; }
-    logf_(c, fmi2Error, "initialisation failed: parameter %s must be >= 0 (or -1 for the "
-          "preset's), got %g", CLAMP_NAMES[vr], v);
-    return 0;
+/* Every Real parameter and input finite and within its declared min/max. */
+static int in_ranges(Instance *c) {
+    for (int vr = 0; vr < VR_OUT0; vr++) {
+        double v = c->s.r[vr];
+        if (!(isfinite(v) && CLAMP_MIN[vr] <= v && v <= CLAMP_MAX[vr])) {
+            logf_(c, fmi2Error, "initialisation failed: %s %s = %.17g is outside [%g, %g]",
+                  vr == VR_X_CMD ? "input" : "parameter", CLAMP_NAMES[vr], v, CLAMP_MIN[vr],
+                  CLAMP_MAX[vr]);
+            return 0;
+        }
+    }
+    return 1;
 }
 
 static int outputs_at(Instance *c, const double xva[3], double *y) {
@@ -170,26 +174,10 @@ static fmi2Status initialise(Instance *c) {
     static const char *const dim_names[] = {"r1", "r2", "r3", "r4a", "r4b", "r4c", "r5", "e"};
     static const char *const half_names[] = {"lower", "upper"};
     double tp[2], lo[2], hi[2], y[CLAMP_N_OUT];
-    for (int i = 0; i < 2; i++) {
-        int vr = i ? VR_DAMPING : VR_BANDWIDTH;
-        if (!(isfinite(s->r[vr]) && s->r[vr] >= 0)) {
-            logf_(c, fmi2Error, "initialisation failed: parameter %s must be finite and >= 0, "
-                  "got %g", CLAMP_NAMES[vr], s->r[vr]);
-            return fmi2Error;
-        }
-    }
-    if (!given(c, VR_MU, CLAMP_PRESET_MU, &s->mu)) return fmi2Error;
-    for (int i = 0; i < 4; i++)
-        if (!given(c, VR_MASS0 + i, CLAMP_PRESET_MASSES[i], &s->masses[i])) return fmi2Error;
-    for (int i = 0; i < 2 * CLAMP_N_DIMS; i++) {
-        double d = s->r[VR_DELTA0 + i];
-        if (!isfinite(d)) {
-            logf_(c, fmi2Error, "initialisation failed: dimensional error %s must be finite, "
-                  "got %g", CLAMP_NAMES[VR_DELTA0 + i], d);
-            return fmi2Error;
-        }
-        s->dims[i] = CLAMP_NOMINAL[i] + d;
-    }
+    if (!in_ranges(c)) return fmi2Error;
+    s->mu = s->r[VR_MU];
+    for (int i = 0; i < 4; i++) s->masses[i] = s->r[VR_MASS0 + i];
+    for (int i = 0; i < 2 * CLAMP_N_DIMS; i++) s->dims[i] = CLAMP_NOMINAL[i] + s->r[VR_DELTA0 + i];
     s->unequal = 0;
     for (int h = 0; h < 2; h++) {
         const double *d = s->dims + h * CLAMP_N_DIMS;
@@ -220,7 +208,7 @@ static fmi2Status initialise(Instance *c) {
               "outside the assemblable range [%g, %g] m", xc, s->x_lo, s->x_hi);
         return fmi2Error;
     }
-    double x0 = s->r[VR_X_CMD], xva[3] = {x0, 0.0, 0.0};
+    double x0 = s->r[VR_X_CMD], xva[6] = {x0, 0.0, 0.0, x0, 0.0, 0.0};
     if (!(s->x_lo <= x0 && x0 <= s->x_hi)) {
         logf_(c, fmi2Error, "initialisation failed: input position x = %g m outside the "
               "assemblable range [%g, %g] m", x0, s->x_lo, s->x_hi);
@@ -262,25 +250,36 @@ static void lag_expm(double w, double zeta, double h, double p[4]) {
     p[3] = e * (c - s * zeta * wh);
 }
 
-/* The drive's motion after a step h toward u (toggle.plant.follow). */
-static void follow(Instance *c, double u, double h, double out[3]) {
+/* The drive's motion after a step h toward u (toggle.plant.follow); 0 if the command asks
+ * for more than MAX_SPEED or MAX_ACCELERATION. */
+#define MAX_SPEED 10.0
+#define MAX_ACCELERATION 1e4
+static int follow(Instance *c, double u, double h, double out[6]) {
     const State *s = &c->s;
     double bw = s->r[VR_BANDWIDTH], zeta = s->r[VR_DAMPING];
     const double *d = s->drive, *p = c->lag;
+    double rate = (u - d[3]) / h, curvature = 2 * (rate - d[4]) / (d[5] + h);
+    double du1 = rate + curvature * h / 2;
     if (bw <= 0) {
-        double v = (u - d[0]) / h;
-        out[0] = u; out[1] = v; out[2] = (v - d[1]) / h;
-        return;
+        double lo = fmin(0.0, 2 * rate), hi = fmax(0.0, 2 * rate);  /* a stop is no reversal */
+        out[0] = u; out[1] = fmin(fmax(du1, lo), hi); out[2] = curvature;
+    } else {
+        double w = 2.0 * PI * bw;
+        if (c->lag_key[0] != bw || c->lag_key[1] != zeta || c->lag_key[2] != h) {
+            lag_expm(w, zeta, h, c->lag);
+            c->lag_key[0] = bw; c->lag_key[1] = zeta; c->lag_key[2] = h;
+        }
+        /* exact for the parabola command: the deviation from x_p = u - k1 u' + k2 u''
+         * decays as exp(A h) */
+        double k1 = 2 * zeta / w, k2 = (4 * zeta * zeta - 1) / (w * w);
+        double du0 = rate - curvature * h / 2;
+        double e0 = d[0] - (d[3] - k1 * du0 + k2 * curvature), e1 = d[1] - (du0 - k1 * curvature);
+        out[0] = u - k1 * du1 + k2 * curvature + p[0] * e0 + p[1] * e1;
+        out[1] = du1 - k1 * curvature + p[2] * e0 + p[3] * e1;
+        out[2] = w * w * (u - out[0]) - 2.0 * zeta * w * out[1];
     }
-    double w = 2.0 * PI * bw;
-    if (c->lag_key[0] != bw || c->lag_key[1] != zeta || c->lag_key[2] != h) {
-        lag_expm(w, zeta, h, c->lag);
-        c->lag_key[0] = bw; c->lag_key[1] = zeta; c->lag_key[2] = h;
-    }
-    /* the input column of the augmented exponential: (I - P) [1 0]^T, as A [1 0]^T = -B/w^2 */
-    out[0] = p[0] * d[0] + p[1] * d[1] + (1.0 - p[0]) * u;
-    out[1] = p[2] * d[0] + p[3] * d[1] - p[2] * u;
-    out[2] = w * w * (u - out[0]) - 2.0 * zeta * w * out[1];
+    out[3] = u; out[4] = rate; out[5] = h;
+    return fabs(out[1]) <= MAX_SPEED && fabs(out[2]) <= MAX_ACCELERATION;
 }
 
 /* ---- FMI 2.0 API ---------------------------------------------------------------------- */
@@ -409,7 +408,7 @@ fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size
 
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean new_step) {
     Instance *c = comp;
-    double drive[3], y[CLAMP_N_OUT];
+    double drive[6], y[CLAMP_N_OUT];
     (void)new_step;
     if (c->s.phase != STEPPING) {
         logf_(c, fmi2Error, "doStep refused: %s", c->s.phase == FAILED ? "initialisation failed"
@@ -420,7 +419,18 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean ne
         logf_(c, fmi2Error, "step at t=%g s rejected: step size must be > 0, got %g s", t, h);
         return fmi2Error;
     }
-    follow(c, c->s.r[VR_X_CMD], h, drive);
+    double u = c->s.r[VR_X_CMD];
+    if (!(c->s.x_lo <= u && u <= c->s.x_hi)) {
+        logf_(c, fmi2Error, "step at t=%g s rejected: input position x = %g m outside the "
+              "assemblable range [%g, %g] m", t, u, c->s.x_lo, c->s.x_hi);
+        return fmi2Error;
+    }
+    if (!follow(c, u, h, drive)) {
+        logf_(c, fmi2Error, "step at t=%g s rejected: the command x_cmd = %g m after %g s asks "
+              "for %.3g m/s and %.3g m/s^2; an input link moves within %g m/s and %g m/s^2",
+              t, u, h, drive[1], drive[2], MAX_SPEED, MAX_ACCELERATION);
+        return fmi2Error;
+    }
     if (!(c->s.x_lo <= drive[0] && drive[0] <= c->s.x_hi)) {
         logf_(c, fmi2Error, "step at t=%g s rejected: input position x = %g m outside the "
               "assemblable range [%g, %g] m", t, drive[0], c->s.x_lo, c->s.x_hi);

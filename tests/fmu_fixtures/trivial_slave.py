@@ -37,6 +37,12 @@ class TrivialGain(DeclaredSlave):
         self._position += self.u * step_size
         self._publish()
 
+    def model_state(self) -> dict:
+        return {"position": getattr(self, "_position", 0.0)}
+
+    def restore_model_state(self, state: dict) -> None:
+        self._position = float(state["position"])
+
     def _publish(self) -> None:
         self.y = self.gain * self.u
         self.x = self._position

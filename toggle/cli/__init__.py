@@ -18,7 +18,7 @@ from toggle.params import ParameterError
 
 #: Command modules, in the order ``toggle --help`` lists them.
 COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetry", "calibrate",
-            "build_fmu", "plan", "plot")
+            "tables", "build_fmu", "plan", "plot")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,4 +1,4 @@
-"""``toggle build-fmu``: write build/ToggleClamp.fmu (FMI 2.0 Co-Simulation).
+"""``toggle build-fmu``: write build/ToggleClamp.fmu (FMI 2.0 Co-Simulation) of one preset.
 
 ``--native`` writes build/ToggleClampNative.fmu instead: the plant generated
 to C, no Python at run time (:mod:`toggle.native_fmu`).
@@ -7,7 +7,6 @@ to C, no Python at run time (:mod:`toggle.native_fmu`).
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from hil.cli_args import check_writable_dir, path
@@ -19,13 +18,9 @@ def run(args: argparse.Namespace) -> int:
     if args.native:
         from toggle.native_fmu import build_native_fmu
 
-        print(build_native_fmu(args.out, args.preset or "chang2021"))
-    elif args.preset is not None:
-        print("toggle build-fmu: error: --preset needs --native (ToggleClamp.fmu takes the "
-              "preset as a parameter)", file=sys.stderr)
-        return 2
+        print(build_native_fmu(args.out, args.preset))
     else:
-        print(build_fmu(args.out))
+        print(build_fmu(args.out, preset=args.preset))
     return 0
 
 
@@ -34,6 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=path, default=Path("build"), help="output folder (default build)")
     p.add_argument("--native", action="store_true",
                    help="build ToggleClampNative.fmu: generated C, no Python at run time")
-    p.add_argument("--preset", help="clamp preset of the native FMU: chang2021 or a TOML file "
-                                    "with [dynamics] (default chang2021)")
+    p.add_argument("--preset", default="chang2021",
+                   help="the preset the FMU is built for: its values are the parameters' start "
+                        "values; it needs [dynamics] and [drive] (default chang2021)")
     p.set_defaults(handler=run)

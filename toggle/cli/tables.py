@@ -1,0 +1,104 @@
+"""``toggle tables``: the simulated rig against seed 000's Tables 3-8, optionally refitted.
+
+Without ``--fit`` the shipped (calibrated) model is compared with every table. With
+``--fit PARAM ...`` those parameters (at most six) are fitted on the rows of
+``--speeds`` and the ``--statistics`` chosen, the stroke reading too when "stroke" is
+among them; the fitted values print with one standard error. Every row prints with
+its residual in units of the printed 3 sigma and the issue's verdict (stroke within
+0.05 mm; forces within 25 % or 3 sigma, delta_r8 = 0 within 3 sigma). ``--plot DIR``
+writes one figure per statistic (measured mean +- 3 sigma against the simulated rig).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from hil.cli_args import check_writable_dir, path
+from toggle.cli.common import (
+    MM,
+    SPEED,
+    add_json_argument,
+    add_preset_argument,
+    mechanism,
+    print_json,
+)
+from toggle.rig_calibration import (
+    FORCE_FITTABLE,
+    MAX_FORCE_FITTED,
+    SHIPPED_FIT_SPEEDS,
+    STATISTICS,
+    RigModel,
+    calibrate_rig,
+    compare_tables,
+    load_paper_tables,
+    plot_tables,
+    simulate_tables,
+)
+
+LABELS = {"force_forward_max": "F_F(max)", "force_forward_rms": "F_F(rms)",
+          "force_backward_min": "F_B(min)", "force_backward_rms": "F_B(rms)",
+          "force_toggle": "F_TP", "stroke": "S"}
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.plot is not None:
+        check_writable_dir(args.plot, "--plot")  # before the simulation, not after it
+    tables = load_paper_tables()
+    nominal = mechanism(args)
+    model, fit = RigModel(), None
+    if args.fit:
+        fit = calibrate_rig(tables, nominal, args.speeds, args.fit, args.statistics)
+        model = fit.model
+    simulated = simulate_tables(tables, nominal, model)
+    rows = compare_tables(tables, simulated)
+    fitted_speeds = set(fit.speeds) if fit else set(SHIPPED_FIT_SPEEDS)
+    if args.plot is not None:
+        for path in plot_tables(tables, simulated, args.plot):
+            print(f"wrote {path}")
+    if args.json:
+        print_json({
+            "fitted": fit.values if fit else {}, "std_error": fit.std_error if fit else {},
+            "reading": model.reading.__dict__,
+            "reading_std_error": fit.stroke_std_error if fit else {},
+            "fit_speeds": sorted(fitted_speeds),
+            "rows": [{**r._asdict(), "in_three_sigma": r.in_sigma, "holds": r.holds()}
+                     for r in rows]})
+        return 0
+    if fit:
+        print(f"{nominal.name}: fitted on {', '.join(f'{s * MM:g}' for s in fit.speeds)} mm/s, "
+              f"statistics {', '.join(LABELS[s] for s in fit.statistics)}")
+        for name, value in fit.values.items():
+            print(f"  {name} = {value:.5g} +- {fit.std_error[name]:.2g} (SI, 1 s.e.)")
+        for name, err in fit.stroke_std_error.items():
+            print(f"  reading {name} = {getattr(model.reading, name):.5g} +- {err:.2g} (SI)")
+    print(f"{'stat':>9} {'v mm/s':>7} {'dr8 mm':>7} {'measured':>18} {'simulated':>10} "
+          f"{'res/3s':>7} {'rel %':>7}  role       verdict")
+    for r in rows:
+        scale = MM if r.statistic == "stroke" else 1.0
+        role = "fitted" if r.speed in fitted_speeds else "predicted"
+        print(f"{LABELS[r.statistic]:>9} {r.speed * MM:7g} {r.error * MM:7.2f} "
+              f"{r.measured * scale:9.3f} +-{r.three_sigma * scale:7.3f} "
+              f"{r.simulated * scale:10.3f} {r.in_sigma:+7.1f} {100 * r.relative:+7.1f}  "
+              f"{role:10} {'holds' if r.holds() else 'MISSES'}")
+    held = sum(r.holds() for r in rows)
+    print(f"{held} of {len(rows)} rows hold (units: mm for S, N for forces)")
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("tables",
+                       help="the simulated rig against seed 000 Tables 3-8 (fit, predict, plot)")
+    add_preset_argument(p, accepts=("chang2021",),
+                        why="the paper's tables were measured on the chang2021 rig")
+    p.add_argument("--fit", nargs="+", choices=tuple(FORCE_FITTABLE), metavar="PARAM",
+                   default=[], help=f"refit at most {MAX_FORCE_FITTED} of: "
+                                    f"{', '.join(FORCE_FITTABLE)}")
+    p.add_argument("--speeds", type=SPEED, nargs="+", default=[5e-3, 15e-3],
+                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3)")
+    p.add_argument("--statistics", nargs="+", choices=STATISTICS, default=list(STATISTICS),
+                   metavar="STAT",
+                   help=f"statistics fitted (default all: {', '.join(STATISTICS)})")
+    p.add_argument("--plot", type=path, default=None, metavar="DIR",
+                   help="write one PNG per statistic into DIR")
+    add_json_argument(p)
+    p.set_defaults(handler=run)

@@ -1,0 +1,147 @@
+"""The prototype's statistics (seed 000, Tables 3-8) from the plant, as the rig measured them.
+
+Chang, Lee & Hsu 2021 drove the clamp from the open position x_open to the toggle and
+back at a constant speed v, 100 times, and reported per condition (v, delta_r8):
+
+* F_F(max), F_F(rms): maximum and RMS of the load-cell force over the forward stroke;
+* F_B(min), F_B(rms): minimum and RMS over the backward stroke;
+* F_TP: the force as the encoder passes the toggle, in motion: the first forward reading
+  within the encoder's resolution (:data:`TOGGLE_BAND`) of the platen's end position;
+* the stroke S read by the platen's encoder (Tables 3-5).
+
+Here the strokes are quasi-static at the constant speed v (the rig's ramps are 0.5 % of
+the stroke), the force comes from :func:`toggle.plant.plant_outputs` in the hysteretic
+slip state carried along the strokes (:func:`toggle.asymmetry.slip_state_along`), so
+these numbers and the simulated rig come from the same equations. The stroke measurement
+adds what the plant's platen does not know (:class:`RigReading`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import NamedTuple
+
+import numpy as np
+from scipy.optimize import brentq
+
+from toggle.asymmetry import AsymmetryParams, slip_state_along
+from toggle.kinematics import half_pose, stroke_limits
+from toggle.params import Mechanism
+from toggle.plant import PlantConfig, plant_outputs
+
+#: The encoder's resolution, m: F_TP is read where the platen first comes this close to
+#: its end position (the rig's 1 um optical encoder, hil.mcu_model).
+TOGGLE_BAND = 1e-6
+#: How long before the encoder reached the toggle the prototype's rig sampled F_TP, s:
+#: fitted (``toggle tables``) on Tables 6-7, docs/unequal-halves.md section 9. The HIL
+#: run summaries read F_TP the same way.
+F_TP_LATENCY = 0.1399
+#: Points per stroke of the quasi-static evaluation (RMS converged to 0.1 %).
+POINTS = 801
+FORCE_STATISTICS = ("force_forward_max", "force_forward_rms", "force_backward_min",
+                    "force_backward_rms", "force_toggle")
+
+
+class RigError(ValueError):
+    """A condition the rig statistics cannot be computed for."""
+
+
+@dataclass(frozen=True)
+class RigReading:
+    """How the rig reads F_TP and the stroke, beyond the plant (SI).
+
+    toggle_latency: F_TP is the force sampled this long (s) before the encoder reading
+    reached the toggle (within its 1 um resolution of the platen's end position): the
+    rig's force sample and position report are not simultaneous (a USB DAQ and a motion
+    card polled by one LabVIEW loop), so at speed v the force is read v * latency early.
+
+    datum: offset of the reading between the open and the toggle end (m): the encoder's
+    reference taken at the open position with the platen not yet seated against the links
+    (the measured stroke error at delta_r8 = 0, 0.40-0.45 mm, is far above any compliance
+    of a 20 N stroke). lever: the encoder's place across the platen, as a fraction of the
+    distance between the halves' joints measured from the platen's centre (positive
+    towards the upper half): a tilted platen reads lever * (L_U - L_L) more there.
+    compliance: the load-cell force F stretches the frame that carries the scale, which
+    reads compliance * F more; the stroke gains compliance * (F_TP - F at the start).
+    """
+
+    datum: float = 0.0
+    lever: float = 0.0
+    compliance: float = 0.0  # m/N: the frame carrying the scale, read as platen travel
+    toggle_latency: float = F_TP_LATENCY
+
+    def __post_init__(self) -> None:
+        for name in ("datum", "lever", "compliance", "toggle_latency"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise RigError(f"rig reading {name} must be finite, got {value!r}")
+        if not 0.0 <= self.toggle_latency <= 1.0:
+            raise RigError(f"toggle_latency must lie in [0, 1] s, got {self.toggle_latency!r}")
+
+
+#: The prototype's reading, fitted with the force model on Tables 3-4 and 6-7
+#: (``toggle tables --fit ...``, docs/unequal-halves.md section 9).
+CHANG2021_READING = RigReading(datum=0.4346e-3, lever=0.8371, compliance=1.462e-6)
+
+
+class RigStatistics(NamedTuple):
+    """One condition's statistics, SI (m, N)."""
+
+    force_forward_max: float
+    force_forward_rms: float
+    force_backward_min: float
+    force_backward_rms: float
+    force_toggle: float
+    stroke: float
+
+    def as_dict(self) -> dict[str, float]:
+        return self._asdict()
+
+
+def rig_config(nominal: Mechanism, delta_r8: float, params: AsymmetryParams,
+               guide_friction: float | None = None) -> PlantConfig:
+    """The plant of the prototype with link 8 off by delta_r8 (m), no mold."""
+    mech = nominal.with_error("upper", "r5", delta_r8) if delta_r8 else nominal
+    if guide_friction is not None:
+        mech = replace(mech, dynamics=replace(mech.dynamics, guide_friction=guide_friction))
+    return PlantConfig(mech, asymmetry=params)
+
+
+def _platen(x: float | np.ndarray, cfg: PlantConfig) -> np.ndarray:
+    mech = cfg.mechanism
+    return 0.5 * (half_pose(x, mech.lower).L + half_pose(x, mech.upper).L)
+
+
+def rig_statistics(cfg: PlantConfig, speed: float, reading: RigReading = RigReading(),
+                   x_ends: tuple[float, float] | None = None) -> RigStatistics:
+    """Tables 3-8 statistics of the steady reciprocation at ``speed`` (m/s) of this plant.
+
+    ``x_ends``: the commanded open and toggle positions (default: the lower half's, which
+    the paper keeps for every delta_r8).
+    """
+    if not (math.isfinite(speed) and speed > 0):
+        raise RigError(f"speed must be a positive number of m/s, got {speed!r}")
+    x_open, x_tp = stroke_limits(cfg.mechanism.lower) if x_ends is None else x_ends
+    xs = np.linspace(x_open, x_tp, POINTS)
+    slip = cfg.asymmetry.slip_distance
+    z_back_end = -1.0
+    for _ in range(2):  # the periodic state: each stroke starts where the last one ended
+        z_fwd = slip_state_along(xs, z_back_end, slip)
+        z_back = slip_state_along(xs[::-1], z_fwd[-1], slip)[::-1]
+        z_back_end = float(z_back[0])
+    fwd = np.asarray(plant_outputs(xs, speed, 0.0, cfg, slip_state=z_fwd).input_force)
+    back = np.asarray(plant_outputs(xs, -speed, 0.0, cfg, slip_state=z_back).input_force)
+    end = float(_platen(x_tp, cfg))
+    x_band = brentq(lambda x: float(_platen(x, cfg)) - (end - TOGGLE_BAND), x_open, x_tp,
+                    xtol=1e-12)
+    x_read = max(x_band - speed * reading.toggle_latency, x_open)
+    z_read = float(slip_state_along(np.array([x_open, x_read]), z_back_end, slip)[-1])
+    f_tp = float(plant_outputs(x_read, speed, 0.0, cfg, slip_state=z_read).input_force)
+    mismatch = [float(half_pose(x, cfg.mechanism.upper).L - half_pose(x, cfg.mechanism.lower).L)
+                for x in (x_open, x_tp)]
+    stroke = (end - float(_platen(x_open, cfg)) + reading.datum
+              + reading.lever * (mismatch[1] - mismatch[0])
+              + reading.compliance * (f_tp - float(fwd[0])))
+    return RigStatistics(float(fwd.max()), float(np.sqrt(np.mean(fwd * fwd))),
+                         float(back.min()), float(np.sqrt(np.mean(back * back))), f_tp, stroke)
