@@ -92,7 +92,8 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        if "default" in text or action.default in (None, False) or not action.option_strings:
+        if "default" in text or action.default is None or action.default is False \
+                or not action.option_strings:
             return text
         return super()._get_help_string(action)
 

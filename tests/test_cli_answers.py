@@ -214,7 +214,8 @@ def test_every_option_with_a_default_shows_it(capsys):
         for words, sub in commands(parser).items():
             formatter = sub._get_formatter()  # noqa: SLF001
             for action in sub._actions:  # noqa: SLF001
-                if (action.option_strings and action.default not in (None, False)
+                if (action.option_strings and action.default is not None
+                        and action.default is not False
                         and action.help not in (None, "==SUPPRESS==")
                         and "help" not in action.dest and action.dest != "version"):
                     text = formatter._expand_help(action)  # noqa: SLF001

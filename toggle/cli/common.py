@@ -34,11 +34,12 @@ IT_GRADE = integer(1, 18, "must be an ISO 286 IT grade between 1 and 18")
 def add_preset_argument(parser: argparse.ArgumentParser, default: str = "chang2021",
                         accepts: Sequence[str] = CLAMP_PRESETS, why: str = "") -> None:
     """``--preset``, with the shipped presets this command accepts (and why others do not)."""
+    family = "; a family takes family/group, e.g. li_micro/6" if "li_micro" in accepts else ""
     note = f"; {why}" if why else ""
     parser.add_argument(
         "--preset", default=default,
-        help=f"shipped preset ({', '.join(accepts)}) or a TOML file; a family takes "
-             f"family/group, e.g. li_micro/6{note} (default {default})",
+        help=f"shipped preset ({', '.join(accepts)}) or a TOML file{family}{note} "
+             f"(default {default})",
     )
 
 
