@@ -19,6 +19,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
 
+import numpy as np
+
 from toggle.fmu_build import DEFAULT_SLAVE
 from toggle.fmu_slave import Var
 
@@ -82,6 +84,18 @@ def run_steps(slave, refs: Mapping[str, int], commands_and_steps, read, t: float
         t += h
         out.append(read(slave, refs))
     return out
+
+
+def slip_along(x, slip_distance: float) -> np.ndarray:
+    """The pin friction's slip state at each point of a sampled path that starts relaxed
+    (z = 0), as the FMUs and the rig emulator carry it (toggle.plant.HystereticPlant)."""
+    from toggle.asymmetry import advance_slip_state
+
+    x = np.atleast_1d(np.asarray(x, dtype=float))
+    z = np.zeros_like(x)
+    for i in range(1, x.size):
+        z[i] = advance_slip_state(z[i - 1], x[i] - x[i - 1], slip_distance)
+    return z
 
 
 def close_slave(slave, *states) -> None:

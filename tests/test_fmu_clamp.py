@@ -23,6 +23,7 @@ from fmu_support import (
     run_fresh,
     run_libcosim,
     run_steps,
+    slip_along,
     validator_problems,
     variable_table,
 )
@@ -55,11 +56,15 @@ def unzipped(fmu: Path, tmp_path_factory: pytest.TempPathFactory):
     return Path(extract(str(fmu), str(tmp_path_factory.mktemp("unzipped"))))
 
 
-def _reference(x, v, a, **start) -> PlantOutputs:
-    """plant_outputs at the reported motion, with the plant the FMU parameters describe."""
+def _reference(x, v, a, slip=None, before=(), **start) -> PlantOutputs:
+    """plant_outputs at the reported motion, with the plant the FMU parameters describe, in
+    the slip state ``slip`` (default: carried from rest along the positions ``before`` and
+    then the reported path)."""
     errors = {k.removeprefix("delta_"): val for k, val in start.items() if k.startswith("delta_")}
     cfg = configure("chang2021", x_contact=start.get("x_contact"), errors=errors)
-    return plant_outputs(np.asarray(x), np.asarray(v), np.asarray(a), cfg)
+    if slip is None:
+        slip = slip_along([*before, *np.atleast_1d(x)], cfg.asymmetry.slip_distance)[len(before):]
+    return plant_outputs(np.asarray(x), np.asarray(v), np.asarray(a), cfg, slip_state=slip)
 
 
 def _assert_outputs_match(actual: dict, reference: PlantOutputs) -> None:
@@ -219,7 +224,7 @@ def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: f
             tuple(drive[:3]), rel=1e-12, abs=1e-15)
     columns = {n: [o[n] for o in out] for n in OUTPUTS}
     _assert_outputs_match(columns, _reference(columns["x"], columns["velocity"],
-                                              columns["acceleration"], **MOLD))
+                                              columns["acceleration"], before=[X_OPEN], **MOLD))
 
 
 @pytest.mark.parametrize(
@@ -266,8 +271,9 @@ def test_input_outside_the_range_fails_the_step_and_keeps_working(unzipped: Path
     assert after_discard == before
     assert recovered[0]["velocity"] == pytest.approx(2.5e-3 / 5e-3)  # from the kept state
     columns = {n: [o[n] for o in recovered] for n in OUTPUTS}
+    path = [X_OPEN, APPROACH[0][0], APPROACH[1][0]]  # the failed step moved nothing
     _assert_outputs_match(columns, _reference(columns["x"], columns["velocity"],
-                                              columns["acceleration"], **MOLD))
+                                              columns["acceleration"], before=path, **MOLD))
 
 
 @settings(max_examples=20, deadline=None)
@@ -304,7 +310,7 @@ def test_fmu_runs_in_a_fresh_process_from_its_bundled_files(fmu: Path, tmp_path:
     result = run_fresh(fmu, tmp_path, signal, OUTPUTS, stop_time=0.05, step_size=1e-3,
                        start_values={"x_cmd": X_OPEN, **MOLD})
     last = result["last"]
-    _assert_outputs_match(last, _reference(last["x"], last["velocity"], last["acceleration"],
+    _assert_outputs_match(last, _reference(last["x"], last["velocity"], last["acceleration"], 1.0,
                                            **MOLD))
     assert last["clamp_force"] > 0
     assert Path(result["toggle"]).is_relative_to(Path(result["unzip"], "resources"))  # not dev
@@ -330,7 +336,7 @@ def test_two_clamps_and_a_ramp_run_in_libcosim(fmu: Path, tmp_path: Path):
     assert nominal["x"] == long_r8["x"] == pytest.approx(0.03 - 1e-4, rel=1e-12)  # 1 step late
     assert nominal["velocity"] == pytest.approx(0.1, rel=1e-9)
     for last, start in [(nominal, {}), (long_r8, {"delta_r8": 0.5e-3})]:
-        ref = _reference(last["x"], last["velocity"], last["acceleration"], **start)
+        ref = _reference(last["x"], last["velocity"], last["acceleration"], 1.0, **start)
         for name in observed:
             assert last[name] == pytest.approx(float(getattr(ref, name)), rel=REL, abs=1e-300)
     assert nominal["asymmetry"] == 0 and long_r8["asymmetry"] > 0.25e-3

@@ -21,7 +21,7 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error
 from fmpy.model_description import read_build_description
-from fmu_support import close_slave, run_libcosim, run_steps, validator_problems
+from fmu_support import close_slave, run_libcosim, run_steps, slip_along, validator_problems
 
 from toggle.fmu_build import build_fmu
 from toggle.fmu_host import start_slave
@@ -62,10 +62,14 @@ def _run(slave, refs, commands_and_steps, t: float = 0.0) -> list:
     return run_steps(slave, refs, commands_and_steps, _outputs, t)
 
 
-def _reference(x, v, a, x_contact: float, **errors: float) -> PlantOutputs:
-    """plant_outputs (numpy) of chang2021 with these parameters; floats for float input."""
+def _reference(x, v, a, x_contact: float, slip=None, **errors: float) -> PlantOutputs:
+    """plant_outputs (numpy) of chang2021 with these parameters; floats for float input. The
+    slip state ``slip`` defaults to the one carried along the path x from rest."""
     cfg = configure("chang2021", x_contact=x_contact, errors=errors)
-    out = plant_outputs(x, v, a, cfg)
+    if slip is None:
+        slip = slip_along(x, cfg.asymmetry.slip_distance)
+        slip = slip if np.ndim(x) else float(slip[0])
+    out = plant_outputs(x, v, a, cfg, slip_state=slip)
     return PlantOutputs(*map(float, out)) if np.ndim(x) == 0 else out
 
 

@@ -117,9 +117,9 @@ def test_steady_sliding_is_the_stateless_plant():
     x, h, v = 0.040, 1e-3, 10e-3
     for _ in range(300):  # 3 mm forward, thirty slip distances
         x += v * h
-        out = stepped(DriveState(x, v, 0.0))
+        out = stepped(DriveState(x, v, 0.0, x))
     assert out.input_force == pytest.approx(plant(x, v, 0.0).input_force, rel=1e-6)
-    back = stepped(DriveState(x - 1e-6, -v, 0.0))  # 1 um back: the friction turns slowly
+    back = stepped(DriveState(x - 1e-6, -v, 0.0, x - 1e-6))  # 1 um back: the friction turns slowly
     assert back.input_force > 0.9 * out.input_force > 0
     assert plant(x - 1e-6, -v, 0.0).input_force < 0
 

@@ -91,8 +91,9 @@ def _frozen_copy(obj: Any, **fields: Any) -> Any:
 
 
 def plant_functions(cfg: PlantConfig) -> list[ca.Function]:
-    """The plant as CasADi functions (xva[3], lower[8], upper[8], mu, masses[4], x_contact)."""
-    xva = ca.SX.sym("xva", 3)
+    """The plant as CasADi functions (xvaz[4], lower[8], upper[8], mu, masses[4], x_contact);
+    xvaz: position, velocity, acceleration and the pin friction's slip state."""
+    xva = ca.SX.sym("xvaz", 4)
     p_lower, p_upper = (ca.SX.sym(h, len(DIMENSIONS)) for h in HALVES)
     mu, masses, x_contact = ca.SX.sym("mu"), ca.SX.sym("masses", 4), ca.SX.sym("x_contact")
     lower = _SymbolicHalf(*ca.vertsplit(p_lower))
@@ -104,11 +105,12 @@ def plant_functions(cfg: PlantConfig) -> list[ca.Function]:
         mech = dataclasses.replace(cfg.mechanism, lower=lower, upper=upper, dynamics=dynamics)
         mold = "_mold" in name  # the no-mold variant ignores its x_contact input
         sym_cfg = _frozen_copy(cfg, mechanism=mech, mu=mu, x_contact=None)
-        outs = plant_outputs(xva[0], xva[1], xva[2], sym_cfg, x_contact if mold else None)
+        outs = plant_outputs(xva[0], xva[1], xva[2], sym_cfg, x_contact if mold else None,
+                             slip_state=xva[3])
         functions.append(ca.Function(
             name, [xva, p_lower, p_upper, mu, masses, x_contact],
             [ca.vertcat(*[ca.SX(o) for o in outs])],
-            ["xva", "lower", "upper", "mu", "masses", "x_contact"], ["y"], {"cse": True}))
+            ["xvaz", "lower", "upper", "mu", "masses", "x_contact"], ["y"], {"cse": True}))
     return functions
 
 
@@ -175,6 +177,7 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         f"#define CLAMP_N_REAL {len(reals)}",
         f"#define CLAMP_N_OUT {len(PlantOutputs._fields)}",
         f"#define CLAMP_N_DIMS {len(DIMENSIONS)}",
+        f"#define CLAMP_SLIP_DISTANCE {cfg.asymmetry.slip_distance!r}",
         *(f"#define {k} {v}" for k, v in roles.items()),
         *(f"#define CLAMP_{k.upper()} {v}" for k, v in sizes.items()),
         f"static const double CLAMP_NOMINAL[2 * CLAMP_N_DIMS] = "

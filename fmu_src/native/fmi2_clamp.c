@@ -20,7 +20,7 @@
 #include "clamp_model.h"
 #include "clamp_model_data.h"
 
-#define STATE_VERSION 3u
+#define STATE_VERSION 4u
 #define GRID 4001
 #define N_IN 6
 #define PI 3.14159265358979323846
@@ -33,6 +33,7 @@ typedef struct {
     int32_t phase, mold, unequal, spare;  /* spare: no padding in the checksum */
     double r[CLAMP_N_REAL];      /* every Real variable, by value reference */
     double drive[6];             /* x, v, a of the input link; last command, its slope, step */
+    double slip[2];              /* last position and slip state of the pin friction */
     double dims[2 * CLAMP_N_DIMS], mu, masses[4], x_lo, x_hi;
     uint64_t checksum;           /* FNV-1a of everything before it */
 } State;
@@ -85,8 +86,9 @@ static void evaluate(Instance *c, PlantFn f, const double **in, int n_in, double
     f(c->arg, c->res, c->iw, c->w, 0);
 }
 
-static void plant(Instance *c, const double xva[3], double y[CLAMP_N_OUT]) {
-    const double *in[N_IN] = {xva, c->s.dims, c->s.dims + CLAMP_N_DIMS, &c->s.mu, c->s.masses,
+/* xvaz: position, velocity, acceleration and slip state z of the pin friction. */
+static void plant(Instance *c, const double xvaz[4], double y[CLAMP_N_OUT]) {
+    const double *in[N_IN] = {xvaz, c->s.dims, c->s.dims + CLAMP_N_DIMS, &c->s.mu, c->s.masses,
                               &c->s.r[VR_X_CONTACT]};
     evaluate(c, VARIANT[2 * c->s.mold + c->s.unequal], in, N_IN, y);
 }
@@ -162,8 +164,8 @@ static int in_ranges(Instance *c) {
     return 1;
 }
 
-static int outputs_at(Instance *c, const double xva[3], double *y) {
-    plant(c, xva, y);
+static int outputs_at(Instance *c, const double xvaz[4], double *y) {
+    plant(c, xvaz, y);
     for (int i = 0; i < CLAMP_N_OUT; i++)
         if (!isfinite(y[i])) return 0;
     return 1;
@@ -208,17 +210,19 @@ static fmi2Status initialise(Instance *c) {
               "outside the assemblable range [%g, %g] m", xc, s->x_lo, s->x_hi);
         return fmi2Error;
     }
-    double x0 = s->r[VR_X_CMD], xva[6] = {x0, 0.0, 0.0, x0, 0.0, 0.0};
+    double x0 = s->r[VR_X_CMD], xvaz[4] = {x0, 0.0, 0.0, 0.0};
+    double drive[6] = {x0, 0.0, 0.0, x0, 0.0, 0.0};
     if (!(s->x_lo <= x0 && x0 <= s->x_hi)) {
         logf_(c, fmi2Error, "initialisation failed: input position x = %g m outside the "
               "assemblable range [%g, %g] m", x0, s->x_lo, s->x_hi);
         return fmi2Error;
     }
-    if (!outputs_at(c, xva, y)) {
+    if (!outputs_at(c, xvaz, y)) {
         logf_(c, fmi2Error, "initialisation failed: no finite plant solution at x = %g m", x0);
         return fmi2Error;
     }
-    memcpy(s->drive, xva, sizeof xva);
+    memcpy(s->drive, drive, sizeof drive);
+    s->slip[0] = x0; s->slip[1] = 0.0;  /* the slip state starts relaxed */
     memcpy(&s->r[VR_OUT0], y, sizeof y);
     return fmi2OK;
 }
@@ -436,12 +440,17 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean ne
               "assemblable range [%g, %g] m", t, drive[0], c->s.x_lo, c->s.x_hi);
         return fmi2Error;
     }
-    if (!outputs_at(c, drive, y)) {
+    /* the slip state after the move (toggle.asymmetry.advance_slip_state, Dahl's law) */
+    double dx = drive[0] - c->s.slip[0], target = (dx > 0) - (dx < 0);
+    double xvaz[4] = {drive[0], drive[1], drive[2],
+                      target - (target - c->s.slip[1]) * exp(-fabs(dx) / CLAMP_SLIP_DISTANCE)};
+    if (!outputs_at(c, xvaz, y)) {
         logf_(c, fmi2Error, "step at t=%g s rejected: no finite plant solution at x = %g m",
               t, drive[0]);
         return fmi2Error;
     }
     memcpy(c->s.drive, drive, sizeof drive);
+    c->s.slip[0] = drive[0]; c->s.slip[1] = xvaz[3];
     memcpy(&c->s.r[VR_OUT0], y, sizeof y);
     return fmi2OK;
 }
