@@ -604,11 +604,12 @@ class ClampPlanner:
         clamp without creeping under the friction model's smoothing speed)."""
         need = self._creep_thrust
         if need > limit:
+            bound = (f"the force limit of {limit:.4g} N" if limit < self.force_limit else
+                     f"the {limit:.4g} N the motor torque limit ({self.limits.torque:.4g} N m) "
+                     "allows")
             raise PlanningError(
-                f"the motor torque limit binds: clamping to {self.clamp_force():.6g} N needs a "
-                f"thrust of {need:.4g} N even at creep speed, above the {limit:.4g} N "
-                f"{'the force limit' if limit < self.force_limit else 'the torque limit'} "
-                f"({self.limits.torque:.4g} N m) allows"
+                f"clamping to {self.clamp_force():.6g} N needs a thrust of {need:.4g} N even "
+                f"at creep speed, above {bound}"
             )
 
     def clamp_force(self) -> float:

@@ -17,7 +17,13 @@ from pathlib import Path
 
 from hil import cli_rig, cli_rsm
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
-from hil.cli_args import join_negative_numbers, path
+from hil.cli_args import (
+    add_version,
+    join_negative_numbers,
+    path,
+    quiet_broken_pipe,
+    use_help_formatter,
+)
 from hil.experiment import CycleCounter, profile_cycles, reciprocating_trajectory
 from hil.interrupts import Interrupted, SignalGuard
 from hil.recording import RecordingError, RunMeta, RunRecorder
@@ -245,6 +251,7 @@ def emulate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="hil", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    add_version(parser)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     p = sub.add_parser("run", help="run an experiment (simulated rig unless --real)",
                        description="Run an experiment; every option can also come from "
@@ -257,7 +264,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use the real rig (or an emulator) on --port instead of the FMU")
     p.add_argument("--port", default=None, help="serial URL of the rig: /dev/ttyACM0, a pty, "
                                                 "socket://host:port (needs --real)")
-    p.add_argument("--preset", default=None, help="mechanism preset (default chang2021)")
+    p.add_argument("--preset", default=None,
+                   help="clamp preset with [dynamics] masses: chang2021, lin2003_sm55 or a TOML "
+                        "file (li_micro has no masses, dong2022 is a press; default chang2021)")
     add_number_options(p)
     p.add_argument("--profile", type=path, default=None,
                    help="planned profile CSV (toggle plan --out); replayed forward and back, "
@@ -275,6 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(handler=emulate)
     cli_rig.add_parser(sub)
     cli_rsm.add_parser(sub)
+    use_help_formatter(parser)
     return parser
 
 
@@ -285,11 +295,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.argv[1:] if argv is None else list(argv)))
     try:
         return int(args.handler(args) or 0)
+    except BrokenPipeError:
+        return quiet_broken_pipe()
     except ParameterError as exc:
         print(f"hil {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except (TrajectoryError, RecordingError, RunStoppedError, cli_rig.RigCommandError,
-            ValueError) as exc:
+            ValueError, OSError) as exc:
         print(f"hil {args.command}: error: {exc}", file=sys.stderr)
         return 1
 

@@ -1,4 +1,5 @@
-"""Argument types of the ``hil`` command line: numbers in a range, paths, negative values.
+"""Argument types of the ``hil`` and ``toggle`` command lines: numbers in a range, paths,
+negative values, help that shows defaults, and the answers every command shares.
 
 argparse takes ``-0.5e-3`` for an option and ``float`` takes ``nan``; these types and the
 argv rewrite make every bad value a one-line usage error (exit 2) naming its option.
@@ -7,9 +8,14 @@ argv rewrite make every bad value a one-line usage error (exit 2) naming its opt
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import os
 import re
-from collections.abc import Callable
+import sys
+import tempfile
+from collections.abc import Callable, Iterator
+from importlib import metadata
 from pathlib import Path
 
 #: A negative number as the value of an option (argparse takes '-1e-3' for an option).
@@ -42,6 +48,34 @@ def number(lo: float, hi: float, what: str) -> Callable[[str], float]:
     return parse
 
 
+def positive(what: str, hi: float = 1e12, lo: float = 0.0) -> Callable[[str], float]:
+    """argparse type: a finite float in (lo, hi]; ``what`` names the quantity and its unit."""
+    why = f"must be a {what} > {lo:g}" + (f" and <= {hi:g}" if hi < 1e12 else "")
+    inner = number(lo, hi, why)
+
+    def parse(text: str) -> float:
+        value = inner(text)
+        if value <= lo:
+            raise argparse.ArgumentTypeError(f"{why}, got {text!r}")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
+def integer(lo: int, hi: int, what: str) -> Callable[[str], int]:
+    """argparse type: a whole number in [lo, hi] (the bound keeps a typo from running for days)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{what}, got {text!r}")
+        return value
+    parse.__name__ = "integer"
+    return parse
+
+
 PROBABILITY = number(0.0, 1.0, "must be a probability between 0 and 1")
 TIME = number(0.0, 1e6, "must be a time >= 0 s")
 
@@ -51,3 +85,86 @@ def path(text: str) -> Path:
     if not text.strip():
         raise argparse.ArgumentTypeError("an empty path")
     return Path(text)
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows ``(default: X)`` unless the help already says its default or there is none."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "default" in text or action.default is None or action.default is False \
+                or not action.option_strings:
+            return text
+        return super()._get_help_string(action)
+
+
+def use_help_formatter(parser: argparse.ArgumentParser) -> None:
+    """Give ``parser`` and all its sub-commands :class:`HelpFormatter`."""
+    parser.formatter_class = HelpFormatter
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for sub in action.choices.values():
+                use_help_formatter(sub)
+
+
+def add_version(parser: argparse.ArgumentParser) -> None:
+    """``--version``: the installed toggle-clamp version."""
+    try:
+        version = metadata.version("toggle-clamp")
+    except metadata.PackageNotFoundError:  # pragma: no cover - run from a source tree
+        version = "unknown"
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version}")
+
+
+def quiet_broken_pipe() -> int:
+    """Piped into ``head``: stop without a traceback (stdout's reader is gone)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    with contextlib.suppress(OSError, ValueError):  # in-process stdout has no descriptor
+        os.dup2(devnull, sys.stdout.fileno())
+    return 1
+
+
+def check_writable(target: Path, option: str) -> None:
+    """Refuse an output file that cannot be written, before any work is done (a file is
+    created and removed in the nearest existing folder)."""
+    if target.is_dir():
+        raise OSError(f"{option} {target}: is a directory, not a file")
+    _check_folder(target.parent, option, target)
+
+
+def check_writable_dir(target: Path, option: str) -> None:
+    """Refuse an output folder that cannot be created or written into."""
+    if target.exists() and not target.is_dir():
+        raise OSError(f"{option} {target}: not a directory")
+    _check_folder(target, option, target)
+
+
+def _check_folder(folder: Path, option: str, target: Path) -> None:
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise OSError(f"{option} {target}: {folder} is not a directory")
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise OSError(f"{option} {target}: cannot write in {folder} ({exc.strerror})") from exc
+
+
+@contextlib.contextmanager
+def atomic_path(target: Path) -> Iterator[Path]:
+    """A temporary path next to ``target``, renamed onto it only when the block succeeds:
+    a failed write leaves no half-written file."""
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.",
+                                   suffix=target.suffix)
+    except OSError as exc:
+        raise OSError(f"{target}: cannot write there ({exc.strerror})") from exc
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, target)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)

@@ -26,7 +26,8 @@ def add_emulator_options(e: argparse.ArgumentParser) -> None:
                    help="pin friction (default: the preset's)")
     e.add_argument("--x-contact", type=number(-1.0, 1.0, "must be a position in m"),
                    default=None, dest="x_contact",
-                   help="crosshead position at mold contact, m (default: no mold)")
+                   help="crosshead position at mold contact, m (default: no mold; hil run's "
+                        "default job plans one, so give it the same --x-contact)")
     e.add_argument("--drop-byte", type=PROBABILITY, default=0.0,
                    help="fault: P(drop a byte) per frame")
     e.add_argument("--flip-bit", type=PROBABILITY, default=0.0,

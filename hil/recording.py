@@ -175,9 +175,13 @@ class RunRecorder:
         self._buffer: list[str] = []
         self._last_flush = time.monotonic()
         self.count = 0
-        self.dir.mkdir(parents=True, exist_ok=True)
-        _write_json(self.dir / META_JSON, asdict(self.meta))
-        self._file = self.csv_path.open("w", encoding="utf-8", newline="")
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+            _write_json(self.dir / META_JSON, asdict(self.meta))
+            self._file = self.csv_path.open("w", encoding="utf-8", newline="")
+        except OSError as exc:
+            raise RecordingError(f"run directory {self.dir}: cannot write there "
+                                 f"({exc.strerror or exc})") from exc
         self._file.write(",".join(CSV_COLUMNS) + "\n")
         self._file.flush()
 

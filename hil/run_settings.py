@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.backends import MAX_SPEED
+from hil.cli_args import check_writable_dir
 from hil.samples import profile_settings
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset, tomllib
@@ -183,9 +184,12 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
         raise ParameterError("give --profile or --speed, not both (a profile sets its speed)")
     digest = _apply_profile(values, explicit) if values["profile"] is not None else None
     try:
-        load_preset(values["preset"])
+        mech = load_preset(values["preset"])
     except (ParameterError, OSError) as exc:
         raise ParameterError(f"--preset (preset): {exc}") from exc
+    if mech.dynamics is None:  # the rig's model needs masses; hil run has no option for them
+        raise ParameterError(f"--preset (preset) {values['preset']}: hil run needs a preset "
+                             "with [dynamics] masses (chang2021, or a TOML file that has them)")
     check(values)
     if values["profile"] is None and values["speed"] is None and values["x_contact"] is None:
         # the default job clamps a mold: the plan's contact position (the preset's final
@@ -196,4 +200,9 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     for key in ("profile", "out", "fmu"):
         if values[key] is not None:
             values[key] = Path(values[key])
+    if values["out"] is not None:
+        try:
+            check_writable_dir(values["out"], "--out")
+        except OSError as exc:
+            raise ParameterError(str(exc)) from exc
     return RunSettings(**values, json=args.json, quiet=args.quiet, profile_sha256=digest)

@@ -4,7 +4,7 @@
 with bad and edge values (0, negative, NaN, inf, huge, empty, wrong type, unwritable
 paths, missing and malformed files); :func:`check_answer` runs one in-process and asserts
 what a user may rely on: no traceback, exit code 0, 1 (runtime failure) or 2 (usage),
-an error named on one line, and no output left behind by a refused command.
+the error on one line, and no output left behind by a refused command.
 """
 
 from __future__ import annotations
@@ -64,7 +64,10 @@ def _values(action: argparse.Action, paths: list[str]) -> st.SearchStrategy[list
         pool = paths
     else:
         pool = TEXTS + paths[:3]
-    many = action.nargs in ("*", "+") or isinstance(action.nargs, int)
+    if isinstance(action.nargs, int):  # mostly the right count, sometimes one short
+        values = st.sampled_from([*pool, *TEXTS[:2]])
+        return st.lists(values, min_size=action.nargs - 1, max_size=action.nargs).filter(bool)
+    many = action.nargs in ("*", "+")
     return st.lists(st.sampled_from(pool), min_size=1, max_size=3 if many else 1)
 
 
@@ -88,10 +91,20 @@ def invocations(draw: st.DrawFn, parser: argparse.ArgumentParser, paths: list[st
     return argv + extra(words)
 
 
+def _files(root: Path | None) -> set[Path]:
+    return set() if root is None else {p for p in root.rglob("*") if p.is_file()}
+
+
 def check_answer(main: Callable[[Sequence[str]], int], argv: list[str],
-                 outputs: Sequence[Path]) -> tuple[int, str]:
-    """Run ``main(argv)`` in-process; assert the CLI contract; return (exit code, stderr)."""
+                 outputs: Sequence[Path], watch: Path | None = None) -> tuple[int, str]:
+    """Run ``main(argv)`` in-process; assert the CLI contract; return (exit code, stderr).
+
+    The contract: no traceback; exit 0, 1 (runtime failure) or 2 (usage); a failure says
+    so on exactly one ``error:`` line (the last); a refused command leaves ``outputs`` as
+    they were and adds no file under ``watch``; no temporary file is ever left behind.
+    """
     before = {p: p.exists() for p in outputs}
+    files = _files(watch)
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
         try:
@@ -101,9 +114,15 @@ def check_answer(main: Callable[[Sequence[str]], int], argv: list[str],
     text = err.getvalue()
     assert "Traceback" not in text, (argv, text)
     assert code in (0, 1, 2), (argv, code, text)
+    after = _files(watch)
+    assert not [p for p in after if p.name.startswith(".")], (argv, after)  # no temp files
     if code:
-        errors = [ln for ln in text.splitlines() if "error" in ln]
-        assert errors, (argv, text)  # the failure is named
+        errors = [ln for ln in text.splitlines() if "error:" in ln]
+        assert len(errors) == 1 and text.rstrip().endswith(errors[0]), (argv, text)
+        assert len(errors[0]) < 400, (argv, errors[0])  # one readable line, no dumped arrays
+        for leak in ("np.float64(", "array(", "HalfDims(", "Traceback"):
+            assert leak not in errors[0], (argv, errors[0])
         for p in outputs:
             assert p.exists() == before[p], (argv, p, text)  # a refused command left nothing
+        assert after <= files, (argv, after - files, text)
     return code, text

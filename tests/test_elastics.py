@@ -146,8 +146,9 @@ def test_cli_json(capsys):
 def test_cli_clamp_force_and_errors(capsys):
     assert main(["clamp", "--preset", "lin2003_sm55", "--clamp-force", "2e5", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["tiebar_force_final"] == pytest.approx(2e5)
-    assert main(["clamp", "--preset", "lin2003_sm55", "--mu", "-1"]) == 2
-    assert "mu" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:  # a usage error, judged by argparse
+        main(["clamp", "--preset", "lin2003_sm55", "--mu", "-1"])
+    assert info.value.code == 2 and "argument --mu" in capsys.readouterr().err
 
 
 def test_cli_plot_writes_figures(tmp_path):

@@ -193,8 +193,8 @@ def test_cli_study_json_and_sweep(capsys, tmp_path):
     data = json.loads(capsys.readouterr().out)
     assert [g["group"] for g in data["groups"]] == list(TABLE2)
     assert set(data["ranking"]["order"]) == set(TABLE2)
-    assert main(["sweep", "--dim", "r3", "60", "93", "2", "--dim", "r4b", "163", "168", "2",
-                 "--points", "20", "--json"]) == 0
+    assert main(["sweep", "--dim", "r3", "0.060", "0.093", "2",
+                 "--dim", "r4b", "0.163", "0.168", "2", "--points", "20", "--json"]) == 0
     sw = json.loads(capsys.readouterr().out)
     assert sw["criteria"]["stroke_ratio"][0] == [None, None] and len(sw["failures"]) == 2
     assert main(["plot", "study", "--points", "20", "--out", str(tmp_path)]) == 0

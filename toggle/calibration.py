@@ -64,8 +64,18 @@ def load_force_table(path: str | Path = PAPER_TABLES, key: str = "force_toggle")
         return ForceTable(np.asarray(data["speed"], float) * 1e-3,
                           np.asarray(data["delta_r8"], float) * 1e-3,
                           np.asarray(table["mean"], float), np.asarray(table["three_sigma"], float))
-    except (OSError, KeyError, tomllib.TOMLDecodeError) as exc:
+    except (OSError, KeyError, TypeError, ValueError, UnicodeDecodeError,
+            tomllib.TOMLDecodeError) as exc:
         raise ValueError(f"cannot read force table {key!r} from {path}: {exc}") from exc
+
+
+def table_mechanism(path: str | Path) -> str | None:
+    """The preset a table was measured on (its ``mechanism`` key), or None if it names none."""
+    try:
+        name = tomllib.loads(Path(path).read_text(encoding="utf-8")).get("mechanism")
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"cannot read force table {path}: {exc}") from exc
+    return name if isinstance(name, str) else None
 
 
 def predict(table: ForceTable, mech: Mechanism, params: AsymmetryParams) -> np.ndarray:

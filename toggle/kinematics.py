@@ -245,7 +245,8 @@ def _assemblable_grid(dims: HalfDims, n: int = 4001) -> tuple[np.ndarray, HalfPo
         pose = half_pose(xs, dims, check=False)
     ok = np.isfinite(pose.L) & np.isfinite(pose.theta3)
     if not np.any(ok):
-        raise AssemblyError(f"the half {dims} cannot assemble at any input position")
+        shown = ", ".join(f"{k} = {v * 1e3:.4g}" for k, v in zip(DIMENSIONS, dims.as_tuple()))
+        raise AssemblyError(f"the half ({shown} mm) cannot assemble at any input position")
     return xs[ok], HalfPose(*(np.asarray(v)[ok] if np.ndim(v) else v for v in pose))
 
 

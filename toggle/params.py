@@ -50,6 +50,10 @@ def paper_dimension(name: str) -> tuple[str, str]:
     raise ParameterError(f"unknown dimension {name!r}; known: {known}")
 
 
+#: Largest plausible clamp dimension, m: a preset written in mm exceeds it.
+MAX_DIMENSION = 10.0
+
+
 @dataclass(frozen=True)
 class HalfDims:
     """Dimensions of one half (a Watt-II six-link chain), metres.
@@ -79,6 +83,11 @@ class HalfDims:
             if getattr(self, name) <= 0:
                 value = getattr(self, name)
                 raise ParameterError(f"link length {name} must be positive, got {value}")
+        for f in fields(self):
+            if abs(getattr(self, f.name)) > MAX_DIMENSION:
+                raise ParameterError(
+                    f"{f.name} = {getattr(self, f.name):g} m is beyond {MAX_DIMENSION:g} m: "
+                    "dimensions are in metres (was it written in mm?)")
         a, b, c = self.r4a, self.r4b, self.r4c
         if not (abs(a - b) < c < a + b):
             raise ParameterError(
@@ -314,7 +323,7 @@ def _section(cls: type, table: Any, origin: str, where: str) -> Any:
         )
     try:
         return cls(**table)
-    except TypeError as exc:
+    except (TypeError, ParameterError) as exc:
         raise ParameterError(f"{origin}: [{where}]: {exc}") from exc
 
 
@@ -343,7 +352,13 @@ def _halves_from_table(table: dict[str, Any], origin: str) -> tuple[HalfDims, Ha
                 f"{origin}: [{half}] dimensions: "
                 f"unknown {sorted(unknown)}, missing {sorted(missing)}"
             )
-        out.append(HalfDims(**{k: float(v) for k, v in values.items()}))
+        for key, value in values.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ParameterError(f"{origin}: [{half}] {key} = {value!r} is not a number (m)")
+        try:
+            out.append(HalfDims(**{k: float(v) for k, v in values.items()}))
+        except ParameterError as exc:
+            raise ParameterError(f"{origin}: [{half}] {exc}") from exc
     return out[0], out[1]
 
 
@@ -397,6 +412,10 @@ def mechanism_from_dict(
     For a preset family, ``group`` names the group (see :func:`select_group`).
     """
     table = select_group(table, group, origin)
+    if not {"half", "lower", "upper"} & set(table):
+        what = table.get("description", "")
+        raise ParameterError(f"{origin} has no clamp link dimensions ([half], [lower], [upper])"
+                             + (f": it is the {what}" if what else ""))
     lower, upper = _halves_from_table(table, origin)
     return Mechanism(
         name=str(table.get("name", origin)),
@@ -413,7 +432,7 @@ def mechanism_from_dict(
 def _read_toml(path: Path) -> dict[str, Any]:
     try:
         return tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ParameterError(f"cannot read mechanism file {path}: {exc}") from exc
 
 
@@ -430,14 +449,23 @@ def preset_names() -> list[str]:
 
 def _split_group(name: str, group: str | int | None) -> tuple[str, str | int | None]:
     """``"family/g"`` -> ``("family", "g")``; an existing file or a ``.toml`` name stays whole."""
-    if group is None and "/" in name and not name.endswith(".toml") and not Path(name).is_file():
-        base, _, group = name.rpartition("/")
-        return base, group
+    if group is None and "/" in name and not name.endswith(".toml") and not Path(name).exists():
+        base, _, part = name.rpartition("/")
+        if base and (base in preset_names() or Path(base).is_file()):
+            return base, part
     return name, group
+
+
+def split_group(name: str) -> tuple[str, str | None]:
+    """``"li_micro/6"`` -> ``("li_micro", "6")``; a name without a group -> ``(name, None)``."""
+    base, group = _split_group(name, None)
+    return base, None if group is None else str(group)
 
 
 def preset_table(name: str) -> tuple[dict[str, Any], str]:
     """Parsed TOML of a shipped preset or of a file, and the origin used in messages."""
+    if Path(name).is_dir():
+        raise ParameterError(f"{name} is a directory, not a preset TOML file")
     if name.endswith(".toml") or Path(name).is_file():
         return _read_toml(Path(name)), name
     resource = resources.files(__package__) / "presets" / f"{name}.toml"

@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 plt.rcParams.update({"axes.grid": True, "grid.alpha": 0.3})
 import numpy as np  # noqa: E402
 
+from hil.cli_args import atomic_path  # noqa: E402
 from toggle.kinematics import half_motion, sensitivities, stroke_limits  # noqa: E402
 from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES, Mechanism  # noqa: E402
 from toggle.tolerance import asymmetry, it_tolerances  # noqa: E402
@@ -21,11 +22,16 @@ MM = 1e3
 
 
 def save_figure(fig: plt.Figure, path: Path) -> Path:
-    """Write a figure as PNG (120 dpi, folders created), close it, return the path."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    """Write a figure as PNG (120 dpi, folders created), close it, return the path.
+
+    Written to a temporary file and renamed: a failed write leaves no half-written PNG.
+    """
+    try:
+        fig.tight_layout()
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -42,6 +42,7 @@ from toggle.params import (
     PinRadii,
     load_preset,
     preset_groups,
+    split_group,
 )
 from toggle.statics import mechanical_advantage
 
@@ -136,7 +137,8 @@ def crosshead_positions(dims: HalfDims, alphas: Any, *, x_lock: float | None = N
     """
     alphas = np.asarray(alphas, dtype=float)
     if alphas.size == 0 or not np.all(np.isfinite(alphas)) or np.any(alphas < 0):
-        raise ValueError(f"toggle angles must be finite and >= 0 rad, got {alphas!r}")
+        raise ValueError(f"toggle angles must be finite and >= 0 rad, got {alphas.size} values "
+                         f"from {np.min(alphas, initial=np.nan):g} rad")
     scan = _opening_scan(dims, toggle_position(dims) if x_lock is None else x_lock)
     xs, alpha = scan.xs[:scan.n], scan.alpha[:scan.n]
     wanted = float(alphas.max())
@@ -172,7 +174,7 @@ def angle_grid(alpha_lock: float, alpha_max: float, points: int) -> np.ndarray:
     if not (0 < alpha_lock < alpha_max < math.pi) or points < 2:
         raise ValueError(
             f"need 0 < alpha_lock < alpha_max < pi rad and >= 2 points, got "
-            f"{alpha_lock!r}, {alpha_max!r}, {points!r}"
+            f"{float(alpha_lock):g}, {float(alpha_max):g} rad and {int(points)} points"
         )
     return np.linspace(alpha_lock, alpha_max, points)
 
@@ -264,14 +266,18 @@ def study_groups(groups: Mapping[str, HalfDims], alphas: Any) -> list[GroupResul
 def preset_halves(preset: str, half: str = "lower") -> tuple[dict[str, HalfDims], str]:
     """One half of every group of a preset family (or of a single preset) and the baseline.
 
-    The baseline is the family's default group (seed 004: group 1, the actual machine).
+    The baseline is the group ``preset`` names (``li_micro/6``), else the family's default
+    group (seed 004: group 1, the actual machine).
     """
-    names = preset_groups(preset)
+    family, group = split_group(preset)
+    names = preset_groups(family)
     if not names:
         mech = load_preset(preset)
         return {mech.name: mech.half(half)}, mech.name
-    default = load_preset(preset).name.rpartition("/")[2]
-    return {g: load_preset(preset, group=g).half(half) for g in names}, default
+    baseline = group if group is not None else load_preset(family).name.rpartition("/")[2]
+    if baseline not in names:
+        raise ParameterError(f"{family} has no group {baseline!r}; groups: {', '.join(names)}")
+    return {g: load_preset(family, group=g).half(half) for g in names}, baseline
 
 
 def _places(scores: Mapping[str, float]) -> dict[str, int]:
@@ -347,7 +353,8 @@ def sweep(dims: HalfDims, first: tuple[str, Sequence[float]],
     a1, a2 = np.asarray(v1, dtype=float), np.asarray(v2, dtype=float)
     for name, a in ((n1, a1), (n2, a2)):
         if a.ndim != 1 or a.size < 2 or not np.all(np.isfinite(a)):
-            raise ValueError(f"{name}: need at least two finite values, got {a!r}")
+            raise ValueError(f"{name}: need at least two finite values, got {a.size} "
+                             f"({'not all finite' if a.size else 'none'})")
     data = {c.key: np.zeros((a1.size, a2.size)) for c in CRITERIA}
     mask = np.zeros((a1.size, a2.size), dtype=bool)
     failures = []

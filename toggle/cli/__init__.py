@@ -12,6 +12,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from hil.cli_args import add_version, join_negative_numbers, quiet_broken_pipe, use_help_formatter
 from toggle.kinematics import AssemblyError
 from toggle.params import ParameterError
 
@@ -24,20 +25,42 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="toggle", description="Double-toggle mold/die clamp: model, analysis and tools."
     )
+    add_version(parser)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"toggle.cli.{name}").add_parser(sub)
+    use_help_formatter(parser)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``toggle`` script; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    """Entry point of the ``toggle`` script; returns the exit status.
+
+    Exit codes: 0 done, 2 a usage error (a bad option, preset or value), 1 a runtime
+    failure (a file that cannot be read or written, a solver that fails).
+    """
+    args = build_parser().parse_args(join_negative_numbers(
+        sys.argv[1:] if argv is None else list(argv)))
+    command = " ".join(filter(None, (args.command, getattr(args, "kind", None))))
     try:
         return int(args.handler(args) or 0)
+    except BrokenPipeError:
+        return quiet_broken_pipe()
     except (ParameterError, AssemblyError, ValueError) as exc:
-        print(f"toggle {args.command}: error: {exc}", file=sys.stderr)
+        print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
+    except (OSError, RuntimeError) as exc:
+        print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
+        return 1
+
+
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (an OSError with its file name)."""
+    if isinstance(exc, OSError) and exc.filename is not None:
+        text = f"{exc.filename}: {exc.strerror or exc}"
+    else:
+        text = str(exc) or type(exc).__name__
+    return " ".join(text.split())
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -11,7 +11,9 @@ import numpy as np
 
 from toggle.asymmetry import asymmetry, force_curves, plot_force_curves
 from toggle.cli.common import (
+    LINK_ERROR,
     MM,
+    SPEED,
     add_json_argument,
     add_out_argument,
     add_preset_argument,
@@ -23,8 +25,6 @@ from toggle.kinematics import stroke_limits
 
 def summary(args: argparse.Namespace) -> dict:
     """F_TP and the paper's curve statistics of the extra force (SI)."""
-    if not args.speed > 0:
-        raise ValueError(f"--speed must be a positive crosshead speed in m/s, got {args.speed}")
     mech = mechanism(args).with_error("upper", "r5", args.delta_r8)
     x_tp = stroke_limits(mech.lower)[1]
     at_tp = asymmetry(x_tp, args.speed, mech.lower, mech.upper)
@@ -64,14 +64,14 @@ def run(args: argparse.Namespace) -> int:
 
 def _add_common(p: argparse.ArgumentParser) -> None:
     add_preset_argument(p)
-    p.add_argument("--speed", type=float, default=5e-3, help="crosshead speed, m/s (default 5e-3)")
+    p.add_argument("--speed", type=SPEED, default=5e-3, help="crosshead speed, m/s (default 5e-3)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("asymmetry",
                        help="extra input force of unequal halves (seed 000 Tables 6-8)")
     _add_common(p)
-    p.add_argument("--delta-r8", type=float, default=0.5e-3,
+    p.add_argument("--delta-r8", type=LINK_ERROR, default=0.5e-3,
                    help="length error of link 8 (upper r5), m (default 0.5e-3)")
     add_json_argument(p)
     p.set_defaults(handler=run)

@@ -9,10 +9,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from hil.cli_args import check_writable_dir, path
 from toggle.fmu_build import build_fmu
 
 
 def run(args: argparse.Namespace) -> int:
+    check_writable_dir(args.out, "--out")  # before the build, not after it
     if args.native:
         from toggle.native_fmu import build_native_fmu
 
@@ -24,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("build-fmu", help="build the FMI 2.0 Co-Simulation FMU into build/")
-    p.add_argument("--out", type=Path, default=Path("build"), help="output folder (default build)")
+    p.add_argument("--out", type=path, default=Path("build"), help="output folder (default build)")
     p.add_argument("--native", action="store_true",
                    help="build ToggleClampNative.fmu: generated C, no Python at run time")
     p.add_argument("--preset", default="chang2021",

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import asdict
-from pathlib import Path
 
+from hil.cli_args import path
 from toggle.calibration import (
     FITTABLE,
     MAX_FITTED,
@@ -19,20 +19,35 @@ from toggle.calibration import (
     calibrate,
     compare,
     load_force_table,
+    table_mechanism,
 )
 from toggle.cli.common import (
     MM,
+    SPEED,
     add_json_argument,
     add_preset_argument,
     mechanism,
     print_json,
     table,
 )
+from toggle.params import ParameterError, load_preset
+
+#: Units of the fittable parameters, for the printed summary.
+FITTED_UNITS = {"free_play": "m", "contact_stiffness": "N/m^1.5", "series_stiffness": "N/m",
+                "drive_stiffness": "N/m", "mu": "(1)", "rate_strengthening": "(1)",
+                "hersey_transition": "m/(s N)"}
 
 
 def run(args: argparse.Namespace) -> int:
     data = load_force_table(args.table)
     mech = mechanism(args)
+    measured = table_mechanism(args.table)
+    if measured is not None:
+        rig = load_preset(measured)
+        if (mech.lower, mech.upper) != (rig.lower, rig.upper):
+            raise ParameterError(
+                f"--preset {args.preset}: {args.table} was measured on {measured}, whose "
+                f"links differ; give --preset {measured} or a table measured on your clamp")
     cal = calibrate(data, mech, tuple(args.speeds), fit=tuple(args.fit))
     rows = compare(data, mech, cal.params)
     fitted = {name: getattr(cal.params, name) for name in cal.fitted}
@@ -44,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{mech.name}: fitted on the rows at "
           f"{', '.join(f'{s * MM:g}' for s in cal.speeds)} mm/s of {args.table}")
     for name, value in fitted.items():
-        print(f"  {name} = {value:.6g} (SI)")
+        print(f"  {name} = {value:.6g} {FITTED_UNITS.get(name, '(SI)')}")
     print(table(["v mm/s", "dr8 mm", "F_TP N", "+-3sigma N", "model N", "error %", "in band"],
                 [(r.speed * MM, r.error * MM, r.measured, r.three_sigma, r.model,
                   100 * r.relative_error, "yes" if r.within_band else "no") for r in rows],
@@ -55,13 +70,15 @@ def run(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate",
                        help="fit the unequal-halves model to measured F_TP (seed 000 Tables 6-8)")
-    add_preset_argument(p)
-    p.add_argument("--table", type=Path, default=PAPER_TABLES,
+    add_preset_argument(p, accepts=("chang2021",),
+                        why="the paper's table was measured on the chang2021 rig")
+    p.add_argument("--table", type=path, default=PAPER_TABLES,
                    help="TOML table in the paper's shape (default: seed 000 Tables 6-8)")
-    p.add_argument("--speeds", type=float, nargs="+", default=[5e-3, 15e-3],
+    p.add_argument("--speeds", type=SPEED, nargs="+", default=[5e-3, 15e-3],
                    help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3)")
     p.add_argument("--fit", nargs="+", choices=FITTABLE, metavar="PARAM",
                    default=["free_play", "contact_stiffness", "hersey_transition"],
-                   help=f"at most {MAX_FITTED} of: {', '.join(FITTABLE)}")
+                   help=f"at most {MAX_FITTED} of: {', '.join(FITTABLE)} (default free_play "
+                        "contact_stiffness hersey_transition)")
     add_json_argument(p)
     p.set_defaults(handler=run)

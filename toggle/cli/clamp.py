@@ -14,8 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.cli_args import path, positive
 from toggle.cli.common import (
+    FORCE,
+    FRICTION,
     MM,
+    POSITION,
     add_json_argument,
     add_preset_argument,
     deg,
@@ -96,17 +100,18 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _common_options(p: argparse.ArgumentParser) -> None:
-    add_preset_argument(p, default="lin2003_sm55")
-    p.add_argument("--clamp-force", type=float, default=None, metavar="N",
+    add_preset_argument(p, default="lin2003_sm55", accepts=("lin2003_sm55", "chang2021"),
+                        why="li_micro has no [clamp] data (pins, sections, tie bars)")
+    p.add_argument("--clamp-force", type=FORCE, default=None, metavar="N",
                    help="final total tie-bar force, N (default: the preset's)")
-    p.add_argument("--contact", type=float, default=None, metavar="M",
+    p.add_argument("--contact", type=POSITION, default=None, metavar="M",
                    help="mold-contact crosshead position x, m (a mold height) instead of a force")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("clamp", help="real-mold clamping with pin friction (Lin & Hsiao 2003)")
     _common_options(p)
-    p.add_argument("--mu", type=float, default=None,
+    p.add_argument("--mu", type=FRICTION, default=None,
                    help="kinetic friction coefficient at the pins (default: the preset's)")
     add_json_argument(p)
     p.set_defaults(handler=run)
@@ -119,23 +124,22 @@ def plot(args: argparse.Namespace) -> int:
     from toggle.plots import plt, save_figure
 
     mech = mechanism(args)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = args.out
     results = [analyse_clamping(mech, mu, tiebar_force=args.clamp_force, x_contact=args.contact)
                for mu in args.mu]
     curves = [clamping_curves(mech, r) for r in results]
     panels = [
-        ("fig4_tiebar_force.png", "Total tie-bar force $F_c$ [kN]",
+        ("fig4_tiebar_force.png", "Total tie-bar force $F_c$ (kN)",
          lambda c: c.state.tiebar_force / 1e3, False),
-        ("fig5_mechanical_advantage.png", "Mechanical advantage $F_{cl}/F_0$ [-]",
+        ("fig5_mechanical_advantage.png", "Mechanical advantage $F_{cl}/F_0$ (1)",
          lambda c: c.mechanical_advantage, True),
-        ("fig6_thrust.png", "Crosshead thrust $F_0$ [kN]", lambda c: c.state.thrust / 1e3, False),
+        ("fig6_thrust.png", "Crosshead thrust $F_0$ (kN)", lambda c: c.state.thrust / 1e3, False),
     ]
     for name, ylabel, value, log in panels:
         fig, ax = plt.subplots(figsize=(6, 4))
         for r, c in zip(results, curves):
             ax.plot(np.degrees(c.alpha), value(c), label=f"$\\mu$ = {r.mu:g}")
-        ax.set_xlabel(r"Toggle angle $\alpha$ [deg]")
+        ax.set_xlabel(r"Toggle angle $\alpha$ (deg)")
         ax.set_ylabel(ylabel)
         if log:
             ax.set_yscale("log")
@@ -150,8 +154,8 @@ def plot(args: argparse.Namespace) -> int:
                               x_contact=args.contact).thrust_max for m in mus]
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(mus, np.array(peaks) / 1e3, marker="o")
-    ax.set_xlabel(r"Friction coefficient $\mu$ [-]")
-    ax.set_ylabel(r"Maximum thrust $F_{0,\max}$ [kN]")
+    ax.set_xlabel(r"Friction coefficient $\mu$ (1)")
+    ax.set_ylabel(r"Maximum thrust $F_{0,\max}$ (kN)")
     ax.set_title(f"{mech.name}: maximum crosshead thrust")
     print(save_figure(fig, out / "fig7_thrust_max.png"))
     plt.close(fig)
@@ -163,8 +167,8 @@ def plot(args: argparse.Namespace) -> int:
             t_end = 1.25 * r.crosshead_travel / (speed * travel_per_radian(mech.drive))
             h = torque_history(mech, r, np.linspace(0.0, t_end, 400), speed)
             ax.plot(h.t, h.torque, label=f"$\\mu_d$ = {r.mu:g}")
-        ax.set_xlabel("Time since mold contact [s]")
-        ax.set_ylabel("Motor torque $T_m$ [N m]")
+        ax.set_xlabel("Time since mold contact (s)")
+        ax.set_ylabel("Motor torque $T_m$ (N m)")
         ax.legend()
         ax.set_title(f"{mech.name}: {args.rpm:g} rpm, $\\eta$ = {mech.drive.efficiency:g}")
         print(save_figure(fig, out / "fig8_motor_torque.png"))
@@ -175,8 +179,11 @@ def plot(args: argparse.Namespace) -> int:
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("clamp", help="Figs 4-7 of Lin & Hsiao 2003 (and motor torque) as PNG")
     _common_options(p)
-    p.add_argument("--mu", type=float, nargs="+", default=list(PAPER_MUS),
-                   help="friction coefficients of the curves (default: the paper's)")
-    p.add_argument("--rpm", type=float, default=200.0, help="motor speed of the torque figure")
-    p.add_argument("--out", default="build/figures/clamp", help="output folder for the PNG files")
+    p.add_argument("--mu", type=FRICTION, nargs="+", default=list(PAPER_MUS),
+                   help="friction coefficients of the curves (default: the paper's, "
+                        f"{' '.join(map(str, PAPER_MUS))})")
+    p.add_argument("--rpm", type=positive("motor speed in rpm", 1e5), default=200.0,
+                   help="motor speed of the torque figure, rpm (default 200)")
+    p.add_argument("--out", type=path, default=Path("build/figures/clamp"),
+                   help="output folder for the PNG files (default build/figures/clamp)")
     p.set_defaults(handler=plot)

@@ -1,4 +1,7 @@
-"""Helpers shared by the command modules: preset option, JSON and tables."""
+"""Helpers shared by the command modules: preset option, argument types, JSON and tables.
+
+The argument types are :mod:`hil.cli_args`'s, so ``toggle`` and ``hil`` judge a value alike.
+"""
 
 from __future__ import annotations
 
@@ -9,15 +12,34 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from toggle.params import Mechanism, load_preset, preset_names
+from hil.cli_args import integer, number, path, positive
+from toggle.params import Mechanism, load_preset
 
 MM = 1e3  # metres to millimetres, for tables only
 
+#: Shipped presets that describe a clamp (the press dong2022 is synthesize's only).
+CLAMP_PRESETS = ("chang2021", "lin2003_sm55", "li_micro")
+SPEED = positive("crosshead speed in m/s", 1.0)
+#: A link-length error of the upper half (link 8), m.
+LINK_ERROR = number(-5e-3, 5e-3, "must be a length error below 5 mm, in m")
+FRICTION = number(0.0, 1.0, "must be a friction coefficient between 0 and 1")
+POSITION = number(-1.0, 1.0, "must be a crosshead position within 1 m, in m")
+FORCE = positive("force in N", 1e9)
+SEED = integer(0, 2**32 - 1, "must be a seed between 0 and 2^32 - 1")
+POINTS = integer(2, 100_000, "must be a count of points between 2 and 100000")
+SAMPLES = integer(1, 100_000_000, "must be a number of samples between 1 and 1e8")
+IT_GRADE = integer(1, 18, "must be an ISO 286 IT grade between 1 and 18")
 
-def add_preset_argument(parser: argparse.ArgumentParser, default: str = "chang2021") -> None:
+
+def add_preset_argument(parser: argparse.ArgumentParser, default: str = "chang2021",
+                        accepts: Sequence[str] = CLAMP_PRESETS, why: str = "") -> None:
+    """``--preset``, with the shipped presets this command accepts (and why others do not)."""
+    family = "; a family takes family/group, e.g. li_micro/6" if "li_micro" in accepts else ""
+    note = f"; {why}" if why else ""
     parser.add_argument(
         "--preset", default=default,
-        help=f"shipped preset ({', '.join(preset_names())}) or a TOML file (default {default})",
+        help=f"shipped preset ({', '.join(accepts)}) or a TOML file{family}{note} "
+             f"(default {default})",
     )
 
 
@@ -29,7 +51,8 @@ def add_json_argument(parser: argparse.ArgumentParser) -> None:
 
 def add_out_argument(parser: argparse.ArgumentParser) -> None:
     """The ``--out`` folder of a ``toggle plot`` figure."""
-    parser.add_argument("--out", type=Path, default=Path("figures"), help="output folder")
+    parser.add_argument("--out", type=path, default=Path("figures"),
+                        help="output folder (default figures)")
 
 
 def mechanism(args: argparse.Namespace) -> Mechanism:
@@ -45,9 +68,13 @@ def deg(rad: float) -> float:
 
 
 def table(headers: Sequence[str], rows: Iterable[Sequence[Any]], fmt: str = "{:>12.4f}") -> str:
-    """A plain text table; floats use ``fmt``, anything else is right-aligned text."""
+    """A plain text table; floats use ``fmt`` (``g`` when that would overflow the column),
+    anything else is right-aligned text."""
     def cell(v: Any) -> str:
-        return fmt.format(v) if isinstance(v, float) else f"{v!s:>12}"
+        if not isinstance(v, float):
+            return f"{v!s:>12}"
+        text = fmt.format(v)
+        return text if len(text) <= 12 else f"{v:>12.5g}"
     lines = ["".join(f"{h:>12}" for h in headers)]
     lines += ["".join(cell(v) for v in row) for row in rows]
     return "\n".join(lines)

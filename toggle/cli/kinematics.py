@@ -6,6 +6,7 @@ import argparse
 
 import numpy as np
 
+from hil.cli_args import integer
 from toggle.cli.common import (
     MM,
     add_json_argument,
@@ -72,23 +73,41 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"preset {mech.name}: {mech.description}")
     rows = [(h, v["x_open"] * MM, v["x_toggle"] * MM, v["stroke"] * MM,
-             deg(v["platen_link_angle_toggle"])) for h, v in data["halves"].items()]
-    print(table(("half", "x_open mm", "x_TP mm", "stroke mm", "th5/8 deg"), rows))
+             "theta5" if h == "lower" else "theta8", _wrapped_deg(v["platen_link_angle_toggle"]))
+            for h, v in data["halves"].items()]
+    print(table(("half", "x_open mm", "x_TP mm", "stroke mm", "angle", "at TP deg"), rows))
     if args.points:
         p = data["profile"]
         rows = [(x * MM, p["lower"]["L"][i] * MM, p["upper"]["L"][i] * MM, p["lower"]["dL_dx"][i],
-                 p["lower"]["mechanical_advantage"][i]) for i, x in enumerate(p["x"])]
+                 _advantage(p["lower"]["mechanical_advantage"][i])) for i, x in enumerate(p["x"])]
         print()
-        print(table(("x mm", "L_L mm", "L_U mm", "dL/dx", "MA"), rows))
+        print(table(("x mm", "L_L mm", "L_U mm", "dL/dx (1)", "MA (1)"), rows))
+        print("(MA = dx/dL, unbounded at the toggle: shown as inf above 1e9)")
     return 0
+
+
+def _wrapped_deg(rad: float) -> float:
+    """An angle in degrees within (-180, 180] (a pose can carry whole turns)."""
+    value = deg(rad) % 360.0
+    return value - 360.0 if value > 180.0 else value
+
+
+def _advantage(value: float) -> float:
+    """The mechanical advantage as printed: ``inf`` where the toggle makes it unbounded."""
+    return float("inf") if abs(value) > MA_SHOWN_MAX else value
+
+
+#: Mechanical advantages above this are the toggle's singularity, printed as inf.
+MA_SHOWN_MAX = 1e9
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("kinematics", help="stroke, open and toggle positions of both halves")
     add_preset_argument(p)
     add_json_argument(p)
-    p.add_argument("--points", type=int, default=0,
-                   help="also tabulate L(x), dL/dx and MA at this many points over the stroke")
+    p.add_argument("--points", type=integer(0, 100_000, "must be a count from 0 to 100000"),
+                   default=0, help="also tabulate L(x), dL/dx and MA at this many points over "
+                                   "the stroke (default 0: no table)")
     p.set_defaults(handler=run)
 
 

@@ -10,8 +10,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
 from controllers.limits import DriveLimits, drive_limits
 from controllers.planner import (
     CONTACT_SPEED,
@@ -23,7 +21,15 @@ from controllers.planner import (
     planner_for,
 )
 from controllers.profiles import read_profile_csv, write_profile_csv
-from toggle.cli.common import add_json_argument, add_preset_argument, print_json, table
+from hil.cli_args import atomic_path, check_writable, integer, path, positive
+from toggle.cli.common import (
+    FRICTION,
+    POSITION,
+    add_json_argument,
+    add_preset_argument,
+    print_json,
+    table,
+)
 from toggle.drive import motor_torque
 from toggle.params import ParameterError
 from toggle.plant import PlantConfig
@@ -56,6 +62,8 @@ def _plant(args: argparse.Namespace) -> tuple[PlantConfig, DriveLimits]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.out:
+        check_writable(args.out, "--out")  # before solving, not after
     cfg, limits = _plant(args)
     planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
     if args.min_time:
@@ -64,13 +72,14 @@ def run(args: argparse.Namespace) -> int:
         plan = planner.solve(args.duration or default_duration(planner), args.objective)
     base = baselines(cfg, limits, plan.duration)
     if args.out:
-        write_profile_csv(args.out, plan.samples, {
-            "preset": args.preset, "x_contact": cfg.x_contact, "mu": cfg.friction,
-            "objective": plan.objective, "duration": plan.duration,
-            "force_limit": args.force_limit if args.min_time else None,
-            "v_max": limits.velocity, "a_max": limits.acceleration, "j_max": limits.jerk,
-            "torque_max": limits.torque,
-        })
+        with atomic_path(args.out) as tmp:  # no half-written CSV
+            write_profile_csv(tmp, plan.samples, {
+                "preset": args.preset, "x_contact": cfg.x_contact, "mu": cfg.friction,
+                "objective": plan.objective, "duration": plan.duration,
+                "force_limit": args.force_limit if args.min_time else None,
+                "v_max": limits.velocity, "a_max": limits.acceleration, "j_max": limits.jerk,
+                "torque_max": limits.torque,
+            })
     peak = plan.peak_force
     trap, scurve = base["trapezoidal"].peak_force, base["s_curve"].peak_force
     result = {
@@ -144,54 +153,57 @@ def plot(args: argparse.Namespace) -> int:
     return 0
 
 
-def _positive(text: str) -> float:
-    value = float(text)
-    if not np.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return value
 
 
 def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
-    add_preset_argument(p)
-    p.add_argument("--mu", type=float, default=None, help="pin friction (default: preset's)")
+    add_preset_argument(p, accepts=("chang2021",),
+                        why="lin2003_sm55 and li_micro have no [dynamics] (give --masses)")
+    p.add_argument("--mu", type=FRICTION, default=None, help="pin friction (default: preset's)")
     mold = p.add_mutually_exclusive_group()
-    mold.add_argument("--x-contact", type=float, default=None,
+    mold.add_argument("--x-contact", type=POSITION, default=None,
                       help="crosshead position at mold contact, m (the mold height)")
-    mold.add_argument("--clamp-force", type=_positive, default=None,
+    mold.add_argument("--clamp-force", type=positive("force in N", 1e15), default=None,
                       help="clamp force held in the locked position, N "
                            "(default: the preset's final tie-bar force)")
     p.add_argument("--masses", default=None,
                    help="override or supply [dynamics]: crosshead=kg,links=kg,platen=kg"
                         "[,guide_damping=N s/m]")
-    p.add_argument("--v-max", type=_positive, default=None, help="crosshead speed limit, m/s")
-    p.add_argument("--a-max", type=_positive, default=None, help="acceleration limit, m/s^2")
-    p.add_argument("--j-max", type=_positive, default=None, help="jerk limit, m/s^3")
-    p.add_argument("--torque-max", type=_positive, default=None, help="motor torque limit, N m")
+    p.add_argument("--v-max", type=positive("speed in m/s", 10.0, 1e-4), default=None,
+                   help="crosshead speed limit, m/s (default: the preset's drive)")
+    p.add_argument("--a-max", type=positive("acceleration in m/s^2", 1e3, 1e-4), default=None,
+                   help="acceleration limit, m/s^2 (default: the preset's drive)")
+    p.add_argument("--j-max", type=positive("jerk in m/s^3", 1e6, 1e-4), default=None,
+                   help="jerk limit, m/s^3 (default: the preset's drive)")
+    p.add_argument("--torque-max", type=positive("torque in N m", 1e5, 1e-4), default=None,
+                   help="motor torque limit, N m (default: the preset's drive)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plan", help="plan the clamp stroke that minimises the drive force")
     _add_plant_arguments(p)
-    p.add_argument("--duration", type=_positive, default=None,
+    p.add_argument("--duration", type=positive("duration in s", 1e4), default=None,
                    help="stroke duration, s (default: twice the kinematic minimum)")
     p.add_argument("--min-time", action="store_true",
                    help="plan the fastest stroke under --force-limit instead")
-    p.add_argument("--force-limit", type=_positive, default=None,
+    p.add_argument("--force-limit", type=positive("force in N", 1e9), default=None,
                    help="input-force limit of --min-time, N (default: the torque limit's)")
     p.add_argument("--objective", choices=OBJECTIVES, default="peak",
-                   help="minimise the peak input force or the integral of its square")
-    p.add_argument("--contact-speed", type=_positive, default=CONTACT_SPEED,
+                   help="minimise the peak input force or the integral of its square "
+                        "(default peak)")
+    p.add_argument("--contact-speed", type=positive("speed in m/s", 1.0, 1e-6),
+                   default=CONTACT_SPEED,
                    help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
-    p.add_argument("--intervals", type=int, default=INTERVALS,
+    p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
+                   default=INTERVALS,
                    help=f"time intervals N (default {INTERVALS})")
-    p.add_argument("--out", type=Path, default=None, help="profile CSV to write (SI units)")
+    p.add_argument("--out", type=path, default=None, help="profile CSV to write (SI units)")
     add_json_argument(p)
     p.set_defaults(handler=run)
 
 
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("plan", help="a planned profile (CSV) against the baselines")
-    p.add_argument("csv", type=Path, help="profile CSV written by toggle plan --out")
+    p.add_argument("csv", type=path, help="profile CSV written by toggle plan --out")
     _add_plant_arguments(p)
-    p.add_argument("--out", type=Path, default=Path("plan.png"), help="PNG file")
+    p.add_argument("--out", type=path, default=Path("plan.png"), help="PNG file (default plan.png)")
     p.set_defaults(handler=plot)

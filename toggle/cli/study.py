@@ -15,8 +15,10 @@ from typing import Any
 
 import numpy as np
 
+from hil.cli_args import integer, number
 from toggle.cli.common import (
     MM,
+    POINTS,
     add_json_argument,
     add_out_argument,
     add_preset_argument,
@@ -24,7 +26,7 @@ from toggle.cli.common import (
     print_json,
     table,
 )
-from toggle.params import DIMENSIONS, HALVES, load_preset
+from toggle.params import DIMENSIONS, HALVES, ParameterError, load_preset
 from toggle.study import (
     CRITERIA,
     GroupResult,
@@ -41,17 +43,26 @@ _SHORT = {"stroke_ratio": "Ms", "velocity_ratio": "Mv peak", "force_amplificatio
           "coping_angle_min": "psi min deg"}
 
 
+#: A toggle angle as typed, deg.
+ANGLE = number(0.0, 180.0, "must be a toggle angle between 0 and 180 deg")
+
+
 def _add_range_arguments(p: argparse.ArgumentParser, preset: str) -> None:
-    add_preset_argument(p, default=preset)
+    add_preset_argument(p, default=preset, why="a family (li_micro) compares its groups; "
+                        "family/group makes that group the baseline")
     p.add_argument("--half", choices=HALVES, default="lower", help="half to study (default lower)")
-    p.add_argument("--alpha-lock", type=float, default=1.0,
+    p.add_argument("--alpha-lock", type=ANGLE, default=1.0,
                    help="smallest toggle angle, deg: where Mp counts as near lock-up (default 1)")
-    p.add_argument("--alpha-max", type=float, default=90.0,
+    p.add_argument("--alpha-max", type=ANGLE, default=90.0,
                    help="largest toggle angle (open clamp), deg (default 90; seed 004 gives none)")
-    p.add_argument("--points", type=int, default=90, help="toggle angles in the range (default 90)")
+    p.add_argument("--points", type=POINTS, default=90,
+                   help="toggle angles in the range (default 90)")
 
 
 def _alphas(args: argparse.Namespace) -> np.ndarray:
+    if not 0 < args.alpha_lock < args.alpha_max < 180:
+        raise ParameterError(f"need 0 < --alpha-lock < --alpha-max < 180 deg, got "
+                             f"{args.alpha_lock:g} and {args.alpha_max:g} deg")
     return angle_grid(math.radians(args.alpha_lock), math.radians(args.alpha_max), args.points)
 
 
@@ -112,6 +123,12 @@ def _print_ranking(data: dict[str, Any], alpha_max: float, alpha_lock: float) ->
 
 def run_study(args: argparse.Namespace) -> int:
     data = study_payload(args)
+    if not any(g["valid"] for g in data["groups"]):
+        reached = ", ".join(
+            f"{g['group']}: {math.degrees(g['alpha_limit']):.1f} deg" if g["alpha_limit"]
+            is not None else f"{g['group']}: {g['error']}" for g in data["groups"])
+        raise ParameterError(f"no group of {args.preset} opens to --alpha-max "
+                             f"{args.alpha_max:g} deg (largest toggle angle of each: {reached})")
     if args.json:
         print_json(data)
         return 0
@@ -121,12 +138,19 @@ def run_study(args: argparse.Namespace) -> int:
     return 0
 
 
+_LENGTH = number(-10.0, 10.0, "must be a length within 10 m, in m")
+_COUNT = integer(2, 200, "must be a count of values from 2 to 200")
+
+
 def _axis(spec: list[str]) -> tuple[str, np.ndarray]:
-    """``[name, start_mm, stop_mm, count]`` -> (name, values in m)."""
+    """``[name, start_m, stop_m, count]`` -> (name, values in m)."""
     name, start, stop, count = spec
     if name not in DIMENSIONS:
-        raise ValueError(f"unknown dimension {name!r}; known: {', '.join(DIMENSIONS)}")
-    return name, np.linspace(float(start), float(stop), int(count)) / MM
+        raise ParameterError(f"--dim: unknown dimension {name!r}; known: {', '.join(DIMENSIONS)}")
+    try:
+        return name, np.linspace(_LENGTH(start), _LENGTH(stop), _COUNT(count))
+    except argparse.ArgumentTypeError as exc:
+        raise ParameterError(f"--dim {name}: {exc}") from exc
 
 
 def _run_sweep(args: argparse.Namespace) -> SweepResult:
@@ -168,7 +192,7 @@ def run_sweep(args: argparse.Namespace) -> int:
 def _add_dim_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dim", nargs=4, action="append", required=True,
                    metavar=("NAME", "START", "STOP", "COUNT"),
-                   help=f"a swept dimension ({', '.join(DIMENSIONS)}) from START to STOP mm in "
+                   help=f"a swept dimension ({', '.join(DIMENSIONS)}) from START to STOP m in "
                         "COUNT values; give exactly two")
 
 
@@ -216,7 +240,8 @@ def plot_sweep(result: SweepResult, title: str, path: Path) -> Path:
     for ax, c in zip(axes.ravel(), CRITERIA):
         grid = result.criteria[c.key] * (180 / math.pi if c.unit == "rad" else 1.0)
         cs = ax.contourf(v2 * MM, v1 * MM, grid, levels=12)
-        fig.colorbar(cs, ax=ax, label=f"{_SHORT[c.key]}")
+        fig.colorbar(cs, ax=ax, label=f"{_SHORT[c.key].removesuffix(' deg')} "
+                                      f"({'deg' if c.unit == 'rad' else '1'})")
         ax.set_title(c.label, fontsize=10)
         ax.set_xlabel(f"{n2} (mm)")
         ax.set_ylabel(f"{n1} (mm)")
@@ -233,8 +258,9 @@ def _plot_study(args: argparse.Namespace) -> int:
 
 
 def _plot_sweep(args: argparse.Namespace) -> int:
-    title = f"{args.preset} ({args.half} half): criteria over {args.dim[0][0]} and {args.dim[1][0]}"
-    print(plot_sweep(_run_sweep(args), title, args.out / "sweep.png"))
+    result = _run_sweep(args)  # checks --dim first
+    title = f"{args.preset} ({args.half} half): criteria over {' and '.join(result.names)}"
+    print(plot_sweep(result, title, args.out / "sweep.png"))
     return 0
 
 

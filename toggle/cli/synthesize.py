@@ -12,7 +12,17 @@ from dataclasses import asdict
 from typing import Any
 
 from toggle import press, synthesis
-from toggle.cli.common import MM, add_json_argument, add_out_argument, print_json, table
+from toggle.cli.common import (
+    CLAMP_PRESETS,
+    MM,
+    SAMPLES,
+    SEED,
+    add_json_argument,
+    add_out_argument,
+    add_preset_argument,
+    print_json,
+    table,
+)
 from toggle.params import load_preset
 
 
@@ -77,7 +87,7 @@ def _print_table(data: dict[str, Any]) -> None:
     for label, block in (("reference", ref), ("allocation", alloc)):
         lin, mc = block["reliability"]["linear"], block["reliability"]["monte_carlo"]
         out.append((label, block["cost"], lin["position"], mc["position"], lin["tilt"], mc["tilt"]))
-    print(table(("", "cost", "P pos lin", "P pos MC", "P tilt lin", "P tilt MC"), out))
+    print(table(("", "cost (1)", "P pos lin", "P pos MC", "P tilt lin", "P tilt MC"), out))
     print(f"(Monte Carlo: {alloc['reliability']['monte_carlo']['samples']} samples)")
 
 
@@ -95,12 +105,12 @@ def run(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("synthesize", help="precision synthesis: sensitivity and tolerance "
                        "allocation by cost and reliability (press or clamp)")
-    p.add_argument("--preset", default="dong2022",
-                   help="press preset (dong2022), clamp preset or TOML file (default dong2022)")
+    add_preset_argument(p, default="dong2022", accepts=("dong2022", *CLAMP_PRESETS),
+                        why="dong2022 is a press, the others clamps")
     add_json_argument(p)
-    p.add_argument("--samples", type=int, default=None,
+    p.add_argument("--samples", type=SAMPLES, default=None,
                    help="Monte Carlo samples of the reliability check (default: the preset's, 1e6)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the Monte Carlo check")
+    p.add_argument("--seed", type=SEED, default=0, help="random seed of the Monte Carlo check")
     p.set_defaults(handler=run)
 
 
@@ -118,7 +128,7 @@ def plot(args: argparse.Namespace) -> int:
     ax.bar(x - 0.2, pos, 0.4, label="slider position error ΔS")
     ax.bar(x + 0.2, tilt, 0.4, label="tilt error Δβ")
     ax.set_xticks(x, [r.source for r in rows], rotation=30)
-    ax.set_ylabel("significance coefficient λ (–)")
+    ax.set_ylabel("significance coefficient λ (1)")
     ax.set_title(f"{model.name}: significance of each error source ({model.output_label})")
     ax.legend()
     print(save_figure(fig, args.out / f"significance_{model.name}.png"))
@@ -128,6 +138,7 @@ def plot(args: argparse.Namespace) -> int:
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("synthesize",
                          help="significance of each error source (seed 003, Figs 6-7)")
-    p.add_argument("--preset", default="dong2022", help="press or clamp preset (default dong2022)")
+    add_preset_argument(p, default="dong2022", accepts=("dong2022", *CLAMP_PRESETS),
+                        why="dong2022 is a press, the others clamps")
     add_out_argument(p)
     p.set_defaults(handler=plot)

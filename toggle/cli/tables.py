@@ -12,9 +12,16 @@ writes one figure per statistic (measured mean +- 3 sigma against the simulated 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from toggle.cli.common import MM, add_json_argument, add_preset_argument, mechanism, print_json
+from hil.cli_args import check_writable_dir, path
+from toggle.cli.common import (
+    MM,
+    SPEED,
+    add_json_argument,
+    add_preset_argument,
+    mechanism,
+    print_json,
+)
 from toggle.rig_calibration import (
     FORCE_FITTABLE,
     MAX_FORCE_FITTED,
@@ -34,6 +41,8 @@ LABELS = {"force_forward_max": "F_F(max)", "force_forward_rms": "F_F(rms)",
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.plot is not None:
+        check_writable_dir(args.plot, "--plot")  # before the simulation, not after it
     tables = load_paper_tables()
     nominal = mechanism(args)
     model, fit = RigModel(), None
@@ -79,16 +88,17 @@ def run(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tables",
                        help="the simulated rig against seed 000 Tables 3-8 (fit, predict, plot)")
-    add_preset_argument(p)
+    add_preset_argument(p, accepts=("chang2021",),
+                        why="the paper's tables were measured on the chang2021 rig")
     p.add_argument("--fit", nargs="+", choices=tuple(FORCE_FITTABLE), metavar="PARAM",
                    default=[], help=f"refit at most {MAX_FORCE_FITTED} of: "
                                     f"{', '.join(FORCE_FITTABLE)}")
-    p.add_argument("--speeds", type=float, nargs="+", default=[5e-3, 15e-3],
+    p.add_argument("--speeds", type=SPEED, nargs="+", default=[5e-3, 15e-3],
                    help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3)")
     p.add_argument("--statistics", nargs="+", choices=STATISTICS, default=list(STATISTICS),
                    metavar="STAT",
                    help=f"statistics fitted (default all: {', '.join(STATISTICS)})")
-    p.add_argument("--plot", type=Path, default=None, metavar="DIR",
+    p.add_argument("--plot", type=path, default=None, metavar="DIR",
                    help="write one PNG per statistic into DIR")
     add_json_argument(p)
     p.set_defaults(handler=run)

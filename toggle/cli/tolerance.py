@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
+from hil.cli_args import integer
 from toggle.cli.common import (
+    IT_GRADE,
     MM,
+    POSITION,
+    SEED,
     add_json_argument,
     add_out_argument,
     add_preset_argument,
@@ -73,13 +77,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tolerance", help="mechanical-error analysis for an ISO IT grade")
     add_preset_argument(p)
     add_json_argument(p)
-    p.add_argument("--it", type=int, default=10, help="ISO 286-1 IT grade (default 10)")
-    p.add_argument("--x", type=float, default=None,
+    p.add_argument("--it", type=IT_GRADE, default=10, help="ISO 286-1 IT grade (default 10)")
+    p.add_argument("--x", type=POSITION, default=None,
                    help="input position, m (default: the lower half's toggle position)")
-    p.add_argument("--samples", type=int, default=0, help="add a Monte Carlo run of N samples")
+    p.add_argument("--samples", type=integer(0, 100_000_000, "must be 0 to 1e8 samples"),
+                   default=0, help="add a Monte Carlo run of N samples (default 0: none)")
     p.add_argument("--distribution", choices=("normal", "uniform"), default="normal",
                    help="Monte Carlo distribution: normal with sigma = IT/3, or uniform over +-IT")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the Monte Carlo run")
+    p.add_argument("--seed", type=SEED, default=0, help="random seed of the Monte Carlo run")
     p.set_defaults(handler=run)
 
 
@@ -95,6 +100,6 @@ def plot(args: argparse.Namespace) -> int:
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("tolerance", help="error curves of each half and δL vs IT (Figs 7-9)")
     add_preset_argument(p)
-    p.add_argument("--it", type=int, default=10, help="IT grade of the error curves")
+    p.add_argument("--it", type=IT_GRADE, default=10, help="IT grade of the error curves")
     add_out_argument(p)
     p.set_defaults(handler=plot)

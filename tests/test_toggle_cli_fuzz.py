@@ -1,0 +1,75 @@
+"""Every ``toggle`` command answers generated bad input with one clear line (tests/cli_fuzz.py).
+
+2000 invocations of every sub-command (``toggle plot <kind>`` included) with values from
+the edge pools. Runs stay cheap without stubbing the checks: the expensive counts are
+capped after the drawn options (argparse still judges every drawn value; the last one
+wins), and the FMU builds and matplotlib's rendering are replaced by fakes that write a
+few bytes where the real ones write the file.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import pytest
+from cli_fuzz import check_answer, invocations, path_values
+from hypothesis import HealthCheck, given, settings
+from matplotlib.figure import Figure
+
+from toggle.cli import build_parser, main
+
+ROOT = Path(tempfile.mkdtemp(prefix="toggle_fuzz_"))
+PATHS = path_values(ROOT)
+
+#: Options appended to keep one run in milliseconds (a count, a sample size).
+CAPS: dict[tuple[str, ...], list[str]] = {
+    ("synthesize",): ["--samples", "20"],
+    ("tolerance",): ["--samples", "0"],
+    ("kinematics",): ["--points", "3"],
+    ("study",): ["--points", "3"],
+    ("sweep",): ["--points", "3"],
+    ("plot", "study"): ["--points", "3"],
+    ("plot", "sweep"): ["--points", "3"],
+    ("plot", "clamp"): ["--mu", "0.1"],
+    ("plan",): ["--intervals", "4"],
+    ("calibrate",): ["--fit", "free_play", "--speeds", "5e-3"],
+}
+
+
+def caps(words: tuple[str, ...]) -> list[str]:
+    return CAPS.get(words, [])
+
+
+@pytest.fixture(scope="module")
+def monkeypatch_module():
+    with pytest.MonkeyPatch.context() as mp:
+        yield mp
+
+
+@pytest.fixture(autouse=True, scope="module")
+def cheap(monkeypatch_module) -> None:
+    import toggle.cli.build_fmu as build_cli
+    import toggle.native_fmu as native
+
+    def fake_build(out: Path, *_args: object, **_kwargs: object) -> Path:
+        path = Path(out) / "ToggleClamp.fmu"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(b"PK")
+        return path
+
+    def fake_savefig(fig: object, path: Path, **_kw: object) -> None:
+        Path(path).write_bytes(b"\x89PNG")  # rendering is matplotlib's; the writing is ours
+
+    monkeypatch_module.setattr(Figure, "savefig", fake_savefig)
+    monkeypatch_module.setattr(Figure, "tight_layout", lambda fig, **_kw: None)
+    monkeypatch_module.setattr(build_cli, "build_fmu", fake_build)
+    monkeypatch_module.setattr(native, "build_native_fmu", fake_build)
+    monkeypatch_module.chdir(ROOT)  # what a command writes by default lands here
+
+
+@settings(max_examples=2000, derandomize=True, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(argv=invocations(build_parser(), PATHS, caps))
+def test_every_toggle_command_answers_bad_input_with_one_clear_line(argv: list[str]) -> None:
+    check_answer(main, argv, [], watch=ROOT)
