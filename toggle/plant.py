@@ -130,17 +130,19 @@ class PlantConfig:
         return replace(self, **changes)
 
 
-def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = None
-                  ) -> PlantOutputs:
+def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = None,
+                  mu: Any = None) -> PlantOutputs:
     """Plant outputs at input position x, velocity v and acceleration a.
 
     Floats, arrays or CasADi symbols; no assembly check (see
     :class:`CompiledPlant` for the checked numeric form). ``x_contact``, if
     given, replaces ``cfg.x_contact`` and may be a CasADi symbol: the planner
-    keeps the mold height a parameter of its problem (no numeric check here).
+    keeps the mold height a parameter of its problem (no numeric check here);
+    likewise ``mu`` replaces the pin friction ``cfg.friction``.
     """
     mech, dyn = cfg.mechanism, cfg.dynamics
     x_contact = cfg.x_contact if x_contact is None else x_contact
+    friction = cfg.friction if mu is None else mu
     terms = [motion_terms(x, mech.half(h)) for h in HALVES]
     L = 0.5 * (terms[0][0] + terms[1][0])
     g = 0.5 * (terms[0][1] + terms[1][1])
@@ -157,12 +159,12 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
         L_contact = 0.5 * sum(half_pose(x_contact, mech.half(h)).L for h in HALVES)
         moving = np.where(x < x_contact, 1.0, 0.0)
         platen = np.where(x < x_contact, L, L_contact)
-        states = [clamp_state(x, x_contact, mech, cfg.friction, direction, half=h)
+        states = [clamp_state(x, x_contact, mech, friction, direction, half=h)
                   for h in HALVES]
         clamp = 0.5 * (states[0].clamp_force + states[1].clamp_force)
         tiebar = 0.5 * (states[0].tiebar_force + states[1].tiebar_force)
         thrust = 0.5 * (states[0].thrust + states[1].thrust)
-        q = force_ratios(x, mech.lower, mech.clamp.pins, cfg.friction, direction).thrust
+        q = force_ratios(x, mech.lower, mech.clamp.pins, friction, direction).thrust
         ma = 1.0 / np.maximum(np.fabs(q), 1.0 / MA_CAP)
     inertia = m_in * a + moving * m_out * g * (g * a + gp * v * v)
     force = inertia + dyn.guide_damping * v + thrust
