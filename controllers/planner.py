@@ -52,6 +52,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import brentq
 
+from controllers.bounds import peak_lower_bound
 from controllers.compiled import Unit, code_digest, compiled
 from controllers.limits import DriveLimits, drive_limits
 from controllers.profiles import Profile, ProfileSamples, minimum_time, predict, s_curve
@@ -68,6 +69,12 @@ INTERVALS = 200
 CREEP_FACTOR = 10.0
 _REGULARISATION = 1e-2  # weight of the squared jerk (relative to its limit), for uniqueness
 _BINDING = 0.99  # a limit counts as binding above this fraction of its value
+#: Objective weights (peak, force integral, duration, jerk regularisation) of each objective.
+_WEIGHTS = {"peak": [1.0, 0.0, 0.0, _REGULARISATION], "rms": [0.0, 1.0, 0.0, 0.0]}
+#: best(): stretches of the late S-curve starts, and the gap to the lower bound that ends
+#: the search (relative).
+_LATE_STARTS = (1.0, 1.1, 1.25)
+_GAP = 3e-3
 _LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's continuation
 _TIGHTEN = 4  # re-plans of minimum_time with the limit tightened by the excess between nodes
 #: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
@@ -543,6 +550,35 @@ class ClampPlanner:
         return np.concatenate([xi, nu * r, al * r**2, jerk * r**3,
                                [tau_c / n1 / r, (1 - tau_c) / n2 / r, s]])
 
+    def _guess_from(self, profile: Profile, duration: float) -> np.ndarray:
+        """A profile sampled at the nodes as the scaled variables (nodes split at its mold
+        contact), the jerk from the accelerations: an initial guess."""
+        t = np.linspace(0.0, duration, 4001)
+        tc = float(np.interp(self.config.x_contact, profile.sample(t)[0], t))
+        n1, n2, S, t_ref = self.n1, self.n2, self.stroke, self.t_ref
+        t = np.concatenate([np.linspace(0.0, tc, n1 + 1), np.linspace(tc, duration, n2 + 1)[1:]])
+        x, v, a = profile.sample(t)
+        s = float(np.max(np.abs(self._force(x, v, a)))) / self.f_ref
+        return np.concatenate([(x - self.x_open) / S, v * t_ref / S, a * t_ref**2 / S,
+                               np.diff(a) / np.diff(t) * t_ref**3 / S,
+                               [tc / n1 / t_ref, (duration - tc) / n2 / t_ref, s]])
+
+    def _late_guess(self, duration: float, stretch: float) -> np.ndarray:
+        """The fastest S-curve stretched in time by ``stretch`` (at most to ``duration``),
+        started late so that it ends at ``duration``: it reaches
+        the mold at speed and brakes through the clamping, where the braking relieves the
+        thrust (the other family of optima than the polynomial guess's slow arrival)."""
+        lim = self.limits
+        fastest = s_curve(self.x_open, self.x_final, min(self.t_ref * stretch, duration),
+                          lim.velocity,
+                          lim.acceleration, lim.jerk)
+        delay = duration - fastest.duration
+        late = Profile(fastest.knots + delay, fastest.x, fastest.v, fastest.a, fastest.jerk)
+        late = Profile(np.concatenate(([0.0], late.knots)), np.concatenate(([late.x[0]], late.x)),
+                       np.concatenate(([0.0], late.v)), np.concatenate(([0.0], late.a)),
+                       np.concatenate(([0.0], late.jerk)))
+        return self._guess_from(late, duration)
+
     def _stretched(self, start: Plan, duration: float) -> dict[str, np.ndarray]:
         """A previous solution stretched in time to ``duration`` and rescaled to this
         planner's time and force scales (the warm start)."""
@@ -602,7 +638,7 @@ class ClampPlanner:
             raise ParameterError(f"duration must be a positive time, got {duration!r} s")
         if duration < self.t_ref:
             self._too_short(duration)
-        weights = [1.0, 0.0, 0.0, _REGULARISATION] if objective == "peak" else [0.0, 1.0, 0.0, 0.0]
+        weights = _WEIGHTS[objective]
         plan, ok = self._run(weights, (duration, duration), self.force_limit, objective, start,
                              warm)
         if not ok and warm:  # a poor warm start: retry from the cold guess
@@ -612,6 +648,38 @@ class ClampPlanner:
             self._too_short(duration)
         self.problem.last = plan
         return plan
+
+    def best(self, duration: float, objective: str = "peak") -> Plan:
+        """:meth:`solve` from several starts, the best plan: the polynomial guess, the
+        previous plan (warm) and late S-curves (:meth:`_late_guess`), stopping once a peak
+        plan is within :data:`_GAP` of :meth:`lower_bound`. The problem has two families
+        of local optima, slow and fast arrival at the mold; a single start finds either."""
+        if objective not in OBJECTIVES:
+            raise ParameterError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+        previous = self.last
+        key = (lambda p: p.peak_force) if objective == "peak" else (lambda p: p.rms_force)
+        good = self.lower_bound() * (1 + _GAP) if objective == "peak" else 0.0
+        plans = [self.solve(duration, objective, warm=False)]
+        if previous is not None:
+            plans.append(self.solve(duration, objective, start=previous))
+        for stretch in _LATE_STARTS:
+            if key(min(plans, key=key)) <= good:
+                break
+            plan, ok = self._run(_WEIGHTS[objective], (duration, duration), self.force_limit,
+                                 objective, None, False,
+                                 guess=self._late_guess(duration, stretch))
+            if ok:
+                plans.append(plan)
+        self.problem.last = min(plans, key=key)
+        return self.problem.last
+
+    @functools.lru_cache(maxsize=1)  # noqa: B019 - one planner per plant, kept by planner_for
+    def lower_bound(self) -> float:
+        """A lower bound on the peak input force of any stroke under this planner's
+        limits, of any duration (:func:`controllers.bounds.peak_lower_bound`), N."""
+        return peak_lower_bound(self.config, self.x_final, self.limits.velocity,
+                                self.limits.acceleration,
+                                CREEP_FACTOR * self.config.velocity_epsilon)
 
     def minimum_time(self, force_limit: float | None = None, *, start: Plan | None = None,
                      warm: bool = True) -> Plan:
