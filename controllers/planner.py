@@ -58,7 +58,7 @@ from controllers.limits import DriveLimits, drive_limits
 from controllers.profiles import Profile, ProfileSamples, minimum_time, predict, s_curve
 from toggle.elastics import ClampingError, clamp_state, clamp_stroke, contact_position
 from toggle.params import HALVES, Dynamics, Mechanism, ParameterError, load_preset
-from toggle.plant import PlantConfig, plant_outputs
+from toggle.plant import PlantConfig, plant_outputs, with_errors
 
 OBJECTIVES = ("peak", "rms")
 CONTACT_SPEED = 5e-3  # m/s, default limit on the platen's speed at mold contact
@@ -131,8 +131,12 @@ def plan_config(
     x_contact: float | None = None,
     clamp_force: float | None = None,
     masses: dict[str, float] | None = None,
+    errors: dict[str, float] | None = None,
 ) -> PlantConfig:
     """The plant to plan for, with the mold-contact position set.
+
+    ``errors`` adds dimensional errors by seed 000's names, as the FMU's ``delta_*``
+    parameters do (:func:`toggle.plant.with_errors`).
 
     Give the mold-contact crosshead position ``x_contact`` or the clamp force
     ``clamp_force`` (N) to hold at rest in the locked position, not both;
@@ -142,6 +146,7 @@ def plan_config(
     guide_damping (N s/m).
     """
     mech = load_preset(mechanism) if isinstance(mechanism, str) else mechanism
+    mech = with_errors(mech, errors)[0]
     if masses:
         dynamics = (replace(mech.dynamics, **masses) if mech.dynamics
                     else Dynamics(**masses) if {"crosshead", "links", "platen"} <= set(masses)

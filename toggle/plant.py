@@ -223,6 +223,25 @@ class CompiledPlant:
         return PlantOutputs(*values)
 
 
+def with_errors(mech: Mechanism, errors: dict[str, float] | None
+                ) -> tuple[Mechanism, list[str]]:
+    """The mechanism with dimensional errors added by seed 000's names (``{"r8": 0.5e-3}``
+    lengthens link 8 of the upper half), and the errors applied as text; every bad value
+    raises :class:`ParameterError` naming it."""
+    changed = []
+    for name, delta in (errors or {}).items():
+        if not math.isfinite(delta):
+            raise ParameterError(f"dimensional error delta_{name} must be finite, got {delta!r}")
+        half, dim = paper_dimension(name)
+        if delta:
+            try:
+                mech = mech.with_error(half, dim, delta)
+            except ParameterError as exc:
+                raise ParameterError(f"delta_{name} = {delta!r} m: {exc}") from exc
+            changed.append(f"delta_{name} = {delta!r} m")
+    return mech, changed
+
+
 def configure(
     preset: str,
     *,
@@ -239,18 +258,7 @@ def configure(
     A contact position at or beyond the toggle means no mold. Every bad value
     raises :class:`ParameterError` naming it.
     """
-    mech = load_preset(preset)
-    changed = []
-    for name, delta in (errors or {}).items():
-        if not math.isfinite(delta):
-            raise ParameterError(f"dimensional error delta_{name} must be finite, got {delta!r}")
-        half, dim = paper_dimension(name)
-        if delta:
-            try:
-                mech = mech.with_error(half, dim, delta)
-            except ParameterError as exc:
-                raise ParameterError(f"delta_{name} = {delta!r} m: {exc}") from exc
-            changed.append(f"delta_{name} = {delta!r} m")
+    mech, changed = with_errors(load_preset(preset), errors)
     if masses:
         if mech.dynamics is None:
             raise ParameterError(f"preset {mech.name!r} has no [dynamics] section to override")
@@ -311,5 +319,5 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
 
 __all__ = [
     "AssemblyError", "CompiledPlant", "DriveState", "PlantConfig", "PlantError", "PlantOutputs",
-    "configure", "follow", "plant_outputs",
+    "configure", "follow", "plant_outputs", "with_errors",
 ]

@@ -25,10 +25,13 @@ from controllers.planner import (
 from controllers.profiles import read_profile_csv, write_profile_csv
 from toggle.cli.common import add_json_argument, add_preset_argument, print_json, table
 from toggle.drive import motor_torque
-from toggle.params import ParameterError
+from toggle.params import HALVES, PAPER_NAMES, ParameterError
 from toggle.plant import PlantConfig
 
 MASS_FIELDS = ("crosshead", "links", "platen", "guide_damping")
+#: The dimensional errors, named as the FMU names its delta_* parameters.
+ERRORS = tuple(name for half in HALVES for name in PAPER_NAMES[half].values())
+_SHOWN = ("r8",)  # the one of them --help describes
 
 
 def _masses(text: str | None) -> dict[str, float] | None:
@@ -47,9 +50,16 @@ def _masses(text: str | None) -> dict[str, float] | None:
     return out
 
 
+def _errors(args: argparse.Namespace) -> dict[str, float]:
+    """The dimensional errors given as ``--delta-NAME`` (m), by the FMU's names."""
+    return {name: value for name in ERRORS
+            if (value := getattr(args, f"delta_{name}", None)) is not None}
+
+
 def _plant(args: argparse.Namespace) -> tuple[PlantConfig, DriveLimits]:
     cfg = plan_config(args.preset, mu=args.mu, x_contact=args.x_contact,
-                      clamp_force=args.clamp_force, masses=_masses(args.masses))
+                      clamp_force=args.clamp_force, masses=_masses(args.masses),
+                      errors=_errors(args))
     limits = drive_limits(cfg.mechanism, velocity=args.v_max, acceleration=args.a_max,
                           jerk=args.j_max, torque=args.torque_max)
     return cfg, limits
@@ -61,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     if args.min_time:
         plan = planner.minimum_time(args.force_limit)
     else:
-        plan = planner.solve(args.duration or default_duration(planner), args.objective)
+        plan = planner.best(args.duration or default_duration(planner), args.objective)
+    bound = planner.lower_bound()
     base = baselines(cfg, limits, plan.duration)
     if args.out:
         write_profile_csv(args.out, plan.samples, {
@@ -84,6 +95,9 @@ def run(args: argparse.Namespace) -> int:
         "x_final": planner.x_final,
         "clamp_force": planner.clamp_force(),
         "peak_force": peak,
+        "peak_force_lower_bound": bound,
+        "gap_to_bound_percent": 100.0 * (peak - bound) / bound,
+        "dimension_errors": {f"delta_{k}": v for k, v in _errors(args).items()},
         "rms_force": plan.rms_force,
         "baseline_peak_force": trap,
         "baseline_rms_force": base["trapezoidal"].rms_force,
@@ -92,9 +106,10 @@ def run(args: argparse.Namespace) -> int:
         "reduction_percent": 100.0 * (trap - peak) / trap,
         "s_curve_reduction_percent": 100.0 * (scurve - peak) / scurve,
         "peak_motor_torque": float(motor_torque(peak, cfg.mechanism.drive)),
-        "binding_limits": planner.binding_limits(plan),
+        "binding_limits": planner.binding_limits(plan, args.force_limit),
         "limits": {"velocity": limits.velocity, "acceleration": limits.acceleration,
                    "jerk": limits.jerk, "torque": limits.torque,
+                   "input_force": min(args.force_limit or np.inf, planner.force_limit),
                    "contact_platen_speed": args.contact_speed},
         "solve_time": plan.solve_time,
         "iterations": plan.iterations,
@@ -114,6 +129,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"peak reduction {result['reduction_percent']:.2f} % (trapezoid), "
           f"{result['s_curve_reduction_percent']:.2f} % (S-curve); solved in "
           f"{plan.solve_time * 1e3:.1f} ms, {plan.iterations} iterations")
+    print(f"no stroke of any duration peaks below {bound:.4g} N (lower bound; the plan is "
+          f"{result['gap_to_bound_percent']:.2f} % above it)")
+    print(f"binding limits: {', '.join(result['binding_limits']) or 'none'}")
     if args.out:
         print(f"profile written to {args.out}")
     return 0
@@ -167,6 +185,12 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--a-max", type=_positive, default=None, help="acceleration limit, m/s^2")
     p.add_argument("--j-max", type=_positive, default=None, help="jerk limit, m/s^3")
     p.add_argument("--torque-max", type=_positive, default=None, help="motor torque limit, N m")
+    errors = p.add_argument_group("dimensional errors, m (named as the FMU's delta_* "
+                                  "parameters; seed 000's names)")
+    for name in ERRORS:
+        errors.add_argument(f"--delta-{name}", dest=f"delta_{name}", type=float, default=None,
+                            metavar="M", help=argparse.SUPPRESS if name not in _SHOWN else
+                            f"error of {name}, m (likewise --delta-NAME for every dimension)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
