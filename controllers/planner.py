@@ -701,6 +701,10 @@ class ClampPlanner:
         limit = self.force_limit if force_limit is None else min(force_limit, self.force_limit)
         if not (math.isfinite(limit) and limit > 0):
             raise ParameterError(f"force limit must be > 0 N, got {force_limit!r}")
+        if limit < self.lower_bound():
+            raise PlanningError(self._unreachable(limit, None) + (
+                f": no stroke of any duration peaks below {self.lower_bound():.4g} N "
+                "(the lower bound, inertia relief included)"))
         plan = self._fastest(self.force_limit, start, warm)
         if plan is None:
             raise PlanningError(self._unreachable(limit, None))
