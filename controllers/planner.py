@@ -199,8 +199,14 @@ def _min_jerk(tau: np.ndarray) -> tuple[np.ndarray, ...]:
 _OUTPUTS = ("free", "mold", "contact", "free_mid", "mold_mid")
 #: The functions compiled to machine code: jets of each output (value, + gradient, + Hessian),
 #: then the model (:meth:`StrokeProblem._model_functions`).
-_NAMES = (*(f"{name}{order}" for name in _OUTPUTS for order in range(3)), "input_force",
-          "f_plain", "grad_f_plain", "fg", "grad_f", "jac_g", "hess_lag")
+_MODEL_NAMES = ("input_force", "f_plain", "grad_f_plain", "fg", "grad_f", "jac_g", "hess_lag")
+
+
+def _names(plants: int) -> tuple[str, ...]:
+    """Names of the compiled functions of a problem over ``plants`` plants: the jets of each
+    output of each plant (``mold_mid1_2``: plant 1, second order), then the model's."""
+    return (*(f"{name}{k}_{order}" for k in range(plants) for name in _OUTPUTS
+              for order in range(3)), *_MODEL_NAMES)
 #: Optimisation level of the compilation units: the jets are small code doing the plant's
 #: arithmetic (-O1 makes them two to three times faster than -O0), the model is 1.6 MB of
 #: straight-line C, compiled in seconds at -O0 and in half a minute at -O1, which would save
@@ -221,13 +227,14 @@ PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "x_contact", "f_ref", "t
 _P = {name: k for k, name in enumerate(PARAMETERS)}
 
 
-def _problem_key(cfg: PlantConfig, intervals: int) -> str:
+def _problem_key(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = ()
+                 ) -> str:
     """Everything that determines a :class:`StrokeProblem`'s functions, the key of their
-    disk cache: the code the problem uses, the plant (every field of the frozen parameters,
+    disk cache: the code the problem uses, the plants (every field of the frozen parameters,
     floats in their exact repr; mold height, friction and drive limits are parameters of
     the problem, not part of the key) and N."""
-    cfg = cfg.with_(x_contact=None, mu=None)
-    return "\n".join((_SOURCE, *map(repr, (astuple(cfg), intervals))))
+    plants = [astuple(c.with_(x_contact=None, mu=None)) for c in (cfg, *variants)]
+    return "\n".join((_SOURCE, *map(repr, (*plants, intervals))))
 
 
 def _jets(name: str, output: ca.SX, z: ca.SX, prm: ca.SX, nodes: int
@@ -266,10 +273,12 @@ class StrokeProblem:
     contact, the duration and the velocity at the midpoints (N).
     """
 
-    def __init__(self, cfg: PlantConfig, intervals: int) -> None:
+    def __init__(self, cfg: PlantConfig, intervals: int,
+                 variants: tuple[PlantConfig, ...] = ()) -> None:
         if not (isinstance(intervals, int) and intervals >= 4):
             raise ParameterError(f"intervals must be an integer >= 4, got {intervals!r}")
-        self.config = cfg
+        self.config, self.variants = cfg, variants
+        self.plants = (cfg, *variants)
         self.x_open, self.x_final = clamp_stroke(cfg.mechanism)
         lo, hi = cfg.input_range
         if not (lo <= self.x_open and self.x_final <= hi):
@@ -278,14 +287,17 @@ class StrokeProblem:
         N = intervals
         self.n1, self.n2 = N - N // 2, N // 2
         self.size = 4 * N + 6
-        self.n_forces = 2 * N + 2  # input force at the N + 2 phase nodes and N midpoints
+        # input force at the N + 2 phase nodes and N midpoints, of each plant
+        self.n_forces = (2 * N + 2) * len(self.plants)
         sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
-                 "force_lower": self.n_forces, "contact_speed": 1, "duration": 1,
+                 "force_lower": self.n_forces, "contact_speed": len(self.plants), "duration": 1,
                  "mid_velocity": N}
         starts = np.cumsum([0, *sizes.values()])
         self.rows = {name: slice(int(a), int(b)) for name, a, b in
                      zip(sizes, starts[:-1], starts[1:])}
         self.n_constraints = int(starts[-1])
+        #: :data:`PARAMETERS`, then each plant's force scale (its forces count divided by it)
+        self.n_parameters = len(PARAMETERS) + len(self.plants)
         self._solvers: dict[tuple[bool, bool], Any] = {}
         self.last: Plan | None = None  # the latest plan, for any mold height
         self._build()
@@ -318,13 +330,17 @@ class StrokeProblem:
         """The per-node jets of :data:`_OUTPUTS` and the model as SX functions, in
         compilation units (see :data:`_OPTIMISATION`)."""
         z, prm = ca.SX.sym("z", 3), ca.SX.sym("prm", 2)  # prm: x_contact, mu
-        free = plant_outputs(z[0], z[1], z[2], self.config, mu=prm[1])
-        mold = plant_outputs(z[0], z[1], z[2], self.config, x_contact=prm[0], mu=prm[1])
-        outputs = (free.input_force, mold.input_force, free.platen_velocity,
-                   free.input_force, mold.input_force)
-        jets = [fn for name, out, nodes in zip(_OUTPUTS, outputs, self._spans())
-                for fn in _jets(name, ca.SX(out), z, prm, nodes.stop - nodes.start)]
-        force = ca.Function("input_force", [z, prm], [mold.input_force], {"cse": True})
+        jets = []
+        for k, plant in enumerate(self.plants):
+            free = plant_outputs(z[0], z[1], z[2], plant, mu=prm[1])
+            mold = plant_outputs(z[0], z[1], z[2], plant, x_contact=prm[0], mu=prm[1])
+            outputs = (free.input_force, mold.input_force, free.platen_velocity,
+                       free.input_force, mold.input_force)
+            jets += [fn for name, out, nodes in zip(_OUTPUTS, outputs, self._spans())
+                     for fn in _jets(f"{name}{k}_", ca.SX(out), z, prm,
+                                     nodes.stop - nodes.start)]
+            if k == 0:
+                force = ca.Function("input_force", [z, prm], [mold.input_force], {"cse": True})
         *values, hess = self._model_functions()
         return [(_OPTIMISATION["jets"], [*jets, force]), (_OPTIMISATION["model"], values),
                 (_OPTIMISATION["model"], [hess])]
@@ -337,16 +353,20 @@ class StrokeProblem:
         xi, nu, al, io, th1, th2, s, nu_m, z = self._nodes(w, t_ref)
         dz = z - self._nodes(w0, t_ref)[-1]
         outputs, col = [], 0
-        for nodes in self._spans():
+        for nodes in self._spans() * len(self.plants):
             d, n = dz[:, nodes], nodes.stop - nodes.start
             block = data[:, col:col + n]
             quad = sum((1 if i == j else 2) * block[4 + k, :] * d[i, :] * d[j, :]
                        for k, (i, j) in enumerate(_UPPER))
             outputs.append(block[0, :] + ca.sum1(block[1:4, :] * d) + quad / 2)
             col += n
-        F = ca.vertcat(outputs[0].T, outputs[1].T) / p[_P["f_ref"]]
-        F_mid = ca.vertcat(outputs[3].T, outputs[4].T) / p[_P["f_ref"]]
-        contact = outputs[2] / p[_P["contact_speed"]]
+        each = len(_OUTPUTS)
+        F = ca.vertcat(outputs[0].T, outputs[1].T) / p[_P["f_ref"]]  # the first plant's
+        scales = p[len(PARAMETERS):]
+        forces = ca.vertcat(*[ca.vertcat(*[outputs[k + j].T for j in (0, 1, 3, 4)])
+                              / scales[k // each] for k in range(0, len(outputs), each)]
+                            ) / p[_P["f_ref"]]
+        contact = ca.vertcat(*outputs[2::each]) / p[_P["contact_speed"]]
         h = ca.vertcat(ca.repmat(th1, n1, 1), ca.repmat(th2, n2, 1))
         dyn = ca.vertcat(
             xi[1:] - (xi[:-1] + h * (nu[:-1] + h * (al[:-1] / 2 + h * io / 6))),
@@ -363,7 +383,6 @@ class StrokeProblem:
         objective = (p[_P["w_peak"]] * s + p[_P["w_energy"]] * energy
                      + p[_P["w_time"]] * duration
                      + p[_P["w_jerk"]] * ca.dot(h, (io / jerk_bound) ** 2))
-        forces = ca.vertcat(F, F_mid)
         return objective, ca.vertcat(dyn, xi[n1], forces - s, forces + s, contact, duration,
                                      nu_m)
 
@@ -374,9 +393,9 @@ class StrokeProblem:
         the objective's value and gradient without the force integral (its weight zero: the
         peak and minimum-time objectives), functions of (w, p) alone, so that IPOPT
         evaluates no plant for them."""
-        m = sum(nodes.stop - nodes.start for nodes in self._spans())
+        m = sum(nodes.stop - nodes.start for nodes in self._spans()) * len(self.plants)
         w, w0 = ca.SX.sym("w", self.size), ca.SX.sym("w0", self.size)
-        p, data = ca.SX.sym("p", len(PARAMETERS)), ca.SX.sym("data", _JET, m)
+        p, data = ca.SX.sym("p", self.n_parameters), ca.SX.sym("data", _JET, m)
         lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", self.n_constraints)
         f, g = self._model(w, w0, p, data)
         hess = ca.triu(ca.hessian(lam_f * f + ca.dot(lam_g, g), w)[0])
@@ -396,15 +415,17 @@ class StrokeProblem:
         the Lagrangian), each the per-node jets mapped over the nodes feeding the model;
         the jets and the model come compiled from the disk cache where possible."""
         N = self.n1 + self.n2
-        key = _problem_key(self.config, N)
-        fn = dict(zip(_NAMES, compiled("stroke", key, _NAMES, self._symbolic)))
-        W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", len(PARAMETERS))
+        key = _problem_key(self.config, N, self.variants)
+        names = _names(len(self.plants))
+        fn = dict(zip(names, compiled("stroke", key, names, self._symbolic)))
+        W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
         L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.n_constraints)
         z = self._nodes(W, P[_P["t_ref"]])[-1]
         prm = ca.vertcat(P[_P["x_contact"]], P[_P["mu"]])
 
         def node_data(order: int) -> ca.MX:
-            return ca.horzcat(*[fn[f"{name}{order}"](z[:, nodes], prm)
+            return ca.horzcat(*[fn[f"{name}{k}_{order}"](z[:, nodes], prm)
+                                for k in range(len(self.plants))
                                 for name, nodes in zip(_OUTPUTS, self._spans())])
 
         self._force = fn["input_force"]
@@ -457,10 +478,11 @@ class StrokeProblem:
 
 
 @functools.lru_cache(maxsize=8)
-def _problem_for(cfg: PlantConfig, intervals: int) -> StrokeProblem:
+def _problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = ()
+                 ) -> StrokeProblem:
     """A built problem, shared by the planners of every mold height, friction and drive
-    limits of one plant."""
-    return StrokeProblem(cfg, intervals)
+    limits of one plant (and variants)."""
+    return StrokeProblem(cfg, intervals, variants)
 
 
 class ClampPlanner:
@@ -470,19 +492,33 @@ class ClampPlanner:
     the fastest one under a force limit; each warm-starts from the previous
     solution on the same problem (another duration, mold height, friction or
     drive limit) unless told otherwise. Without ``problem`` the planner builds
-    its own.
+    its own. With ``variants`` (the clamp with other dimensional errors or masses) the
+    force limits and the peak objective hold for the worst of the plant and its variants,
+    with the mold at the same crosshead position: a robust plan (:meth:`worst_peak`).
+    ``scales`` divide the variants' forces in the objective and the limit (default 1:
+    the absolute worst case; a variant's baseline peak over the plant's weighs each
+    against its own baseline).
     """
 
     def __init__(self, cfg: PlantConfig, limits: DriveLimits, *,
                  contact_speed: float = CONTACT_SPEED, intervals: int = INTERVALS,
-                 problem: StrokeProblem | None = None) -> None:
+                 problem: StrokeProblem | None = None,
+                 variants: tuple[PlantConfig, ...] = (),
+                 scales: tuple[float, ...] | None = None) -> None:
         if cfg.x_contact is None:
             raise ParameterError("the planner needs a mold-contact position (x_contact)")
         if not (math.isfinite(contact_speed) and contact_speed > 0):
             raise ParameterError(f"contact speed must be > 0 m/s, got {contact_speed!r}")
-        self.problem = problem or StrokeProblem(cfg.with_(x_contact=None, mu=None), intervals)
+        self.problem = problem or StrokeProblem(
+            cfg.with_(x_contact=None, mu=None), intervals,
+            tuple(v.with_(x_contact=None, mu=None) for v in variants))
         pr = self.problem
         self.config, self.limits, self.contact_speed = cfg, limits, contact_speed
+        self.variants = tuple(v.with_(x_contact=cfg.x_contact, mu=cfg.mu) for v in variants)
+        self.scales = tuple(scales or (1.0,) * len(variants))
+        if len(self.scales) != len(variants) or not all(
+                math.isfinite(k) and k > 0 for k in self.scales):
+            raise ParameterError(f"need one positive force scale per variant, got {scales!r}")
         self.x_open, self.x_final, self.stroke = pr.x_open, pr.x_final, pr.stroke
         self.t_ref = minimum_time(self.stroke, limits.velocity, limits.acceleration, limits.jerk)
         self.jerk_bound = limits.jerk * self.t_ref**3 / self.stroke
@@ -507,9 +543,10 @@ class ClampPlanner:
         return max(float(np.max(np.abs(f))), 1e-6)
 
     def _parameters(self, weights: list[float]) -> list[float]:
-        """The problem's :data:`PARAMETERS` for these objective weights."""
+        """The problem's :data:`PARAMETERS` for these objective weights, then the plants'
+        force scales."""
         return [*weights, self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
-                self.contact_speed, self.config.friction]
+                self.contact_speed, self.config.friction, 1.0, *self.scales]
 
     # ---- solving --------------------------------------------------------------------
 
@@ -662,7 +699,7 @@ class ClampPlanner:
         if objective not in OBJECTIVES:
             raise ParameterError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
         previous = self.last
-        key = (lambda p: p.peak_force) if objective == "peak" else (lambda p: p.rms_force)
+        key = self.worst_peak if objective == "peak" else (lambda p: p.rms_force)
         good = self.lower_bound() * (1 + _GAP) if objective == "peak" else 0.0
         plans = [self.solve(duration, objective, warm=False)]
         if previous is not None:
@@ -708,7 +745,7 @@ class ClampPlanner:
         plan = self._fastest(self.force_limit, start, warm)
         if plan is None:
             raise PlanningError(self._unreachable(limit, None))
-        levels = self._levels(min(plan.peak_force, self.force_limit), limit)
+        levels = self._levels(min(self.worst_peak(plan), self.force_limit), limit)
         imposed = limit
         for level in levels:
             imposed = level
@@ -717,7 +754,7 @@ class ClampPlanner:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
         for _ in range(_TIGHTEN):  # between the nodes: the 1 ms samples decide
-            excess = plan.peak_force - limit
+            excess = self.worst_peak(plan) - limit
             if excess <= 0:
                 break
             imposed -= 1.5 * excess
@@ -753,7 +790,7 @@ class ClampPlanner:
         text = (f"{which} binds: the planner found no stroke clamping to "
                 f"{self.clamp_force():.6g} N with an input force of at most {limit:.4g} N")
         if best is not None:
-            text += (f"; the lowest peak it reached is {best.peak_force:.4g} N, in a stroke "
+            text += (f"; the lowest peak it reached is {self.worst_peak(best):.4g} N, in a stroke "
                      f"of {best.duration:.4g} s")
         return text
 
@@ -765,12 +802,18 @@ class ClampPlanner:
         F, contact = self.problem.monitor(plan.solution["x"], self._parameters([0] * 4))
         return np.asarray(F).ravel(), float(contact)
 
+    def worst_peak(self, plan: Plan) -> float:
+        """The plan's peak input force (1 ms samples through the plant), N: the worst over
+        the plant and its variants (each divided by its scale)."""
+        return max([plan.peak_force, *(predict(plan.profile, v).peak_force / k
+                                       for v, k in zip(self.variants, self.scales))])
+
     def binding_limits(self, plan: Plan, force_limit: float | None = None) -> list[str]:
         """Names of the limits the plan runs at (within 1 %), the force limit judged by the
         plan's 1 ms samples through the plant."""
         pr, lim = plan.profile, self.limits
         contact = self.node_forces(plan)[1]
-        peak = plan.peak_force
+        peak = self.worst_peak(plan)
         found = {
             f"velocity (max {lim.velocity * 1e3:.4g} mm/s)": np.max(pr.v) / lim.velocity,
             f"acceleration (max {lim.acceleration:.4g} m/s^2)":
@@ -800,12 +843,14 @@ class ClampPlanner:
 
 @functools.lru_cache(maxsize=8)
 def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CONTACT_SPEED,
-                intervals: int = INTERVALS) -> ClampPlanner:
-    """A planner on a kept problem, so that a re-plan for the same plant, for any mold
-    height, friction or drive limits, neither rebuilds nor starts cold."""
-    problem = _problem_for(cfg.with_(x_contact=None, mu=None), intervals)
+                intervals: int = INTERVALS, variants: tuple[PlantConfig, ...] = (),
+                scales: tuple[float, ...] | None = None) -> ClampPlanner:
+    """A planner on a kept problem, so that a re-plan for the same plant (and variants),
+    for any mold height, friction or drive limits, neither rebuilds nor starts cold."""
+    problem = _problem_for(cfg.with_(x_contact=None, mu=None), intervals,
+                           tuple(v.with_(x_contact=None, mu=None) for v in variants))
     return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
-                        problem=problem)
+                        problem=problem, variants=variants, scales=scales)
 
 
 def baselines(cfg: PlantConfig, limits: DriveLimits, duration: float
