@@ -853,15 +853,20 @@ def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CO
                         problem=problem, variants=variants, scales=scales)
 
 
+def baseline_stroke(cfg: PlantConfig, limits: DriveLimits, duration: float,
+                    jerk: float | None = None) -> Profile:
+    """The S-curve stroke of the plant's clamp in ``duration`` under the limits (the jerk
+    limit's unless ``jerk`` is given; inf: the trapezoidal velocity profile)."""
+    x_open, x_final = clamp_stroke(cfg.mechanism)
+    return s_curve(x_open, x_final, duration, limits.velocity, limits.acceleration,
+                   limits.jerk if jerk is None else jerk)
+
+
 def baselines(cfg: PlantConfig, limits: DriveLimits, duration: float
               ) -> dict[str, ProfileSamples]:
     """The trapezoidal and S-curve strokes of the same duration and limits, predicted."""
-    x_open, x_final = clamp_stroke(cfg.mechanism)
-    return {
-        name: predict(s_curve(x_open, x_final, duration, limits.velocity, limits.acceleration,
-                              jerk), cfg)
-        for name, jerk in (("trapezoidal", math.inf), ("s_curve", limits.jerk))
-    }
+    return {name: predict(baseline_stroke(cfg, limits, duration, jerk), cfg)
+            for name, jerk in (("trapezoidal", math.inf), ("s_curve", limits.jerk))}
 
 
 def default_duration(planner: ClampPlanner) -> float:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import types
 from dataclasses import replace
 
 import casadi as ca
@@ -379,3 +378,30 @@ def test_best_plan_finds_the_lower_optimum_and_respects_the_bound(chang):
     assert plan.peak_force <= 14.99 < single.peak_force
     assert bound <= plan.peak_force <= bound * 1.005
     assert 14.9 < bound  # the quasi-static peak at creep speed is 15.18 N
+
+
+def test_robust_plan_beats_the_s_curve_on_both_clamps(capsys):
+    """With delta_r8 = 0.25 mm a plan for the nominal clamp is worse than the S-curve on the
+    erroneous one; the robust plan (both clamps, each against its S-curve) beats the S-curve
+    on both."""
+    assert main(["plan", "--delta-r8", "0.25e-3", "--robust", "--intervals", "100",
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["dimension_errors"] == {"delta_r8": 0.25e-3}
+    nominal, erroneous = report["robust"]["nominal"], report["robust"]["erroneous"]
+    assert erroneous["nominal_plan_peak_force"] > erroneous["s_curve_peak_force"] * 1.1
+    for clamp in (nominal, erroneous):
+        assert clamp["robust_plan_peak_force"] < clamp["s_curve_peak_force"] * (1 - 5e-3)
+    assert nominal["nominal_plan_peak_force"] <= nominal["robust_plan_peak_force"]
+    assert main(["plan", "--robust"]) == 2  # no errors to be robust against
+    assert "--delta-NAME" in capsys.readouterr().err
+
+
+def test_dimension_errors_are_named_as_the_fmu_names_them():
+    from fmu_src.toggle_clamp_fmu import ERRORS as FMU_ERRORS
+    from toggle.cli.plan import ERRORS
+
+    assert ERRORS == FMU_ERRORS
+    nominal = plan_config("chang2021")
+    longer = plan_config("chang2021", errors={"r8": 0.25e-3}, x_contact=nominal.x_contact)
+    assert longer.mechanism.upper.r5 == pytest.approx(nominal.mechanism.upper.r5 + 0.25e-3)

@@ -17,16 +17,19 @@ from controllers.planner import (
     CONTACT_SPEED,
     INTERVALS,
     OBJECTIVES,
+    ClampPlanner,
+    Plan,
+    baseline_stroke,
     baselines,
     default_duration,
     plan_config,
     planner_for,
 )
-from controllers.profiles import read_profile_csv, write_profile_csv
+from controllers.profiles import predict, read_profile_csv, write_profile_csv
 from toggle.cli.common import add_json_argument, add_preset_argument, print_json, table
 from toggle.drive import motor_torque
 from toggle.params import HALVES, PAPER_NAMES, ParameterError
-from toggle.plant import PlantConfig
+from toggle.plant import PlantConfig, with_errors
 
 MASS_FIELDS = ("crosshead", "links", "platen", "guide_damping")
 #: The dimensional errors, named as the FMU names its delta_* parameters.
@@ -56,21 +59,50 @@ def _errors(args: argparse.Namespace) -> dict[str, float]:
             if (value := getattr(args, f"delta_{name}", None)) is not None}
 
 
-def _plant(args: argparse.Namespace) -> tuple[PlantConfig, DriveLimits]:
+def _plant(args: argparse.Namespace, errors: bool = True) -> tuple[PlantConfig, DriveLimits]:
+    """The plant (with the dimensional errors unless ``errors`` is false) and the limits."""
     cfg = plan_config(args.preset, mu=args.mu, x_contact=args.x_contact,
                       clamp_force=args.clamp_force, masses=_masses(args.masses),
-                      errors=_errors(args))
+                      errors=_errors(args) if errors else None)
     limits = drive_limits(cfg.mechanism, velocity=args.v_max, acceleration=args.a_max,
                           jerk=args.j_max, torque=args.torque_max)
     return cfg, limits
 
 
+def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, object]]:
+    """The robust planner (``--robust``): the nominal clamp with the erroneous one as a
+    variant, each weighed against its own S-curve; and the report of the robust plan, the
+    nominal plan and the S-curve on each clamp."""
+    if args.min_time or not _errors(args):
+        raise ParameterError("--robust plans a fixed duration against dimensional errors: "
+                             "give --delta-NAME and no --min-time")
+    cfg, limits = _plant(args, errors=False)
+    erroneous = cfg.with_(mechanism=with_errors(cfg.mechanism, _errors(args))[0])
+    nominal = planner_for(cfg, limits, args.contact_speed, args.intervals)
+    duration = args.duration or default_duration(nominal)
+    stroke = baseline_stroke(cfg, limits, duration)
+    curve = {"nominal": predict(stroke, cfg), "erroneous": predict(stroke, erroneous)}
+    scale = curve["erroneous"].peak_force / curve["nominal"].peak_force
+    planner = planner_for(cfg, limits, args.contact_speed, args.intervals, (erroneous,), (scale,))
+    plan, plain = planner.best(duration, args.objective), nominal.best(duration, args.objective)
+    report = {}
+    for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
+        report[name] = {"robust_plan_peak_force": predict(plan.profile, plant).peak_force,
+                        "nominal_plan_peak_force": predict(plain.profile, plant).peak_force,
+                        "s_curve_peak_force": curve[name].peak_force}
+    return planner, plan, report
+
+
 def run(args: argparse.Namespace) -> int:
-    cfg, limits = _plant(args)
-    planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
-    if args.min_time:
+    cfg, limits = _plant(args, errors=not args.robust)
+    robust = None
+    if args.robust:
+        planner, plan, robust = _robust(args)
+    elif args.min_time:
+        planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
         plan = planner.minimum_time(args.force_limit)
     else:
+        planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
         plan = planner.best(args.duration or default_duration(planner), args.objective)
     bound = planner.lower_bound()
     base = baselines(cfg, limits, plan.duration)
@@ -98,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
         "peak_force_lower_bound": bound,
         "gap_to_bound_percent": 100.0 * (peak - bound) / bound,
         "dimension_errors": {f"delta_{k}": v for k, v in _errors(args).items()},
+        "robust": robust,
         "rms_force": plan.rms_force,
         "baseline_peak_force": trap,
         "baseline_rms_force": base["trapezoidal"].rms_force,
@@ -132,6 +165,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"no stroke of any duration peaks below {bound:.4g} N (lower bound; the plan is "
           f"{result['gap_to_bound_percent']:.2f} % above it)")
     print(f"binding limits: {', '.join(result['binding_limits']) or 'none'}")
+    if robust:
+        rows = [(name, *values.values()) for name, values in robust.items()]
+        print("peak input force (N) on each clamp of the robust plan, the nominal clamp's "
+              "plan and the S-curve:")
+        print(table(("clamp", "robust", "nominal", "S-curve"), rows))
     if args.out:
         print(f"profile written to {args.out}")
     return 0
@@ -208,6 +246,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
     p.add_argument("--intervals", type=int, default=INTERVALS,
                    help=f"time intervals N (default {INTERVALS})")
+    p.add_argument("--robust", action="store_true",
+                   help="plan for the nominal clamp and the one with the --delta-NAME errors "
+                        "at once (the worst of the two, each against its S-curve)")
     p.add_argument("--out", type=Path, default=None, help="profile CSV to write (SI units)")
     add_json_argument(p)
     p.set_defaults(handler=run)
