@@ -1,4 +1,5 @@
-"""Optimal crosshead motion for a clamp stroke: least drive force under real limits.
+"""Optimal crosshead motion for a clamp stroke: least time or least drive force under
+real limits.
 
 The optimal control problem, solved with CasADi and IPOPT through the plant's
 own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
@@ -10,34 +11,50 @@ own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
   platen's speed there is a node value) and the clamping up to the toggle.
   Approach nodes are evaluated with the mold-free plant, clamping nodes with
   the mold; the two agree up to contact, so this is the FMU's model;
-* objective the peak input force (epigraph variable s, |F_k| <= s, plus a
-  small weight on the squared jerk to make the optimum unique) or the
-  integral of F^2; the minimum-time mode minimises the duration under
-  |F_k| <= force limit;
+* objective the peak input force (epigraph variable s, |F| <= s at the nodes
+  and interval midpoints, plus a small weight on the squared jerk to make the
+  optimum unique) or the integral of F^2; the minimum-time mode minimises the
+  duration under |F| <= force limit;
 * constraints: rest at the open position and at the toggle, monotone stroke
-  inside the stroke limits, velocity, acceleration, jerk (at the nodes) and
-  motor-torque limits (:mod:`controllers.limits`), platen speed at mold
+  inside the stroke limits, velocity (nodes and midpoints), acceleration, jerk
+  and motor-torque limits (:mod:`controllers.limits`), platen speed at mold
   contact, and no creeping through the clamping (``CREEP_FACTOR``).
+
+Optima to trust: :meth:`ClampPlanner.best` starts from several guesses (the
+problem has two families of local optima: slow or fast arrival at the mold,
+the latter braking through the thrust peak) and :meth:`ClampPlanner.lower_bound`
+gives what no stroke can beat (:mod:`controllers.bounds`).
+:meth:`ClampPlanner.minimum_time` lets the optimiser decide whether a force
+limit can be met, by continuation from the fastest stroke down to the limit,
+and checks the limit on the plan's 1 ms samples (tightening it where the
+samples between the nodes exceed it). With ``variants`` (the clamp with
+dimensional errors) the force limits and the peak hold for the worst plant:
+a robust plan.
 
 Variables are scaled by the stroke, a reference time (the kinematic minimum)
 and a reference force; the interval lengths of the two phases are variables
 and the duration is a constraint whose bounds fix it or leave it free. The
-objective weights, the mold-contact position and the force scale are
-parameters. So one built problem (:class:`StrokeProblem`, shared by
-:func:`planner_for` across mold heights) serves every duration, mode and mold
-height, and a re-plan warm-starts IPOPT from the previous primal and dual
-solution, stretched in time to the new duration. IPOPT's functions are per-node
-jets of the plant feeding a model of the rest (see :class:`StrokeProblem`),
-compiled to machine code once and kept on disk under a hash of everything that
-determines them (this code and the toggle model's, the plant, limits, contact
-speed and N: :mod:`controllers.compiled`), so a new process builds a problem in
-milliseconds; without a C compiler they are built symbolically and interpreted.
+objective weights, the mold-contact position, the pin friction, the scales,
+the jerk and contact-speed limits are parameters (:data:`PARAMETERS`) and
+the other limits bounds. So one built problem (:class:`StrokeProblem`,
+shared by :func:`planner_for`) serves every duration, mode, mold height,
+friction and drive limit, and a re-plan warm-starts IPOPT from the previous
+primal and dual solution, stretched in time to the new duration. IPOPT's
+functions are per-node jets of the plant feeding a model of the rest (see
+:class:`StrokeProblem`), compiled to machine code once and kept on disk
+under a hash of what determines them (the code this module imports, not
+plots or the CLI; the plant without mold and friction; N:
+:mod:`controllers.compiled`), so a new process builds a problem in
+milliseconds; without a C compiler they are built symbolically and
+interpreted.
 
-Speed (``benchmarks/bench_planner.py``, chang2021, N = 200, 3 s, two cores): a
-cold plan takes about 0.18 s with the disk cache filled (the problem loaded in
-under 10 ms, 63 IPOPT iterations), a warm re-plan about 10 ms for another
-duration (3 iterations) and 16 ms for another mold height (6 iterations); the
-first plan of a plant (or after any change of the code) compiles for about 5 s.
+Speed (``benchmarks/bench_planner.py``, chang2021, N = 200, 3 s, two shared
+cores): a cold plan takes about 0.25 s with the disk cache filled (the problem
+loaded in about 12 ms, 62 IPOPT iterations), a warm re-plan about 14 ms for
+another duration (3 iterations), 25 ms for another mold height and 17 ms for
+another v_max or mu; the best of several starts about 1.3 s, minimum time under
+a force limit about 2 s; the first plan of a plant (or after a change of the
+code it uses) compiles for about 10 s.
 """
 
 from __future__ import annotations
