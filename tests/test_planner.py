@@ -352,19 +352,26 @@ def test_cli_infeasible_requests_exit_2(capsys):
     assert "beyond reach" in capsys.readouterr().err
 
 
-def test_minimum_time_under_a_force_limit_met_only_with_inertia_relief(chang):
-    """15.0 N is below the quasi-static clamping thrust at creep speed (15.18 N): braking
-    through the thrust peak meets it. Checked on the 1 ms samples through the plant."""
+def test_minimum_time_under_a_force_limit_met_only_with_inertia_relief(chang, capsys):
+    """``toggle plan --min-time --force-limit 15.0``: 15.0 N is below the quasi-static
+    clamping thrust at creep speed (15.18 N, the old pre-check refused it); braking through
+    the thrust peak meets it. Checked on the 1 ms samples through the plant."""
     cfg, limits, planner, _ = chang
     quasi_static = planner._force(np.linspace(cfg.x_contact, planner.x_final, 401),
                                   CREEP_FACTOR * cfg.velocity_epsilon, 0.0).max()
     assert quasi_static > 15.1
-    plan = planner.minimum_time(15.0, warm=False)
-    assert plan.duration <= 1.70
-    assert plan.samples.peak_force <= 15.0
+    assert main(["plan", "--preset", "chang2021", "--min-time", "--force-limit", "15.0",
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    plan = planner.last
+    assert report["duration"] == pytest.approx(plan.duration) and plan.duration <= 1.70
+    assert plan.samples.peak_force <= 15.0 and report["peak_force"] <= 15.0
     assert plan.samples.velocity.max() <= limits.velocity * (1 + 1e-3)
-    assert "input force (max 15 N)" in planner.binding_limits(plan, 15.0)
-    assert plan.peak_force >= planner.lower_bound()
+    assert "input force (max 15 N)" in report["binding_limits"]
+    assert report["limits"]["input_force"] == 15.0
+    # both baselines of that duration break the limit, and the report says so
+    assert report["baselines_within_limits"] == {"trapezoidal": False, "s_curve": False}
+    assert report["peak_force_lower_bound"] <= report["peak_force"]
     with pytest.raises(PlanningError, match="force limit binds.*lower bound"):
         planner.minimum_time(0.99 * planner.lower_bound())
 
@@ -384,7 +391,7 @@ def test_robust_plan_beats_the_s_curve_on_both_clamps(capsys):
     """With delta_r8 = 0.25 mm a plan for the nominal clamp is worse than the S-curve on the
     erroneous one; the robust plan (both clamps, each against its S-curve) beats the S-curve
     on both."""
-    assert main(["plan", "--delta-r8", "0.25e-3", "--robust", "--intervals", "100",
+    assert main(["plan", "--delta-r8", "0.25e-3", "--robust", "--intervals", "60",
                  "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["dimension_errors"] == {"delta_r8": 0.25e-3}

@@ -116,6 +116,9 @@ def run(args: argparse.Namespace) -> int:
         })
     peak = plan.peak_force
     trap, scurve = base["trapezoidal"].peak_force, base["s_curve"].peak_force
+    force_limit = min(args.force_limit or np.inf, planner.force_limit)
+    # the baselines are held to the plan's limits: one that breaks them is no comparison
+    feasible = {name: bool(samples.peak_force <= force_limit) for name, samples in base.items()}
     result = {
         "preset": cfg.mechanism.name,
         "mode": "minimum_time" if args.min_time else "fixed_duration",
@@ -138,11 +141,12 @@ def run(args: argparse.Namespace) -> int:
         "s_curve_rms_force": base["s_curve"].rms_force,
         "reduction_percent": 100.0 * (trap - peak) / trap,
         "s_curve_reduction_percent": 100.0 * (scurve - peak) / scurve,
+        "baselines_within_limits": feasible,
         "peak_motor_torque": float(motor_torque(peak, cfg.mechanism.drive)),
         "binding_limits": planner.binding_limits(plan, args.force_limit),
         "limits": {"velocity": limits.velocity, "acceleration": limits.acceleration,
                    "jerk": limits.jerk, "torque": limits.torque,
-                   "input_force": min(args.force_limit or np.inf, planner.force_limit),
+                   "input_force": force_limit,
                    "contact_platen_speed": args.contact_speed},
         "solve_time": plan.solve_time,
         "iterations": plan.iterations,
@@ -162,6 +166,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"peak reduction {result['reduction_percent']:.2f} % (trapezoid), "
           f"{result['s_curve_reduction_percent']:.2f} % (S-curve); solved in "
           f"{plan.solve_time * 1e3:.1f} ms, {plan.iterations} iterations")
+    for name, ok in feasible.items():
+        if not ok:
+            print(f"the {name.replace('_', '-')} baseline breaks the input-force limit of "
+                  f"{force_limit:.4g} N: its reduction compares with an infeasible stroke")
     print(f"no stroke of any duration peaks below {bound:.4g} N (lower bound; the plan is "
           f"{result['gap_to_bound_percent']:.2f} % above it)")
     print(f"binding limits: {', '.join(result['binding_limits']) or 'none'}")
