@@ -43,8 +43,9 @@ Unit = tuple[tuple[str, ...], list[ca.Function]]
 _COMPILE = ("-fPIC", "-c")
 _LINK = ("-shared", "-s")
 _TIMEOUT = 300  # s, per compiler run
-#: Libraries of one name kept; older ones (of changed code or parameters) are deleted.
-KEEP = 16
+#: Libraries of one name kept (0.7 to 2 MB each); older ones (of changed code or plants,
+#: other N, robust variants) are deleted.
+KEEP = 48
 
 
 def cache_dir() -> Path:

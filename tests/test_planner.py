@@ -234,20 +234,27 @@ def test_the_cache_key_covers_the_plant_and_the_code_it_uses(tmp_path):
         sys.path.remove(str(tmp_path))
 
 
-def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, monkeypatch):
+def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, tmp_path, monkeypatch):
     cfg, limits, planner, plan = chang
-    monkeypatch.setattr("controllers.planner.compiled", _no_compile)
     faster = planner_for(cfg, replace(limits, velocity=0.05))
     rougher = planner_for(cfg.with_(mu=cfg.friction * 1.5), limits)
     assert faster.problem is planner.problem and rougher.problem is planner.problem
-    fresh = ClampPlanner(cfg.with_(mu=cfg.friction * 1.5), replace(limits, velocity=0.03))
-    assert fresh.problem is not planner.problem  # built anew, its functions from the disk cache
     quick = faster.solve(DURATION, start=plan)
     assert quick.samples.velocity.max() <= 0.05 * (1 + 1e-3)
-    slow = fresh.solve(DURATION, start=plan)
+    slow = planner_for(cfg.with_(mu=cfg.friction * 1.5), replace(limits, velocity=0.03)
+                       ).solve(DURATION, start=plan)
     assert plan.samples.velocity.max() > 0.031  # the new limit binds
     assert slow.samples.velocity.max() <= 0.03 * (1 + 1e-3)
     assert slow.peak_force > plan.peak_force  # more pin friction, more thrust
+    # a new process (a new problem) loads the compiled functions another v_max and mu left
+    # in the disk cache (its own here: other processes prune the shared one), no compile
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
+    ClampPlanner(cfg, limits, intervals=8)
+    monkeypatch.setattr("controllers.planner.compiled", _no_compile)
+    other = ClampPlanner(cfg.with_(mu=cfg.friction * 1.5), replace(limits, velocity=0.03),
+                         intervals=8)
+    assert other.problem._force.class_name() == "External"
+    assert other.solve(DURATION).profile.v.max() <= 0.03 * (1 + 1e-6)  # at the nodes
 
 
 def _no_compile(name, key, names, build):
