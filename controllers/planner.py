@@ -782,6 +782,27 @@ class ClampPlanner:
         self.problem.last = plan
         return plan
 
+    def trade_off(self, points: int = 6) -> list[Plan]:
+        """The trade-off between stroke time and peak input force: the fastest stroke under
+        ``points`` force limits from the unconstrained fastest stroke's peak down to just
+        above :meth:`lower_bound` (geometrically spaced), each continued from the last;
+        limits no stroke meets are left out."""
+        if not (isinstance(points, int) and points >= 2):
+            raise ParameterError(f"points must be an integer >= 2, got {points!r}")
+        fastest = self._fastest(self.force_limit, None, False)
+        if fastest is None:
+            raise PlanningError(self._unreachable(self.force_limit, None))
+        top = min(self.worst_peak(fastest), self.force_limit)
+        plans, start = [fastest], fastest
+        for limit in np.geomspace(top, self.lower_bound() * (1 + _GAP), points)[1:]:
+            try:
+                plan = self.minimum_time(float(limit), start=start)
+            except PlanningError:
+                break
+            plans.append(plan)
+            start = plan
+        return plans
+
     @staticmethod
     def _levels(peak: float, limit: float) -> list[float]:
         """Force limits from ``peak`` down to ``limit``, each at most :data:`_LIMIT_STEP`

@@ -419,3 +419,16 @@ def test_dimension_errors_are_named_as_the_fmu_names_them():
     nominal = plan_config("chang2021")
     longer = plan_config("chang2021", errors={"r8": 0.25e-3}, x_contact=nominal.x_contact)
     assert longer.mechanism.upper.r5 == pytest.approx(nominal.mechanism.upper.r5 + 0.25e-3)
+
+
+def test_trade_off_is_monotone_and_ends_near_the_bound(chang, capsys):
+    """``toggle plan --trade-off``: each lower force limit costs stroke time; the last point
+    is within 0.5 % of the lower bound, every peak within its limit on the 1 ms samples."""
+    assert main(["plan", "--trade-off", "3", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    points = report["trade_off"]
+    peaks, times = ([p[k] for p in points] for k in ("peak_force", "duration"))
+    assert len(points) == 3
+    assert all(np.diff(peaks) < 0) and all(np.diff(times) > 0)
+    assert peaks[-1] <= report["peak_force_lower_bound"] * 1.005
+    assert main(["plan", "--trade-off", "1"]) == 2

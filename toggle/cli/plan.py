@@ -93,8 +93,25 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     return planner, plan, report
 
 
+def _trade_off(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits) -> int:
+    """``--trade-off N``: stroke time against peak input force, N minimum-time plans."""
+    planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
+    plans = planner.trade_off(args.trade_off)
+    rows = [(p.peak_force, p.duration) for p in plans]
+    if args.json:
+        print_json({"preset": cfg.mechanism.name, "peak_force_lower_bound": planner.lower_bound(),
+                    "trade_off": [{"peak_force": f, "duration": t} for f, t in rows]})
+        return 0
+    print(f"{cfg.mechanism.name}: the fastest stroke under each input-force limit "
+          f"(no stroke peaks below {planner.lower_bound():.4g} N)")
+    print(table(("peak (N)", "time (s)"), rows))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     cfg, limits = _plant(args, errors=not args.robust)
+    if args.trade_off:
+        return _trade_off(args, cfg, limits)
     robust = None
     if args.robust:
         planner, plan, robust = _robust(args)
@@ -254,6 +271,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
     p.add_argument("--intervals", type=int, default=INTERVALS,
                    help=f"time intervals N (default {INTERVALS})")
+    p.add_argument("--trade-off", type=int, default=None, metavar="POINTS",
+                   help="print the stroke time against the peak input force instead: the "
+                        "fastest stroke under POINTS (>= 2) force limits")
     p.add_argument("--robust", action="store_true",
                    help="plan for the nominal clamp and the one with the --delta-NAME errors "
                         "at once (the worst of the two, each against its S-curve)")
