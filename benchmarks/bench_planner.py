@@ -9,8 +9,13 @@ process with an empty cache directory (TOGGLE_CACHE_DIR), which builds the funct
 symbolically and compiles them (one run). Warm: the same planner re-plans a 2 % longer or
 shorter stroke from the previous solution (primal and dual). Mold: a planner for another
 mold height (+-0.1 mm of contact position) on the same built problem re-plans from the
-previous solution. Medians over several runs with iteration counts; targets 0.3 s cold and
-20 ms warm.
+previous solution. Limits: planners with another top speed (+-5 %) or pin friction
+(+-10 %) on the same built problem (these are parameters of the compiled problem: no
+rebuild, no compile) re-plan from the previous solution. Best: the multi-start plan
+(ClampPlanner.best) and minimum time under a 15.0 N force limit (continuation in the
+limit), on new planners over the loaded problem. Medians over several runs with iteration
+counts, each also as a ratio to the baseline measured in the same run: the cold plan with
+the cache filled. Targets 0.3 s cold and 20 ms warm.
 Run: python benchmarks/bench_planner.py [--runs 5] [--intervals 200]
 """
 
@@ -24,6 +29,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 
 from controllers.limits import drive_limits
 from controllers.planner import ClampPlanner, plan_config
@@ -73,8 +79,9 @@ def main() -> None:
     limits = drive_limits(cfg.mechanism)
     colds = [cold(args.intervals, args.duration) for _ in range(args.runs)]
     fresh = [_in_new_process(args, None) for _ in range(args.runs)]
-    times: dict[str, list[float]] = {"warm": [], "mold": []}
-    iters: dict[str, list[int]] = {"warm": [], "mold": []}
+    times: dict[str, list[float]] = {"warm": [], "mold": [], "limits": [], "best": [],
+                                     "min_time": []}
+    iters: dict[str, list[int]] = {"warm": [], "mold": [], "limits": []}
     for _ in range(args.runs):
         planner = ClampPlanner(cfg, limits, intervals=args.intervals)
         plan = planner.solve(args.duration, warm=False)
@@ -89,24 +96,59 @@ def main() -> None:
             elapsed, replan = _timed(moved.solve, args.duration)
             times["mold"].append(elapsed)
             iters["mold"].append(replan.iterations)
+        for changed in (replace(limits, velocity=limits.velocity * 1.05),
+                        replace(limits, velocity=limits.velocity * 0.95)):
+            other = ClampPlanner(cfg, changed, problem=planner.problem)
+            elapsed, replan = _timed(other.solve, args.duration)
+            times["limits"].append(elapsed)
+            iters["limits"].append(replan.iterations)
+        for mu in (cfg.friction * 1.1, cfg.friction * 0.9):
+            other = ClampPlanner(cfg.with_(mu=mu), limits, problem=planner.problem)
+            elapsed, replan = _timed(other.solve, args.duration)
+            times["limits"].append(elapsed)
+            iters["limits"].append(replan.iterations)
+    for _ in range(max(1, args.runs // 2)):
+        fresh_planner = ClampPlanner(cfg, limits, problem=planner.problem)
+        fresh_planner.lower_bound()  # computed once per planner, timed apart
+        elapsed, best = _timed(fresh_planner.best, args.duration)
+        times["best"].append(elapsed)
+        fresh_planner = ClampPlanner(cfg, limits, problem=planner.problem)
+        fresh_planner.lower_bound()
+        elapsed, fastest = _timed(fresh_planner.minimum_time, 15.0, warm=False)
+        times["min_time"].append(elapsed)
+    bound_time, bound = _timed(ClampPlanner(cfg, limits, problem=planner.problem).lower_bound)
 
     def med(runs: list[dict[str, float]], key: str) -> float:
         return statistics.median(run[key] for run in runs)
+
+    baseline = med(colds, "total")
+
+    def ratio(seconds: float) -> str:
+        return f"{seconds / baseline:6.2f}x baseline"
 
     print(f"chang2021, N = {args.intervals}, duration {args.duration} s, "
           f"peak {plan.peak_force:.4f} N")
     for label, runs in (("cold plan, cache filled:       ", colds),
                         ("cold plan, new process:        ", fresh)):
-        print(f"{label}{med(runs, 'total') * 1e3:8.1f} ms median (construction "
-              f"{med(runs, 'build') * 1e3:.1f} ms, IPOPT {med(runs, 'ipopt') * 1e3:.1f} ms, "
-              f"{med(runs, 'iterations'):.0f} iterations)")
+        print(f"{label}{med(runs, 'total') * 1e3:8.1f} ms median, {ratio(med(runs, 'total'))} "
+              f"(construction {med(runs, 'build') * 1e3:.1f} ms, IPOPT "
+              f"{med(runs, 'ipopt') * 1e3:.1f} ms, {med(runs, 'iterations'):.0f} iterations)")
     print(f"cold plan, first-ever:         {first['total']:8.2f} s (construction with "
           f"compilation {first['build']:.2f} s, IPOPT {first['ipopt'] * 1e3:.1f} ms; one run, "
           "empty cache)")
-    print(f"warm re-plan (duration +-2 %): {statistics.median(times['warm']) * 1e3:8.1f} ms "
-          f"median ({statistics.median(iters['warm']):.0f} iterations)")
-    print(f"warm re-plan (mold +-0.1 mm):  {statistics.median(times['mold']) * 1e3:8.1f} ms "
-          f"median ({statistics.median(iters['mold']):.0f} iterations, no rebuild)")
+    for key, label in (("warm", "warm re-plan (duration +-2 %): "),
+                       ("mold", "warm re-plan (mold +-0.1 mm):  "),
+                       ("limits", "re-plan (v_max +-5 %, mu +-10 %):")):
+        m = statistics.median(times[key])
+        print(f"{label}{m * 1e3:8.1f} ms median, {ratio(m)} "
+              f"({statistics.median(iters[key]):.0f} iterations, no rebuild)")
+    print(f"peak lower bound {bound:.4f} N:       {bound_time * 1e3:8.1f} ms, {ratio(bound_time)}")
+    m = statistics.median(times["best"])
+    print(f"best of several starts:        {m * 1e3:8.1f} ms median, {ratio(m)} "
+          f"(peak {best.peak_force:.4f} N vs {plan.peak_force:.4f} N from one cold start)")
+    m = statistics.median(times["min_time"])
+    print(f"minimum time under 15.0 N:     {m * 1e3:8.1f} ms median, {ratio(m)} "
+          f"({fastest.duration:.4f} s, peak {fastest.peak_force:.4f} N at 1 ms)")
     print("(new processes: Python and library imports excluded; the 1 ms samples through the "
           "plant, Plan.samples, are computed when first asked for; not included)")
 

@@ -8,7 +8,7 @@ CasADi's virtual machine evaluates them several times per IPOPT iteration.
 (``TOGGLE_CACHE_DIR``, default ``~/.cache/toggle-clamp``) under a key computed from
 everything that determines the functions, so a later process loads them in
 milliseconds without building them. The caller's key covers the code
-(:func:`source_digest`) and its parameters; the compiler, the link flags, CasADi's
+(:func:`code_digest`) and its parameters; the compiler, the link flags, CasADi's
 version and the platform are added here. A changed input is a new key, never a stale
 library.
 
@@ -24,7 +24,9 @@ slower. The newest :data:`KEEP` libraries of a name are kept.
 
 from __future__ import annotations
 
+import ast
 import hashlib
+import importlib.util
 import os
 import platform
 import subprocess
@@ -41,8 +43,9 @@ Unit = tuple[tuple[str, ...], list[ca.Function]]
 _COMPILE = ("-fPIC", "-c")
 _LINK = ("-shared", "-s")
 _TIMEOUT = 300  # s, per compiler run
-#: Libraries of one name kept; older ones (of changed code or parameters) are deleted.
-KEEP = 16
+#: Libraries of one name kept (0.7 to 2 MB each); older ones (of changed code or plants,
+#: other N, robust variants) are deleted.
+KEEP = 48
 
 
 def cache_dir() -> Path:
@@ -59,6 +62,45 @@ def source_digest(*packages: ModuleType) -> str:
         for path in sorted(p for root in roots for p in root.glob("*.py")):
             digest.update(f"{package.__name__}.{path.stem}\0".encode())
             digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _imported(path: Path, roots: tuple[str, ...]) -> set[str]:
+    """Names of the modules of the packages ``roots`` that the source file imports at
+    module level (imports inside functions, such as plotting, are not the model's)."""
+    names = set()
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return {n for n in names if n.split(".")[0] in roots}
+
+
+def code_digest(*modules: str) -> str:
+    """Hash of the source text of the modules and of every module of their top-level
+    packages that they import, directly or not: the code a compiled problem uses, so that
+    editing another module (plots, the CLI) keeps the cache."""
+    roots = tuple({m.split(".")[0] for m in modules})
+    seen: dict[str, Path] = {}
+    todo = list(modules)
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        try:
+            spec = importlib.util.find_spec(name)
+        except ModuleNotFoundError:  # an attribute imported from a module
+            continue
+        if spec is None or not spec.origin or not spec.origin.endswith(".py"):
+            continue  # an attribute imported from a module, not a module
+        seen[name] = Path(spec.origin)
+        todo.extend(_imported(seen[name], roots))
+    digest = hashlib.sha256()
+    for name in sorted(seen):
+        digest.update(f"{name}\0".encode())
+        digest.update(seen[name].read_bytes())
     return digest.hexdigest()
 
 

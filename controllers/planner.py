@@ -1,4 +1,5 @@
-"""Optimal crosshead motion for a clamp stroke: least drive force under real limits.
+"""Optimal crosshead motion for a clamp stroke: least time or least drive force under
+real limits.
 
 The optimal control problem, solved with CasADi and IPOPT through the plant's
 own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
@@ -10,34 +11,50 @@ own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
   platen's speed there is a node value) and the clamping up to the toggle.
   Approach nodes are evaluated with the mold-free plant, clamping nodes with
   the mold; the two agree up to contact, so this is the FMU's model;
-* objective the peak input force (epigraph variable s, |F_k| <= s, plus a
-  small weight on the squared jerk to make the optimum unique) or the
-  integral of F^2; the minimum-time mode minimises the duration under
-  |F_k| <= force limit;
+* objective the peak input force (epigraph variable s, |F| <= s at the nodes
+  and interval midpoints, plus a small weight on the squared jerk to make the
+  optimum unique) or the integral of F^2; the minimum-time mode minimises the
+  duration under |F| <= force limit;
 * constraints: rest at the open position and at the toggle, monotone stroke
-  inside the stroke limits, velocity, acceleration, jerk (at the nodes) and
-  motor-torque limits (:mod:`controllers.limits`), platen speed at mold
+  inside the stroke limits, velocity (nodes and midpoints), acceleration, jerk
+  and motor-torque limits (:mod:`controllers.limits`), platen speed at mold
   contact, and no creeping through the clamping (``CREEP_FACTOR``).
+
+Optima to trust: :meth:`ClampPlanner.best` starts from several guesses (the
+problem has two families of local optima: slow or fast arrival at the mold,
+the latter braking through the thrust peak) and :meth:`ClampPlanner.lower_bound`
+gives what no stroke can beat (:mod:`controllers.bounds`).
+:meth:`ClampPlanner.minimum_time` lets the optimiser decide whether a force
+limit can be met, by continuation from the fastest stroke down to the limit,
+and checks the limit on the plan's 1 ms samples (tightening it where the
+samples between the nodes exceed it). With ``variants`` (the clamp with
+dimensional errors) the force limits and the peak hold for the worst plant:
+a robust plan.
 
 Variables are scaled by the stroke, a reference time (the kinematic minimum)
 and a reference force; the interval lengths of the two phases are variables
 and the duration is a constraint whose bounds fix it or leave it free. The
-objective weights, the mold-contact position and the force scale are
-parameters. So one built problem (:class:`StrokeProblem`, shared by
-:func:`planner_for` across mold heights) serves every duration, mode and mold
-height, and a re-plan warm-starts IPOPT from the previous primal and dual
-solution, stretched in time to the new duration. IPOPT's functions are per-node
-jets of the plant feeding a model of the rest (see :class:`StrokeProblem`),
-compiled to machine code once and kept on disk under a hash of everything that
-determines them (this code and the toggle model's, the plant, limits, contact
-speed and N: :mod:`controllers.compiled`), so a new process builds a problem in
-milliseconds; without a C compiler they are built symbolically and interpreted.
+objective weights, the mold-contact position, the pin friction, the scales,
+the jerk and contact-speed limits are parameters (:data:`PARAMETERS`) and
+the other limits bounds. So one built problem (:class:`StrokeProblem`,
+shared by :func:`planner_for`) serves every duration, mode, mold height,
+friction and drive limit, and a re-plan warm-starts IPOPT from the previous
+primal and dual solution, stretched in time to the new duration. IPOPT's
+functions are per-node jets of the plant feeding a model of the rest (see
+:class:`StrokeProblem`), compiled to machine code once and kept on disk
+under a hash of what determines them (the code this module imports, not
+plots or the CLI; the plant without mold and friction; N:
+:mod:`controllers.compiled`), so a new process builds a problem in
+milliseconds; without a C compiler they are built symbolically and
+interpreted.
 
-Speed (``benchmarks/bench_planner.py``, chang2021, N = 200, 3 s, two cores): a
-cold plan takes about 0.18 s with the disk cache filled (the problem loaded in
-under 10 ms, 63 IPOPT iterations), a warm re-plan about 10 ms for another
-duration (3 iterations) and 16 ms for another mold height (6 iterations); the
-first plan of a plant (or after any change of the code) compiles for about 5 s.
+Speed (``benchmarks/bench_planner.py``, chang2021, N = 200, 3 s, two shared
+cores): a cold plan takes about 0.25 s with the disk cache filled (the problem
+loaded in about 12 ms, 62 IPOPT iterations), a warm re-plan about 14 ms for
+another duration (3 iterations), 25 ms for another mold height and 17 ms for
+another v_max or mu; the best of several starts about 1.3 s, minimum time under
+a force limit about 2 s; the first plan of a plant (or after a change of the
+code it uses) compiles for about 10 s.
 """
 
 from __future__ import annotations
@@ -52,14 +69,13 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import brentq
 
-import controllers
-import toggle
-from controllers.compiled import Unit, compiled, source_digest
+from controllers.bounds import peak_lower_bound
+from controllers.compiled import Unit, code_digest, compiled
 from controllers.limits import DriveLimits, drive_limits
 from controllers.profiles import Profile, ProfileSamples, minimum_time, predict, s_curve
 from toggle.elastics import ClampingError, clamp_state, clamp_stroke, contact_position
 from toggle.params import HALVES, Dynamics, Mechanism, ParameterError, load_preset
-from toggle.plant import PlantConfig, plant_outputs
+from toggle.plant import PlantConfig, plant_outputs, with_errors
 
 OBJECTIVES = ("peak", "rms")
 CONTACT_SPEED = 5e-3  # m/s, default limit on the platen's speed at mold contact
@@ -70,6 +86,14 @@ INTERVALS = 200
 CREEP_FACTOR = 10.0
 _REGULARISATION = 1e-2  # weight of the squared jerk (relative to its limit), for uniqueness
 _BINDING = 0.99  # a limit counts as binding above this fraction of its value
+#: Objective weights (peak, force integral, duration, jerk regularisation) of each objective.
+_WEIGHTS = {"peak": [1.0, 0.0, 0.0, _REGULARISATION], "rms": [0.0, 1.0, 0.0, 0.0]}
+#: best(): stretches of the late S-curve starts, and the gap to the lower bound that ends
+#: the search (relative).
+_LATE_STARTS = (1.0, 1.1, 1.25)
+_GAP = 3e-3
+_LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's continuation
+_TIGHTEN = 4  # re-plans of minimum_time with the limit tightened by the excess between nodes
 #: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
 #: scaling of every KKT matrix only costs time (a tenth of a warm re-plan).
 _IPOPT = {"print_level": 0, "sb": "yes", "max_iter": 500, "tol": 1e-6,
@@ -124,8 +148,12 @@ def plan_config(
     x_contact: float | None = None,
     clamp_force: float | None = None,
     masses: dict[str, float] | None = None,
+    errors: dict[str, float] | None = None,
 ) -> PlantConfig:
     """The plant to plan for, with the mold-contact position set.
+
+    ``errors`` adds dimensional errors by seed 000's names, as the FMU's ``delta_*``
+    parameters do (:func:`toggle.plant.with_errors`).
 
     Give the mold-contact crosshead position ``x_contact`` or the clamp force
     ``clamp_force`` (N) to hold at rest in the locked position, not both;
@@ -135,6 +163,7 @@ def plan_config(
     guide_damping (N s/m).
     """
     mech = load_preset(mechanism) if isinstance(mechanism, str) else mechanism
+    mech = with_errors(mech, errors)[0]
     if masses:
         dynamics = (replace(mech.dynamics, **masses) if mech.dynamics
                     else Dynamics(**masses) if {"crosshead", "links", "platen"} <= set(masses)
@@ -182,109 +211,153 @@ def _min_jerk(tau: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(np.polyval(np.polyder(c, m) if m else c, tau) for m in range(4))
 
 
-#: The plant outputs the problem evaluates at the nodes (see :meth:`StrokeProblem._spans`).
-_OUTPUTS = ("free", "mold", "contact")
+#: The plant outputs the problem evaluates (see :meth:`StrokeProblem._spans`): the input
+#: force at the nodes and interval midpoints of each phase, the platen speed at contact.
+_OUTPUTS = ("free", "mold", "contact", "free_mid", "mold_mid")
 #: The functions compiled to machine code: jets of each output (value, + gradient, + Hessian),
 #: then the model (:meth:`StrokeProblem._model_functions`).
-_NAMES = (*(f"{name}{order}" for name in _OUTPUTS for order in range(3)), "input_force",
-          "f_plain", "grad_f_plain", "fg", "grad_f", "jac_g", "hess_lag")
+_MODEL_NAMES = ("input_force", "f_plain", "grad_f_plain", "fg", "grad_f", "jac_g", "hess_lag")
+
+
+def _names(plants: int) -> tuple[str, ...]:
+    """Names of the compiled functions of a problem over ``plants`` plants: the jets of each
+    output of each plant (``mold_mid1_2``: plant 1, second order), then the model's."""
+    return (*(f"{name}{k}_{order}" for k in range(plants) for name in _OUTPUTS
+              for order in range(3)), *_MODEL_NAMES)
 #: Optimisation level of the compilation units: the jets are small code doing the plant's
 #: arithmetic (-O1 makes them two to three times faster than -O0), the model is 1.6 MB of
 #: straight-line C, compiled in seconds at -O0 and in half a minute at -O1, which would save
 #: a tenth of the solve time.
 _OPTIMISATION = {"jets": ("-O1",), "model": ("-O0",)}
-#: The code that determines the problem's functions, hashed when this module is imported (so
+#: The code that determines the problem's functions (this module and what it imports from
+#: toggle and controllers, not plots or the CLI), hashed when this module is imported (so
 #: the hash matches the code this process runs, even if the files change later).
-_SOURCE = source_digest(toggle, controllers)
+_SOURCE = code_digest(__name__)
 #: Upper triangle of a symmetric 3 x 3 matrix, row by row (the per-node plant Hessians).
 _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 _JET = 10  # rows of a node's plant data: value, gradient (3), Hessian upper triangle (6)
+#: The problem's parameters, in order: objective weights (peak, force integral, duration,
+#: jerk regularisation), mold-contact position (m), force scale (N), time scale T_ref (s),
+#: jerk limit (m/s^3), platen speed limit at contact (m/s), pin friction mu.
+PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "x_contact", "f_ref", "t_ref",
+              "jerk", "contact_speed", "mu")
+_P = {name: k for k, name in enumerate(PARAMETERS)}
 
 
-def _problem_key(cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
-                 intervals: int) -> str:
+def _problem_key(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = ()
+                 ) -> str:
     """Everything that determines a :class:`StrokeProblem`'s functions, the key of their
-    disk cache: the code and the problem's inputs (every field of the frozen parameters,
-    floats in their exact repr)."""
-    return "\n".join((_SOURCE, *map(repr, (astuple(cfg), astuple(limits), contact_speed,
-                                            intervals))))
+    disk cache: the code the problem uses, the plants (every field of the frozen parameters,
+    floats in their exact repr; mold height, friction and drive limits are parameters of
+    the problem, not part of the key) and N."""
+    plants = [astuple(c.with_(x_contact=None, mu=None)) for c in (cfg, *variants)]
+    return "\n".join((_SOURCE, *map(repr, (*plants, intervals))))
 
 
-def _jets(name: str, output: ca.SX, z: ca.SX, xc: ca.SX, nodes: int
+def _jets(name: str, output: ca.SX, z: ca.SX, prm: ca.SX, nodes: int
           ) -> tuple[ca.Function, ...]:
-    """One plant output h(z, x_contact) of a node, z = (x, v, a), as three functions of
-    (z at ``nodes`` nodes, x_contact) -> its value, first- and second-order jet at each node,
-    a :data:`_JET`-row column per node (missing orders zero). Mapped here, so that the map
-    is compiled into a loop too."""
+    """One plant output h(z, prm) of a node, z = (x, v, a), prm = (x_contact, mu), as three
+    functions of (z at ``nodes`` nodes, prm) -> its value, first- and second-order jet at
+    each node, a :data:`_JET`-row column per node (missing orders zero). Mapped here, so
+    that the map is compiled into a loop too."""
     H, g = ca.hessian(output, z)
     zero = ca.SX.zeros
     rows = (ca.vertcat(output, zero(_JET - 1)), ca.vertcat(output, g, zero(_JET - 4)),
             ca.vertcat(output, g, *[H[i, j] for i, j in _UPPER]))
-    return tuple(ca.Function(f"{name}{k}_node", [z, xc], [r], {"cse": True}).map(
+    return tuple(ca.Function(f"{name}{k}_node", [z, prm], [r], {"cse": True}).map(
         f"{name}{k}", "serial", nodes, [1], []) for k, r in enumerate(rows))
 
 
 class StrokeProblem:
-    """The optimal control problem for one mold-free plant, drive limits and contact-speed
-    limit, built once; the mold-contact position is one of its parameters.
+    """The optimal control problem for one mold-free plant and N, built once; the mold
+    height, the pin friction, the drive limits and the contact-speed limit are parameters
+    (:data:`PARAMETERS`) or bounds, so changing them neither rebuilds nor recompiles.
 
     Variables are scaled: position xi = (x - x_open) / S, velocity, acceleration and jerk
-    in units of S / T_ref^k, interval lengths theta in units of T_ref. The plant enters
-    only through its outputs at the nodes (input force, platen speed at contact), each a
-    function of that node's (x, v, a). So IPOPT's derivatives are assembled from per-node
-    jets (value, gradient, Hessian of each output, small SX functions mapped over the nodes)
-    and a small SX graph of the rest, in which each output is its second-order Taylor model
-    about the current point: exact value, gradient and Hessian of the Lagrangian there,
-    without CasADi differentiating through the mapped plant at every call. Both come from
-    the disk cache of compiled code when it holds this problem (:func:`_problem_key`),
-    else they are built and compiled; only the small MX graph joining them is built here.
+    in units of S / T_ref^k, interval lengths theta in units of T_ref (T_ref a parameter).
+    The plant enters only through its outputs at the nodes and at the interval midpoints
+    (input force, platen speed at contact), each a function of that point's (x, v, a). So
+    IPOPT's derivatives are assembled from per-node jets (value, gradient, Hessian of each
+    output, small SX functions mapped over the nodes) and a small SX graph of the rest, in
+    which each output is its second-order Taylor model about the current point: exact
+    value, gradient and Hessian of the Lagrangian there, without CasADi differentiating
+    through the mapped plant at every call. Both come from the disk cache of compiled code
+    when it holds this problem (:func:`_problem_key`), else they are built and compiled;
+    only the small MX graph joining them is built here.
+
+    Constraints, in order (:attr:`rows`): the dynamics (3N), contact at node N1, the force
+    epigraph F - s <= 0 and F + s >= 0 at nodes and midpoints, the platen speed at
+    contact, the duration and the velocity at the midpoints (N).
     """
 
-    def __init__(self, cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
-                 intervals: int) -> None:
+    def __init__(self, cfg: PlantConfig, intervals: int,
+                 variants: tuple[PlantConfig, ...] = ()) -> None:
         if not (isinstance(intervals, int) and intervals >= 4):
             raise ParameterError(f"intervals must be an integer >= 4, got {intervals!r}")
-        if not (math.isfinite(contact_speed) and contact_speed > 0):
-            raise ParameterError(f"contact speed must be > 0 m/s, got {contact_speed!r}")
-        self.config, self.limits, self.contact_speed = cfg, limits, contact_speed
+        self.config, self.variants = cfg, variants
+        self.plants = (cfg, *variants)
         self.x_open, self.x_final = clamp_stroke(cfg.mechanism)
         lo, hi = cfg.input_range
         if not (lo <= self.x_open and self.x_final <= hi):
             raise ParameterError("the stroke leaves the assemblable range")
         self.stroke = self.x_final - self.x_open
-        self.n1, self.n2 = intervals - intervals // 2, intervals // 2
-        self.size = 4 * intervals + 6
-        self.n_constraints = 3 * intervals + 1 + 2 * (intervals + 2) + 2
-        self.t_ref = minimum_time(self.stroke, limits.velocity, limits.acceleration, limits.jerk)
-        self.jerk_bound = limits.jerk * self.t_ref**3 / self.stroke
+        N = intervals
+        self.n1, self.n2 = N - N // 2, N // 2
+        self.size = 4 * N + 6
+        # input force at the N + 2 phase nodes and N midpoints, of each plant
+        self.n_forces = (2 * N + 2) * len(self.plants)
+        sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
+                 "force_lower": self.n_forces, "contact_speed": len(self.plants), "duration": 1,
+                 "mid_velocity": N}
+        starts = np.cumsum([0, *sizes.values()])
+        self.rows = {name: slice(int(a), int(b)) for name, a, b in
+                     zip(sizes, starts[:-1], starts[1:])}
+        self.n_constraints = int(starts[-1])
+        #: :data:`PARAMETERS`, then each plant's force scale (its forces count divided by it)
+        self.n_parameters = len(PARAMETERS) + len(self.plants)
         self._solvers: dict[tuple[bool, bool], Any] = {}
         self.last: Plan | None = None  # the latest plan, for any mold height
         self._build()
 
-    def _nodes(self, w: Any) -> tuple[Any, ...]:
-        """Scaled variables -> (xi, nu, al, jerk, th1, th2, s) and the node states (3 x N+1)."""
-        N = self.n1 + self.n2
+    def _nodes(self, w: Any, t_ref: Any) -> tuple[Any, ...]:
+        """Scaled variables -> (xi, nu, al, jerk, th1, th2, s, nu at the midpoints) and the
+        states (3 x 2N+1: the N+1 nodes, then the N interval midpoints)."""
+        n1, N = self.n1, self.n1 + self.n2
         xi, nu, al = (w[k * (N + 1):(k + 1) * (N + 1)] for k in range(3))
-        S, t_ref = self.stroke, self.t_ref
-        z = ca.vertcat(self.x_open + S * xi.T, S / t_ref * nu.T, S / t_ref**2 * al.T)
-        return xi, nu, al, w[3 * N + 3:4 * N + 3], w[4 * N + 3], w[4 * N + 4], w[4 * N + 5], z
+        io, th1, th2 = w[3 * N + 3:4 * N + 3], w[4 * N + 3], w[4 * N + 4]
+        h = ca.vertcat(ca.repmat(th1 / 2, n1, 1), ca.repmat(th2 / 2, N - n1, 1))
+        xi_m = xi[:-1] + h * (nu[:-1] + h * (al[:-1] / 2 + h * io / 6))
+        nu_m = nu[:-1] + h * (al[:-1] + h * io / 2)
+        al_m = al[:-1] + h * io
+        S = self.stroke
+        z = ca.vertcat(self.x_open + S * ca.horzcat(xi.T, xi_m.T),
+                       S / t_ref * ca.horzcat(nu.T, nu_m.T),
+                       S / t_ref**2 * ca.horzcat(al.T, al_m.T))
+        return xi, nu, al, io, th1, th2, w[4 * N + 5], nu_m, z
 
     def _spans(self) -> tuple[slice, ...]:
-        """The nodes of each of :data:`_OUTPUTS`: the mold-free input force over the approach,
-        the input force with the mold over the clamping, the platen speed at contact."""
+        """The columns of the states (:meth:`_nodes`) of each of :data:`_OUTPUTS`: the
+        mold-free input force over the approach, the input force with the mold over the
+        clamping, the platen speed at contact, then the forces at the midpoints."""
         n1, N = self.n1, self.n1 + self.n2
-        return slice(0, n1 + 1), slice(n1, N + 1), slice(n1, n1 + 1)
+        return (slice(0, n1 + 1), slice(n1, N + 1), slice(n1, n1 + 1),
+                slice(N + 1, N + 1 + n1), slice(N + 1 + n1, 2 * N + 1))
 
     def _symbolic(self) -> list[Unit]:
         """The per-node jets of :data:`_OUTPUTS` and the model as SX functions, in
         compilation units (see :data:`_OPTIMISATION`)."""
-        z, xc = ca.SX.sym("z", 3), ca.SX.sym("x_contact")
-        free = plant_outputs(z[0], z[1], z[2], self.config)
-        mold = plant_outputs(z[0], z[1], z[2], self.config, x_contact=xc)
-        outputs = (free.input_force, mold.input_force, free.platen_velocity)
-        jets = [fn for name, out, nodes in zip(_OUTPUTS, outputs, self._spans())
-                for fn in _jets(name, ca.SX(out), z, xc, nodes.stop - nodes.start)]
-        force = ca.Function("input_force", [z, xc], [mold.input_force], {"cse": True})
+        z, prm = ca.SX.sym("z", 3), ca.SX.sym("prm", 2)  # prm: x_contact, mu
+        jets = []
+        for k, plant in enumerate(self.plants):
+            free = plant_outputs(z[0], z[1], z[2], plant, mu=prm[1])
+            mold = plant_outputs(z[0], z[1], z[2], plant, x_contact=prm[0], mu=prm[1])
+            outputs = (free.input_force, mold.input_force, free.platen_velocity,
+                       free.input_force, mold.input_force)
+            jets += [fn for name, out, nodes in zip(_OUTPUTS, outputs, self._spans())
+                     for fn in _jets(f"{name}{k}_", ca.SX(out), z, prm,
+                                     nodes.stop - nodes.start)]
+            if k == 0:
+                force = ca.Function("input_force", [z, prm], [mold.input_force], {"cse": True})
         *values, hess = self._model_functions()
         return [(_OPTIMISATION["jets"], [*jets, force]), (_OPTIMISATION["model"], values),
                 (_OPTIMISATION["model"], [hess])]
@@ -293,19 +366,24 @@ class StrokeProblem:
         """Objective and constraints with each plant output replaced by its Taylor model
         about the point w0, from the node data (:data:`_JET` rows per output and node, the
         outputs' nodes :meth:`_spans`)."""
-        n1, n2 = self.n1, self.n2
-        xi, nu, al, io, th1, th2, s, z = self._nodes(w)
-        dz = z - self._nodes(w0)[-1]
+        n1, n2, t_ref = self.n1, self.n2, p[_P["t_ref"]]
+        xi, nu, al, io, th1, th2, s, nu_m, z = self._nodes(w, t_ref)
+        dz = z - self._nodes(w0, t_ref)[-1]
         outputs, col = [], 0
-        for nodes in self._spans():
+        for nodes in self._spans() * len(self.plants):
             d, n = dz[:, nodes], nodes.stop - nodes.start
             block = data[:, col:col + n]
             quad = sum((1 if i == j else 2) * block[4 + k, :] * d[i, :] * d[j, :]
                        for k, (i, j) in enumerate(_UPPER))
             outputs.append(block[0, :] + ca.sum1(block[1:4, :] * d) + quad / 2)
             col += n
-        F = ca.vertcat(outputs[0].T, outputs[1].T) / p[5]
-        contact = outputs[2] / self.contact_speed
+        each = len(_OUTPUTS)
+        F = ca.vertcat(outputs[0].T, outputs[1].T) / p[_P["f_ref"]]  # the first plant's
+        scales = p[len(PARAMETERS):]
+        forces = ca.vertcat(*[ca.vertcat(*[outputs[k + j].T for j in (0, 1, 3, 4)])
+                              / scales[k // each] for k in range(0, len(outputs), each)]
+                            ) / p[_P["f_ref"]]
+        contact = ca.vertcat(*outputs[2::each]) / p[_P["contact_speed"]]
         h = ca.vertcat(ca.repmat(th1, n1, 1), ca.repmat(th2, n2, 1))
         dyn = ca.vertcat(
             xi[1:] - (xi[:-1] + h * (nu[:-1] + h * (al[:-1] / 2 + h * io / 6))),
@@ -318,27 +396,30 @@ class StrokeProblem:
 
         energy = integral(F[:n1 + 1], th1) + integral(F[n1 + 1:], th2)
         duration = n1 * th1 + n2 * th2
-        objective = (p[0] * s + p[1] * energy + p[2] * duration
-                     + p[3] * ca.dot(h, (io / self.jerk_bound) ** 2))
-        return objective, ca.vertcat(dyn, xi[n1], F - s, F + s, contact, duration)
+        jerk_bound = p[_P["jerk"]] * t_ref**3 / self.stroke
+        objective = (p[_P["w_peak"]] * s + p[_P["w_energy"]] * energy
+                     + p[_P["w_time"]] * duration
+                     + p[_P["w_jerk"]] * ca.dot(h, (io / jerk_bound) ** 2))
+        return objective, ca.vertcat(dyn, xi[n1], forces - s, forces + s, contact, duration,
+                                     nu_m)
 
     def _model_functions(self) -> list[ca.Function]:
         """The model's value (f, g), gradient, constraint Jacobian and Hessian of the
         Lagrangian, functions of (w, p, node data): derivatives of the Taylor models taken
         about w0, then evaluated at w0 = w, where the models are exact to second order. And
-        the objective's value and gradient without the force integral (its weight p[1]
-        zero: the peak and minimum-time objectives), functions of (w, p) alone, so that
-        IPOPT evaluates no plant for them."""
-        m = sum(nodes.stop - nodes.start for nodes in self._spans())
+        the objective's value and gradient without the force integral (its weight zero: the
+        peak and minimum-time objectives), functions of (w, p) alone, so that IPOPT
+        evaluates no plant for them."""
+        m = sum(nodes.stop - nodes.start for nodes in self._spans()) * len(self.plants)
         w, w0 = ca.SX.sym("w", self.size), ca.SX.sym("w0", self.size)
-        p, data = ca.SX.sym("p", 6), ca.SX.sym("data", _JET, m)
+        p, data = ca.SX.sym("p", self.n_parameters), ca.SX.sym("data", _JET, m)
         lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", self.n_constraints)
         f, g = self._model(w, w0, p, data)
         hess = ca.triu(ca.hessian(lam_f * f + ca.dot(lam_g, g), w)[0])
         f, g, grad, jac, hess = ca.substitute(
             [f, g, ca.gradient(f, w), ca.jacobian(g, w), hess], [w0], [w])
         args, opts = [w, p, data], {"cse": True}
-        plain, plain_grad = ca.substitute([f, grad], [p[1]], [0.0])
+        plain, plain_grad = ca.substitute([f, grad], [p[_P["w_energy"]]], [0.0])
         return [ca.Function("f_plain", [w, p], [plain], opts),
                 ca.Function("grad_f_plain", [w, p], [plain, plain_grad], opts),
                 ca.Function("fg", args, [f, g], opts),
@@ -351,14 +432,17 @@ class StrokeProblem:
         the Lagrangian), each the per-node jets mapped over the nodes feeding the model;
         the jets and the model come compiled from the disk cache where possible."""
         N = self.n1 + self.n2
-        key = _problem_key(self.config, self.limits, self.contact_speed, N)
-        fn = dict(zip(_NAMES, compiled("stroke", key, _NAMES, self._symbolic)))
-        W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", 6)
+        key = _problem_key(self.config, N, self.variants)
+        names = _names(len(self.plants))
+        fn = dict(zip(names, compiled("stroke", key, names, self._symbolic)))
+        W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
         L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.n_constraints)
-        z = self._nodes(W)[-1]
+        z = self._nodes(W, P[_P["t_ref"]])[-1]
+        prm = ca.vertcat(P[_P["x_contact"]], P[_P["mu"]])
 
         def node_data(order: int) -> ca.MX:
-            return ca.horzcat(*[fn[f"{name}{order}"](z[:, nodes], P[4])
+            return ca.horzcat(*[fn[f"{name}{k}_{order}"](z[:, nodes], prm)
+                                for k in range(len(self.plants))
                                 for name, nodes in zip(_OUTPUTS, self._spans())])
 
         self._force = fn["input_force"]
@@ -377,22 +461,26 @@ class StrokeProblem:
                                     [fn["hess_lag"](W, P, node_data(2), L_f, L_g)],
                                     ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
         }
-        n1 = self.n1
+        n1, spans = self.n1, self._spans()
+        forces = [values[0, col:col + s.stop - s.start] for col, s in
+                  zip(np.cumsum([0, *(s.stop - s.start for s in spans)]), spans)]
+        #: input force (N) at the nodes and midpoints, platen speed at contact (m/s)
         self.monitor = ca.Function("monitor", [W, P], [
-            ca.vertcat(values[0, :n1 + 1].T, values[0, n1 + 1:N + 2].T),
-            values[0, N + 2] / self.contact_speed])
-        nf = N + 2
-        self.g_bounds = (
-            np.concatenate([np.zeros(3 * N), [np.nan], np.full(nf, -np.inf), np.zeros(nf),
-                            [-np.inf, 0.0]]),
-            np.concatenate([np.zeros(3 * N), [np.nan], np.zeros(nf), np.full(nf, np.inf),
-                            [1.0, np.inf]]))
+            ca.vertcat(forces[0][:n1 + 1].T, forces[1][1:].T, forces[3].T, forces[4].T),
+            forces[2]])
+        lbg, ubg = np.zeros(self.n_constraints), np.zeros(self.n_constraints)
+        r = self.rows
+        lbg[r["force_upper"]], ubg[r["force_lower"]] = -np.inf, np.inf
+        lbg[r["contact_speed"]], ubg[r["contact_speed"]] = -np.inf, 1.0
+        ubg[r["duration"]] = np.inf
+        self.g_bounds = (lbg, ubg)
 
-    def input_force(self, x: Any, v: Any, a: Any, x_contact: float) -> np.ndarray:
+    def input_force(self, x: Any, v: Any, a: Any, x_contact: float, mu: float) -> np.ndarray:
         """The plant's input force (N) at the points (x, v, a) with the mold at ``x_contact``
-        (the function of the clamping phase's jets, exact before contact too, compiled)."""
+        and pin friction ``mu`` (the function of the clamping phase's jets, exact before
+        contact too, compiled)."""
         z = np.vstack(np.broadcast_arrays(x, v, a)).astype(float)
-        return np.asarray(self._force(z, x_contact))[0]
+        return np.asarray(self._force(z, [x_contact, mu]))[0]
 
     def solver(self, warm: bool, energy: bool) -> Any:
         """The IPOPT instance, cold or with the warm-start options, for an objective with
@@ -407,10 +495,11 @@ class StrokeProblem:
 
 
 @functools.lru_cache(maxsize=8)
-def _problem_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
-                 intervals: int) -> StrokeProblem:
-    """A built problem, shared by the planners of every mold height of one plant."""
-    return StrokeProblem(cfg, limits, contact_speed, intervals)
+def _problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = ()
+                 ) -> StrokeProblem:
+    """A built problem, shared by the planners of every mold height, friction and drive
+    limits of one plant (and variants)."""
+    return StrokeProblem(cfg, intervals, variants)
 
 
 class ClampPlanner:
@@ -418,21 +507,38 @@ class ClampPlanner:
 
     :meth:`solve` plans a stroke of a given duration, :meth:`minimum_time`
     the fastest one under a force limit; each warm-starts from the previous
-    solution on the same problem (another duration or mold height) unless told
-    otherwise. Without ``problem`` the planner builds its own.
+    solution on the same problem (another duration, mold height, friction or
+    drive limit) unless told otherwise. Without ``problem`` the planner builds
+    its own. With ``variants`` (the clamp with other dimensional errors or masses) the
+    force limits and the peak objective hold for the worst of the plant and its variants,
+    with the mold at the same crosshead position: a robust plan (:meth:`worst_peak`).
+    ``scales`` divide the variants' forces in the objective and the limit (default 1:
+    the absolute worst case; a variant's baseline peak over the plant's weighs each
+    against its own baseline).
     """
 
     def __init__(self, cfg: PlantConfig, limits: DriveLimits, *,
                  contact_speed: float = CONTACT_SPEED, intervals: int = INTERVALS,
-                 problem: StrokeProblem | None = None) -> None:
+                 problem: StrokeProblem | None = None,
+                 variants: tuple[PlantConfig, ...] = (),
+                 scales: tuple[float, ...] | None = None) -> None:
         if cfg.x_contact is None:
             raise ParameterError("the planner needs a mold-contact position (x_contact)")
-        self.problem = problem or StrokeProblem(cfg.with_(x_contact=None), limits,
-                                                contact_speed, intervals)
+        if not (math.isfinite(contact_speed) and contact_speed > 0):
+            raise ParameterError(f"contact speed must be > 0 m/s, got {contact_speed!r}")
+        self.problem = problem or StrokeProblem(
+            cfg.with_(x_contact=None, mu=None), intervals,
+            tuple(v.with_(x_contact=None, mu=None) for v in variants))
         pr = self.problem
         self.config, self.limits, self.contact_speed = cfg, limits, contact_speed
-        self.x_open, self.x_final, self.stroke, self.t_ref = (pr.x_open, pr.x_final, pr.stroke,
-                                                              pr.t_ref)
+        self.variants = tuple(v.with_(x_contact=cfg.x_contact, mu=cfg.mu) for v in variants)
+        self.scales = tuple(scales or (1.0,) * len(variants))
+        if len(self.scales) != len(variants) or not all(
+                math.isfinite(k) and k > 0 for k in self.scales):
+            raise ParameterError(f"need one positive force scale per variant, got {scales!r}")
+        self.x_open, self.x_final, self.stroke = pr.x_open, pr.x_final, pr.stroke
+        self.t_ref = minimum_time(self.stroke, limits.velocity, limits.acceleration, limits.jerk)
+        self.jerk_bound = limits.jerk * self.t_ref**3 / self.stroke
         self.n1, self.n2 = pr.n1, pr.n2
         self.xi_contact = (cfg.x_contact - self.x_open) / self.stroke
         self.force_limit = limits.force(cfg.mechanism.drive)
@@ -445,7 +551,7 @@ class ClampPlanner:
 
     def _force(self, x: Any, v: Any, a: Any) -> np.ndarray:
         """The plant's input force at the points (x, v, a) with this planner's mold, N."""
-        return self.problem.input_force(x, v, a, self.config.x_contact)
+        return self.problem.input_force(x, v, a, self.config.x_contact, self.config.friction)
 
     def _reference_force(self) -> float:
         """Scale of the input force: its quasi-static peak at the reference speed, N."""
@@ -454,7 +560,10 @@ class ClampPlanner:
         return max(float(np.max(np.abs(f))), 1e-6)
 
     def _parameters(self, weights: list[float]) -> list[float]:
-        return [*weights, self.config.x_contact, self.f_ref]
+        """The problem's :data:`PARAMETERS` for these objective weights, then the plants'
+        force scales."""
+        return [*weights, self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
+                self.contact_speed, self.config.friction, 1.0, *self.scales]
 
     # ---- solving --------------------------------------------------------------------
 
@@ -466,8 +575,7 @@ class ClampPlanner:
                  (-lim.acceleration * t_ref**2 / S, lim.acceleration * t_ref**2 / S))
         for k, (lo, hi) in enumerate(spans):
             lbx[k * (N + 1):(k + 1) * (N + 1)], ubx[k * (N + 1):(k + 1) * (N + 1)] = lo, hi
-        lbx[3 * N + 3:4 * N + 3] = -self.problem.jerk_bound
-        ubx[3 * N + 3:4 * N + 3] = self.problem.jerk_bound
+        lbx[3 * N + 3:4 * N + 3], ubx[3 * N + 3:4 * N + 3] = -self.jerk_bound, self.jerk_bound
         # no creeping through the clamping below the friction model's smoothing speed
         creep = CREEP_FACTOR * self.config.velocity_epsilon * t_ref / S
         lbx[N + 1 + self.n1:2 * N + 1 - max(2, self.n2 // 10)] = creep
@@ -477,6 +585,16 @@ class ClampPlanner:
         lbx[4 * N + 3:4 * N + 5], ubx[4 * N + 3:4 * N + 5] = 1e-6, np.inf
         lbx[4 * N + 5], ubx[4 * N + 5] = 0.0, force_limit / self.f_ref
         return lbx, ubx
+
+    def _constraint_bounds(self, t_bounds: tuple[float, float]) -> tuple[np.ndarray, ...]:
+        """Bounds of the constraints: the duration's, contact at node N1, the top speed
+        (and a monotone stroke) at the interval midpoints."""
+        lbg, ubg = (b.copy() for b in self.problem.g_bounds)
+        rows = self.problem.rows
+        lbg[rows["duration"]], ubg[rows["duration"]] = (t / self.t_ref for t in t_bounds)
+        lbg[rows["contact_position"]] = ubg[rows["contact_position"]] = self.xi_contact
+        ubg[rows["mid_velocity"]] = self.limits.velocity * self.t_ref / self.stroke
+        return lbg, ubg
 
     def _initial_guess(self, duration: float) -> np.ndarray:
         """The septic rest-to-rest polynomial over ``duration``, split at mold contact."""
@@ -491,26 +609,61 @@ class ClampPlanner:
         return np.concatenate([xi, nu * r, al * r**2, jerk * r**3,
                                [tau_c / n1 / r, (1 - tau_c) / n2 / r, s]])
 
+    def _guess_from(self, profile: Profile, duration: float) -> np.ndarray:
+        """A profile sampled at the nodes as the scaled variables (nodes split at its mold
+        contact), the jerk from the accelerations: an initial guess."""
+        t = np.linspace(0.0, duration, 4001)
+        tc = float(np.interp(self.config.x_contact, profile.sample(t)[0], t))
+        n1, n2, S, t_ref = self.n1, self.n2, self.stroke, self.t_ref
+        t = np.concatenate([np.linspace(0.0, tc, n1 + 1), np.linspace(tc, duration, n2 + 1)[1:]])
+        x, v, a = profile.sample(t)
+        s = float(np.max(np.abs(self._force(x, v, a)))) / self.f_ref
+        return np.concatenate([(x - self.x_open) / S, v * t_ref / S, a * t_ref**2 / S,
+                               np.diff(a) / np.diff(t) * t_ref**3 / S,
+                               [tc / n1 / t_ref, (duration - tc) / n2 / t_ref, s]])
+
+    def _late_guess(self, duration: float, stretch: float) -> np.ndarray:
+        """The fastest S-curve stretched in time by ``stretch`` (at most to ``duration``),
+        started late so that it ends at ``duration``: it reaches
+        the mold at speed and brakes through the clamping, where the braking relieves the
+        thrust (the other family of optima than the polynomial guess's slow arrival)."""
+        lim = self.limits
+        fastest = s_curve(self.x_open, self.x_final, min(self.t_ref * stretch, duration),
+                          lim.velocity,
+                          lim.acceleration, lim.jerk)
+        delay = duration - fastest.duration
+        late = Profile(fastest.knots + delay, fastest.x, fastest.v, fastest.a, fastest.jerk)
+        late = Profile(np.concatenate(([0.0], late.knots)), np.concatenate(([late.x[0]], late.x)),
+                       np.concatenate(([0.0], late.v)), np.concatenate(([0.0], late.a)),
+                       np.concatenate(([0.0], late.jerk)))
+        return self._guess_from(late, duration)
+
     def _stretched(self, start: Plan, duration: float) -> dict[str, np.ndarray]:
-        """A previous solution stretched in time to ``duration`` (the warm start)."""
+        """A previous solution stretched in time to ``duration`` and rescaled to this
+        planner's time and force scales (the warm start)."""
         N, sol = self.n1 + self.n2, start.solution
-        r = start.duration / duration
+        t_ref, f_ref = sol["scales"]
+        r = start.duration / duration * self.t_ref / t_ref
         w = sol["x"].copy()
         for k, power in enumerate((1, 2, 3), start=1):
             w[k * (N + 1):(k + 1) * (N + 1) - (k == 3)] *= r**power
         w[4 * N + 3:4 * N + 5] /= r
+        w[4 * N + 5] *= f_ref / self.f_ref
         return {"x0": w, "lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
 
     def _run(self, weights: list[float], t_bounds: tuple[float, float], force_limit: float,
-             objective: str, start: Plan | None, warm: bool) -> tuple[Plan, bool]:
+             objective: str, start: Plan | None, warm: bool,
+             guess: np.ndarray | None = None) -> tuple[Plan, bool]:
         start = start or self.last
         warm = warm and start is not None and start.solution["x"].size == self.problem.size
         lbx, ubx = self._bounds(force_limit)
-        lbg, ubg = (b.copy() for b in self.problem.g_bounds)
-        lbg[-1], ubg[-1] = (t / self.t_ref for t in t_bounds)
-        lbg[3 * (self.n1 + self.n2)] = ubg[3 * (self.n1 + self.n2)] = self.xi_contact
+        lbg, ubg = self._constraint_bounds(t_bounds)
         target = min(max(2 * self.t_ref, t_bounds[0]), t_bounds[1])
-        args = self._stretched(start, target) if warm else {"x0": self._initial_guess(target)}
+        if guess is not None:
+            args, warm = {"x0": guess}, False
+        else:
+            args = (self._stretched(start, target) if warm
+                    else {"x0": self._initial_guess(target)})
         args["x0"] = np.clip(args["x0"], lbx, ubx)
         solver = self.problem.solver(warm, energy=weights[1] > 0)
         tic = time.perf_counter()
@@ -518,6 +671,7 @@ class ClampPlanner:
         elapsed = time.perf_counter() - tic
         stats = solver.stats()
         solution = {k: np.asarray(sol[k]).ravel() for k in ("x", "lam_x", "lam_g")}
+        solution["scales"] = np.array([self.t_ref, self.f_ref])
         plan = self._plan(solution, objective, elapsed, int(stats["iter_count"]), warm)
         return plan, bool(stats["success"])
 
@@ -541,10 +695,9 @@ class ClampPlanner:
             raise ParameterError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
         if not (math.isfinite(duration) and duration > 0):
             raise ParameterError(f"duration must be a positive time, got {duration!r} s")
-        self._check_force(self.force_limit)
         if duration < self.t_ref:
             self._too_short(duration)
-        weights = [1.0, 0.0, 0.0, _REGULARISATION] if objective == "peak" else [0.0, 1.0, 0.0, 0.0]
+        weights = _WEIGHTS[objective]
         plan, ok = self._run(weights, (duration, duration), self.force_limit, objective, start,
                              warm)
         if not ok and warm:  # a poor warm start: retry from the cold guess
@@ -555,62 +708,163 @@ class ClampPlanner:
         self.problem.last = plan
         return plan
 
+    def best(self, duration: float, objective: str = "peak") -> Plan:
+        """:meth:`solve` from several starts, the best plan: the polynomial guess, the
+        previous plan (warm) and late S-curves (:meth:`_late_guess`), stopping once a peak
+        plan is within :data:`_GAP` of :meth:`lower_bound`. The problem has two families
+        of local optima, slow and fast arrival at the mold; a single start finds either."""
+        if objective not in OBJECTIVES:
+            raise ParameterError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+        previous = self.last
+        key = self.worst_peak if objective == "peak" else (lambda p: p.rms_force)
+        good = self.lower_bound() * (1 + _GAP) if objective == "peak" else 0.0
+        plans = [self.solve(duration, objective, warm=False)]
+        if previous is not None:
+            plans.append(self.solve(duration, objective, start=previous))
+        for stretch in _LATE_STARTS:
+            if key(min(plans, key=key)) <= good:
+                break
+            plan, ok = self._run(_WEIGHTS[objective], (duration, duration), self.force_limit,
+                                 objective, None, False,
+                                 guess=self._late_guess(duration, stretch))
+            if ok:
+                plans.append(plan)
+        self.problem.last = min(plans, key=key)
+        return self.problem.last
+
+    @functools.lru_cache(maxsize=1)  # noqa: B019 - one planner per plant, kept by planner_for
+    def lower_bound(self) -> float:
+        """A lower bound on the peak input force of any stroke under this planner's
+        limits, of any duration (:func:`controllers.bounds.peak_lower_bound`), N."""
+        return peak_lower_bound(self.config, self.x_final, self.limits.velocity,
+                                self.limits.acceleration,
+                                CREEP_FACTOR * self.config.velocity_epsilon)
+
     def minimum_time(self, force_limit: float | None = None, *, start: Plan | None = None,
                      warm: bool = True) -> Plan:
         """The fastest stroke with |input force| at most ``force_limit`` N (default: the
-        motor-torque limit)."""
+        motor-torque limit) at every instant, also between the nodes.
+
+        The optimiser decides whether a limit can be met: it first plans the fastest stroke
+        under the torque limit alone, then lowers the force limit from that plan's peak to
+        the requested one in steps of at most :data:`_LIMIT_STEP`, each warm-started from
+        the last (a cold start under a tight limit stalls in a slow local optimum). The
+        limit is imposed at the nodes and interval midpoints; where the plan's 1 ms
+        samples through the plant still exceed it, the limit is tightened by the excess and
+        the plan repeated."""
         limit = self.force_limit if force_limit is None else min(force_limit, self.force_limit)
         if not (math.isfinite(limit) and limit > 0):
             raise ParameterError(f"force limit must be > 0 N, got {force_limit!r}")
-        self._check_force(limit)
+        if limit < self.lower_bound():
+            raise PlanningError(self._unreachable(limit, None) + (
+                f": no stroke of any duration peaks below {self.lower_bound():.4g} N "
+                "(the lower bound, inertia relief included)"))
+        plan = self._fastest(self.force_limit, start, warm)
+        if plan is None:
+            raise PlanningError(self._unreachable(limit, None))
+        levels = self._levels(min(self.worst_peak(plan), self.force_limit), limit)
+        imposed = limit
+        for level in levels:
+            imposed = level
+            reached = self._fastest(level, plan, True)
+            if reached is None:
+                raise PlanningError(self._unreachable(limit, plan))
+            plan = reached
+        for _ in range(_TIGHTEN):  # between the nodes: the 1 ms samples decide
+            excess = self.worst_peak(plan) - limit
+            if excess <= 0:
+                break
+            imposed -= 1.5 * excess
+            reached = self._fastest(imposed, plan, True)
+            if reached is None:
+                raise PlanningError(self._unreachable(limit, plan))
+            plan = reached
+        self.problem.last = plan
+        return plan
+
+    def trade_off(self, points: int = 6) -> list[Plan]:
+        """The trade-off between stroke time and peak input force: the fastest stroke under
+        ``points`` force limits from the unconstrained fastest stroke's peak down to just
+        above :meth:`lower_bound` (geometrically spaced), each continued from the last;
+        limits no stroke meets are left out."""
+        if not (isinstance(points, int) and points >= 2):
+            raise ParameterError(f"points must be an integer >= 2, got {points!r}")
+        fastest = self._fastest(self.force_limit, None, False)
+        if fastest is None:
+            raise PlanningError(self._unreachable(self.force_limit, None))
+        top = min(self.worst_peak(fastest), self.force_limit)
+        plans, start = [fastest], fastest
+        for limit in np.geomspace(top, self.lower_bound() * (1 + _GAP), points)[1:]:
+            try:
+                plan = self.minimum_time(float(limit), start=start)
+            except PlanningError:
+                break
+            plans.append(plan)
+            start = plan
+        return plans
+
+    @staticmethod
+    def _levels(peak: float, limit: float) -> list[float]:
+        """Force limits from ``peak`` down to ``limit``, each at most :data:`_LIMIT_STEP`
+        (relative) below the last; just ``limit`` if it is not below ``peak``."""
+        if limit >= peak:
+            return [limit]
+        steps = min(math.ceil(math.log(peak / limit) / math.log1p(_LIMIT_STEP)), 40)
+        return [float(v) for v in np.geomspace(peak, limit, steps + 1)[1:]]
+
+    def _fastest(self, limit: float, start: Plan | None, warm: bool) -> Plan | None:
+        """The minimum-time plan under the force limit imposed at nodes and midpoints, or
+        None if IPOPT finds none (warm, then cold)."""
         bounds, weights = (self.t_ref, 100 * self.t_ref), [0.0, 0.0, 1.0, _REGULARISATION]
         plan, ok = self._run(weights, bounds, limit, "time", start, warm)
         if not ok and warm:
             plan, ok = self._run(weights, bounds, limit, "time", None, False)
-        if not ok:
-            status = self.problem.solver(False, energy=False).stats()["return_status"]
-            raise PlanningError("the planner found no profile that meets the drive limits "
-                                f"(IPOPT: {status})")
-        self.problem.last = plan
-        return plan
+        return plan if ok else None
+
+    def _unreachable(self, limit: float, best: Plan | None) -> str:
+        """Why no stroke meets ``limit``: which limit binds, the lowest peak reached."""
+        which = ("the force limit" if limit < self.force_limit
+                 else f"the motor torque limit ({self.limits.torque:.4g} N m)")
+        text = (f"{which} binds: the planner found no stroke clamping to "
+                f"{self.clamp_force():.6g} N with an input force of at most {limit:.4g} N")
+        if best is not None:
+            text += (f"; the lowest peak it reached is {self.worst_peak(best):.4g} N, in a stroke "
+                     f"of {best.duration:.4g} s")
+        return text
 
     # ---- diagnosis ------------------------------------------------------------------
 
+    def node_forces(self, plan: Plan) -> tuple[np.ndarray, float]:
+        """Input force at the nodes and interval midpoints (N), platen speed at contact
+        (m/s), from the plan's solution."""
+        F, contact = self.problem.monitor(plan.solution["x"], self._parameters([0] * 4))
+        return np.asarray(F).ravel(), float(contact)
+
+    def worst_peak(self, plan: Plan) -> float:
+        """The plan's peak input force (1 ms samples through the plant), N: the worst over
+        the plant and its variants (each divided by its scale)."""
+        return max([plan.peak_force, *(predict(plan.profile, v).peak_force / k
+                                       for v, k in zip(self.variants, self.scales))])
+
     def binding_limits(self, plan: Plan, force_limit: float | None = None) -> list[str]:
-        """Names of the limits the plan runs at (within 1 %)."""
-        F, contact = (np.asarray(v).ravel()
-                      for v in self.problem.monitor(plan.solution["x"], self._parameters([0] * 4)))
+        """Names of the limits the plan runs at (within 1 %), the force limit judged by the
+        plan's 1 ms samples through the plant."""
         pr, lim = plan.profile, self.limits
-        limit = self.force_limit if force_limit is None else force_limit
+        contact = self.node_forces(plan)[1]
+        peak = self.worst_peak(plan)
         found = {
             f"velocity (max {lim.velocity * 1e3:.4g} mm/s)": np.max(pr.v) / lim.velocity,
             f"acceleration (max {lim.acceleration:.4g} m/s^2)":
                 np.max(np.abs(pr.a)) / lim.acceleration,
             f"jerk (max {lim.jerk:.4g} m/s^3)": np.max(np.abs(pr.jerk)) / lim.jerk,
-            f"motor torque (max {lim.torque:.4g} N m, {limit:.4g} N thrust)":
-                np.max(np.abs(F)) / limit,
-            f"platen speed at mold contact (max {self.contact_speed * 1e3:.4g} mm/s)": contact[0],
+            f"motor torque (max {lim.torque:.4g} N m, {self.force_limit:.4g} N thrust)":
+                peak / self.force_limit,
+            f"platen speed at mold contact (max {self.contact_speed * 1e3:.4g} mm/s)":
+                contact / self.contact_speed,
         }
+        if force_limit is not None and force_limit < self.force_limit:
+            found[f"input force (max {force_limit:.4g} N)"] = peak / force_limit
         return [name for name, ratio in found.items() if ratio >= _BINDING]
-
-    @functools.cached_property
-    def _creep_thrust(self) -> float:
-        """The largest input force of clamping at creep speed, N."""
-        xs = np.linspace(self.config.x_contact, self.x_final, 401)
-        return float(np.max(self._force(xs, CREEP_FACTOR * self.config.velocity_epsilon, 0.0)))
-
-    def _check_force(self, limit: float) -> None:
-        """Refuse a force limit below the clamping thrust at creep speed (no profile can
-        clamp without creeping under the friction model's smoothing speed)."""
-        need = self._creep_thrust
-        if need > limit:
-            bound = (f"the force limit of {limit:.4g} N" if limit < self.force_limit else
-                     f"the {limit:.4g} N the motor torque limit ({self.limits.torque:.4g} N m) "
-                     "allows")
-            raise PlanningError(
-                f"clamping to {self.clamp_force():.6g} N needs a thrust of {need:.4g} N even "
-                f"at creep speed, above {bound}"
-            )
 
     def clamp_force(self) -> float:
         """Clamp force held at rest in the locked position, N."""
@@ -627,23 +881,30 @@ class ClampPlanner:
 
 @functools.lru_cache(maxsize=8)
 def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CONTACT_SPEED,
-                intervals: int = INTERVALS) -> ClampPlanner:
-    """A planner on a kept problem, so that a re-plan for the same plant, for any mold
-    height, neither rebuilds nor starts cold."""
-    problem = _problem_for(cfg.with_(x_contact=None), limits, contact_speed, intervals)
+                intervals: int = INTERVALS, variants: tuple[PlantConfig, ...] = (),
+                scales: tuple[float, ...] | None = None) -> ClampPlanner:
+    """A planner on a kept problem, so that a re-plan for the same plant (and variants),
+    for any mold height, friction or drive limits, neither rebuilds nor starts cold."""
+    problem = _problem_for(cfg.with_(x_contact=None, mu=None), intervals,
+                           tuple(v.with_(x_contact=None, mu=None) for v in variants))
     return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
-                        problem=problem)
+                        problem=problem, variants=variants, scales=scales)
+
+
+def baseline_stroke(cfg: PlantConfig, limits: DriveLimits, duration: float,
+                    jerk: float | None = None) -> Profile:
+    """The S-curve stroke of the plant's clamp in ``duration`` under the limits (the jerk
+    limit's unless ``jerk`` is given; inf: the trapezoidal velocity profile)."""
+    x_open, x_final = clamp_stroke(cfg.mechanism)
+    return s_curve(x_open, x_final, duration, limits.velocity, limits.acceleration,
+                   limits.jerk if jerk is None else jerk)
 
 
 def baselines(cfg: PlantConfig, limits: DriveLimits, duration: float
               ) -> dict[str, ProfileSamples]:
     """The trapezoidal and S-curve strokes of the same duration and limits, predicted."""
-    x_open, x_final = clamp_stroke(cfg.mechanism)
-    return {
-        name: predict(s_curve(x_open, x_final, duration, limits.velocity, limits.acceleration,
-                              jerk), cfg)
-        for name, jerk in (("trapezoidal", math.inf), ("s_curve", limits.jerk))
-    }
+    return {name: predict(baseline_stroke(cfg, limits, duration, jerk), cfg)
+            for name, jerk in (("trapezoidal", math.inf), ("s_curve", limits.jerk))}
 
 
 def default_duration(planner: ClampPlanner) -> float:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import types
 from dataclasses import replace
 
 import casadi as ca
@@ -13,7 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controllers.compiled import compiled, source_digest
+from controllers.compiled import code_digest, compiled
+from controllers.compiled import compiled as _real_compiled
 from controllers.limits import drive_limits
 from controllers.planner import (
     CREEP_FACTOR,
@@ -200,22 +200,65 @@ def test_without_a_compiler_the_functions_stay_interpreted(tmp_path, monkeypatch
     np.testing.assert_allclose(np.asarray(fn(POINT)), np.asarray(_check_function()(POINT)))
 
 
-def test_the_cache_key_covers_the_code_and_every_input(tmp_path):
+def test_the_cache_key_covers_the_plant_and_the_code_it_uses(tmp_path):
     cfg = plan_config("chang2021").with_(x_contact=None)
-    limits = drive_limits(cfg.mechanism)
-    key = _problem_key(cfg, limits, 5e-3, 200)
-    changed = [_problem_key(cfg.with_(mu=0.06), limits, 5e-3, 200),
-               _problem_key(cfg.with_(velocity_epsilon=2e-4), limits, 5e-3, 200),
-               _problem_key(cfg, replace(limits, jerk=limits.jerk * (1 + 1e-15)), 5e-3, 200),
-               _problem_key(cfg, limits, 4e-3, 200), _problem_key(cfg, limits, 5e-3, 100)]
-    assert key == _problem_key(cfg, limits, 5e-3, 200) and key not in changed
+    key = _problem_key(cfg, 200)
+    changed = [_problem_key(cfg.with_(velocity_epsilon=2e-4), 200), _problem_key(cfg, 100),
+               _problem_key(replace(cfg, mechanism=replace(
+                   cfg.mechanism, dynamics=replace(cfg.dynamics, platen=2.6))), 200)]
+    assert key == _problem_key(cfg, 200) and key not in changed
     assert len(set(changed)) == len(changed)
-    package = types.ModuleType("fake")
-    package.__path__ = [str(tmp_path)]
-    (tmp_path / "model.py").write_text("GAIN = 1.0\n")
-    before = source_digest(package)
-    (tmp_path / "model.py").write_text("GAIN = 1.5\n")
-    assert source_digest(package) != before
+    # mold height and friction are parameters of the problem, not part of the key
+    assert _problem_key(cfg.with_(mu=0.06, x_contact=0.04), 200) == key
+    package = tmp_path / "fakepkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "model.py").write_text("from fakepkg import helper\nGAIN = 1.0\n")
+    (package / "helper.py").write_text("K = 1\n")
+    (package / "plots.py").write_text("STYLE = 1\n")
+    import sys
+    sys.path.insert(0, str(tmp_path))
+    try:
+        before = code_digest("fakepkg.model")
+        (package / "plots.py").write_text("STYLE = 2\n")  # not imported by the model
+        assert code_digest("fakepkg.model") == before
+        (package / "helper.py").write_text("K = 2\n")  # imported by the model
+        assert code_digest("fakepkg.model") != before
+    finally:
+        sys.path.remove(str(tmp_path))
+
+
+def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, tmp_path, monkeypatch):
+    cfg, limits, planner, plan = chang
+    faster = planner_for(cfg, replace(limits, velocity=0.05))
+    rougher = planner_for(cfg.with_(mu=cfg.friction * 1.5), limits)
+    assert faster.problem is planner.problem and rougher.problem is planner.problem
+    quick = faster.solve(DURATION, start=plan)
+    assert quick.samples.velocity.max() <= 0.05 * (1 + 1e-3)
+    slow = planner_for(cfg.with_(mu=cfg.friction * 1.5), replace(limits, velocity=0.03)
+                       ).solve(DURATION, start=plan)
+    assert plan.samples.velocity.max() > 0.031  # the new limit binds
+    assert slow.samples.velocity.max() <= 0.03 * (1 + 1e-3)
+    assert slow.peak_force > plan.peak_force  # more pin friction, more thrust
+    # a new process (a new problem) loads the compiled functions another v_max and mu left
+    # in the disk cache (its own here: other processes prune the shared one), no compile
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
+    ClampPlanner(cfg, limits, intervals=8)
+    monkeypatch.setattr("controllers.planner.compiled", _no_compile)
+    other = ClampPlanner(cfg.with_(mu=cfg.friction * 1.5), replace(limits, velocity=0.03),
+                         intervals=8)
+    assert other.problem._force.class_name() == "External"
+    assert other.solve(DURATION).profile.v.max() <= 0.03 * (1 + 1e-6)  # at the nodes
+
+
+def _no_compile(name, key, names, build):
+    """Stands in for :func:`compiled` where the cache must hold the problem: loads only."""
+    loaded = _real_compiled(name, key, names, _fail_build)
+    return loaded
+
+
+def _fail_build():
+    raise AssertionError("the problem was rebuilt: a cache miss")
 
 
 def test_interpreted_fallback_plans_the_same_stroke(tmp_path, monkeypatch):
@@ -259,7 +302,7 @@ def test_too_short_a_duration_names_the_limit_and_the_shortest(chang):
 def test_torque_limit_and_unreachable_clamp_force():
     cfg = plan_config("chang2021")
     weak = drive_limits(cfg.mechanism, torque=0.012)  # 13.6 N of thrust, below the ~15 N peak
-    with pytest.raises(PlanningError, match=r"the motor torque limit \(0.012 N m\) allows"):
+    with pytest.raises(PlanningError, match="motor torque limit .*binds"):
         planner_for(cfg, weak, intervals=60).solve(DURATION)
     with pytest.raises(ClampingError, match="beyond reach"):
         plan_config("chang2021", clamp_force=1e12)
@@ -308,3 +351,78 @@ def test_cli_infeasible_requests_exit_2(capsys):
     assert "too short" in err and "shortest feasible" in err and "Traceback" not in err
     assert main(["plan", "--clamp-force", "1e12"]) == 2
     assert "beyond reach" in capsys.readouterr().err
+
+
+def test_minimum_time_under_a_force_limit_met_only_with_inertia_relief(chang, capsys):
+    """``toggle plan --min-time --force-limit 15.0``: 15.0 N is below the quasi-static
+    clamping thrust at creep speed (15.18 N, the old pre-check refused it); braking through
+    the thrust peak meets it. Checked on the 1 ms samples through the plant."""
+    cfg, limits, planner, _ = chang
+    quasi_static = planner._force(np.linspace(cfg.x_contact, planner.x_final, 401),
+                                  CREEP_FACTOR * cfg.velocity_epsilon, 0.0).max()
+    assert quasi_static > 15.1
+    assert main(["plan", "--preset", "chang2021", "--min-time", "--force-limit", "15.0",
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    plan = planner.last
+    assert report["duration"] == pytest.approx(plan.duration) and plan.duration <= 1.70
+    assert plan.samples.peak_force <= 15.0 and report["peak_force"] <= 15.0
+    assert plan.samples.velocity.max() <= limits.velocity * (1 + 1e-3)
+    assert "input force (max 15 N)" in report["binding_limits"]
+    assert report["limits"]["input_force"] == 15.0
+    # both baselines of that duration break the limit, and the report says so
+    assert report["baselines_within_limits"] == {"trapezoidal": False, "s_curve": False}
+    assert report["peak_force_lower_bound"] <= report["peak_force"]
+    with pytest.raises(PlanningError, match="force limit binds.*lower bound"):
+        planner.minimum_time(0.99 * planner.lower_bound())
+
+
+def test_best_plan_finds_the_lower_optimum_and_respects_the_bound(chang):
+    """The default-duration peak plan: below 14.99 N (a single cold start stops at a local
+    optimum near 15.04 N) and above the reachable-set bound, within 0.5 % of it."""
+    _, _, planner, single = chang
+    bound = planner.lower_bound()
+    plan = planner.best(DURATION)
+    assert plan.peak_force <= 14.99 < single.peak_force
+    assert bound <= plan.peak_force <= bound * 1.005
+    assert 14.9 < bound  # the quasi-static peak at creep speed is 15.18 N
+
+
+def test_robust_plan_beats_the_s_curve_on_both_clamps(capsys):
+    """With delta_r8 = 0.25 mm a plan for the nominal clamp is worse than the S-curve on the
+    erroneous one; the robust plan (both clamps, each against its S-curve) beats the S-curve
+    on both."""
+    assert main(["plan", "--delta-r8", "0.25e-3", "--robust", "--intervals", "60",
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["dimension_errors"] == {"delta_r8": 0.25e-3}
+    nominal, erroneous = report["robust"]["nominal"], report["robust"]["erroneous"]
+    assert erroneous["nominal_plan_peak_force"] > erroneous["s_curve_peak_force"] * 1.1
+    for clamp in (nominal, erroneous):
+        assert clamp["robust_plan_peak_force"] < clamp["s_curve_peak_force"] * (1 - 5e-3)
+    assert nominal["nominal_plan_peak_force"] <= nominal["robust_plan_peak_force"]
+    assert main(["plan", "--robust"]) == 2  # no errors to be robust against
+    assert "--delta-NAME" in capsys.readouterr().err
+
+
+def test_dimension_errors_are_named_as_the_fmu_names_them():
+    from fmu_src.toggle_clamp_fmu import ERRORS as FMU_ERRORS
+    from toggle.cli.plan import ERRORS
+
+    assert ERRORS == FMU_ERRORS
+    nominal = plan_config("chang2021")
+    longer = plan_config("chang2021", errors={"r8": 0.25e-3}, x_contact=nominal.x_contact)
+    assert longer.mechanism.upper.r5 == pytest.approx(nominal.mechanism.upper.r5 + 0.25e-3)
+
+
+def test_trade_off_is_monotone_and_ends_near_the_bound(chang, capsys):
+    """``toggle plan --trade-off``: each lower force limit costs stroke time; the last point
+    is within 0.5 % of the lower bound, every peak within its limit on the 1 ms samples."""
+    assert main(["plan", "--trade-off", "3", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    points = report["trade_off"]
+    peaks, times = ([p[k] for p in points] for k in ("peak_force", "duration"))
+    assert len(points) == 3
+    assert all(np.diff(peaks) < 0) and all(np.diff(times) > 0)
+    assert peaks[-1] <= report["peak_force_lower_bound"] * 1.005
+    assert main(["plan", "--trade-off", "1"]) == 2

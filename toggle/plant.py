@@ -136,19 +136,21 @@ class PlantConfig:
 
 
 def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = None,
-                  slip_state: Any = None) -> PlantOutputs:
+                  slip_state: Any = None, mu: Any = None) -> PlantOutputs:
     """Plant outputs at input position x, velocity v and acceleration a.
 
     Floats, arrays or CasADi symbols; no assembly check (see
     :class:`CompiledPlant` for the checked numeric form). ``x_contact``, if
     given, replaces ``cfg.x_contact`` and may be a CasADi symbol: the planner
-    keeps the mold height a parameter of its problem (no numeric check here).
+    keeps the mold height a parameter of its problem (no numeric check here);
+    likewise ``mu`` replaces the pin friction ``cfg.friction``.
     ``slip_state`` z in [-1, 1] is the hysteretic friction state of the guides and
     of the unequal halves (:func:`toggle.asymmetry.advance_slip_state`, carried by the
     caller); None: steady sliding (z = the smooth sign of v), the stateless plant.
     """
     mech, dyn = cfg.mechanism, cfg.dynamics
     x_contact = cfg.x_contact if x_contact is None else x_contact
+    friction = cfg.friction if mu is None else mu
     terms = [motion_terms(x, mech.half(h)) for h in HALVES]
     L = 0.5 * (terms[0][0] + terms[1][0])
     g = 0.5 * (terms[0][1] + terms[1][1])
@@ -165,12 +167,12 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
         L_contact = 0.5 * sum(half_pose(x_contact, mech.half(h)).L for h in HALVES)
         moving = np.where(x < x_contact, 1.0, 0.0)
         platen = np.where(x < x_contact, L, L_contact)
-        states = [clamp_state(x, x_contact, mech, cfg.friction, direction, half=h)
+        states = [clamp_state(x, x_contact, mech, friction, direction, half=h)
                   for h in HALVES]
         clamp = 0.5 * (states[0].clamp_force + states[1].clamp_force)
         tiebar = 0.5 * (states[0].tiebar_force + states[1].tiebar_force)
         thrust = 0.5 * (states[0].thrust + states[1].thrust)
-        q = force_ratios(x, mech.lower, mech.clamp.pins, cfg.friction, direction).thrust
+        q = force_ratios(x, mech.lower, mech.clamp.pins, friction, direction).thrust
         ma = 1.0 / np.maximum(np.fabs(q), 1.0 / MA_CAP)
     inertia = m_in * a + moving * m_out * g * (g * a + gp * v * v)
     guide = direction if slip_state is None else slip_state
@@ -243,6 +245,25 @@ class CompiledPlant:
         return PlantOutputs(*values)
 
 
+def with_errors(mech: Mechanism, errors: dict[str, float] | None
+                ) -> tuple[Mechanism, list[str]]:
+    """The mechanism with dimensional errors added by seed 000's names (``{"r8": 0.5e-3}``
+    lengthens link 8 of the upper half), and the errors applied as text; every bad value
+    raises :class:`ParameterError` naming it."""
+    changed = []
+    for name, delta in (errors or {}).items():
+        if not math.isfinite(delta):
+            raise ParameterError(f"dimensional error delta_{name} must be finite, got {delta!r}")
+        half, dim = paper_dimension(name)
+        if delta:
+            try:
+                mech = mech.with_error(half, dim, delta)
+            except ParameterError as exc:
+                raise ParameterError(f"delta_{name} = {delta!r} m: {exc}") from exc
+            changed.append(f"delta_{name} = {delta!r} m")
+    return mech, changed
+
+
 class HystereticPlant:
     """A :class:`CompiledPlant` stepped along a drive path, carrying the slip state.
 
@@ -284,18 +305,8 @@ def configure(
     A contact position at or beyond the toggle means no mold. Every bad value
     raises :class:`ParameterError` naming it.
     """
-    mech = preset if isinstance(preset, Mechanism) else load_preset(preset)
-    changed = []
-    for name, delta in (errors or {}).items():
-        if not math.isfinite(delta):
-            raise ParameterError(f"dimensional error delta_{name} must be finite, got {delta!r}")
-        half, dim = paper_dimension(name)
-        if delta:
-            try:
-                mech = mech.with_error(half, dim, delta)
-            except ParameterError as exc:
-                raise ParameterError(f"delta_{name} = {delta!r} m: {exc}") from exc
-            changed.append(f"delta_{name} = {delta!r} m")
+    mech, changed = with_errors(
+        preset if isinstance(preset, Mechanism) else load_preset(preset), errors)
     if masses:
         if mech.dynamics is None:
             raise ParameterError(f"preset {mech.name!r} has no [dynamics] section to override")
@@ -406,6 +417,5 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
 
 __all__ = [
     "AssemblyError", "CompiledPlant", "DriveState", "HystereticPlant", "PlantConfig",
-    "PlantError", "PlantOutputs",
-    "configure", "follow", "plant_outputs",
+    "PlantError", "PlantOutputs", "configure", "follow", "plant_outputs", "with_errors",
 ]

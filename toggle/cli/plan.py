@@ -10,20 +10,26 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from controllers.limits import DriveLimits, drive_limits
 from controllers.planner import (
     CONTACT_SPEED,
     INTERVALS,
     OBJECTIVES,
+    ClampPlanner,
+    Plan,
+    baseline_stroke,
     baselines,
     default_duration,
     plan_config,
     planner_for,
 )
-from controllers.profiles import read_profile_csv, write_profile_csv
+from controllers.profiles import predict, read_profile_csv, write_profile_csv
 from hil.cli_args import atomic_path, check_writable, integer, path, positive
 from toggle.cli.common import (
     FRICTION,
+    LINK_ERROR,
     POSITION,
     add_json_argument,
     add_preset_argument,
@@ -31,10 +37,13 @@ from toggle.cli.common import (
     table,
 )
 from toggle.drive import motor_torque
-from toggle.params import ParameterError
-from toggle.plant import PlantConfig
+from toggle.params import HALVES, PAPER_NAMES, ParameterError
+from toggle.plant import PlantConfig, with_errors
 
 MASS_FIELDS = ("crosshead", "links", "platen", "guide_damping")
+#: The dimensional errors, named as the FMU names its delta_* parameters.
+ERRORS = tuple(name for half in HALVES for name in PAPER_NAMES[half].values())
+_SHOWN = ("r8",)  # the one of them --help describes
 
 
 def _masses(text: str | None) -> dict[str, float] | None:
@@ -53,23 +62,77 @@ def _masses(text: str | None) -> dict[str, float] | None:
     return out
 
 
-def _plant(args: argparse.Namespace) -> tuple[PlantConfig, DriveLimits]:
+def _errors(args: argparse.Namespace) -> dict[str, float]:
+    """The dimensional errors given as ``--delta-NAME`` (m), by the FMU's names."""
+    return {name: value for name in ERRORS
+            if (value := getattr(args, f"delta_{name}", None)) is not None}
+
+
+def _plant(args: argparse.Namespace, errors: bool = True) -> tuple[PlantConfig, DriveLimits]:
+    """The plant (with the dimensional errors unless ``errors`` is false) and the limits."""
     cfg = plan_config(args.preset, mu=args.mu, x_contact=args.x_contact,
-                      clamp_force=args.clamp_force, masses=_masses(args.masses))
+                      clamp_force=args.clamp_force, masses=_masses(args.masses),
+                      errors=_errors(args) if errors else None)
     limits = drive_limits(cfg.mechanism, velocity=args.v_max, acceleration=args.a_max,
                           jerk=args.j_max, torque=args.torque_max)
     return cfg, limits
 
 
+def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, object]]:
+    """The robust planner (``--robust``): the nominal clamp with the erroneous one as a
+    variant, each weighed against its own S-curve; and the report of the robust plan, the
+    nominal plan and the S-curve on each clamp."""
+    if args.min_time or not _errors(args):
+        raise ParameterError("--robust plans a fixed duration against dimensional errors: "
+                             "give --delta-NAME and no --min-time")
+    cfg, limits = _plant(args, errors=False)
+    erroneous = cfg.with_(mechanism=with_errors(cfg.mechanism, _errors(args))[0])
+    nominal = planner_for(cfg, limits, args.contact_speed, args.intervals)
+    duration = args.duration or default_duration(nominal)
+    stroke = baseline_stroke(cfg, limits, duration)
+    curve = {"nominal": predict(stroke, cfg), "erroneous": predict(stroke, erroneous)}
+    scale = curve["erroneous"].peak_force / curve["nominal"].peak_force
+    planner = planner_for(cfg, limits, args.contact_speed, args.intervals, (erroneous,), (scale,))
+    plan, plain = planner.best(duration, args.objective), nominal.best(duration, args.objective)
+    report = {}
+    for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
+        report[name] = {"robust_plan_peak_force": predict(plan.profile, plant).peak_force,
+                        "nominal_plan_peak_force": predict(plain.profile, plant).peak_force,
+                        "s_curve_peak_force": curve[name].peak_force}
+    return planner, plan, report
+
+
+def _trade_off(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits) -> int:
+    """``--trade-off N``: stroke time against peak input force, N minimum-time plans."""
+    planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
+    plans = planner.trade_off(args.trade_off)
+    rows = [(p.peak_force, p.duration) for p in plans]
+    if args.json:
+        print_json({"preset": cfg.mechanism.name, "peak_force_lower_bound": planner.lower_bound(),
+                    "trade_off": [{"peak_force": f, "duration": t} for f, t in rows]})
+        return 0
+    print(f"{cfg.mechanism.name}: the fastest stroke under each input-force limit "
+          f"(no stroke peaks below {planner.lower_bound():.4g} N)")
+    print(table(("peak (N)", "time (s)"), rows))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     if args.out:
         check_writable(args.out, "--out")  # before solving, not after
-    cfg, limits = _plant(args)
-    planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
-    if args.min_time:
+    cfg, limits = _plant(args, errors=not args.robust)
+    if args.trade_off:
+        return _trade_off(args, cfg, limits)
+    robust = None
+    if args.robust:
+        planner, plan, robust = _robust(args)
+    elif args.min_time:
+        planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
         plan = planner.minimum_time(args.force_limit)
     else:
-        plan = planner.solve(args.duration or default_duration(planner), args.objective)
+        planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
+        plan = planner.best(args.duration or default_duration(planner), args.objective)
+    bound = planner.lower_bound()
     base = baselines(cfg, limits, plan.duration)
     if args.out:
         with atomic_path(args.out) as tmp:  # no half-written CSV
@@ -82,6 +145,9 @@ def run(args: argparse.Namespace) -> int:
             })
     peak = plan.peak_force
     trap, scurve = base["trapezoidal"].peak_force, base["s_curve"].peak_force
+    force_limit = min(args.force_limit or np.inf, planner.force_limit)
+    # the baselines are held to the plan's limits: one that breaks them is no comparison
+    feasible = {name: bool(samples.peak_force <= force_limit) for name, samples in base.items()}
     result = {
         "preset": cfg.mechanism.name,
         "mode": "minimum_time" if args.min_time else "fixed_duration",
@@ -93,6 +159,10 @@ def run(args: argparse.Namespace) -> int:
         "x_final": planner.x_final,
         "clamp_force": planner.clamp_force(),
         "peak_force": peak,
+        "peak_force_lower_bound": bound,
+        "gap_to_bound_percent": 100.0 * (peak - bound) / bound,
+        "dimension_errors": {f"delta_{k}": v for k, v in _errors(args).items()},
+        "robust": robust,
         "rms_force": plan.rms_force,
         "baseline_peak_force": trap,
         "baseline_rms_force": base["trapezoidal"].rms_force,
@@ -100,10 +170,12 @@ def run(args: argparse.Namespace) -> int:
         "s_curve_rms_force": base["s_curve"].rms_force,
         "reduction_percent": 100.0 * (trap - peak) / trap,
         "s_curve_reduction_percent": 100.0 * (scurve - peak) / scurve,
+        "baselines_within_limits": feasible,
         "peak_motor_torque": float(motor_torque(peak, cfg.mechanism.drive)),
-        "binding_limits": planner.binding_limits(plan),
+        "binding_limits": planner.binding_limits(plan, args.force_limit),
         "limits": {"velocity": limits.velocity, "acceleration": limits.acceleration,
                    "jerk": limits.jerk, "torque": limits.torque,
+                   "input_force": force_limit,
                    "contact_platen_speed": args.contact_speed},
         "solve_time": plan.solve_time,
         "iterations": plan.iterations,
@@ -123,6 +195,18 @@ def run(args: argparse.Namespace) -> int:
     print(f"peak reduction {result['reduction_percent']:.2f} % (trapezoid), "
           f"{result['s_curve_reduction_percent']:.2f} % (S-curve); solved in "
           f"{plan.solve_time * 1e3:.1f} ms, {plan.iterations} iterations")
+    for name, ok in feasible.items():
+        if not ok:
+            print(f"the {name.replace('_', '-')} baseline breaks the input-force limit of "
+                  f"{force_limit:.4g} N: its reduction compares with an infeasible stroke")
+    print(f"no stroke of any duration peaks below {bound:.4g} N (lower bound; the plan is "
+          f"{result['gap_to_bound_percent']:.2f} % above it)")
+    print(f"binding limits: {', '.join(result['binding_limits']) or 'none'}")
+    if robust:
+        rows = [(name, *values.values()) for name, values in robust.items()]
+        print("peak input force (N) on each clamp of the robust plan, the nominal clamp's "
+              "plan and the S-curve:")
+        print(table(("clamp", "robust", "nominal", "S-curve"), rows))
     if args.out:
         print(f"profile written to {args.out}")
     return 0
@@ -176,6 +260,13 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
                    help="jerk limit, m/s^3 (default: the preset's drive)")
     p.add_argument("--torque-max", type=positive("torque in N m", 1e5, 1e-4), default=None,
                    help="motor torque limit, N m (default: the preset's drive)")
+    errors = p.add_argument_group("dimensional errors, m (named as the FMU's delta_* "
+                                  "parameters; seed 000's names)")
+    for name in ERRORS:
+        errors.add_argument(f"--delta-{name}", dest=f"delta_{name}", type=LINK_ERROR,
+                            default=None, metavar="M", help=argparse.SUPPRESS
+                            if name not in _SHOWN else
+                            f"error of {name}, m (likewise --delta-NAME for every dimension)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -196,6 +287,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
                    default=INTERVALS,
                    help=f"time intervals N (default {INTERVALS})")
+    p.add_argument("--trade-off", type=integer(2, 100, "must be 2 to 100 points"), default=None,
+                   metavar="POINTS",
+                   help="print the stroke time against the peak input force instead: the "
+                        "fastest stroke under POINTS force limits")
+    p.add_argument("--robust", action="store_true",
+                   help="plan for the nominal clamp and the one with the --delta-NAME errors "
+                        "at once (the worst of the two, each against its S-curve)")
     p.add_argument("--out", type=path, default=None, help="profile CSV to write (SI units)")
     add_json_argument(p)
     p.set_defaults(handler=run)
