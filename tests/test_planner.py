@@ -389,15 +389,16 @@ def test_best_plan_finds_the_lower_optimum_and_respects_the_bound(chang):
 
 
 def test_robust_plan_beats_the_s_curve_on_both_clamps(capsys):
-    """With delta_r8 = 0.25 mm a plan for the nominal clamp is worse than the S-curve on the
-    erroneous one; the robust plan (both clamps, each against its S-curve) beats the S-curve
-    on both."""
+    """With delta_r8 = 0.25 mm the robust plan (both clamps, each against its S-curve) beats
+    the S-curve on both clamps, and the nominal plan on the erroneous one. (With the
+    stateless friction model of issue 17's text the nominal plan was 21 % worse than the
+    S-curve there; with the calibrated rig model of issue 18 it is 2 % better.)"""
     assert main(["plan", "--delta-r8", "0.25e-3", "--robust", "--intervals", "60",
                  "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["dimension_errors"] == {"delta_r8": 0.25e-3}
     nominal, erroneous = report["robust"]["nominal"], report["robust"]["erroneous"]
-    assert erroneous["nominal_plan_peak_force"] > erroneous["s_curve_peak_force"] * 1.1
+    assert erroneous["robust_plan_peak_force"] < erroneous["nominal_plan_peak_force"]
     for clamp in (nominal, erroneous):
         assert clamp["robust_plan_peak_force"] < clamp["s_curve_peak_force"] * (1 - 5e-3)
     assert nominal["nominal_plan_peak_force"] <= nominal["robust_plan_peak_force"]
@@ -425,4 +426,6 @@ def test_trade_off_is_monotone_and_ends_near_the_bound(chang, capsys):
     assert len(points) == 3
     assert all(np.diff(peaks) < 0) and all(np.diff(times) > 0)
     assert peaks[-1] <= report["peak_force_lower_bound"] * 1.005
-    assert main(["plan", "--trade-off", "1"]) == 2
+    with pytest.raises(SystemExit) as refused:  # an argparse usage error
+        main(["plan", "--trade-off", "1"])
+    assert refused.value.code == 2
