@@ -26,7 +26,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from toggle.asymmetry import AsymmetryParams, slip_state_along
-from toggle.kinematics import half_pose, stroke_limits
+from toggle.kinematics import stroke_limits
 from toggle.params import Mechanism
 from toggle.plant import PlantConfig, plant_outputs
 
@@ -108,9 +108,9 @@ def rig_config(nominal: Mechanism, delta_r8: float, params: AsymmetryParams,
     return PlantConfig(mech, asymmetry=params)
 
 
-def _platen(x: float | np.ndarray, cfg: PlantConfig) -> np.ndarray:
-    mech = cfg.mechanism
-    return 0.5 * (half_pose(x, mech.lower).L + half_pose(x, mech.upper).L)
+def _platen(x: float, cfg: PlantConfig) -> float:
+    """The plant's platen position at x (no mold), m."""
+    return float(plant_outputs(x, 0.0, 0.0, cfg).platen_position)
 
 
 def rig_statistics(cfg: PlantConfig, speed: float, reading: RigReading = RigReading(),
@@ -138,8 +138,7 @@ def rig_statistics(cfg: PlantConfig, speed: float, reading: RigReading = RigRead
     x_read = max(x_band - speed * reading.toggle_latency, x_open)
     z_read = float(slip_state_along(np.array([x_open, x_read]), z_back_end, slip)[-1])
     f_tp = float(plant_outputs(x_read, speed, 0.0, cfg, slip_state=z_read).input_force)
-    mismatch = [float(half_pose(x, cfg.mechanism.upper).L - half_pose(x, cfg.mechanism.lower).L)
-                for x in (x_open, x_tp)]
+    mismatch = [float(plant_outputs(x, 0.0, 0.0, cfg).asymmetry) for x in (x_open, x_tp)]
     stroke = (end - float(_platen(x_open, cfg)) + reading.datum
               + reading.lever * (mismatch[1] - mismatch[0])
               + reading.compliance * (f_tp - float(fwd[0])))
