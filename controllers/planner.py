@@ -71,7 +71,7 @@ from scipy.optimize import brentq
 
 from controllers.bounds import peak_lower_bound
 from controllers.compiled import Unit, code_digest, compiled
-from controllers.limits import DriveLimits, drive_limits
+from controllers.limits import DriveLimits
 from controllers.profiles import Profile, ProfileSamples, minimum_time, predict, s_curve
 from toggle.elastics import ClampingError, clamp_state, clamp_stroke, contact_position
 from toggle.params import HALVES, Dynamics, Mechanism, ParameterError, load_preset
@@ -910,14 +910,3 @@ def baselines(cfg: PlantConfig, limits: DriveLimits, duration: float
 def default_duration(planner: ClampPlanner) -> float:
     """Twice the kinematic minimum stroke time, rounded up to 0.1 s."""
     return math.ceil(20 * planner.t_ref) / 10
-
-
-def plan_default_profile(preset: str, *, period: float = 1e-3) -> Any:
-    """The preset's default plan as a :class:`hil.samples.Trajectory` sampled every ``period``."""
-    from hil.samples import Trajectory
-
-    cfg = plan_config(preset)
-    planner = planner_for(cfg, drive_limits(cfg.mechanism))
-    plan = planner.solve(default_duration(planner))
-    t = np.arange(0.0, plan.duration + period / 2, period)
-    return Trajectory.from_positions(plan.profile.sample(t)[0], period)

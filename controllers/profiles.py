@@ -4,7 +4,9 @@ A :class:`Profile` is a chain of segments of constant jerk (the planner's
 exact discretisation; an acceleration jump at a segment start also serves
 the trapezoidal velocity profile). :func:`s_curve` gives the two baselines
 the planner is measured against: the trapezoidal velocity profile (jerk
-unlimited) and the jerk-limited S-curve, each stretched to a given duration.
+unlimited) and the jerk-limited S-curve, each stretched to a given duration;
+:func:`stroke_at_speed` the same S-curve at a given cruise speed, the HIL
+experiment's strokes (one S-curve generator for both).
 :func:`predict` samples a profile through the plant (the FMU's model) and
 :func:`write_profile_csv` writes what the HIL layer executes.
 """
@@ -12,15 +14,17 @@ unlimited) and the jerk-limited S-curve, each stretched to a given duration.
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy.optimize import brentq
 
+from toggle.params import tomllib
 from toggle.plant import PlantConfig, plant_outputs
 
 #: The CSV columns, units in the header (``hil run --profile`` reads time and position).
@@ -106,15 +110,33 @@ def minimum_time(S: float, v_max: float, a_max: float, j_max: float = math.inf) 
     return S / v + _accel_time(v, a_max, j_max)
 
 
+def _move(x_start: float, x_end: float, v: float, a_max: float, j_max: float) -> Profile:
+    """Rest-to-rest move cruising at ``v`` (which the stroke can reach): full acceleration
+    and jerk on the ramps, the mirrored ramp down, a zero-length rest segment at the end."""
+    S, sign = abs(x_end - x_start), math.copysign(1.0, x_end - x_start)
+    d, j = _accel_segments(v, a_max, j_max)
+    durations = np.array([*d, max(S / v - _accel_time(v, a_max, j_max), 0.0), *d[::-1], 0.0])
+    jerks = sign * np.array([*j, 0.0, *(-np.array(j)), 0.0])
+    accel = sign * np.array([a_max, 0.0, -a_max, 0.0]) if math.isinf(j_max) else None
+    return Profile.build(x_start, durations, jerks, accel)
+
+
+def _check_limits(v_max: float, a_max: float, j_max: float) -> None:
+    for name, value in (("speed", v_max), ("acceleration", a_max), ("jerk", j_max)):
+        if not (value > 0 and not math.isnan(value)) or (name != "jerk" and math.isinf(value)):
+            raise ProfileError(f"{name} limit must be a positive number, got {value!r}")
+
+
 def s_curve(x_start: float, x_end: float, duration: float, v_max: float, a_max: float,
             j_max: float = math.inf) -> Profile:
     """Rest-to-rest S-curve (trapezoidal velocity if ``j_max`` is inf) taking
     exactly ``duration``: full acceleration and jerk, the cruise speed lowered
     until the stroke takes that long. Raises :class:`ProfileError` if the
     limits cannot cover the stroke in that time."""
-    S = x_end - x_start
+    _check_limits(v_max, a_max, j_max)
+    S = abs(x_end - x_start)
     if not (S > 0 and duration > 0):
-        raise ProfileError(f"need a positive stroke and duration, got {S!r} m in {duration!r} s")
+        raise ProfileError(f"need a stroke and a positive duration, got {S!r} m in {duration!r} s")
     v_top = _top_speed(S, v_max, a_max, j_max)
     t_min = minimum_time(S, v_max, a_max, j_max)
     if duration < t_min * (1 - 1e-12):
@@ -125,12 +147,20 @@ def s_curve(x_start: float, x_end: float, duration: float, v_max: float, a_max: 
     v = v_top if duration <= t_min else brentq(
         lambda u: S / u + _accel_time(u, a_max, j_max) - duration, 0.5 * S / duration, v_top,
         xtol=1e-14)
-    d, j = _accel_segments(v, a_max, j_max)
-    # ramp up, cruise, the mirrored ramp down, and a zero-length rest segment at the end
-    durations = np.array([*d, max(duration - 2 * sum(d), 0.0), *d[::-1], 0.0])
-    jerks = np.array([*j, 0.0, *(-np.array(j)), 0.0])
-    accel = np.array([a_max, 0.0, -a_max, 0.0]) if math.isinf(j_max) else None
-    return Profile.build(x_start, durations, jerks, accel)
+    return _move(x_start, x_end, v, a_max, j_max)
+
+
+def stroke_at_speed(x_start: float, x_end: float, speed: float, a_max: float,
+                    j_max: float = math.inf) -> Profile:
+    """The fastest rest-to-rest S-curve from ``x_start`` to ``x_end`` (either direction)
+    cruising at ``speed`` m/s, or at the highest speed the stroke reaches under the
+    acceleration and jerk limits when it is too short to cruise (seed 000's constant-speed
+    strokes, the rig's moves to the start)."""
+    _check_limits(speed, a_max, j_max)
+    S = abs(x_end - x_start)
+    if not S > 0:
+        raise ProfileError("a stroke needs distinct start and end positions")
+    return _move(x_start, x_end, _top_speed(S, speed, a_max, j_max), a_max, j_max)
 
 
 class ProfileSamples(NamedTuple):
@@ -174,7 +204,7 @@ def write_profile_csv(path: str | Path, samples: ProfileSamples,
 
     ``settings`` (SI) go first as ``# key = value`` lines (TOML values; None is left
     out): what the plan was made for, so a replay (``hil run --profile``) clamps the
-    same mold with the same friction (:func:`hil.samples.profile_settings` reads them).
+    same mold with the same friction (:func:`read_profile_settings` reads them).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -188,22 +218,52 @@ def write_profile_csv(path: str | Path, samples: ProfileSamples,
     return path
 
 
-def read_profile_csv(path: str | Path) -> ProfileSamples:
-    """Read a CSV written by :func:`write_profile_csv` (all columns required)."""
+def read_profile_columns(path: str | Path, columns: tuple[str, ...] = CSV_COLUMNS
+                         ) -> np.ndarray:
+    """The named columns (header text with units, :data:`CSV_COLUMNS`) of a profile CSV as
+    an array of rows; other columns and the leading ``# key = value`` lines are skipped.
+    The time column (first of :data:`CSV_COLUMNS`) must increase over at least two rows."""
     path = Path(path)
     try:
-        with path.open(newline="", encoding="utf-8") as fh:
-            lines = [ln for ln in fh if ln.strip() and not ln.startswith("#")]
-        header = [h.strip() for h in next(csv.reader(lines[:1]), [])]
-        missing = [c for c in CSV_COLUMNS if c not in header]
-        if missing:
-            raise ProfileError(f"profile {path} lacks column(s) {missing}")
-        data = np.loadtxt(lines[1:], delimiter=",", ndmin=2,
-                          usecols=[header.index(c) for c in CSV_COLUMNS])
-    except (OSError, ValueError) as exc:
-        if isinstance(exc, ProfileError):
-            raise
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
         raise ProfileError(f"cannot read profile {path}: {exc}") from exc
-    if data.shape[0] < 2 or np.any(np.diff(data[:, 0]) <= 0):
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        raise ProfileError(f"profile {path} is empty")
+    header = [h.strip() for h in next(csv.reader(lines[:1]))]
+    missing = [c for c in columns if c not in header]
+    if missing:
+        raise ProfileError(f"profile {path} lacks column(s) {missing}; header is {header}")
+    try:
+        data = np.loadtxt(lines[1:], delimiter=",", ndmin=2,
+                          usecols=[header.index(c) for c in columns])
+    except ValueError as exc:
+        raise ProfileError(f"profile {path}: {exc}") from exc
+    if not np.all(np.isfinite(data)):
+        raise ProfileError(f"profile {path} holds non-finite numbers")
+    time = data[:, columns.index(CSV_COLUMNS[0])] if CSV_COLUMNS[0] in columns else None
+    if data.shape[0] < 2 or (time is not None and np.any(np.diff(time) <= 0)):
         raise ProfileError(f"profile {path}: need >= 2 rows with increasing time")
-    return ProfileSamples(*data.T)
+    return data
+
+
+def read_profile_csv(path: str | Path) -> ProfileSamples:
+    """Read a CSV written by :func:`write_profile_csv` (all columns required)."""
+    return ProfileSamples(*read_profile_columns(path).T)
+
+
+def read_profile_settings(path: str | Path) -> dict[str, Any]:
+    """The settings a planned profile was made with: its leading ``# key = value`` lines
+    (TOML values, SI units) as :func:`write_profile_csv` writes them; {} for a bare CSV."""
+    path = Path(path)
+    try:
+        with path.open(encoding="utf-8") as fh:
+            head = list(itertools.takewhile(lambda ln: ln.lstrip().startswith("#"), fh))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ProfileError(f"cannot read profile {path}: {exc}") from exc
+    text = "\n".join(ln.lstrip()[1:].strip() for ln in head)
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ProfileError(f"profile {path}: bad settings line ({exc})") from exc

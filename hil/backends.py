@@ -29,6 +29,7 @@ import numpy as np
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Discard
 
+from controllers.limits import DriveLimits, drive_limits
 from hil.experiment import stroke_positions
 from hil.homing import APPROACH_SPEED, START_TOLERANCE
 from hil.samples import Sample, Status, Trajectory, TrajectoryError
@@ -77,6 +78,12 @@ class RigSetup:
     def stroke(self) -> tuple[float, float]:
         """(x_open, x_toggle) of the nominal mechanism, m."""
         return stroke_limits(load_preset(self.preset).lower)
+
+    @property
+    def limits(self) -> DriveLimits:
+        """The preset's drive limits (:func:`controllers.limits.drive_limits`): every move
+        of a run, recorded or not, keeps to the acceleration and jerk the planner obeys."""
+        return drive_limits(load_preset(self.preset))
 
     @property
     def travel_limits(self) -> tuple[float, float]:
@@ -276,7 +283,7 @@ class FmuPlant(Plant):
         if abs(x - self._x) <= START_TOLERANCE:
             return 0.0
         start, h = self._x, self.setup.period
-        for xi in stroke_positions(start, x, APPROACH_SPEED, h)[1:]:
+        for xi in stroke_positions(start, x, APPROACH_SPEED, h, self.setup.limits)[1:]:
             check()
             force = self._step(float(xi), h)[1]
             if abs(force) > self.setup.force_limit:
@@ -367,7 +374,7 @@ class RigPlant(Plant):
         from hil.serial_link import RigError
 
         try:
-            distance = move_to(self._link, x, self._x0, check=check)
+            distance = move_to(self._link, x, self._x0, self.setup.limits, check=check)
         except RigError as exc:
             raise RunStoppedError(f"rig fault while moving to the start x = {x:.6g} m: "
                                   f"{exc}") from exc

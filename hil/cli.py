@@ -15,7 +15,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from hil import cli_rig, cli_rsm
+from hil import cli_rig, cli_rsm, experiment
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
 from hil.cli_args import (
     add_version,
@@ -63,10 +63,8 @@ def _trajectory(s: RunSettings, guard: SignalGuard) -> tuple[Trajectory, str]:
         _guard_duration(2 * s.cycles * (x_tp - x_open) / s.speed, s)  # before building it
         return reciprocating_trajectory(nominal, s.speed, s.cycles, period), (
             f"reciprocating at {s.speed * 1e3:g} mm/s")
-    from controllers.planner import plan_default_profile
-
     print(f"hil run: planning the default profile for {s.preset}", file=sys.stderr)
-    forward = plan_default_profile(s.preset, period=period)
+    forward = experiment.planned_trajectory(s.preset, period)
     guard.check()  # IPOPT swallows Ctrl-C: act on it before anything moves
     return _guarded(profile_cycles(forward, s.cycles), s), "planned (minimum peak input force)"
 

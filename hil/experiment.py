@@ -1,13 +1,11 @@
 """The reciprocating experiment of Chang, Lee & Hsu 2021, section 5, and its cycle segmentation.
 
 The input link is driven forward from the open position x_open (link 3 horizontal)
-to the toggle x_TP and back, N times, at a speed v. Each stroke is a jerk-limited
-("double S") move: its position is the distance D times the CDF of the sum of three
-uniform variables U(0, D/v) + U(0, v/a) + U(0, a/j), i.e. a velocity pulse of height v
-and width D/v smoothed by two box filters (of widths v/a and a/j). That gives exactly
-the distance D, peak velocity <= v (= v when the stroke is long enough to cruise), peak
-acceleration <= a and peak jerk <= j; without a jerk limit the second filter is
-dropped (trapezoidal velocity). The strokes join at rest, without dwell.
+to the toggle x_TP and back, N times, at a speed v. Each stroke is the planner's
+jerk-limited S-curve (:func:`controllers.profiles.stroke_at_speed`) cruising at v,
+sampled every period, with the acceleration and jerk limits of the preset's drive
+(:func:`controllers.limits.drive_limits`, the limits the planner and its baselines obey).
+The strokes join at rest, without dwell.
 
 A recorded stream is cut into cycles by the commanded position alone, so the same
 segmentation serves every back-end and a re-read CSV.
@@ -15,66 +13,41 @@ segmentation serves every back-end and a re-read CSV.
 
 from __future__ import annotations
 
-import itertools
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.limits import DriveLimits, drive_limits
+from controllers.profiles import ProfileError, stroke_at_speed
 from hil.samples import Trajectory, TrajectoryError
 from toggle.kinematics import stroke_limits
 from toggle.params import Mechanism
 
-#: Default ramp limits: at 25 mm/s the velocity ramp lasts 50 ms + 10 ms.
-DEFAULT_ACCEL = 0.5  # m/s^2
-DEFAULT_JERK = 50.0  # m/s^3
 DEFAULT_PERIOD = 1e-3  # s
 #: Band around x_open / x_TP (m) within which the commanded position counts as "at the end".
 DEFAULT_END_TOL = 1e-6
 
 
-def _integrated_cdf(s: np.ndarray, widths: Sequence[float]) -> np.ndarray:
-    """Integral from 0 to s of the CDF of the sum of independent U(0, w) variables.
-
-    Closed form: sum over subsets S of (-1)^|S| (s - sum_S w)_+^(m+1) / ((m+1)! prod w)
-    while s < sum w; beyond, s - sum(w) / 2 exactly.
-    """
-    m, total = len(widths), sum(widths)
-    acc = np.zeros_like(s)
-    for k in range(m + 1):
-        for subset in itertools.combinations(widths, k):
-            acc += (-1) ** k * np.maximum(s - sum(subset), 0.0) ** (m + 1)
-    ramp = acc / (math.factorial(m + 1) * math.prod(widths))
-    return np.where(s >= total, s - total / 2, ramp)
-
-
-def stroke_positions(
-    start: float, end: float, speed: float, period: float,
-    accel: float = DEFAULT_ACCEL, jerk: float | None = DEFAULT_JERK,
-) -> np.ndarray:
-    """Positions of one jerk-limited move from ``start`` to ``end`` every ``period`` s.
+def stroke_positions(start: float, end: float, speed: float, period: float,
+                     limits: DriveLimits, jerk: float | None = None) -> np.ndarray:
+    """Positions of one S-curve move from ``start`` to ``end`` every ``period`` s, cruising
+    at ``speed`` under the acceleration and jerk of ``limits`` (``jerk`` overrides the
+    latter; inf gives the trapezoidal velocity profile).
 
     The first sample is ``start``; the last is exactly ``end`` (the move's duration
     is rounded up to a whole number of periods).
     """
-    for name, value in (("speed", speed), ("period", period), ("accel", accel)):
-        if not (math.isfinite(value) and value > 0):
-            raise TrajectoryError(f"{name} must be positive, got {value!r}")
-    if jerk is not None and not (math.isfinite(jerk) and jerk > 0):
-        raise TrajectoryError(f"jerk must be positive or None, got {jerk!r}")
-    distance = abs(end - start)
-    if distance == 0:
-        raise TrajectoryError("a stroke needs distinct start and end positions")
-    cruise = distance / speed
-    ramps = [speed / accel] + ([accel / jerk] if jerk is not None else [])
-    n = math.ceil((cruise + sum(ramps)) / period - 1e-9)
-    t = np.arange(n + 1) * period
-    # CDF of U(0, cruise) + ramps = (G(t) - G(t - cruise)) / cruise, G the integrated
-    # CDF of the ramps alone: no cancellation between large powers of t
-    frac = (_integrated_cdf(t, ramps) - _integrated_cdf(t - cruise, ramps)) / cruise
-    x = start + (end - start) * np.clip(frac, 0.0, 1.0)
-    x[-1] = end  # the move is over by then (frac = 1); avoid start + (end - start) roundoff
+    if not (math.isfinite(period) and period > 0):
+        raise TrajectoryError(f"period must be positive, got {period!r}")
+    try:
+        move = stroke_at_speed(start, end, speed, limits.acceleration,
+                               limits.jerk if jerk is None else jerk)
+    except ProfileError as exc:
+        raise TrajectoryError(str(exc)) from exc
+    t = np.arange(math.ceil(move.duration / period - 1e-9) + 1) * period
+    x = move.sample(t)[0]
+    x[-1] = end  # the move is over by then; avoid start + (end - start) roundoff
     return x
 
 
@@ -90,21 +63,35 @@ def _repeat_cycles(forward: np.ndarray, backward: np.ndarray, cycles: int,
 
 def reciprocating_trajectory(
     mech: Mechanism, speed: float, cycles: int, period: float = DEFAULT_PERIOD, *,
-    accel: float = DEFAULT_ACCEL, jerk: float | None = DEFAULT_JERK,
+    limits: DriveLimits | None = None, jerk: float | None = None,
 ) -> Trajectory:
-    """Seed 000's experiment: x_open -> x_TP -> x_open, ``cycles`` times, at ``speed`` m/s.
+    """Seed 000's experiment: x_open -> x_TP -> x_open, ``cycles`` times, at ``speed`` m/s,
+    under ``limits`` (default: the preset's drive, :func:`controllers.limits.drive_limits`).
 
     The end positions come from ``mech``'s lower half, so pass the nominal mechanism
     (the paper drives every Delta r8 between the nominal -3.439 and 51.566 mm).
     """
     x_open, x_tp = stroke_limits(mech.lower)
-    forward = stroke_positions(x_open, x_tp, speed, period, accel, jerk)
+    forward = stroke_positions(x_open, x_tp, speed, period,
+                               drive_limits(mech) if limits is None else limits, jerk)
     return _repeat_cycles(forward, forward[::-1], cycles, period)
 
 
 def profile_cycles(forward: Trajectory, cycles: int) -> Trajectory:
     """A planned forward stroke, replayed ``cycles`` times with its time-mirror as the return."""
     return _repeat_cycles(forward.x_cmd, forward.x_cmd[::-1], cycles, forward.period)
+
+
+def planned_trajectory(preset: str, period: float = DEFAULT_PERIOD) -> Trajectory:
+    """The preset's default plan (the planner's best minimum-peak stroke of the default
+    duration, :meth:`controllers.planner.ClampPlanner.best`) sampled every ``period`` s."""
+    from controllers.planner import default_duration, plan_config, planner_for
+
+    cfg = plan_config(preset)
+    planner = planner_for(cfg, drive_limits(cfg.mechanism))
+    plan = planner.best(default_duration(planner))
+    t = np.arange(0.0, plan.duration + period / 2, period)
+    return Trajectory.from_positions(plan.profile.sample(t)[0], period)
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+from controllers.limits import DriveLimits
 from hil import protocol as p
 from hil.experiment import stroke_positions
 from hil.serial_link import RigError, SerialLink
@@ -88,9 +89,10 @@ def home(link: SerialLink) -> float:
     return abs(edge.steps - origin) * sc.step_m
 
 
-def move_to(link: SerialLink, x_target: float, x_origin: float,
+def move_to(link: SerialLink, x_target: float, x_origin: float, limits: DriveLimits,
             speed: float = APPROACH_SPEED, check: Callable[[], None] = lambda: None) -> float:
-    """Move the table to ``x_target`` (m) with a jerk-limited stroke at ``speed``; not recorded.
+    """Move the table to ``x_target`` (m) with an S-curve at ``speed`` under the drive's
+    ``limits``; not recorded.
 
     ``x_origin`` is the input position at step 0; ``check`` is called every sample and may
     raise to abandon the move (the rig then stops). Returns the distance moved (0 when
@@ -100,7 +102,7 @@ def move_to(link: SerialLink, x_target: float, x_origin: float,
     x_now = sc.x(link.status.steps, x_origin)
     if abs(x_now - x_target) <= START_TOLERANCE:
         return 0.0
-    x = stroke_positions(x_now, x_target, speed, sc.period)[1:]
+    x = stroke_positions(x_now, x_target, speed, sc.period, limits)[1:]
     points = [(sc.steps(float(xi), x_origin), p.NO_CHECK) for xi in x]
     _unrecorded(link, points, lambda _tel: check() or False)
     return abs(x_target - x_now)

@@ -16,9 +16,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from controllers.profiles import read_profile_settings
 from hil.backends import MAX_SPEED
 from hil.cli_args import check_writable_dir
-from hil.samples import profile_settings
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset, tomllib
 
@@ -162,7 +162,7 @@ def _apply_profile(values: dict[str, Any], explicit: set[str]) -> str:
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
     except OSError as exc:
         raise ParameterError(f"cannot read profile {path}: {exc}") from exc
-    planned = profile_settings(path)
+    planned = read_profile_settings(path)
     for key in PROFILE_KEYS:
         if key not in planned:
             continue

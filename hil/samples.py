@@ -7,22 +7,18 @@ units (s, m, N), independent of the back-end.
 
 from __future__ import annotations
 
-import csv
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from toggle.params import tomllib
+from controllers.profiles import CSV_COLUMNS, ProfileError, read_profile_columns
 
 #: Columns a planned profile CSV must have (the planner writes velocity etc. too).
-PROFILE_TIME = "time [s]"
-PROFILE_POSITION = "position [m]"
+PROFILE_TIME, PROFILE_POSITION = CSV_COLUMNS[:2]
 #: Relative tolerance on the spacing of a profile's time column.
 _PERIOD_RTOL = 1e-6
 
@@ -92,24 +88,17 @@ class Trajectory:
 
     @classmethod
     def from_csv(cls, path: str | Path, period: float | None = None) -> Trajectory:
-        """Read a planned profile (columns ``time [s]``, ``position [m]``, others ignored).
+        """Read a planned profile (:func:`controllers.profiles.read_profile_columns`:
+        columns ``time [s]``, ``position [m]``, others ignored).
 
         Without ``period`` the file's own time step is used and must be uniform;
         with it the profile is linearly resampled at that period. Time is shifted
         to start at zero.
         """
-        path = Path(path)
-        lines, header = _profile_lines(path)
-        missing = [c for c in (PROFILE_TIME, PROFILE_POSITION) if c not in header]
-        if missing:
-            raise TrajectoryError(f"profile {path} lacks column(s) {missing}; header is {header}")
-        cols = (header.index(PROFILE_TIME), header.index(PROFILE_POSITION))
         try:
-            data = np.loadtxt(lines, delimiter=",", usecols=cols, ndmin=2)
-        except ValueError as exc:
-            raise TrajectoryError(f"profile {path}: {exc}") from exc
-        if data.shape[0] < 2 or np.any(np.diff(data[:, 0]) <= 0):
-            raise TrajectoryError(f"profile {path}: need >= 2 rows with increasing time")
+            data = read_profile_columns(path, (PROFILE_TIME, PROFILE_POSITION))
+        except ProfileError as exc:
+            raise TrajectoryError(str(exc)) from exc
         t, x = data[:, 0] - data[0, 0], data[:, 1]
         if period is None:
             step = (t[-1] - t[0]) / (t.size - 1)
@@ -130,32 +119,3 @@ class Trajectory:
     def duration(self) -> float:
         """Time from the first to the last sample, s."""
         return float(self.time[-1] - self.time[0])
-
-
-def _profile_lines(path: Path) -> tuple[list[str], list[str]]:
-    """(data lines, header columns) of a profile CSV; leading ``#`` lines are its settings."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TrajectoryError(f"cannot read profile {path}: {exc}") from exc
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise TrajectoryError(f"profile {path} is empty")
-    header = [h.strip() for h in next(csv.reader(lines[:1]))]
-    return lines[1:], header
-
-
-def profile_settings(path: str | Path) -> dict[str, Any]:
-    """The settings a planned profile was made with: its leading ``# key = value`` lines
-    (TOML values, SI units), as written by ``toggle plan --out``; {} for a bare CSV."""
-    path = Path(path)
-    try:
-        with path.open(encoding="utf-8") as fh:
-            head = list(itertools.takewhile(lambda ln: ln.lstrip().startswith("#"), fh))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TrajectoryError(f"cannot read profile {path}: {exc}") from exc
-    text = "\n".join(ln.lstrip()[1:].strip() for ln in head)
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise TrajectoryError(f"profile {path}: bad settings line ({exc})") from exc

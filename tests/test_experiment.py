@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from controllers.limits import DriveLimits, drive_limits
+from controllers.profiles import s_curve, stroke_at_speed
 from hil.experiment import (
     CycleCounter,
     profile_cycles,
@@ -36,34 +40,65 @@ def test_reciprocating_runs_between_open_and_toggle(chang):
     assert np.allclose(np.diff(traj.time), PERIOD)
 
 
-@pytest.mark.parametrize("jerk", [50.0, None])
+@pytest.mark.parametrize("jerk", [50.0, math.inf])
 def test_ramps_respect_speed_accel_and_jerk(chang, jerk):
     accel = 0.5
-    x = reciprocating_trajectory(chang, 0.025, 1, PERIOD, accel=accel, jerk=jerk).x_cmd
+    limits = DriveLimits(velocity=0.04, acceleration=accel, jerk=50.0, torque=0.3)
+    x = reciprocating_trajectory(chang, 0.025, 1, PERIOD, limits=limits, jerk=jerk).x_cmd
     v, a, j = derivatives(x, PERIOD)
     assert np.max(np.abs(v)) == pytest.approx(0.025, rel=1e-6)  # long stroke: cruises at v
     assert np.max(np.abs(a)) <= accel * (1 + 1e-3)
-    if jerk is not None:
+    if math.isfinite(jerk):
         assert np.max(np.abs(j)) <= jerk * (1 + 1e-3)
     else:  # trapezoidal: the acceleration jumps, so its finite difference is not bounded
         assert np.max(np.abs(j)) > 100 * accel
 
 
+def test_default_strokes_keep_the_planners_drive_limits(chang):
+    """The experiment's strokes obey the limits the planner and its baselines obey
+    (they once defaulted to 0.5 m/s^2 and 50 m/s^3 against the preset's 0.4 and 8)."""
+    limits = drive_limits(chang)
+    x = reciprocating_trajectory(chang, 0.025, 1, PERIOD).x_cmd
+    _, a, j = derivatives(x, PERIOD)
+    assert np.max(np.abs(a)) <= limits.acceleration * (1 + 1e-3)
+    assert np.max(np.abs(j)) <= limits.jerk * (1 + 1e-2)
+    assert np.max(np.abs(a)) >= 0.99 * limits.acceleration  # the ramps use them
+
+
+def test_one_s_curve_generator_for_the_rig_and_the_baselines(chang):
+    """A stroke at a cruise speed is the baseline S-curve of the same duration."""
+    limits = drive_limits(chang)
+    x_open, x_tp = stroke_limits(chang.lower)
+    move = stroke_at_speed(x_open, x_tp, 0.025, limits.acceleration, limits.jerk)
+    baseline = s_curve(x_open, x_tp, move.duration, limits.velocity, limits.acceleration,
+                       limits.jerk)
+    t = np.linspace(0.0, move.duration, 997)
+    np.testing.assert_allclose(move.sample(t), baseline.sample(t), atol=1e-12)
+    back = stroke_at_speed(x_tp, x_open, 0.025, limits.acceleration, limits.jerk)
+    np.testing.assert_allclose(back.sample(t)[0], x_open + x_tp - move.sample(t)[0],
+                               atol=1e-12)
+
+
 @settings(max_examples=40, deadline=None)
 @given(distance=st.floats(1e-4, 0.1), speed=st.floats(1e-3, 0.05),
-       accel=st.floats(0.05, 5.0), jerk=st.one_of(st.none(), st.floats(5.0, 500.0)))
-def test_stroke_is_monotonic_exact_and_within_speed(distance, speed, accel, jerk):
-    x = stroke_positions(0.01, 0.01 + distance, speed, PERIOD, accel, jerk)
-    assert x[0] == 0.01 and x[-1] == 0.01 + distance
-    assert np.all(np.diff(x) >= -1e-15)
-    assert np.max(np.diff(x)) / PERIOD <= speed * (1 + 1e-9)
+       accel=st.floats(0.05, 5.0), jerk=st.one_of(st.just(math.inf), st.floats(5.0, 500.0)),
+       backward=st.booleans())
+def test_stroke_is_monotonic_exact_and_within_speed(distance, speed, accel, jerk, backward):
+    limits = DriveLimits(velocity=1.0, acceleration=accel, jerk=jerk if math.isfinite(jerk)
+                         else 1.0, torque=1.0)
+    start, end = (0.01 + distance, 0.01) if backward else (0.01, 0.01 + distance)
+    x = stroke_positions(start, end, speed, PERIOD, limits, jerk)
+    assert x[0] == start and x[-1] == end
+    step = np.diff(x) * (-1 if backward else 1)
+    assert np.all(step >= -1e-15)
+    assert np.max(step) / PERIOD <= speed * (1 + 1e-9)
 
 
 def test_bad_stroke_arguments_raise(chang):
     with pytest.raises(TrajectoryError):
-        stroke_positions(0.0, 0.01, -0.01, PERIOD)
+        stroke_positions(0.0, 0.01, -0.01, PERIOD, drive_limits(chang))
     with pytest.raises(TrajectoryError):
-        stroke_positions(0.0, 0.0, 0.01, PERIOD)
+        stroke_positions(0.0, 0.0, 0.01, PERIOD, drive_limits(chang))
     with pytest.raises(TrajectoryError):
         reciprocating_trajectory(chang, 0.025, 0)
 

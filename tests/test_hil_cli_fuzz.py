@@ -31,11 +31,11 @@ def caps(words: tuple[str, ...]) -> list[str]:
 
 @pytest.fixture(autouse=True, scope="module")
 def cheap(monkeypatch_module) -> None:
-    import controllers.planner as planner
+    from hil import experiment
     from hil.rig_emulator import RigEmulator
 
     canned = Trajectory.from_positions(np.linspace(-3.4386e-3, 51.5e-3, 50), 1e-3)
-    monkeypatch_module.setattr(planner, "plan_default_profile", lambda *a, **k: canned)
+    monkeypatch_module.setattr(experiment, "planned_trajectory", lambda *a, **k: canned)
     monkeypatch_module.setattr(RigEmulator, "serve", lambda self: None)
     monkeypatch_module.chdir(ROOT)  # what a command writes by default lands here
 

@@ -133,11 +133,11 @@ def test_ctrl_c_while_planning_moves_nothing(tmp_path) -> None:
 
 def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_path) -> None:
     """IPOPT catches KeyboardInterrupt and returns its iterate: the guard remembers it."""
-    import controllers.planner as planner
+    from hil import experiment
     from hil.cli import main
     from hil.interrupts import Interrupted
 
-    real = planner.plan_default_profile
+    real = experiment.planned_trajectory
 
     def swallowing(*args, **kw):
         try:
@@ -147,6 +147,6 @@ def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_p
             pass  # what CasADi does with the exception
         return real(*args, **kw)
 
-    monkeypatch.setattr(planner, "plan_default_profile", swallowing)
+    monkeypatch.setattr(experiment, "planned_trajectory", swallowing)
     assert main(["run", "--out", str(tmp_path / "r"), "--quiet"]) == 130
     assert not (tmp_path / "r").exists()

@@ -28,10 +28,10 @@ from controllers.profiles import (
     CSV_COLUMNS,
     minimum_time,
     read_profile_csv,
+    read_profile_settings,
     s_curve,
     write_profile_csv,
 )
-from hil.samples import profile_settings
 from toggle.cli import main
 from toggle.elastics import ClampingError
 from toggle.fmu_build import build_fmu
@@ -335,7 +335,7 @@ def test_cli_writes_the_profile_and_the_json(tmp_path, capsys):
     lines = out.read_text().splitlines()
     header = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
     assert lines[header] == ",".join(CSV_COLUMNS)
-    assert profile_settings(out)["x_contact"] == pytest.approx(report["x_contact"], rel=1e-12)
+    assert read_profile_settings(out)["x_contact"] == pytest.approx(report["x_contact"], rel=1e-12)
     samples = read_profile_csv(out)
     assert samples.peak_force == pytest.approx(report["peak_force"], rel=1e-9)
     copy = write_profile_csv(tmp_path / "copy.csv", samples)
