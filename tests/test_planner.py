@@ -33,7 +33,7 @@ from controllers.profiles import (
     write_profile_csv,
 )
 from toggle.cli import main
-from toggle.elastics import ClampingError
+from toggle.elastics import ClampingError, clamp_stroke
 from toggle.fmu_build import build_fmu
 from toggle.params import Dynamics, load_preset
 from toggle.plant import plant_outputs
@@ -306,6 +306,21 @@ def test_torque_limit_and_unreachable_clamp_force():
         planner_for(cfg, weak, intervals=60).solve(DURATION)
     with pytest.raises(ClampingError, match="beyond reach"):
         plan_config("chang2021", clamp_force=1e12)
+
+
+def test_plan_config_is_the_plants_configuration_with_the_preset_clamp_force():
+    """One plant configuration (the FMU's) and one contact solver: the default mold is the
+    preset's clamp force held by the plant, exactly what --clamp-force of it gives."""
+    from toggle.plant import configure
+
+    cfg = plan_config("chang2021", errors={"r8": 0.25e-3}, masses={"platen": 4.0})
+    same = configure("chang2021", errors={"r8": 0.25e-3}, masses={"platen": 4.0})
+    assert cfg.mechanism == same.mechanism
+    force = cfg.mechanism.clamp.final_tiebar_force
+    assert cfg.x_contact == plan_config("chang2021", errors={"r8": 0.25e-3}, masses={
+        "platen": 4.0}, clamp_force=force).x_contact
+    held = plant_outputs(clamp_stroke(cfg.mechanism)[1], 0.0, 0.0, cfg).clamp_force
+    assert float(held) == pytest.approx(force, rel=1e-9)
 
 
 @settings(max_examples=30, deadline=None)
