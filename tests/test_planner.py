@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controllers.compiled import code_digest, compiled
+from controllers.compiled import code_digest, code_modules, compiled
 from controllers.compiled import compiled as _real_compiled
 from controllers.limits import drive_limits
 from controllers.planner import (
@@ -219,13 +219,22 @@ def test_the_cache_key_covers_the_plant_and_the_code_it_uses(tmp_path):
     import sys
     sys.path.insert(0, str(tmp_path))
     try:
-        before = code_digest("fakepkg.model")
+        before = code_digest("fakepkg.model", roots=("fakepkg",))
         (package / "plots.py").write_text("STYLE = 2\n")  # not imported by the model
-        assert code_digest("fakepkg.model") == before
+        assert code_digest("fakepkg.model", roots=("fakepkg",)) == before
         (package / "helper.py").write_text("K = 2\n")  # imported by the model
-        assert code_digest("fakepkg.model") != before
+        assert code_digest("fakepkg.model", roots=("fakepkg",)) != before
     finally:
         sys.path.remove(str(tmp_path))
+
+
+def test_the_planners_key_covers_the_plant_it_compiles_and_nothing_else():
+    """The compiled problem holds the plant's equations: editing toggle/plant.py (or what it
+    imports) must recompile; the key once followed only controllers/ and kept a stale plant."""
+    used = code_modules("controllers.planner")
+    assert {"toggle.plant", "toggle.kinematics", "toggle.statics", "toggle.asymmetry",
+            "controllers.profiles"} <= set(used)
+    assert not {"toggle.plots", "toggle.press", "toggle.cli", "hil.cli"} & set(used)
 
 
 def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, tmp_path, monkeypatch):
