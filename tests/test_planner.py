@@ -20,6 +20,7 @@ from controllers.planner import (
     ClampPlanner,
     PlanningError,
     _problem_key,
+    baseline_stroke,
     baselines,
     plan_config,
     planner_for,
@@ -27,6 +28,7 @@ from controllers.planner import (
 from controllers.profiles import (
     CSV_COLUMNS,
     minimum_time,
+    predict,
     read_profile_csv,
     read_profile_settings,
     s_curve,
@@ -453,3 +455,20 @@ def test_trade_off_is_monotone_and_ends_near_the_bound(chang, capsys):
     with pytest.raises(SystemExit) as refused:  # an argparse usage error
         main(["plan", "--trade-off", "1"])
     assert refused.value.code == 2
+
+
+def test_durations_beyond_the_friction_models_creep_speed_are_refused_up_front(chang, capsys):
+    """A 1e4 s stroke once took 10 min and 6 GB and compared the plan with baselines whose
+    friction had faded (tanh(v / v_eps) at 5 um/s): 10 N 'baselines' under a 14.9 N bound."""
+    cfg, limits, planner, _ = chang
+    longest = planner.longest
+    assert longest == pytest.approx(
+        minimum_time(planner.stroke, 10 * cfg.velocity_epsilon, limits.acceleration,
+                     limits.jerk), rel=1e-12)
+    with pytest.raises(PlanningError, match=f"longest stroke planned is {longest:.4g} s"):
+        planner.solve(longest * 1.01)
+    slow = predict(baseline_stroke(cfg, limits, longest), cfg)  # the slowest baseline kept
+    assert slow.peak_force >= planner.lower_bound()
+    for extra in ([], ["--robust", "--delta-r8", "0.25e-3"]):
+        assert main(["plan", "--preset", "chang2021", "--duration", "1e4", *extra]) == 2
+        assert "too long for the plant's friction model" in capsys.readouterr().err

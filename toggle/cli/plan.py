@@ -89,6 +89,7 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     erroneous = cfg.with_(mechanism=with_errors(cfg.mechanism, _errors(args))[0])
     nominal = planner_for(cfg, limits, args.contact_speed, args.intervals)
     duration = args.duration or default_duration(nominal)
+    nominal.check_duration(duration)  # before predicting a baseline of that length
     stroke = baseline_stroke(cfg, limits, duration)
     curve = {"nominal": predict(stroke, cfg), "erroneous": predict(stroke, erroneous)}
     scale = curve["erroneous"].peak_force / curve["nominal"].peak_force
