@@ -72,7 +72,14 @@ from scipy.optimize import brentq
 from controllers.bounds import peak_lower_bound
 from controllers.compiled import Unit, code_digest, compiled
 from controllers.limits import DriveLimits
-from controllers.profiles import Profile, ProfileSamples, minimum_time, predict, s_curve
+from controllers.profiles import (
+    Profile,
+    ProfileSamples,
+    minimum_time,
+    predict,
+    ramp_time,
+    s_curve,
+)
 from toggle.elastics import ClampingError, clamp_stroke, contact_for_clamp_force
 from toggle.params import Mechanism, ParameterError
 from toggle.plant import PlantConfig, configure, plant_outputs
@@ -520,6 +527,18 @@ class ClampPlanner:
         """The slowest crosshead speed the plans keep while clamping, m/s."""
         return CREEP_FACTOR * self.config.velocity_epsilon
 
+    def clamping_creeps(self, settle: int) -> bool:
+        """Whether the clamping (mold contact to the final position) is long enough to hold
+        the creep floor on all but its last ``settle`` of n2 intervals: the floor holds for
+        at least (n2 - settle) / settle times the fastest stop from :attr:`creep_speed`, so
+        the clamping must be longer than that travel. A shorter one (a mold set within
+        ~0.2 mm of the toggle on chang2021) builds so little force that its friction cannot
+        be exploited, and the floor would make it infeasible."""
+        lim, v = self.limits, min(self.creep_speed, self.limits.velocity)
+        stop = ramp_time(v, lim.acceleration, lim.jerk)  # creep speed to rest
+        travel = v * stop * ((self.n2 - settle) / settle + 0.5)
+        return self.x_final - self.config.x_contact > travel
+
     @property
     def longest(self) -> float:
         """The longest duration planned, s: the S-curve cruising at :attr:`creep_speed`
@@ -561,8 +580,10 @@ class ClampPlanner:
             lbx[k * (N + 1):(k + 1) * (N + 1)], ubx[k * (N + 1):(k + 1) * (N + 1)] = lo, hi
         lbx[3 * N + 3:4 * N + 3], ubx[3 * N + 3:4 * N + 3] = -self.jerk_bound, self.jerk_bound
         # no creeping through the clamping below the friction model's smoothing speed
-        creep = self.creep_speed * t_ref / S
-        lbx[N + 1 + self.n1:2 * N + 1 - max(2, self.n2 // 10)] = creep
+        # (unless the clamping is too short to cross at creep speed and still settle)
+        settle = max(2, self.n2 // 10)
+        if self.clamping_creeps(settle):
+            lbx[N + 1 + self.n1:2 * N + 1 - settle] = self.creep_speed * t_ref / S
         for k in (N + 1, 2 * N + 2, 2 * N + 1, 3 * N + 2):  # rest at both ends
             lbx[k] = ubx[k] = 0.0
         ubx[0], lbx[N] = 0.0, 1.0  # from the open position to the toggle

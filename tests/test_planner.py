@@ -472,3 +472,22 @@ def test_durations_beyond_the_friction_models_creep_speed_are_refused_up_front(c
     for extra in ([], ["--robust", "--delta-r8", "0.25e-3"]):
         assert main(["plan", "--preset", "chang2021", "--duration", "1e4", *extra]) == 2
         assert "too long for the plant's friction model" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("x_contact", [0.0515, 0.05156])
+def test_a_mold_set_at_the_toggle_is_planned(chang, x_contact, capsys):
+    """Molds within 0.1 mm of the toggle ran 8-19 s and were reported infeasible ("the motor
+    torque limit binds"): the creep floor left no room to stop in such a short clamping."""
+    cfg, limits, planner, _ = chang
+    near = planner_for(cfg.with_(x_contact=x_contact), limits)
+    assert near.problem is planner.problem and not near.clamping_creeps(2)
+    plan = near.solve(DURATION, warm=False)
+    s = plan.samples
+    assert s.position[-1] == pytest.approx(near.x_final, abs=1e-9)
+    s_curve_peak = baselines(cfg.with_(x_contact=x_contact), limits, DURATION)["s_curve"]
+    assert s.peak_force < s_curve_peak.peak_force
+    assert planner.clamping_creeps(max(2, planner.n2 // 10))  # the preset's mold keeps it
+    assert main(["plan", "--x-contact", str(x_contact), "--duration", str(DURATION),
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["gap_to_bound_percent"] is None or report["peak_force_lower_bound"] > 0
