@@ -802,8 +802,9 @@ class ClampPlanner:
     def trade_off(self, points: int = 6) -> list[Plan]:
         """The trade-off between stroke time and peak input force: the fastest stroke under
         ``points`` force limits from the unconstrained fastest stroke's peak down to just
-        above :meth:`lower_bound` (geometrically spaced), each continued from the last;
-        limits no stroke meets are left out."""
+        above :meth:`lower_bound` (geometrically spaced; without a bound, as for a mold at
+        the toggle, down to a quarter of that peak), each continued from the last; limits
+        no stroke meets are left out."""
         if not (isinstance(points, int) and points >= 2):
             raise ParameterError(f"points must be an integer >= 2, got {points!r}")
         fastest = self._fastest(self.force_limit, None, False)
@@ -811,7 +812,9 @@ class ClampPlanner:
             raise PlanningError(self._unreachable(self.force_limit, None))
         top = min(self.worst_peak(fastest), self.force_limit)
         plans, start = [fastest], fastest
-        for limit in np.geomspace(top, self.lower_bound() * (1 + _GAP), points)[1:]:
+        bound = self.lower_bound()
+        bottom = bound * (1 + _GAP) if bound > 0 else top / 4
+        for limit in np.geomspace(top, bottom, points)[1:]:
             try:
                 plan = self.minimum_time(float(limit), start=start)
             except PlanningError:
