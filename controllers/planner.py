@@ -86,6 +86,11 @@ from toggle.plant import PlantConfig, configure, plant_outputs
 
 OBJECTIVES = ("peak", "rms")
 CONTACT_SPEED = 5e-3  # m/s, default limit on the platen's speed at mold contact
+#: Default mold-protection distance: this fraction of the platen's travel from the open
+#: position to mold contact (4.5 mm of chang2021's 45 mm; see :func:`protection_entry`).
+PROTECT_FRACTION = 0.1
+#: A protection cap that is not set: a value no plan reaches (the cap stays a parameter).
+_NO_CAP = 1e12
 INTERVALS = 200
 #: While clamping the crosshead moves at least this many times the plant's friction-smoothing
 #: speed (tanh(v / v_eps)), except while it settles in the last tenth of the clamping phase:
@@ -118,6 +123,43 @@ class PlanningError(ValueError):
 
 
 @dataclass(frozen=True)
+class Protection:
+    """The mold-protection zone as machine controls define it: over the last ``distance``
+    m of platen travel before mold contact (default :data:`PROTECT_FRACTION` of the
+    platen's travel to contact) the platen moves at most ``speed`` m/s and the input force
+    stays within ``force`` N (a part left in the mold stops the clamp); None: no cap."""
+
+    distance: float | None = None
+    speed: float | None = None
+    force: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("distance", "speed", "force"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ParameterError(f"protection {name} must be > 0, got {value!r}")
+
+
+def protection_entry(cfg: PlantConfig, distance: float | None) -> tuple[float, float]:
+    """The crosshead position where the mold-protection zone begins, ``distance`` m of
+    platen travel before mold contact (default :data:`PROTECT_FRACTION` of the platen's
+    travel from the open position to contact), and that distance, m."""
+    free = cfg.with_(x_contact=None)
+    x_open = clamp_stroke(cfg.mechanism)[0]
+
+    def platen(x: float) -> float:
+        return float(plant_outputs(x, 0.0, 0.0, free).platen_position)
+
+    travel = platen(cfg.x_contact) - platen(x_open)
+    distance = PROTECT_FRACTION * travel if distance is None else distance
+    if not 0 < distance < travel:
+        raise ParameterError(f"protection distance {distance!r} m must be > 0 and shorter than "
+                             f"the platen's travel to mold contact ({travel:.6g} m)")
+    target = platen(cfg.x_contact) - distance
+    return brentq(lambda x: platen(x) - target, x_open, cfg.x_contact, xtol=1e-14), distance
+
+
+@dataclass(frozen=True)
 class Plan:
     """A planned stroke: the profile, its prediction through the plant and solver data."""
 
@@ -129,6 +171,12 @@ class Plan:
     iterations: int
     warm: bool
     solution: dict[str, np.ndarray] = field(repr=False)  # scaled primal and dual solution
+    t_zone: float = math.nan  # entry into the mold-protection zone, s
+
+    @property
+    def protection_time(self) -> float:
+        """Time spent in the mold-protection zone (its entry to mold contact), s."""
+        return self.t_contact - self.t_zone
 
     @property
     def duration(self) -> float:
@@ -191,7 +239,7 @@ def _min_jerk(tau: np.ndarray) -> tuple[np.ndarray, ...]:
 
 #: The plant outputs the problem evaluates (see :meth:`StrokeProblem._spans`): the input
 #: force at the nodes and interval midpoints of each phase, the platen speed at contact.
-_OUTPUTS = ("free", "mold", "contact", "free_mid", "mold_mid")
+_OUTPUTS = ("free", "mold", "contact", "free_mid", "mold_mid", "zone", "zone_mid")
 #: The functions compiled to machine code: jets of each output (value, + gradient, + Hessian),
 #: then the model (:meth:`StrokeProblem._model_functions`).
 _MODEL_NAMES = ("input_force", "f_plain", "grad_f_plain", "fg", "grad_f", "jac_g", "hess_lag")
@@ -216,9 +264,10 @@ _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 _JET = 10  # rows of a node's plant data: value, gradient (3), Hessian upper triangle (6)
 #: The problem's parameters, in order: objective weights (peak, force integral, duration,
 #: jerk regularisation), mold-contact position (m), force scale (N), time scale T_ref (s),
-#: jerk limit (m/s^3), platen speed limit at contact (m/s), pin friction mu.
+#: jerk limit (m/s^3), platen speed limit at contact (m/s), pin friction mu, the
+#: mold-protection zone's platen speed cap (m/s) and input-force cap (N).
 PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "x_contact", "f_ref", "t_ref",
-              "jerk", "contact_speed", "mu")
+              "jerk", "contact_speed", "mu", "protect_speed", "protect_force")
 _P = {name: k for k, name in enumerate(PARAMETERS)}
 
 
@@ -265,7 +314,11 @@ class StrokeProblem:
 
     Constraints, in order (:attr:`rows`): the dynamics (3N), contact at node N1, the force
     epigraph F - s <= 0 and F + s >= 0 at nodes and midpoints, the platen speed at
-    contact, the duration and the velocity at the midpoints (N).
+    contact, the duration, the velocity at the midpoints (N), then the mold-protection
+    zone: its entry at node NA, the platen speed and the input force over its nodes and
+    midpoints. The closing stroke has three phases, each of equal intervals: the approach
+    (NA intervals, length w[4N+3]), the protection zone up to contact (N1 - NA, w[4N+6])
+    and the clamp-up (N - N1, w[4N+4]).
     """
 
     def __init__(self, cfg: PlantConfig, intervals: int,
@@ -281,12 +334,16 @@ class StrokeProblem:
         self.stroke = self.x_final - self.x_open
         N = intervals
         self.n1, self.n2 = N - N // 2, N // 2
-        self.size = 4 * N + 6
+        self.nz = max(1, self.n1 // 4)  # intervals in the mold-protection zone
+        self.na = self.n1 - self.nz
+        self.size = 4 * N + 7
         # input force at the N + 2 phase nodes and N midpoints, of each plant
         self.n_forces = (2 * N + 2) * len(self.plants)
         sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
                  "force_lower": self.n_forces, "contact_speed": len(self.plants), "duration": 1,
-                 "mid_velocity": N}
+                 "mid_velocity": N, "zone_position": 1,
+                 "zone_speed": (2 * self.nz + 1) * len(self.plants),
+                 "zone_force": (2 * self.nz + 1) * len(self.plants)}
         starts = np.cumsum([0, *sizes.values()])
         self.rows = {name: slice(int(a), int(b)) for name, a, b in
                      zip(sizes, starts[:-1], starts[1:])}
@@ -297,13 +354,20 @@ class StrokeProblem:
         self.last: Plan | None = None  # the latest plan, for any mold height
         self._build()
 
+    def steps(self, w: Any) -> Any:
+        """The interval lengths (scaled) of the three phases: approach, protection zone,
+        clamp-up."""
+        N = self.n1 + self.n2
+        return ca.vertcat(ca.repmat(w[4 * N + 3], self.na, 1), ca.repmat(w[4 * N + 6], self.nz, 1),
+                          ca.repmat(w[4 * N + 4], self.n2, 1))
+
     def _nodes(self, w: Any, t_ref: Any) -> tuple[Any, ...]:
         """Scaled variables -> (xi, nu, al, jerk, th1, th2, s, nu at the midpoints) and the
         states (3 x 2N+1: the N+1 nodes, then the N interval midpoints)."""
-        n1, N = self.n1, self.n1 + self.n2
+        N = self.n1 + self.n2
         xi, nu, al = (w[k * (N + 1):(k + 1) * (N + 1)] for k in range(3))
         io, th1, th2 = w[3 * N + 3:4 * N + 3], w[4 * N + 3], w[4 * N + 4]
-        h = ca.vertcat(ca.repmat(th1 / 2, n1, 1), ca.repmat(th2 / 2, N - n1, 1))
+        h = self.steps(w) / 2
         xi_m = xi[:-1] + h * (nu[:-1] + h * (al[:-1] / 2 + h * io / 6))
         nu_m = nu[:-1] + h * (al[:-1] + h * io / 2)
         al_m = al[:-1] + h * io
@@ -316,10 +380,12 @@ class StrokeProblem:
     def _spans(self) -> tuple[slice, ...]:
         """The columns of the states (:meth:`_nodes`) of each of :data:`_OUTPUTS`: the
         mold-free input force over the approach, the input force with the mold over the
-        clamping, the platen speed at contact, then the forces at the midpoints."""
-        n1, N = self.n1, self.n1 + self.n2
+        clamping, the platen speed at contact, then the forces at the midpoints, then the
+        platen speed over the protection zone's nodes and midpoints."""
+        n1, na, N = self.n1, self.na, self.n1 + self.n2
         return (slice(0, n1 + 1), slice(n1, N + 1), slice(n1, n1 + 1),
-                slice(N + 1, N + 1 + n1), slice(N + 1 + n1, 2 * N + 1))
+                slice(N + 1, N + 1 + n1), slice(N + 1 + n1, 2 * N + 1),
+                slice(na, n1 + 1), slice(N + 1 + na, N + 1 + n1))
 
     def _symbolic(self) -> list[Unit]:
         """The per-node jets of :data:`_OUTPUTS` and the model as SX functions, in
@@ -330,7 +396,8 @@ class StrokeProblem:
             free = plant_outputs(z[0], z[1], z[2], plant, mu=prm[1])
             mold = plant_outputs(z[0], z[1], z[2], plant, x_contact=prm[0], mu=prm[1])
             outputs = (free.input_force, mold.input_force, free.platen_velocity,
-                       free.input_force, mold.input_force)
+                       free.input_force, mold.input_force, free.platen_velocity,
+                       free.platen_velocity)
             jets += [fn for name, out, nodes in zip(_OUTPUTS, outputs, self._spans())
                      for fn in _jets(f"{name}{k}_", ca.SX(out), z, prm,
                                      nodes.stop - nodes.start)]
@@ -344,8 +411,9 @@ class StrokeProblem:
         """Objective and constraints with each plant output replaced by its Taylor model
         about the point w0, from the node data (:data:`_JET` rows per output and node, the
         outputs' nodes :meth:`_spans`)."""
-        n1, n2, t_ref = self.n1, self.n2, p[_P["t_ref"]]
+        n1, na, t_ref = self.n1, self.na, p[_P["t_ref"]]
         xi, nu, al, io, th1, th2, s, nu_m, z = self._nodes(w, t_ref)
+        thz = w[-1]
         dz = z - self._nodes(w0, t_ref)[-1]
         outputs, col = [], 0
         for nodes in self._spans() * len(self.plants):
@@ -362,7 +430,11 @@ class StrokeProblem:
                               / scales[k // each] for k in range(0, len(outputs), each)]
                             ) / p[_P["f_ref"]]
         contact = ca.vertcat(*outputs[2::each]) / p[_P["contact_speed"]]
-        h = ca.vertcat(ca.repmat(th1, n1, 1), ca.repmat(th2, n2, 1))
+        zone_speed = ca.vertcat(*[ca.vertcat(outputs[k + 5].T, outputs[k + 6].T)
+                                  for k in range(0, len(outputs), each)]) / p[_P["protect_speed"]]
+        zone_force = ca.vertcat(*[ca.vertcat(outputs[k][:, na:].T, outputs[k + 3][:, na:].T)
+                                  for k in range(0, len(outputs), each)]) / p[_P["protect_force"]]
+        h = self.steps(w)
         dyn = ca.vertcat(
             xi[1:] - (xi[:-1] + h * (nu[:-1] + h * (al[:-1] / 2 + h * io / 6))),
             nu[1:] - (nu[:-1] + h * (al[:-1] + h * io / 2)),
@@ -372,14 +444,15 @@ class StrokeProblem:
         def integral(Fp: ca.SX, step: ca.SX) -> ca.SX:  # trapezoidal rule
             return step * (ca.sumsqr(Fp) - (Fp[0] ** 2 + Fp[-1] ** 2) / 2)
 
-        energy = integral(F[:n1 + 1], th1) + integral(F[n1 + 1:], th2)
-        duration = n1 * th1 + n2 * th2
+        energy = (integral(F[:na + 1], th1) + integral(F[na:n1 + 1], thz)
+                  + integral(F[n1 + 1:], th2))
+        duration = ca.sum1(h)
         jerk_bound = p[_P["jerk"]] * t_ref**3 / self.stroke
         objective = (p[_P["w_peak"]] * s + p[_P["w_energy"]] * energy
                      + p[_P["w_time"]] * duration
                      + p[_P["w_jerk"]] * ca.dot(h, (io / jerk_bound) ** 2))
         return objective, ca.vertcat(dyn, xi[n1], forces - s, forces + s, contact, duration,
-                                     nu_m)
+                                     nu_m, xi[na], zone_speed, zone_force)
 
     def _model_functions(self) -> list[ca.Function]:
         """The model's value (f, g), gradient, constraint Jacobian and Hessian of the
@@ -450,6 +523,8 @@ class StrokeProblem:
         r = self.rows
         lbg[r["force_upper"]], ubg[r["force_lower"]] = -np.inf, np.inf
         lbg[r["contact_speed"]], ubg[r["contact_speed"]] = -np.inf, 1.0
+        lbg[r["zone_speed"]], ubg[r["zone_speed"]] = -np.inf, 1.0
+        lbg[r["zone_force"]], ubg[r["zone_force"]] = -1.0, 1.0
         ubg[r["duration"]] = np.inf
         self.g_bounds = (lbg, ubg)
 
@@ -499,7 +574,8 @@ class ClampPlanner:
                  contact_speed: float = CONTACT_SPEED, intervals: int = INTERVALS,
                  problem: StrokeProblem | None = None,
                  variants: tuple[PlantConfig, ...] = (),
-                 scales: tuple[float, ...] | None = None) -> None:
+                 scales: tuple[float, ...] | None = None,
+                 protection: Protection = Protection()) -> None:
         if cfg.x_contact is None:
             raise ParameterError("the planner needs a mold-contact position (x_contact)")
         if not (math.isfinite(contact_speed) and contact_speed > 0):
@@ -519,6 +595,9 @@ class ClampPlanner:
         self.jerk_bound = limits.jerk * self.t_ref**3 / self.stroke
         self.n1, self.n2 = pr.n1, pr.n2
         self.xi_contact = (cfg.x_contact - self.x_open) / self.stroke
+        self.x_zone, self.protect_distance = protection_entry(cfg, protection.distance)
+        self.xi_zone = (self.x_zone - self.x_open) / self.stroke
+        self.protect_speed, self.protect_force = protection.speed, protection.force
         self.force_limit = limits.force(cfg.mechanism.drive)
         self.f_ref = self._reference_force()
 
@@ -562,17 +641,19 @@ class ClampPlanner:
         f = self._force(xs, self.stroke / self.t_ref, 0.0)
         return max(float(np.max(np.abs(f))), 1e-6)
 
-    def _parameters(self, weights: list[float]) -> list[float]:
-        """The problem's :data:`PARAMETERS` for these objective weights, then the plants'
-        force scales."""
+    def _parameters(self, weights: list[float],
+                    caps: tuple[float | None, float | None] = (None, None)) -> list[float]:
+        """The problem's :data:`PARAMETERS` for these objective weights and protection caps
+        (speed, force; None: none), then the plants' force scales."""
         return [*weights, self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
-                self.contact_speed, self.config.friction, 1.0, *self.scales]
+                self.contact_speed, self.config.friction,
+                *(_NO_CAP if c is None else c for c in caps), 1.0, *self.scales]
 
     # ---- solving --------------------------------------------------------------------
 
     def _bounds(self, force_limit: float) -> tuple[np.ndarray, np.ndarray]:
         N, S, t_ref, lim = self.n1 + self.n2, self.stroke, self.t_ref, self.limits
-        lbx, ubx = np.empty(4 * N + 6), np.empty(4 * N + 6)
+        lbx, ubx = np.empty(4 * N + 7), np.empty(4 * N + 7)
         spans = ((0.0, 1.0),  # stroke limits
                  (0.0, lim.velocity * t_ref / S),  # monotone stroke, top speed
                  (-lim.acceleration * t_ref**2 / S, lim.acceleration * t_ref**2 / S))
@@ -589,6 +670,7 @@ class ClampPlanner:
         ubx[0], lbx[N] = 0.0, 1.0  # from the open position to the toggle
         lbx[4 * N + 3:4 * N + 5], ubx[4 * N + 3:4 * N + 5] = 1e-6, np.inf
         lbx[4 * N + 5], ubx[4 * N + 5] = 0.0, force_limit / self.f_ref
+        lbx[4 * N + 6], ubx[4 * N + 6] = 1e-6, np.inf
         return lbx, ubx
 
     def _constraint_bounds(self, t_bounds: tuple[float, float]) -> tuple[np.ndarray, ...]:
@@ -598,34 +680,53 @@ class ClampPlanner:
         rows = self.problem.rows
         lbg[rows["duration"]], ubg[rows["duration"]] = (t / self.t_ref for t in t_bounds)
         lbg[rows["contact_position"]] = ubg[rows["contact_position"]] = self.xi_contact
+        lbg[rows["zone_position"]] = ubg[rows["zone_position"]] = self.xi_zone
         ubg[rows["mid_velocity"]] = self.limits.velocity * self.t_ref / self.stroke
         return lbg, ubg
 
     def _initial_guess(self, duration: float) -> np.ndarray:
-        """The septic rest-to-rest polynomial over ``duration``, split at mold contact."""
-        n1, n2, r = self.n1, self.n2, self.t_ref / duration
-        tau_c = brentq(lambda t: _min_jerk(np.array(t))[0] - self.xi_contact, 0.0, 1.0)
-        tau = np.concatenate([np.linspace(0, tau_c, n1 + 1), np.linspace(tau_c, 1, n2 + 1)[1:]])
+        """The septic rest-to-rest polynomial over ``duration``, split at the protection
+        zone's entry and at mold contact."""
+        r = self.t_ref / duration
+        tau_z, tau_c = (brentq(lambda t, xi=xi: _min_jerk(np.array(t))[0] - xi, 0.0, 1.0)
+                        for xi in (self.xi_zone, self.xi_contact))
+        tau = self._split(1.0, tau_z, tau_c)
         xi, nu, al, _ = _min_jerk(tau)
         jerk = np.diff(al) / np.diff(tau)
         f = self._force(self.x_open + self.stroke * xi, self.stroke * nu / duration,
                         self.stroke * al / duration**2)
         s = float(np.max(np.abs(f))) / self.f_ref
         return np.concatenate([xi, nu * r, al * r**2, jerk * r**3,
-                               [tau_c / n1 / r, (1 - tau_c) / n2 / r, s]])
+                               self._tail(1.0, tau_z, tau_c, r, s)])
+
+    def _split(self, duration: float, t_zone: float, t_contact: float) -> np.ndarray:
+        """The node times of a stroke entering the zone at ``t_zone``, in contact at
+        ``t_contact``."""
+        na, nz, n2 = self.problem.na, self.problem.nz, self.n2
+        return np.concatenate([np.linspace(0.0, t_zone, na + 1),
+                               np.linspace(t_zone, t_contact, nz + 1)[1:],
+                               np.linspace(t_contact, duration, n2 + 1)[1:]])
+
+    def _tail(self, duration: float, t_zone: float, t_contact: float, unit: float, s: float
+              ) -> np.ndarray:
+        """The last variables: the approach's and clamp-up's interval lengths, the force
+        epigraph ``s`` (scaled) and the zone's interval length, times in ``unit``."""
+        return np.array([t_zone / self.problem.na / unit, (duration - t_contact) / self.n2 / unit,
+                         s, (t_contact - t_zone) / self.problem.nz / unit])
 
     def _guess_from(self, profile: Profile, duration: float) -> np.ndarray:
         """A profile sampled at the nodes as the scaled variables (nodes split at its mold
         contact), the jerk from the accelerations: an initial guess."""
         t = np.linspace(0.0, duration, 4001)
-        tc = float(np.interp(self.config.x_contact, profile.sample(t)[0], t))
-        n1, n2, S, t_ref = self.n1, self.n2, self.stroke, self.t_ref
-        t = np.concatenate([np.linspace(0.0, tc, n1 + 1), np.linspace(tc, duration, n2 + 1)[1:]])
+        tz, tc = (float(np.interp(x, profile.sample(t)[0], t))
+                  for x in (self.x_zone, self.config.x_contact))
+        S, t_ref = self.stroke, self.t_ref
+        t = self._split(duration, tz, tc)
         x, v, a = profile.sample(t)
         s = float(np.max(np.abs(self._force(x, v, a)))) / self.f_ref
         return np.concatenate([(x - self.x_open) / S, v * t_ref / S, a * t_ref**2 / S,
                                np.diff(a) / np.diff(t) * t_ref**3 / S,
-                               [tc / n1 / t_ref, (duration - tc) / n2 / t_ref, s]])
+                               self._tail(duration, tz, tc, t_ref, s)])
 
     def _late_guess(self, duration: float, stretch: float) -> np.ndarray:
         """The fastest S-curve stretched in time by ``stretch`` (at most to ``duration``),
@@ -652,13 +753,33 @@ class ClampPlanner:
         w = sol["x"].copy()
         for k, power in enumerate((1, 2, 3), start=1):
             w[k * (N + 1):(k + 1) * (N + 1) - (k == 3)] *= r**power
-        w[4 * N + 3:4 * N + 5] /= r
+        w[[4 * N + 3, 4 * N + 4, 4 * N + 6]] /= r
         w[4 * N + 5] *= f_ref / self.f_ref
         return {"x0": w, "lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
 
     def _run(self, weights: list[float], t_bounds: tuple[float, float], force_limit: float,
              objective: str, start: Plan | None, warm: bool,
              guess: np.ndarray | None = None) -> tuple[Plan, bool]:
+        """Solve; with protection caps, where the plan's 1 ms samples exceed a cap between
+        the nodes, impose it tighter by the excess and re-solve from the plan."""
+        caps = imposed = (self.protect_speed, self.protect_force)
+        plan, ok = self._solve_once(weights, t_bounds, force_limit, objective, start, warm,
+                                    guess, caps)
+        for _ in range(_TIGHTEN if caps != (None, None) else 0):
+            zone = self.protection(plan)
+            reached = (zone["peak_platen_speed"], zone["peak_input_force"])
+            excess = [0.0 if c is None else max(r - c, 0.0) for c, r in zip(caps, reached)]
+            if not ok or not any(excess):
+                break
+            imposed = tuple(c if c is None else c - 1.5 * e for c, e in zip(imposed, excess))
+            plan, ok = self._solve_once(weights, t_bounds, force_limit, objective, plan, True,
+                                        None, imposed)
+        return plan, ok
+
+    def _solve_once(self, weights: list[float], t_bounds: tuple[float, float],
+                    force_limit: float, objective: str, start: Plan | None, warm: bool,
+                    guess: np.ndarray | None, caps: tuple[float | None, float | None]
+                    ) -> tuple[Plan, bool]:
         start = start or self.last
         warm = warm and start is not None and start.solution["x"].size == self.problem.size
         lbx, ubx = self._bounds(force_limit)
@@ -672,7 +793,7 @@ class ClampPlanner:
         args["x0"] = np.clip(args["x0"], lbx, ubx)
         solver = self.problem.solver(warm, energy=weights[1] > 0)
         tic = time.perf_counter()
-        sol = solver(p=self._parameters(weights), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **args)
+        sol = solver(p=self._parameters(weights, caps), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **args)
         elapsed = time.perf_counter() - tic
         stats = solver.stats()
         solution = {k: np.asarray(sol[k]).ravel() for k in ("x", "lam_x", "lam_g")}
@@ -682,15 +803,15 @@ class ClampPlanner:
 
     def _plan(self, sol: dict[str, np.ndarray], objective: str, elapsed: float, iterations: int,
               warm: bool) -> Plan:
-        N, n1, S, t_ref = self.n1 + self.n2, self.n1, self.stroke, self.t_ref
-        w = sol["x"]
-        steps = t_ref * np.concatenate([np.full(n1, w[4 * N + 3]), np.full(self.n2, w[4 * N + 4])])
+        n1, S, t_ref = self.n1, self.stroke, self.t_ref
+        N, w = n1 + self.n2, sol["x"]
+        steps = t_ref * np.asarray(self.problem.steps(ca.DM(w))).ravel()
         profile = Profile(knots=np.concatenate(([0.0], np.cumsum(steps))),
                           x=self.x_open + S * w[:N], v=S / t_ref * w[N + 1:2 * N + 1],
                           a=S / t_ref**2 * w[2 * N + 2:3 * N + 2],
                           jerk=S / t_ref**3 * w[3 * N + 3:4 * N + 3])
-        return Plan(profile, self.config, objective,
-                    float(profile.knots[n1]), elapsed, iterations, warm, sol)
+        return Plan(profile, self.config, objective, float(profile.knots[n1]), elapsed,
+                    iterations, warm, sol, float(profile.knots[self.problem.na]))
 
     def solve(self, duration: float, objective: str = "peak", *, start: Plan | None = None,
               warm: bool = True) -> Plan:
@@ -845,6 +966,8 @@ class ClampPlanner:
         """Why no stroke meets ``limit``: which limit binds, the lowest peak reached."""
         which = ("the force limit" if limit < self.force_limit
                  else f"the motor torque limit ({self.limits.torque:.4g} N m)")
+        if (self.protect_speed, self.protect_force) != (None, None):
+            which += " or the mold-protection caps"
         text = (f"{which} binds: the planner found no stroke clamping to "
                 f"{self.clamp_force():.6g} N with an input force of at most {limit:.4g} N")
         if best is not None:
@@ -859,6 +982,20 @@ class ClampPlanner:
         (m/s), from the plan's solution."""
         F, contact = self.problem.monitor(plan.solution["x"], self._parameters([0] * 4))
         return np.asarray(F).ravel(), float(contact)
+
+    def protection(self, plan: Plan) -> dict[str, float]:
+        """The plan in the mold-protection zone on its 1 ms samples through the plant: the
+        time the platen spends there (s), its peak speed (m/s) and the peak |input force|
+        (N); the zone's distance (m), entry and caps (m/s, N; None: no cap)."""
+        s = plan.samples
+        inside = (s.position >= self.x_zone) & (s.time <= plan.t_contact)
+        speed = plant_outputs(s.position[inside], s.velocity[inside], s.acceleration[inside],
+                              self.config.with_(x_contact=None)).platen_velocity
+        return {"distance": self.protect_distance, "x_entry": self.x_zone,
+                "time": plan.protection_time,
+                "peak_platen_speed": float(np.max(speed, initial=0.0)),
+                "peak_input_force": float(np.max(np.abs(s.input_force[inside]), initial=0.0)),
+                "speed_cap": self.protect_speed, "force_cap": self.protect_force}
 
     def worst_peak(self, plan: Plan) -> float:
         """The plan's peak input force (1 ms samples through the plant), N: the worst over
@@ -884,6 +1021,13 @@ class ClampPlanner:
         }
         if force_limit is not None and force_limit < self.force_limit:
             found[f"input force (max {force_limit:.4g} N)"] = peak / force_limit
+        zone, where = self.protection(plan), f"over the last {self.protect_distance * 1e3:.3g} mm"
+        if self.protect_speed is not None:
+            found[f"mold-protection platen speed (max {self.protect_speed * 1e3:.4g} mm/s "
+                  f"{where})"] = zone["peak_platen_speed"] / self.protect_speed
+        if self.protect_force is not None:
+            found[f"mold-protection input force (max {self.protect_force:.4g} N {where})"] = (
+                zone["peak_input_force"] / self.protect_force)
         return [name for name, ratio in found.items() if ratio >= _BINDING]
 
     def clamp_force(self) -> float:
@@ -902,13 +1046,16 @@ class ClampPlanner:
 @functools.lru_cache(maxsize=8)
 def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CONTACT_SPEED,
                 intervals: int = INTERVALS, variants: tuple[PlantConfig, ...] = (),
-                scales: tuple[float, ...] | None = None) -> ClampPlanner:
+                scales: tuple[float, ...] | None = None,
+                protection: Protection = Protection()) -> ClampPlanner:
     """A planner on a kept problem, so that a re-plan for the same plant (and variants),
-    for any mold height, friction or drive limits, neither rebuilds nor starts cold."""
+    for any mold height, friction, drive limits or protection zone, neither rebuilds nor
+    starts cold."""
     problem = _problem_for(cfg.with_(x_contact=None, mu=None), intervals,
                            tuple(v.with_(x_contact=None, mu=None) for v in variants))
     return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
-                        problem=problem, variants=variants, scales=scales)
+                        problem=problem, variants=variants, scales=scales,
+                        protection=protection)
 
 
 def baseline_stroke(cfg: PlantConfig, limits: DriveLimits, duration: float,
