@@ -966,9 +966,12 @@ class ClampPlanner:
         """Why no stroke meets ``limit``: which limit binds, the lowest peak reached."""
         which = ("the force limit" if limit < self.force_limit
                  else f"the motor torque limit ({self.limits.torque:.4g} N m)")
-        if (self.protect_speed, self.protect_force) != (None, None):
-            which += " or the mold-protection caps"
-        text = (f"{which} binds: the planner found no stroke clamping to "
+        caps = [f"{name} {value:.4g} {unit}" for name, value, unit in (
+            ("input force", self.protect_force, "N"),
+            ("platen speed", self.protect_speed, "m/s")) if value is not None]
+        if caps:
+            which += f" or the mold-protection caps ({', '.join(caps)})"
+        text = (f"{which} {'bind' if caps else 'binds'}: the planner found no stroke clamping to "
                 f"{self.clamp_force():.6g} N with an input force of at most {limit:.4g} N")
         if best is not None:
             text += (f"; the lowest peak it reached is {self.worst_peak(best):.4g} N, in a stroke "

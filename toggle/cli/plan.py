@@ -17,8 +17,10 @@ from controllers.planner import (
     CONTACT_SPEED,
     INTERVALS,
     OBJECTIVES,
+    PROTECT_FRACTION,
     ClampPlanner,
     Plan,
+    Protection,
     baseline_stroke,
     baselines,
     default_duration,
@@ -81,6 +83,11 @@ def _plant(args: argparse.Namespace, errors: bool = True) -> tuple[PlantConfig, 
     return cfg, limits
 
 
+def _protection(args: argparse.Namespace) -> Protection:
+    """The mold-protection zone of ``--protect-distance/-speed/-force``."""
+    return Protection(args.protect_distance, args.protect_speed, args.protect_force)
+
+
 def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, object]]:
     """The robust planner (``--robust``): the nominal clamp with the erroneous one as a
     variant, each weighed against its own S-curve; and the report of the robust plan, the
@@ -90,13 +97,15 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
                              "give --delta-NAME and no --min-time")
     cfg, limits = _plant(args, errors=False)
     erroneous = cfg.with_(mechanism=with_errors(cfg.mechanism, _errors(args))[0])
-    nominal = planner_for(cfg, limits, args.contact_speed, args.intervals)
+    nominal = planner_for(cfg, limits, args.contact_speed, args.intervals,
+                          protection=_protection(args))
     duration = args.duration or default_duration(nominal)
     nominal.check_duration(duration)  # before predicting a baseline of that length
     stroke = baseline_stroke(cfg, limits, duration)
     curve = {"nominal": predict(stroke, cfg), "erroneous": predict(stroke, erroneous)}
     scale = curve["erroneous"].peak_force / curve["nominal"].peak_force
-    planner = planner_for(cfg, limits, args.contact_speed, args.intervals, (erroneous,), (scale,))
+    planner = planner_for(cfg, limits, args.contact_speed, args.intervals, (erroneous,), (scale,),
+                          _protection(args))
     plan, plain = planner.best(duration, args.objective), nominal.best(duration, args.objective)
     report = {}
     for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
@@ -113,7 +122,8 @@ def _trade_off_curves(args: argparse.Namespace, cfg: PlantConfig, limits: DriveL
     dry = cfg.with_(x_contact=clamp_stroke(cfg.mechanism)[1] - DRY_CONTACT)
     curves = {}
     for name, plant in (("mold", cfg), ("dry_cycle", dry)):
-        planner = planner_for(plant, limits, args.contact_speed, args.intervals)
+        planner = planner_for(plant, limits, args.contact_speed, args.intervals,
+                              protection=_protection(args))
         curves[name] = planner, planner.trade_off(args.trade_off)
     return curves
 
@@ -147,12 +157,15 @@ def run(args: argparse.Namespace) -> int:
     if args.robust:
         planner, plan, robust = _robust(args)
     elif args.min_time:
-        planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
+        planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
+                              protection=_protection(args))
         plan = planner.minimum_time(args.force_limit)
     else:
-        planner = planner_for(cfg, limits, args.contact_speed, args.intervals)
+        planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
+                              protection=_protection(args))
         plan = planner.best(args.duration or default_duration(planner), args.objective)
     bound = planner.lower_bound()
+    zone = planner.protection(plan)
     base = baselines(cfg, limits, plan.duration)
     if args.out:
         with atomic_path(args.out) as tmp:  # no half-written CSV
@@ -161,7 +174,9 @@ def run(args: argparse.Namespace) -> int:
                 "objective": plan.objective, "duration": plan.duration,
                 "force_limit": args.force_limit if args.min_time else None,
                 "v_max": limits.velocity, "a_max": limits.acceleration, "j_max": limits.jerk,
-                "torque_max": limits.torque,
+                "torque_max": limits.torque, "protect_distance": zone["distance"],
+                "protect_speed": zone["speed_cap"], "protect_force": zone["force_cap"],
+                "protection_time": zone["time"],
             })
     peak = plan.peak_force
     trap, scurve = base["trapezoidal"].peak_force, base["s_curve"].peak_force
@@ -174,6 +189,10 @@ def run(args: argparse.Namespace) -> int:
         "objective": plan.objective,
         "duration": plan.duration,
         "t_contact": plan.t_contact,
+        "closing_time": plan.t_contact,
+        "clamp_up_time": plan.duration - plan.t_contact,
+        "protection_time": plan.protection_time,
+        "protection": zone,
         "x_open": planner.x_open,
         "x_contact": cfg.x_contact,
         "x_final": planner.x_final,
@@ -224,6 +243,14 @@ def run(args: argparse.Namespace) -> int:
               f"is {result['gap_to_bound_percent']:.2f} % above it)")
     else:
         print("lower bound 0 N: the clamping is too short to force any peak")
+    caps = [f"{name} {value:.4g} {unit}" for name, value, unit in (
+        ("platen speed", zone["speed_cap"] and zone["speed_cap"] * 1e3, "mm/s"),
+        ("input force", zone["force_cap"], "N")) if value is not None]
+    print(f"mold protection over the last {zone['distance'] * 1e3:.4g} mm of platen travel "
+          f"(caps: {', '.join(caps) or 'none'}): {plan.protection_time:.4g} s, platen at most "
+          f"{zone['peak_platen_speed'] * 1e3:.4g} mm/s, input force at most "
+          f"{zone['peak_input_force']:.4g} N; closing {plan.t_contact:.4g} s, clamp-up "
+          f"{result['clamp_up_time']:.4g} s")
     print(f"binding limits: {', '.join(result['binding_limits']) or 'none'}")
     if robust:
         rows = [(name, *values.values()) for name, values in robust.items()]
@@ -284,6 +311,19 @@ def plot_trade_off(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_protection_arguments(p: argparse.ArgumentParser) -> None:
+    zone = p.add_argument_group("mold protection: the last distance of platen travel before "
+                                "mold contact")
+    zone.add_argument("--protect-distance", type=positive("distance in m", 10.0, 1e-6),
+                      default=None, help="length of the zone, m of platen travel (default "
+                      f"{PROTECT_FRACTION:g} of the platen's travel to contact)")
+    zone.add_argument("--protect-speed", type=positive("speed in m/s", 10.0, 1e-6),
+                      default=None, help="platen speed cap in the zone, m/s (default none)")
+    zone.add_argument("--protect-force", type=positive("force in N", 1e9), default=None,
+                      help="input-force cap in the zone, N: a part left in the mold stops "
+                           "the clamp (default none)")
+
+
 def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
     add_preset_argument(p, accepts=("chang2021",),
                         why="lin2003_sm55 and li_micro have no [dynamics] (give --masses)")
@@ -336,6 +376,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    metavar="POINTS",
                    help="print the stroke time against the peak input force instead: the "
                         "fastest stroke under POINTS force limits")
+    _add_protection_arguments(p)
     p.add_argument("--robust", action="store_true",
                    help="plan for the nominal clamp and the one with the --delta-NAME errors "
                         "at once (the worst of the two, each against its S-curve)")
@@ -360,6 +401,7 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
                    help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
     p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
                    default=INTERVALS, help=f"time intervals N (default {INTERVALS})")
+    _add_protection_arguments(p)
     p.add_argument("--out", type=path, default=Path("trade_off.png"),
                    help="PNG file (default trade_off.png)")
     p.set_defaults(handler=plot_trade_off)
