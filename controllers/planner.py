@@ -171,12 +171,13 @@ class Plan:
     iterations: int
     warm: bool
     solution: dict[str, np.ndarray] = field(repr=False)  # scaled primal and dual solution
-    t_zone: float = math.nan  # entry into the mold-protection zone, s
+    t_zone: float = math.nan  # entry into (opening: exit from) the mold-protection zone, s
 
     @property
     def protection_time(self) -> float:
-        """Time spent in the mold-protection zone (its entry to mold contact), s."""
-        return self.t_contact - self.t_zone
+        """Time spent in the mold-protection zone (its entry to mold contact; opening: mold
+        separation to its exit), s."""
+        return abs(self.t_contact - self.t_zone)
 
     @property
     def duration(self) -> float:
@@ -271,14 +272,14 @@ PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "x_contact", "f_ref", "t
 _P = {name: k for k, name in enumerate(PARAMETERS)}
 
 
-def _problem_key(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = ()
-                 ) -> str:
+def _problem_key(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = (),
+                 opening: bool = False) -> str:
     """Everything that determines a :class:`StrokeProblem`'s functions, the key of their
     disk cache: the code the problem uses, the plants (every field of the frozen parameters,
     floats in their exact repr; mold height, friction and drive limits are parameters of
-    the problem, not part of the key) and N."""
+    the problem, not part of the key), N and the direction (opening or closing)."""
     plants = [astuple(c.with_(x_contact=None, mu=None)) for c in (cfg, *variants)]
-    return "\n".join((_SOURCE, *map(repr, (*plants, intervals))))
+    return "\n".join((_SOURCE, *map(repr, (*plants, intervals)), *(("opening",) * opening)))
 
 
 def _jets(name: str, output: ca.SX, z: ca.SX, prm: ca.SX, nodes: int
@@ -322,10 +323,10 @@ class StrokeProblem:
     """
 
     def __init__(self, cfg: PlantConfig, intervals: int,
-                 variants: tuple[PlantConfig, ...] = ()) -> None:
+                 variants: tuple[PlantConfig, ...] = (), opening: bool = False) -> None:
         if not (isinstance(intervals, int) and intervals >= 4):
             raise ParameterError(f"intervals must be an integer >= 4, got {intervals!r}")
-        self.config, self.variants = cfg, variants
+        self.config, self.variants, self.opening = cfg, variants, opening
         self.plants = (cfg, *variants)
         self.x_open, self.x_final = clamp_stroke(cfg.mechanism)
         lo, hi = cfg.input_range
@@ -393,11 +394,13 @@ class StrokeProblem:
         z, prm = ca.SX.sym("z", 3), ca.SX.sym("prm", 2)  # prm: x_contact, mu
         jets = []
         for k, plant in enumerate(self.plants):
-            free = plant_outputs(z[0], z[1], z[2], plant, mu=prm[1])
-            mold = plant_outputs(z[0], z[1], z[2], plant, x_contact=prm[0], mu=prm[1])
-            outputs = (free.input_force, mold.input_force, free.platen_velocity,
-                       free.input_force, mold.input_force, free.platen_velocity,
-                       free.platen_velocity)
+            # the opening stroke is the closing one run backwards in time: v -> -v
+            v = -z[1] if self.opening else z[1]
+            free = plant_outputs(z[0], v, z[2], plant, mu=prm[1])
+            mold = plant_outputs(z[0], v, z[2], plant, x_contact=prm[0], mu=prm[1])
+            speed = -free.platen_velocity if self.opening else free.platen_velocity
+            outputs = (free.input_force, mold.input_force, speed, free.input_force,
+                       mold.input_force, speed, speed)
             jets += [fn for name, out, nodes in zip(_OUTPUTS, outputs, self._spans())
                      for fn in _jets(f"{name}{k}_", ca.SX(out), z, prm,
                                      nodes.stop - nodes.start)]
@@ -483,7 +486,7 @@ class StrokeProblem:
         the Lagrangian), each the per-node jets mapped over the nodes feeding the model;
         the jets and the model come compiled from the disk cache where possible."""
         N = self.n1 + self.n2
-        key = _problem_key(self.config, N, self.variants)
+        key = _problem_key(self.config, N, self.variants, self.opening)
         names = _names(len(self.plants))
         fn = dict(zip(names, compiled("stroke", key, names, self._symbolic)))
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
@@ -548,11 +551,11 @@ class StrokeProblem:
 
 
 @functools.lru_cache(maxsize=8)
-def _problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = ()
-                 ) -> StrokeProblem:
+def _problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = (),
+                 opening: bool = False) -> StrokeProblem:
     """A built problem, shared by the planners of every mold height, friction and drive
-    limits of one plant (and variants)."""
-    return StrokeProblem(cfg, intervals, variants)
+    limits of one plant (and variants) and direction."""
+    return StrokeProblem(cfg, intervals, variants, opening)
 
 
 class ClampPlanner:
@@ -810,8 +813,12 @@ class ClampPlanner:
                           x=self.x_open + S * w[:N], v=S / t_ref * w[N + 1:2 * N + 1],
                           a=S / t_ref**2 * w[2 * N + 2:3 * N + 2],
                           jerk=S / t_ref**3 * w[3 * N + 3:4 * N + 3])
-        return Plan(profile, self.config, objective, float(profile.knots[n1]), elapsed,
-                    iterations, warm, sol, float(profile.knots[self.problem.na]))
+        t_contact, t_zone = (float(profile.knots[k]) for k in (n1, self.problem.na))
+        if self.problem.opening:  # solved backwards in time
+            profile = profile.reversed()
+            t_contact, t_zone = profile.duration - t_contact, profile.duration - t_zone
+        return Plan(profile, self.config, objective, t_contact, elapsed, iterations, warm, sol,
+                    t_zone)
 
     def solve(self, duration: float, objective: str = "peak", *, start: Plan | None = None,
               warm: bool = True) -> Plan:
@@ -875,6 +882,8 @@ class ClampPlanner:
     def lower_bound(self) -> float:
         """A lower bound on the peak input force of any stroke under this planner's
         limits, of any duration (:func:`controllers.bounds.peak_lower_bound`), N."""
+        if self.problem.opening:  # the bound is the clamping's; none for the opening
+            return 0.0
         return peak_lower_bound(self.config, self.x_final, self.limits.velocity,
                                 self.limits.acceleration, self.creep_speed)
 
@@ -991,12 +1000,13 @@ class ClampPlanner:
         time the platen spends there (s), its peak speed (m/s) and the peak |input force|
         (N); the zone's distance (m), entry and caps (m/s, N; None: no cap)."""
         s = plan.samples
-        inside = (s.position >= self.x_zone) & (s.time <= plan.t_contact)
+        inside = (s.position >= self.x_zone) & (
+            s.time >= plan.t_contact if self.problem.opening else s.time <= plan.t_contact)
         speed = plant_outputs(s.position[inside], s.velocity[inside], s.acceleration[inside],
                               self.config.with_(x_contact=None)).platen_velocity
         return {"distance": self.protect_distance, "x_entry": self.x_zone,
                 "time": plan.protection_time,
-                "peak_platen_speed": float(np.max(speed, initial=0.0)),
+                "peak_platen_speed": float(np.max(np.abs(speed), initial=0.0)),
                 "peak_input_force": float(np.max(np.abs(s.input_force[inside]), initial=0.0)),
                 "speed_cap": self.protect_speed, "force_cap": self.protect_force}
 
@@ -1013,7 +1023,7 @@ class ClampPlanner:
         contact = self.node_forces(plan)[1]
         peak = self.worst_peak(plan)
         found = {
-            f"velocity (max {lim.velocity * 1e3:.4g} mm/s)": np.max(pr.v) / lim.velocity,
+            f"velocity (max {lim.velocity * 1e3:.4g} mm/s)": np.max(np.abs(pr.v)) / lim.velocity,
             f"acceleration (max {lim.acceleration:.4g} m/s^2)":
                 np.max(np.abs(pr.a)) / lim.acceleration,
             f"jerk (max {lim.jerk:.4g} m/s^3)": np.max(np.abs(pr.jerk)) / lim.jerk,
@@ -1024,7 +1034,9 @@ class ClampPlanner:
         }
         if force_limit is not None and force_limit < self.force_limit:
             found[f"input force (max {force_limit:.4g} N)"] = peak / force_limit
-        zone, where = self.protection(plan), f"over the last {self.protect_distance * 1e3:.3g} mm"
+        zone, where = self.protection(plan), (
+            f"over the first {self.protect_distance * 1e3:.3g} mm after mold separation"
+            if self.problem.opening else f"over the last {self.protect_distance * 1e3:.3g} mm")
         if self.protect_speed is not None:
             found[f"mold-protection platen speed (max {self.protect_speed * 1e3:.4g} mm/s "
                   f"{where})"] = zone["peak_platen_speed"] / self.protect_speed
@@ -1050,12 +1062,13 @@ class ClampPlanner:
 def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CONTACT_SPEED,
                 intervals: int = INTERVALS, variants: tuple[PlantConfig, ...] = (),
                 scales: tuple[float, ...] | None = None,
-                protection: Protection = Protection()) -> ClampPlanner:
+                protection: Protection = Protection(), opening: bool = False) -> ClampPlanner:
     """A planner on a kept problem, so that a re-plan for the same plant (and variants),
     for any mold height, friction, drive limits or protection zone, neither rebuilds nor
-    starts cold."""
+    starts cold. ``opening``: the opening (break-away) stroke from the toggle back to the
+    open position instead of the closing one (:class:`ClampPlanner`)."""
     problem = _problem_for(cfg.with_(x_contact=None, mu=None), intervals,
-                           tuple(v.with_(x_contact=None, mu=None) for v in variants))
+                           tuple(v.with_(x_contact=None, mu=None) for v in variants), opening)
     return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
                         problem=problem, variants=variants, scales=scales,
                         protection=protection)

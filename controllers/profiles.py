@@ -65,6 +65,12 @@ class Profile:
     def duration(self) -> float:
         return float(self.knots[-1])
 
+    def reversed(self) -> Profile:
+        """The same motion run backwards in time (x(T - t)): velocity and jerk change sign."""
+        x, v, a = _advance(self.x, self.v, self.a, self.jerk, np.diff(self.knots))
+        return Profile(self.duration - self.knots[::-1], x[::-1], -v[::-1], a[::-1],
+                       -self.jerk[::-1])
+
     def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position, velocity and acceleration at times t (clipped to the profile)."""
         t = np.clip(np.asarray(t, float), 0.0, self.duration)

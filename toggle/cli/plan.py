@@ -147,9 +147,31 @@ def _trade_off(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits) 
     return 0
 
 
+def _opening(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
+             ) -> dict[str, object]:
+    """``--cycle``: the fastest opening (break-away) stroke from the toggle back to the open
+    position under the drive's force limit (and ``--force-limit``), the platen leaving the
+    mold at most at ``--contact-speed`` and at most at ``--break-speed`` over the
+    protection distance after it; its times, forces and binding limits."""
+    opener = planner_for(cfg, limits, args.contact_speed, args.intervals, opening=True,
+                         protection=Protection(args.protect_distance, args.break_speed))
+    plan = opener.minimum_time(args.force_limit)
+    s = plan.samples
+    zone = opener.protection(plan)
+    return {"opening_time": plan.duration, "t_separation": plan.t_contact,
+            "break_away_time": plan.t_contact, "mold_break_time": zone["time"],
+            "peak_force": plan.peak_force,
+            "break_away_force": float(np.max(np.abs(s.input_force[s.time <= plan.t_contact]))),
+            "mold_break_peak_platen_speed": zone["peak_platen_speed"],
+            "end_position": float(s.position[-1]), "end_velocity": float(s.velocity[-1]),
+            "binding_limits": opener.binding_limits(plan, args.force_limit)}
+
+
 def run(args: argparse.Namespace) -> int:
     if args.out:
         check_writable(args.out, "--out")  # before solving, not after
+    if args.trade_off and args.cycle:
+        raise ParameterError("--cycle plans one cycle: not with --trade-off")
     cfg, limits = _plant(args, errors=not args.robust)
     if args.trade_off:
         return _trade_off(args, cfg, limits)
@@ -166,6 +188,7 @@ def run(args: argparse.Namespace) -> int:
         plan = planner.best(args.duration or default_duration(planner), args.objective)
     bound = planner.lower_bound()
     zone = planner.protection(plan)
+    opening = _opening(args, cfg, limits) if args.cycle else None
     base = baselines(cfg, limits, plan.duration)
     if args.out:
         with atomic_path(args.out) as tmp:  # no half-written CSV
@@ -177,6 +200,7 @@ def run(args: argparse.Namespace) -> int:
                 "torque_max": limits.torque, "protect_distance": zone["distance"],
                 "protect_speed": zone["speed_cap"], "protect_force": zone["force_cap"],
                 "protection_time": zone["time"],
+                "opening_time": opening and opening["opening_time"],
             })
     peak = plan.peak_force
     trap, scurve = base["trapezoidal"].peak_force, base["s_curve"].peak_force
@@ -193,6 +217,8 @@ def run(args: argparse.Namespace) -> int:
         "clamp_up_time": plan.duration - plan.t_contact,
         "protection_time": plan.protection_time,
         "protection": zone,
+        "opening": opening,
+        "cycle_time": opening and plan.duration + opening["opening_time"],
         "x_open": planner.x_open,
         "x_contact": cfg.x_contact,
         "x_final": planner.x_final,
@@ -252,6 +278,12 @@ def run(args: argparse.Namespace) -> int:
           f"{zone['peak_input_force']:.4g} N; closing {plan.t_contact:.4g} s, clamp-up "
           f"{result['clamp_up_time']:.4g} s")
     print(f"binding limits: {', '.join(result['binding_limits']) or 'none'}")
+    if opening:
+        print(f"opening stroke {opening['opening_time']:.4g} s (break-away to mold separation "
+              f"{opening['break_away_time']:.4g} s at up to {opening['break_away_force']:.4g} N, "
+              f"mold break {opening['mold_break_time']:.4g} s, peak {opening['peak_force']:.4g} "
+              f"N); cycle {result['cycle_time']:.4g} s; opening binding limits: "
+              f"{', '.join(opening['binding_limits']) or 'none'}")
     if robust:
         rows = [(name, *values.values()) for name, values in robust.items()]
         print("peak input force (N) on each clamp of the robust plan, the nominal clamp's "
@@ -377,6 +409,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="print the stroke time against the peak input force instead: the "
                         "fastest stroke under POINTS force limits")
     _add_protection_arguments(p)
+    p.add_argument("--cycle", action="store_true",
+                   help="plan the opening (break-away) stroke back to the open position too, "
+                        "the fastest under the force limits, and report the cycle's times")
+    p.add_argument("--break-speed", type=positive("speed in m/s", 10.0, 1e-6), default=None,
+                   help="with --cycle: platen speed cap over the protection distance after "
+                        "the mold separates, m/s (default none)")
     p.add_argument("--robust", action="store_true",
                    help="plan for the nominal clamp and the one with the --delta-NAME errors "
                         "at once (the worst of the two, each against its S-curve)")
