@@ -6,9 +6,11 @@ own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
 
 * states crosshead position, velocity and acceleration, jerk piecewise
   constant on N intervals, discretised exactly (the triple integrator);
-* two phases joined at mold contact: the approach (the contact position is
-  pinned to node N1, so the force's kink at contact falls on a node and the
-  platen's speed there is a node value) and the clamping up to the toggle.
+* three phases: the approach, the mold-protection zone (:class:`Protection`: its
+  entry, the last distance of platen travel before contact, pinned to node NA,
+  with a platen speed cap and an input-force cap) and, from mold contact
+  (pinned to node N1, so the force's kink at contact falls on a node and the
+  platen's speed there is a node value), the clamping up to the toggle.
   Approach nodes are evaluated with the mold-free plant, clamping nodes with
   the mold; the two agree up to contact, so this is the FMU's model;
 * objective the peak input force (epigraph variable s, |F| <= s at the nodes
@@ -19,6 +21,10 @@ own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
   inside the stroke limits, velocity (nodes and midpoints), acceleration, jerk
   and motor-torque limits (:mod:`controllers.limits`), platen speed at mold
   contact, and no creeping through the clamping (``CREEP_FACTOR``).
+
+The opening (break-away) stroke, ``planner_for(..., opening=True)``, is the same
+problem run backwards in time (the plant evaluated at -v): its plans are reversed
+profiles from rest at the toggle to rest at the open position.
 
 Optima to trust: :meth:`ClampPlanner.best` starts from several guesses (the
 problem has two families of local optima: slow or fast arrival at the mold,
