@@ -114,7 +114,9 @@ _LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's
 _TIGHTEN = 4  # re-plans of minimum_time with the limit tightened by the excess between nodes
 #: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
 #: scaling of every KKT matrix only costs time (a tenth of a warm re-plan).
-_IPOPT = {"print_level": 0, "sb": "yes", "max_iter": 500, "tol": 1e-6,
+#: The dynamics are met to 1e-10 of the stroke: the profile's segments then join within
+#: picometres, which a replay differentiating positions at 0.1 ms needs.
+_IPOPT = {"print_level": 0, "sb": "yes", "max_iter": 500, "tol": 1e-6, "constr_viol_tol": 1e-10,
           "acceptable_tol": 1e-4, "mu_strategy": "adaptive", "mumps_permuting_scaling": 0,
           "mumps_scaling": 0}
 #: From a nearby solution the monotone barrier update, started small, takes the fewest steps.
