@@ -114,9 +114,7 @@ _LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's
 _TIGHTEN = 4  # re-plans of minimum_time with the limit tightened by the excess between nodes
 #: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
 #: scaling of every KKT matrix only costs time (a tenth of a warm re-plan).
-#: The dynamics are met to 1e-10 of the stroke: the profile's segments then join within
-#: picometres, which a replay differentiating positions at 0.1 ms needs.
-_IPOPT = {"print_level": 0, "sb": "yes", "max_iter": 500, "tol": 1e-6, "constr_viol_tol": 1e-10,
+_IPOPT = {"print_level": 0, "sb": "yes", "max_iter": 500, "tol": 1e-6,
           "acceptable_tol": 1e-4, "mu_strategy": "adaptive", "mumps_permuting_scaling": 0,
           "mumps_scaling": 0}
 #: From a nearby solution the monotone barrier update, started small, takes the fewest steps.
@@ -179,13 +177,6 @@ class Plan:
     iterations: int
     warm: bool
     solution: dict[str, np.ndarray] = field(repr=False)  # scaled primal and dual solution
-    t_zone: float = math.nan  # entry into (opening: exit from) the mold-protection zone, s
-
-    @property
-    def protection_time(self) -> float:
-        """Time spent in the mold-protection zone (its entry to mold contact; opening: mold
-        separation to its exit), s."""
-        return abs(self.t_contact - self.t_zone)
 
     @property
     def duration(self) -> float:
@@ -350,7 +341,7 @@ class StrokeProblem:
         self.n_forces = (2 * N + 2) * len(self.plants)
         sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
                  "force_lower": self.n_forces, "contact_speed": len(self.plants), "duration": 1,
-                 "mid_velocity": N, "zone_position": 1,
+                 "mid_velocity": N, "zone_position": 1, "zone_steps": 1,
                  "zone_speed": (2 * self.nz + 1) * len(self.plants),
                  "zone_force": (2 * self.nz + 1) * len(self.plants)}
         starts = np.cumsum([0, *sizes.values()])
@@ -463,7 +454,7 @@ class StrokeProblem:
                      + p[_P["w_time"]] * duration
                      + p[_P["w_jerk"]] * ca.dot(h, (io / jerk_bound) ** 2))
         return objective, ca.vertcat(dyn, xi[n1], forces - s, forces + s, contact, duration,
-                                     nu_m, xi[na], zone_speed, zone_force)
+                                     nu_m, xi[na], th1 - thz, zone_speed, zone_force)
 
     def _model_functions(self) -> list[ca.Function]:
         """The model's value (f, g), gradient, constraint Jacobian and Hessian of the
@@ -609,6 +600,9 @@ class ClampPlanner:
         self.x_zone, self.protect_distance = protection_entry(cfg, protection.distance)
         self.xi_zone = (self.x_zone - self.x_open) / self.stroke
         self.protect_speed, self.protect_force = protection.speed, protection.force
+        #: with a cap the zone's entry is pinned to a node; without, the approach and the zone
+        #: share one interval length (the problem of a plain two-phase stroke)
+        self.capped = (protection.speed, protection.force) != (None, None)
         self.force_limit = limits.force(cfg.mechanism.drive)
         self.f_ref = self._reference_force()
 
@@ -691,7 +685,11 @@ class ClampPlanner:
         rows = self.problem.rows
         lbg[rows["duration"]], ubg[rows["duration"]] = (t / self.t_ref for t in t_bounds)
         lbg[rows["contact_position"]] = ubg[rows["contact_position"]] = self.xi_contact
-        lbg[rows["zone_position"]] = ubg[rows["zone_position"]] = self.xi_zone
+        if self.capped:  # the zone's entry on node NA, its own interval length
+            lbg[rows["zone_position"]] = ubg[rows["zone_position"]] = self.xi_zone
+            lbg[rows["zone_steps"]], ubg[rows["zone_steps"]] = -np.inf, np.inf
+        else:  # no caps: one interval length from the open position to contact
+            lbg[rows["zone_position"]], ubg[rows["zone_position"]] = -np.inf, np.inf
         ubg[rows["mid_velocity"]] = self.limits.velocity * self.t_ref / self.stroke
         return lbg, ubg
 
@@ -701,6 +699,7 @@ class ClampPlanner:
         r = self.t_ref / duration
         tau_z, tau_c = (brentq(lambda t, xi=xi: _min_jerk(np.array(t))[0] - xi, 0.0, 1.0)
                         for xi in (self.xi_zone, self.xi_contact))
+        tau_z = tau_z if self.capped else tau_c * self.problem.na / self.n1
         tau = self._split(1.0, tau_z, tau_c)
         xi, nu, al, _ = _min_jerk(tau)
         jerk = np.diff(al) / np.diff(tau)
@@ -731,6 +730,7 @@ class ClampPlanner:
         t = np.linspace(0.0, duration, 4001)
         tz, tc = (float(np.interp(x, profile.sample(t)[0], t))
                   for x in (self.x_zone, self.config.x_contact))
+        tz = tz if self.capped else tc * self.problem.na / self.n1
         S, t_ref = self.stroke, self.t_ref
         t = self._split(duration, tz, tc)
         x, v, a = profile.sample(t)
@@ -821,12 +821,11 @@ class ClampPlanner:
                           x=self.x_open + S * w[:N], v=S / t_ref * w[N + 1:2 * N + 1],
                           a=S / t_ref**2 * w[2 * N + 2:3 * N + 2],
                           jerk=S / t_ref**3 * w[3 * N + 3:4 * N + 3])
-        t_contact, t_zone = (float(profile.knots[k]) for k in (n1, self.problem.na))
+        t_contact = float(profile.knots[n1])
         if self.problem.opening:  # solved backwards in time
             profile = profile.reversed()
-            t_contact, t_zone = profile.duration - t_contact, profile.duration - t_zone
-        return Plan(profile, self.config, objective, t_contact, elapsed, iterations, warm, sol,
-                    t_zone)
+            t_contact = profile.duration - t_contact
+        return Plan(profile, self.config, objective, t_contact, elapsed, iterations, warm, sol)
 
     def solve(self, duration: float, objective: str = "peak", *, start: Plan | None = None,
               warm: bool = True) -> Plan:
@@ -1013,10 +1012,21 @@ class ClampPlanner:
         speed = plant_outputs(s.position[inside], s.velocity[inside], s.acceleration[inside],
                               self.config.with_(x_contact=None)).platen_velocity
         return {"distance": self.protect_distance, "x_entry": self.x_zone,
-                "time": plan.protection_time,
+                "time": self._zone_time(plan),
                 "peak_platen_speed": float(np.max(np.abs(speed), initial=0.0)),
                 "peak_input_force": float(np.max(np.abs(s.input_force[inside]), initial=0.0)),
                 "speed_cap": self.protect_speed, "force_cap": self.protect_force}
+
+    def _zone_time(self, plan: Plan) -> float:
+        """Time the plan spends in the protection zone, s: from the crosshead's crossing of
+        the zone's entry (interpolated on the 1 ms samples) to mold contact (opening: from
+        separation to the crossing)."""
+        s, opening = plan.samples, self.problem.opening
+        closing = s.time <= plan.t_contact if not opening else s.time >= plan.t_contact
+        x, t = s.position[closing], s.time[closing]
+        crossing = float(np.interp(self.x_zone, x[::-1], t[::-1]) if opening
+                         else np.interp(self.x_zone, x, t))
+        return abs(plan.t_contact - crossing)
 
     def worst_peak(self, plan: Plan) -> float:
         """The plan's peak input force (1 ms samples through the plant), N: the worst over

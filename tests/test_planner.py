@@ -542,8 +542,9 @@ def test_mold_protection_caps_hold_between_the_nodes(chang):
     inside, platen_speed = _in_zone(guarded, safe)
     assert platen_speed[inside].max() <= caps.speed * (1 + 1e-6)
     assert np.abs(safe.samples.input_force[inside]).max() <= caps.force * (1 + 1e-6)
-    assert safe.protection_time == pytest.approx(inside.sum() * 1e-3, abs=2e-3)
-    assert guarded.protection(safe)["time"] == safe.protection_time
+    assert guarded.protection(safe)["time"] == pytest.approx(inside.sum() * 1e-3, abs=2e-3)
+    free_time = planner_for(cfg, limits).protection(plan)["time"]  # no caps: reported too
+    assert free_time == pytest.approx(_in_zone(guarded, plan)[0].sum() * 1e-3, abs=2e-3)
     free_inside, free_speed = _in_zone(guarded, plan)  # the plan without caps is faster there
     assert free_speed[free_inside].max() > caps.speed
 
@@ -557,7 +558,7 @@ def test_mold_protection_speed_cap_binds_and_lengthens_the_stroke(chang):
     inside, speed = _in_zone(capped, slow)
     assert speed[inside].max() <= 5e-3 * (1 + 1e-6) and slow.peak_force <= 15.0
     assert slow.duration > fast.duration + 0.1
-    assert slow.protection_time > planner.protection(fast)["time"] + 0.2
+    assert capped.protection(slow)["time"] > planner.protection(fast)["time"] + 0.2
     assert any("mold-protection platen speed" in b for b in capped.binding_limits(slow, 15.0))
 
 
@@ -582,7 +583,7 @@ def test_opening_stroke_breaks_away_and_ends_open_at_rest(chang):
     platen = plant_outputs(s.position[after], s.velocity[after], s.acceleration[after],
                            cfg.with_(x_contact=None)).platen_velocity
     assert np.abs(platen).max() <= 5e-3 * (1 + 1e-6)
-    assert plan.protection_time == pytest.approx(after.sum() * 1e-3, abs=2e-3)
+    assert opener.protection(plan)["time"] == pytest.approx(after.sum() * 1e-3, abs=2e-3)
 
 
 def test_cli_cycle_and_protection_report(tmp_path, capsys):

@@ -215,7 +215,7 @@ def run(args: argparse.Namespace) -> int:
         "t_contact": plan.t_contact,
         "closing_time": plan.t_contact,
         "clamp_up_time": plan.duration - plan.t_contact,
-        "protection_time": plan.protection_time,
+        "protection_time": zone["time"],
         "protection": zone,
         "opening": opening,
         "cycle_time": opening and plan.duration + opening["opening_time"],
@@ -273,7 +273,7 @@ def run(args: argparse.Namespace) -> int:
         ("platen speed", zone["speed_cap"] and zone["speed_cap"] * 1e3, "mm/s"),
         ("input force", zone["force_cap"], "N")) if value is not None]
     print(f"mold protection over the last {zone['distance'] * 1e3:.4g} mm of platen travel "
-          f"(caps: {', '.join(caps) or 'none'}): {plan.protection_time:.4g} s, platen at most "
+          f"(caps: {', '.join(caps) or 'none'}): {zone['time']:.4g} s, platen at most "
           f"{zone['peak_platen_speed'] * 1e3:.4g} mm/s, input force at most "
           f"{zone['peak_input_force']:.4g} N; closing {plan.t_contact:.4g} s, clamp-up "
           f"{result['clamp_up_time']:.4g} s")
