@@ -73,8 +73,17 @@ from controllers.bounds import peak_lower_bound
 from controllers.compiled import Unit, code_digest, compiled
 from controllers.limits import DriveLimits
 from controllers.profiles import Profile, ProfileSamples, minimum_time, predict, s_curve
+from toggle.drive import drive_torque, reflected_mass, torque_speed_limit, travel_per_radian
 from toggle.elastics import ClampingError, clamp_state, clamp_stroke, contact_position
-from toggle.params import HALVES, Dynamics, Mechanism, ParameterError, load_preset
+from toggle.params import (
+    HALVES,
+    MAX_CURVE_POINTS,
+    Drive,
+    Dynamics,
+    Mechanism,
+    ParameterError,
+    load_preset,
+)
 from toggle.plant import PlantConfig, plant_outputs, with_errors
 
 OBJECTIVES = ("peak", "rms")
@@ -238,19 +247,46 @@ _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 _JET = 10  # rows of a node's plant data: value, gradient (3), Hessian upper triangle (6)
 #: The problem's parameters, in order: objective weights (peak, force integral, duration,
 #: jerk regularisation), mold-contact position (m), force scale (N), time scale T_ref (s),
-#: jerk limit (m/s^3), platen speed limit at contact (m/s), pin friction mu.
+#: jerk limit (m/s^3), platen speed limit at contact (m/s), pin friction mu; the drive:
+#: travel per motor radian (m/rad), efficiency, reflected mass of rotor and screw (kg),
+#: standstill torque (N m, the torque rows' scale), the factor on the torque-speed curve
+#: (1, less where minimum_time tightens it), the curve's speeds (rad/s) and torques (N m),
+#: padded to :data:`MAX_CURVE_POINTS` points.
 PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "x_contact", "f_ref", "t_ref",
-              "jerk", "contact_speed", "mu")
+              "jerk", "contact_speed", "mu", "travel", "efficiency", "drive_mass",
+              "torque_ref", "torque_factor",
+              *(f"curve_speed{k}" for k in range(MAX_CURVE_POINTS)),
+              *(f"curve_torque{k}" for k in range(MAX_CURVE_POINTS)))
 _P = {name: k for k, name in enumerate(PARAMETERS)}
+#: A drive whose values are all parameters of the problem: the one its plants carry, so
+#: that the drive is no part of the compile key (:func:`_neutral`).
+_NEUTRAL_DRIVE = Drive(ratio=1.0, lead=1.0, efficiency=1.0, pulses_per_rev=1)
+
+
+def _neutral(cfg: PlantConfig) -> PlantConfig:
+    """The plant as a problem is built for it: without mold and friction, with the neutral
+    drive (all three parameters of the problem)."""
+    return cfg.with_(x_contact=None, mu=None,
+                     mechanism=replace(cfg.mechanism, drive=_NEUTRAL_DRIVE))
+
+
+def _curve_parameters(limits: DriveLimits) -> list[float]:
+    """The torque-speed curve's speeds and torques, padded to :data:`MAX_CURVE_POINTS`
+    points by flat steps beyond the last (which add nothing to the curve)."""
+    speeds, torques = (list(c) for c in zip(*limits.curve))
+    while len(speeds) < MAX_CURVE_POINTS:
+        speeds.append(speeds[-1] + 1.0)
+        torques.append(torques[-1])
+    return [*speeds, *torques]
 
 
 def _problem_key(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = ()
                  ) -> str:
     """Everything that determines a :class:`StrokeProblem`'s functions, the key of their
     disk cache: the code the problem uses, the plants (every field of the frozen parameters,
-    floats in their exact repr; mold height, friction and drive limits are parameters of
-    the problem, not part of the key) and N."""
-    plants = [astuple(c.with_(x_contact=None, mu=None)) for c in (cfg, *variants)]
+    floats in their exact repr; mold height, friction, the drive and its limits are
+    parameters of the problem, not part of the key: :func:`_neutral`) and N."""
+    plants = [astuple(_neutral(c)) for c in (cfg, *variants)]
     return "\n".join((_SOURCE, *map(repr, (*plants, intervals))))
 
 
@@ -308,7 +344,8 @@ class StrokeProblem:
         self.n_forces = (2 * N + 2) * len(self.plants)
         sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
                  "force_lower": self.n_forces, "contact_speed": len(self.plants), "duration": 1,
-                 "mid_velocity": N}
+                 "mid_velocity": N, "torque_upper": self.n_forces,
+                 "torque_lower": self.n_forces}
         starts = np.cumsum([0, *sizes.values()])
         self.rows = {name: slice(int(a), int(b)) for name, a, b in
                      zip(sizes, starts[:-1], starts[1:])}
@@ -378,6 +415,7 @@ class StrokeProblem:
             outputs.append(block[0, :] + ca.sum1(block[1:4, :] * d) + quad / 2)
             col += n
         each = len(_OUTPUTS)
+        torque = self._torque_rows(outputs, z, p)
         F = ca.vertcat(outputs[0].T, outputs[1].T) / p[_P["f_ref"]]  # the first plant's
         scales = p[len(PARAMETERS):]
         forces = ca.vertcat(*[ca.vertcat(*[outputs[k + j].T for j in (0, 1, 3, 4)])
@@ -401,7 +439,25 @@ class StrokeProblem:
                      + p[_P["w_time"]] * duration
                      + p[_P["w_jerk"]] * ca.dot(h, (io / jerk_bound) ** 2))
         return objective, ca.vertcat(dyn, xi[n1], forces - s, forces + s, contact, duration,
-                                     nu_m)
+                                     nu_m, *torque)
+
+    def _torque_rows(self, outputs: list[ca.SX], z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """The motor torque (:func:`toggle.drive.drive_torque` of each plant's input force
+        and the acceleration) less and plus the torque-speed curve at the motor speed, at
+        the nodes and midpoints, in units of the standstill torque: rows <= 0 and >= 0."""
+        travel = p[_P["travel"]]
+        speeds = [p[_P[f"curve_speed{k}"]] for k in range(MAX_CURVE_POINTS)]
+        torques = [p[_P[f"curve_torque{k}"]] for k in range(MAX_CURVE_POINTS)]
+        torque, limit = [], []
+        for k in range(0, len(outputs), len(_OUTPUTS)):
+            for j in (0, 1, 3, 4):
+                states = z[:, self._spans()[j]]
+                torque.append(drive_torque(outputs[k + j], states[2, :], travel,
+                                           p[_P["efficiency"]], p[_P["drive_mass"]]).T)
+                limit.append(p[_P["torque_factor"]] * torque_speed_limit(
+                    states[1, :] / travel, speeds, torques).T)
+        torque, limit = ca.vertcat(*torque), ca.vertcat(*limit)
+        return ((torque - limit) / p[_P["torque_ref"]], (torque + limit) / p[_P["torque_ref"]])
 
     def _model_functions(self) -> list[ca.Function]:
         """The model's value (f, g), gradient, constraint Jacobian and Hessian of the
@@ -473,6 +529,7 @@ class StrokeProblem:
         lbg[r["force_upper"]], ubg[r["force_lower"]] = -np.inf, np.inf
         lbg[r["contact_speed"]], ubg[r["contact_speed"]] = -np.inf, 1.0
         ubg[r["duration"]] = np.inf
+        lbg[r["torque_upper"]], ubg[r["torque_lower"]] = -np.inf, np.inf
         self.g_bounds = (lbg, ubg)
 
     def input_force(self, x: Any, v: Any, a: Any, x_contact: float, mu: float) -> np.ndarray:
@@ -497,8 +554,8 @@ class StrokeProblem:
 @functools.lru_cache(maxsize=8)
 def _problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = ()
                  ) -> StrokeProblem:
-    """A built problem, shared by the planners of every mold height, friction and drive
-    limits of one plant (and variants)."""
+    """A built problem, shared by the planners of every mold height, friction, drive and
+    drive limits of one plant (and variants)."""
     return StrokeProblem(cfg, intervals, variants)
 
 
@@ -527,8 +584,7 @@ class ClampPlanner:
         if not (math.isfinite(contact_speed) and contact_speed > 0):
             raise ParameterError(f"contact speed must be > 0 m/s, got {contact_speed!r}")
         self.problem = problem or StrokeProblem(
-            cfg.with_(x_contact=None, mu=None), intervals,
-            tuple(v.with_(x_contact=None, mu=None) for v in variants))
+            _neutral(cfg), intervals, tuple(_neutral(v) for v in variants))
         pr = self.problem
         self.config, self.limits, self.contact_speed = cfg, limits, contact_speed
         self.variants = tuple(v.with_(x_contact=cfg.x_contact, mu=cfg.mu) for v in variants)
@@ -559,11 +615,14 @@ class ClampPlanner:
         f = self._force(xs, self.stroke / self.t_ref, 0.0)
         return max(float(np.max(np.abs(f))), 1e-6)
 
-    def _parameters(self, weights: list[float]) -> list[float]:
-        """The problem's :data:`PARAMETERS` for these objective weights, then the plants'
-        force scales."""
+    def _parameters(self, weights: list[float], torque_factor: float = 1.0) -> list[float]:
+        """The problem's :data:`PARAMETERS` for these objective weights and factor on the
+        torque-speed curve, then the plants' force scales."""
+        drive = self.config.mechanism.drive
         return [*weights, self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
-                self.contact_speed, self.config.friction, 1.0, *self.scales]
+                self.contact_speed, self.config.friction, travel_per_radian(drive),
+                drive.efficiency, reflected_mass(drive), self.limits.torque, torque_factor,
+                *_curve_parameters(self.limits), 1.0, *self.scales]
 
     # ---- solving --------------------------------------------------------------------
 
@@ -653,7 +712,7 @@ class ClampPlanner:
 
     def _run(self, weights: list[float], t_bounds: tuple[float, float], force_limit: float,
              objective: str, start: Plan | None, warm: bool,
-             guess: np.ndarray | None = None) -> tuple[Plan, bool]:
+             guess: np.ndarray | None = None, torque_factor: float = 1.0) -> tuple[Plan, bool]:
         start = start or self.last
         warm = warm and start is not None and start.solution["x"].size == self.problem.size
         lbx, ubx = self._bounds(force_limit)
@@ -667,7 +726,8 @@ class ClampPlanner:
         args["x0"] = np.clip(args["x0"], lbx, ubx)
         solver = self.problem.solver(warm, energy=weights[1] > 0)
         tic = time.perf_counter()
-        sol = solver(p=self._parameters(weights), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **args)
+        sol = solver(p=self._parameters(weights, torque_factor), lbx=lbx, ubx=ubx, lbg=lbg,
+                     ubg=ubg, **args)
         elapsed = time.perf_counter() - tic
         stats = solver.stats()
         solution = {k: np.asarray(sol[k]).ravel() for k in ("x", "lam_x", "lam_g")}
@@ -749,9 +809,9 @@ class ClampPlanner:
         under the torque limit alone, then lowers the force limit from that plan's peak to
         the requested one in steps of at most :data:`_LIMIT_STEP`, each warm-started from
         the last (a cold start under a tight limit stalls in a slow local optimum). The
-        limit is imposed at the nodes and interval midpoints; where the plan's 1 ms
-        samples through the plant still exceed it, the limit is tightened by the excess and
-        the plan repeated."""
+        limit and the motor's torque-speed curve are imposed at the nodes and interval
+        midpoints; where the plan's 1 ms samples through the plant still exceed either, it
+        is tightened by the excess and the plan repeated."""
         limit = self.force_limit if force_limit is None else min(force_limit, self.force_limit)
         if not (math.isfinite(limit) and limit > 0):
             raise ParameterError(f"force limit must be > 0 N, got {force_limit!r}")
@@ -770,12 +830,14 @@ class ClampPlanner:
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
+        factor = 1.0
         for _ in range(_TIGHTEN):  # between the nodes: the 1 ms samples decide
-            excess = self.worst_peak(plan) - limit
-            if excess <= 0:
+            excess, over = self.worst_peak(plan) - limit, self.torque_ratio(plan) - 1.0
+            if excess <= 0 and over <= 0:
                 break
-            imposed -= 1.5 * excess
-            reached = self._fastest(imposed, plan, True)
+            imposed -= 1.5 * max(excess, 0.0)
+            factor /= 1.0 + 1.5 * max(over, 0.0)
+            reached = self._fastest(imposed, plan, True, factor)
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
@@ -812,19 +874,24 @@ class ClampPlanner:
         steps = min(math.ceil(math.log(peak / limit) / math.log1p(_LIMIT_STEP)), 40)
         return [float(v) for v in np.geomspace(peak, limit, steps + 1)[1:]]
 
-    def _fastest(self, limit: float, start: Plan | None, warm: bool) -> Plan | None:
-        """The minimum-time plan under the force limit imposed at nodes and midpoints, or
-        None if IPOPT finds none (warm, then cold)."""
+    def _fastest(self, limit: float, start: Plan | None, warm: bool,
+                 torque_factor: float = 1.0) -> Plan | None:
+        """The minimum-time plan under the force limit and the torque-speed curve (times
+        ``torque_factor``) imposed at nodes and midpoints, or None if IPOPT finds none
+        (warm, then cold)."""
         bounds, weights = (self.t_ref, 100 * self.t_ref), [0.0, 0.0, 1.0, _REGULARISATION]
-        plan, ok = self._run(weights, bounds, limit, "time", start, warm)
+        plan, ok = self._run(weights, bounds, limit, "time", start, warm,
+                             torque_factor=torque_factor)
         if not ok and warm:
-            plan, ok = self._run(weights, bounds, limit, "time", None, False)
+            plan, ok = self._run(weights, bounds, limit, "time", None, False,
+                                 torque_factor=torque_factor)
         return plan if ok else None
 
     def _unreachable(self, limit: float, best: Plan | None) -> str:
         """Why no stroke meets ``limit``: which limit binds, the lowest peak reached."""
         which = ("the force limit" if limit < self.force_limit
-                 else f"the motor torque limit ({self.limits.torque:.4g} N m)")
+                 else f"the motor's torque-speed curve ({self.limits.torque:.4g} N m at "
+                      "standstill)")
         text = (f"{which} binds: the planner found no stroke clamping to "
                 f"{self.clamp_force():.6g} N with an input force of at most {limit:.4g} N")
         if best is not None:
@@ -846,6 +913,13 @@ class ClampPlanner:
         return max([plan.peak_force, *(predict(plan.profile, v).peak_force / k
                                        for v, k in zip(self.variants, self.scales))])
 
+    def torque_ratio(self, plan: Plan) -> float:
+        """The plan's largest motor torque over the torque-speed curve at the motor's speed
+        (1 ms samples through the plant and its variants): at most 1 within the curve."""
+        drive = self.config.mechanism.drive
+        return max(self.limits.torque_ratio(drive, s.velocity, s.acceleration, s.input_force)
+                   for s in (plan.samples, *(predict(plan.profile, v) for v in self.variants)))
+
     def binding_limits(self, plan: Plan, force_limit: float | None = None) -> list[str]:
         """Names of the limits the plan runs at (within 1 %), the force limit judged by the
         plan's 1 ms samples through the plant."""
@@ -857,8 +931,8 @@ class ClampPlanner:
             f"acceleration (max {lim.acceleration:.4g} m/s^2)":
                 np.max(np.abs(pr.a)) / lim.acceleration,
             f"jerk (max {lim.jerk:.4g} m/s^3)": np.max(np.abs(pr.jerk)) / lim.jerk,
-            f"motor torque (max {lim.torque:.4g} N m, {self.force_limit:.4g} N thrust)":
-                peak / self.force_limit,
+            f"motor torque (torque-speed curve, {lim.torque:.4g} N m at standstill)":
+                self.torque_ratio(plan),
             f"platen speed at mold contact (max {self.contact_speed * 1e3:.4g} mm/s)":
                 contact / self.contact_speed,
         }
@@ -885,8 +959,7 @@ def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CO
                 scales: tuple[float, ...] | None = None) -> ClampPlanner:
     """A planner on a kept problem, so that a re-plan for the same plant (and variants),
     for any mold height, friction or drive limits, neither rebuilds nor starts cold."""
-    problem = _problem_for(cfg.with_(x_contact=None, mu=None), intervals,
-                           tuple(v.with_(x_contact=None, mu=None) for v in variants))
+    problem = _problem_for(_neutral(cfg), intervals, tuple(_neutral(v) for v in variants))
     return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
                         problem=problem, variants=variants, scales=scales)
 

@@ -192,7 +192,7 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
         mechanical_advantage=ma,
         toggle_angle=theta4,
         asymmetry=terms[1][0] - terms[0][0],
-        motor_torque=motor_torque(force, mech.drive),
+        motor_torque=motor_torque(force, mech.drive, a),
     )
 
 
