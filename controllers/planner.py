@@ -72,7 +72,14 @@ from scipy.optimize import brentq
 from controllers.bounds import peak_lower_bound
 from controllers.compiled import Unit, code_digest, compiled
 from controllers.limits import DriveLimits
-from controllers.profiles import Profile, ProfileSamples, minimum_time, predict, s_curve
+from controllers.profiles import (
+    Profile,
+    ProfileError,
+    ProfileSamples,
+    minimum_time,
+    predict,
+    s_curve,
+)
 from toggle.drive import drive_torque, reflected_mass, torque_speed_limit, travel_per_radian
 from toggle.elastics import ClampingError, clamp_state, clamp_stroke, contact_position
 from toggle.params import (
@@ -102,6 +109,7 @@ _WEIGHTS = {"peak": [1.0, 0.0, 0.0, _REGULARISATION], "rms": [0.0, 1.0, 0.0, 0.0
 _LATE_STARTS = (1.0, 1.1, 1.25)
 _GAP = 3e-3
 _LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's continuation
+_BASELINE_STEP = 0.8  # factor on a baseline's acceleration while it breaks the torque curve
 _TIGHTEN = 4  # re-plans of minimum_time with the limit tightened by the excess between nodes
 #: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
 #: scaling of every KKT matrix only costs time (a tenth of a warm re-plan).
@@ -967,10 +975,40 @@ def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CO
 def baseline_stroke(cfg: PlantConfig, limits: DriveLimits, duration: float,
                     jerk: float | None = None) -> Profile:
     """The S-curve stroke of the plant's clamp in ``duration`` under the limits (the jerk
-    limit's unless ``jerk`` is given; inf: the trapezoidal velocity profile)."""
+    limit's unless ``jerk`` is given; inf: the trapezoidal velocity profile), held to the
+    motor's torque-speed curve: where the stroke at full acceleration breaks it (the
+    drive's inertia needs torque), the acceleration is lowered, in steps of
+    :data:`_BASELINE_STEP` and then by bisection, to the highest that keeps the curve, as
+    far as the duration allows (else the stroke at full acceleration, which the caller
+    reports as breaking the curve: :meth:`DriveLimits.torque_ratio`)."""
     x_open, x_final = clamp_stroke(cfg.mechanism)
-    return s_curve(x_open, x_final, duration, limits.velocity, limits.acceleration,
-                   limits.jerk if jerk is None else jerk)
+    jerk = limits.jerk if jerk is None else jerk
+    drive = cfg.mechanism.drive
+
+    def stroke(factor: float) -> Profile:
+        return s_curve(x_open, x_final, duration, limits.velocity,
+                       factor * limits.acceleration, jerk)
+
+    def within(factor: float) -> bool:
+        try:
+            s = predict(stroke(factor), cfg)
+        except ProfileError:  # too slow an acceleration for the duration
+            return False
+        return limits.torque_ratio(drive, s.velocity, s.acceleration, s.input_force) <= 1.0
+
+    if within(1.0):
+        return stroke(1.0)
+    high, low = 1.0, _BASELINE_STEP
+    while not within(low):
+        if low < 1e-3:
+            return stroke(1.0)
+        high, low = low, low * _BASELINE_STEP
+    for _ in range(20):  # the highest acceleration within the curve, to 0.01 %
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if within(middle) else (low, middle)
+        if high - low < 1e-4 * high:
+            break
+    return stroke(low)
 
 
 def baselines(cfg: PlantConfig, limits: DriveLimits, duration: float

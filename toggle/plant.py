@@ -295,12 +295,14 @@ def configure(
     x_contact: float | None = None,
     masses: dict[str, float] | None = None,
     errors: dict[str, float] | None = None,
+    drive: dict[str, Any] | None = None,
 ) -> PlantConfig:
     """A plant from a preset (a name, a TOML path or a loaded :class:`Mechanism`), with
     overrides named as the FMU names its parameters.
 
     ``masses`` overrides fields of the preset's [dynamics] (crosshead, links,
-    platen, guide_damping); ``errors`` adds dimensional errors by seed 000's
+    platen, guide_damping); ``drive`` fields of its [drive] (rotor_inertia,
+    screw_inertia, ...); ``errors`` adds dimensional errors by seed 000's
     names (for example ``{"r8": 0.5e-3}`` lengthens link 8 of the upper half).
     A contact position at or beyond the toggle means no mold. Every bad value
     raises :class:`ParameterError` naming it.
@@ -311,6 +313,10 @@ def configure(
         if mech.dynamics is None:
             raise ParameterError(f"preset {mech.name!r} has no [dynamics] section to override")
         mech = replace(mech, dynamics=replace(mech.dynamics, **masses))
+    if drive:
+        if mech.drive is None:
+            raise ParameterError(f"preset {mech.name!r} has no [drive] section to override")
+        mech = replace(mech, drive=replace(mech.drive, **drive))
     for h in HALVES:
         try:
             toggle_position(mech.half(h))
