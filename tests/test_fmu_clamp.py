@@ -30,10 +30,10 @@ from fmu_support import (
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from toggle.drive import motor_torque
 from toggle.fmu_build import DEFAULT_SLAVE, build_fmu
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
-from toggle.drive import motor_torque
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
 SLAVE = load_module(DEFAULT_SLAVE, "toggle_clamp_fmu_inproc").ToggleClamp

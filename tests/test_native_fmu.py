@@ -23,11 +23,11 @@ from fmpy.fmi2 import fmi2Error
 from fmpy.model_description import read_build_description
 from fmu_support import close_slave, run_libcosim, run_steps, slip_along, validator_problems
 
+from toggle.drive import motor_torque
 from toggle.fmu_build import build_fmu
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
 from toggle.native_fmu import build_native_fmu, fmi2_headers, slave_variables
-from toggle.drive import motor_torque
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
 VARIABLES = slave_variables()[0]
