@@ -16,9 +16,11 @@ own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
   optimum unique) or the integral of F^2; the minimum-time mode minimises the
   duration under |F| <= force limit;
 * constraints: rest at the open position and at the toggle, monotone stroke
-  inside the stroke limits, velocity (nodes and midpoints), acceleration, jerk
-  and motor-torque limits (:mod:`controllers.limits`), platen speed at mold
-  contact, and no creeping through the clamping (``CREEP_FACTOR``).
+  inside the stroke limits, velocity (nodes and midpoints), acceleration and
+  jerk limits (:mod:`controllers.limits`), the motor torque with the drive's
+  inertia (:func:`toggle.drive.drive_torque`) within the torque-speed curve at
+  the motor's speed (nodes and midpoints), platen speed at mold contact, and no
+  creeping through the clamping (``CREEP_FACTOR``).
 
 Optima to trust: :meth:`ClampPlanner.best` starts from several guesses (the
 problem has two families of local optima: slow or fast arrival at the mold,
@@ -35,15 +37,17 @@ Variables are scaled by the stroke, a reference time (the kinematic minimum)
 and a reference force; the interval lengths of the two phases are variables
 and the duration is a constraint whose bounds fix it or leave it free. The
 objective weights, the mold-contact position, the pin friction, the scales,
-the jerk and contact-speed limits are parameters (:data:`PARAMETERS`) and
-the other limits bounds. So one built problem (:class:`StrokeProblem`,
-shared by :func:`planner_for`) serves every duration, mode, mold height,
-friction and drive limit, and a re-plan warm-starts IPOPT from the previous
+the jerk and contact-speed limits, the drive (travel per radian, efficiency,
+the rotor's and screw's reflected mass, the torque-speed curve) and the masses
+are parameters (:data:`PARAMETERS`, :data:`MASSES`) and the other limits
+bounds. So one built problem (:class:`StrokeProblem`, shared by
+:func:`planner_for`) serves every duration, mode, mold height, friction,
+mass, drive and drive limit, and a re-plan warm-starts IPOPT from the previous
 primal and dual solution, stretched in time to the new duration. IPOPT's
 functions are per-node jets of the plant feeding a model of the rest (see
 :class:`StrokeProblem`), compiled to machine code once and kept on disk
 under a hash of what determines them (the code this module imports, not
-plots or the CLI; the plant without mold and friction; N:
+plots or the CLI; the plant's geometry and friction model; N:
 :mod:`controllers.compiled`), so a new process builds a problem in
 milliseconds; without a C compiler they are built symbolically and
 interpreted.
@@ -62,7 +66,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import astuple, dataclass, field, replace
+from dataclasses import astuple, dataclass, field, fields, replace
 from typing import Any
 
 import casadi as ca
@@ -90,6 +94,7 @@ from toggle.params import (
     Mechanism,
     ParameterError,
     load_preset,
+    symbolic_copy,
 )
 from toggle.plant import PlantConfig, plant_outputs, with_errors
 
@@ -266,16 +271,25 @@ PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "x_contact", "f_ref", "t
               *(f"curve_speed{k}" for k in range(MAX_CURVE_POINTS)),
               *(f"curve_torque{k}" for k in range(MAX_CURVE_POINTS)))
 _P = {name: k for k, name in enumerate(PARAMETERS)}
-#: A drive whose values are all parameters of the problem: the one its plants carry, so
-#: that the drive is no part of the compile key (:func:`_neutral`).
+#: The masses and guide friction of each plant (:class:`toggle.params.Dynamics`), parameters
+#: of the problem after the plants' force scales, in this order for each plant.
+MASSES = tuple(f.name for f in fields(Dynamics))
+#: A drive and masses whose values are all parameters of the problem: what its plants
+#: carry, so that neither is part of the compile key (:func:`_neutral`).
 _NEUTRAL_DRIVE = Drive(ratio=1.0, lead=1.0, efficiency=1.0, pulses_per_rev=1)
+_NEUTRAL_DYNAMICS = Dynamics(crosshead=1.0, links=1.0, platen=1.0)
 
 
 def _neutral(cfg: PlantConfig) -> PlantConfig:
     """The plant as a problem is built for it: without mold and friction, with the neutral
-    drive (all three parameters of the problem)."""
-    return cfg.with_(x_contact=None, mu=None,
-                     mechanism=replace(cfg.mechanism, drive=_NEUTRAL_DRIVE))
+    drive and masses (all parameters of the problem)."""
+    return cfg.with_(x_contact=None, mu=None, mechanism=replace(
+        cfg.mechanism, drive=_NEUTRAL_DRIVE, dynamics=_NEUTRAL_DYNAMICS))
+
+
+def _masses(cfg: PlantConfig) -> list[float]:
+    """The plant's :data:`MASSES` (kg, N s/m, N), parameters of the problem."""
+    return [float(getattr(cfg.dynamics, name)) for name in MASSES]
 
 
 def _curve_parameters(limits: DriveLimits) -> list[float]:
@@ -292,8 +306,8 @@ def _problem_key(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, 
                  ) -> str:
     """Everything that determines a :class:`StrokeProblem`'s functions, the key of their
     disk cache: the code the problem uses, the plants (every field of the frozen parameters,
-    floats in their exact repr; mold height, friction, the drive and its limits are
-    parameters of the problem, not part of the key: :func:`_neutral`) and N."""
+    floats in their exact repr; mold height, friction, masses, the drive and its limits
+    are parameters of the problem, not part of the key: :func:`_neutral`) and N."""
     plants = [astuple(_neutral(c)) for c in (cfg, *variants)]
     return "\n".join((_SOURCE, *map(repr, (*plants, intervals))))
 
@@ -314,8 +328,9 @@ def _jets(name: str, output: ca.SX, z: ca.SX, prm: ca.SX, nodes: int
 
 class StrokeProblem:
     """The optimal control problem for one mold-free plant and N, built once; the mold
-    height, the pin friction, the drive limits and the contact-speed limit are parameters
-    (:data:`PARAMETERS`) or bounds, so changing them neither rebuilds nor recompiles.
+    height, the pin friction, the masses, the drive, its limits and the contact-speed limit
+    are parameters (:data:`PARAMETERS`, :data:`MASSES`) or bounds, so changing them neither
+    rebuilds nor recompiles.
 
     Variables are scaled: position xi = (x - x_open) / S, velocity, acceleration and jerk
     in units of S / T_ref^k, interval lengths theta in units of T_ref (T_ref a parameter).
@@ -358,8 +373,9 @@ class StrokeProblem:
         self.rows = {name: slice(int(a), int(b)) for name, a, b in
                      zip(sizes, starts[:-1], starts[1:])}
         self.n_constraints = int(starts[-1])
-        #: :data:`PARAMETERS`, then each plant's force scale (its forces count divided by it)
-        self.n_parameters = len(PARAMETERS) + len(self.plants)
+        #: :data:`PARAMETERS`, then each plant's force scale (its forces count divided by it),
+        #: then each plant's :data:`MASSES`
+        self.n_parameters = len(PARAMETERS) + len(self.plants) * (1 + len(MASSES))
         self._solvers: dict[tuple[bool, bool], Any] = {}
         self.last: Plan | None = None  # the latest plan, for any mold height
         self._build()
@@ -391,9 +407,12 @@ class StrokeProblem:
     def _symbolic(self) -> list[Unit]:
         """The per-node jets of :data:`_OUTPUTS` and the model as SX functions, in
         compilation units (see :data:`_OPTIMISATION`)."""
-        z, prm = ca.SX.sym("z", 3), ca.SX.sym("prm", 2)  # prm: x_contact, mu
+        # prm: x_contact, mu, the plant's MASSES
+        z, prm = ca.SX.sym("z", 3), ca.SX.sym("prm", 2 + len(MASSES))
+        dynamics = symbolic_copy(_NEUTRAL_DYNAMICS, **dict(zip(MASSES, ca.vertsplit(prm[2:]))))
         jets = []
         for k, plant in enumerate(self.plants):
+            plant = plant.with_(mechanism=replace(plant.mechanism, dynamics=dynamics))
             free = plant_outputs(z[0], z[1], z[2], plant, mu=prm[1])
             mold = plant_outputs(z[0], z[1], z[2], plant, x_contact=prm[0], mu=prm[1])
             outputs = (free.input_force, mold.input_force, free.platen_velocity,
@@ -425,7 +444,7 @@ class StrokeProblem:
         each = len(_OUTPUTS)
         torque = self._torque_rows(outputs, z, p)
         F = ca.vertcat(outputs[0].T, outputs[1].T) / p[_P["f_ref"]]  # the first plant's
-        scales = p[len(PARAMETERS):]
+        scales = p[len(PARAMETERS):len(PARAMETERS) + len(self.plants)]
         forces = ca.vertcat(*[ca.vertcat(*[outputs[k + j].T for j in (0, 1, 3, 4)])
                               / scales[k // each] for k in range(0, len(outputs), each)]
                             ) / p[_P["f_ref"]]
@@ -502,10 +521,12 @@ class StrokeProblem:
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
         L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.n_constraints)
         z = self._nodes(W, P[_P["t_ref"]])[-1]
-        prm = ca.vertcat(P[_P["x_contact"]], P[_P["mu"]])
+        first, n = len(PARAMETERS) + len(self.plants), len(MASSES)
+        prm = [ca.vertcat(P[_P["x_contact"]], P[_P["mu"]], P[first + n * k:first + n * (k + 1)])
+               for k in range(len(self.plants))]
 
         def node_data(order: int) -> ca.MX:
-            return ca.horzcat(*[fn[f"{name}{k}_{order}"](z[:, nodes], prm)
+            return ca.horzcat(*[fn[f"{name}{k}_{order}"](z[:, nodes], prm[k])
                                 for k in range(len(self.plants))
                                 for name, nodes in zip(_OUTPUTS, self._spans())])
 
@@ -540,12 +561,13 @@ class StrokeProblem:
         lbg[r["torque_upper"]], ubg[r["torque_lower"]] = -np.inf, np.inf
         self.g_bounds = (lbg, ubg)
 
-    def input_force(self, x: Any, v: Any, a: Any, x_contact: float, mu: float) -> np.ndarray:
-        """The plant's input force (N) at the points (x, v, a) with the mold at ``x_contact``
-        and pin friction ``mu`` (the function of the clamping phase's jets, exact before
+    def input_force(self, x: Any, v: Any, a: Any, cfg: PlantConfig) -> np.ndarray:
+        """The input force (N) at the points (x, v, a) of the plant ``cfg`` (its mold, pin
+        friction and masses; the function of the clamping phase's jets, exact before
         contact too, compiled)."""
         z = np.vstack(np.broadcast_arrays(x, v, a)).astype(float)
-        return np.asarray(self._force(z, [x_contact, mu]))[0]
+        return np.asarray(self._force(z, [cfg.x_contact, cfg.friction,
+                                          *_masses(cfg)]))[0]
 
     def solver(self, warm: bool, energy: bool) -> Any:
         """The IPOPT instance, cold or with the warm-start options, for an objective with
@@ -615,7 +637,7 @@ class ClampPlanner:
 
     def _force(self, x: Any, v: Any, a: Any) -> np.ndarray:
         """The plant's input force at the points (x, v, a) with this planner's mold, N."""
-        return self.problem.input_force(x, v, a, self.config.x_contact, self.config.friction)
+        return self.problem.input_force(x, v, a, self.config)
 
     def _reference_force(self) -> float:
         """Scale of the input force: its quasi-static peak at the reference speed, N."""
@@ -630,7 +652,8 @@ class ClampPlanner:
         return [*weights, self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
                 self.contact_speed, self.config.friction, travel_per_radian(drive),
                 drive.efficiency, reflected_mass(drive), self.limits.torque, torque_factor,
-                *_curve_parameters(self.limits), 1.0, *self.scales]
+                *_curve_parameters(self.limits), 1.0, *self.scales,
+                *(m for plant in (self.config, *self.variants) for m in _masses(plant))]
 
     # ---- solving --------------------------------------------------------------------
 

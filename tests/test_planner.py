@@ -206,12 +206,15 @@ def test_the_cache_key_covers_the_plant_and_the_code_it_uses(tmp_path):
     cfg = plan_config("chang2021").with_(x_contact=None)
     key = _problem_key(cfg, 200)
     changed = [_problem_key(cfg.with_(velocity_epsilon=2e-4), 200), _problem_key(cfg, 100),
-               _problem_key(replace(cfg, mechanism=replace(
-                   cfg.mechanism, dynamics=replace(cfg.dynamics, platen=2.6))), 200)]
+               _problem_key(cfg.with_(mechanism=cfg.mechanism.with_error("upper", "r5", 1e-4)),
+                            200)]
     assert key == _problem_key(cfg, 200) and key not in changed
     assert len(set(changed)) == len(changed)
-    # mold height, friction and the drive are parameters of the problem, not part of the key
+    # mold height, friction, masses and the drive are parameters of the problem, not part of
+    # the key
     assert _problem_key(cfg.with_(mu=0.06, x_contact=0.04), 200) == key
+    assert _problem_key(replace(cfg, mechanism=replace(
+        cfg.mechanism, dynamics=replace(cfg.dynamics, platen=2.6))), 200) == key
     other_drive = replace(cfg.mechanism.drive, rotor_inertia=1e-4, lead=4e-3,
                           torque_speed=((0.0, 0.2), (40.0, 0.1)))
     assert _problem_key(cfg.with_(mechanism=replace(cfg.mechanism, drive=other_drive)),
@@ -258,13 +261,21 @@ def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, tmp_path, mo
 
 
 def test_a_change_of_the_drive_reuses_the_compiled_problem(chang, tmp_path, monkeypatch):
-    """Rotor inertia and torque-speed curve are parameters of the compiled problem: another
-    rotor or curve neither rebuilds the problem in this process nor recompiles in a new one."""
+    """Rotor inertia, torque-speed curve and masses are parameters of the compiled problem:
+    another rotor, curve or platen neither rebuilds the problem in this process nor
+    recompiles in a new one; the masses count (a heavier platen, more inertia force)."""
     cfg, limits, planner, plan = chang
-    heavy = cfg.with_(mechanism=replace(cfg.mechanism, drive=replace(
-        cfg.mechanism.drive, rotor_inertia=2e-4)))
+    heavy = cfg.with_(mechanism=replace(
+        cfg.mechanism, drive=replace(cfg.mechanism.drive, rotor_inertia=2e-4),
+        dynamics=replace(cfg.dynamics, platen=25.0)))
     steep = replace(limits, torque=0.03, torque_speed=STEEP)
     assert planner_for(heavy, steep).problem is planner.problem
+    heavier = planner_for(heavy, limits).solve(DURATION, start=plan)
+    assert heavier.peak_force > plan.peak_force
+    np.testing.assert_allclose(  # the planner's compiled force is the plant's
+        planner_for(heavy, limits)._force(heavier.samples.position, heavier.samples.velocity,
+                                          heavier.samples.acceleration),
+        heavier.samples.input_force, rtol=1e-9, atol=1e-9)
     monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
     ClampPlanner(cfg, limits, intervals=8)
     monkeypatch.setattr("controllers.planner.compiled", _no_compile)

@@ -41,7 +41,7 @@ from toggle.fmu_build import (
 from toggle.fmu_build import number_text as _number
 from toggle.fmu_slave import Var
 from toggle.kinematics import half_pose
-from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES, load_preset
+from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES, load_preset, symbolic_copy
 from toggle.plant import PlantConfig, PlantOutputs, configure, plant_outputs
 
 MODEL = "ToggleClampNative"
@@ -86,14 +86,6 @@ class _SymbolicHalf(NamedTuple):
         return id(self)
 
 
-def _frozen_copy(obj: Any, **fields: Any) -> Any:
-    """A frozen dataclass with some fields set to symbols (its numeric checks skipped)."""
-    copy = object.__new__(type(obj))
-    for f in dataclasses.fields(obj):
-        object.__setattr__(copy, f.name, fields.get(f.name, getattr(obj, f.name)))
-    return copy
-
-
 def plant_functions(cfg: PlantConfig) -> list[ca.Function]:
     """The plant as CasADi functions (xvaz[4], lower[8], upper[8], mu, masses[6], x_contact);
     xvaz: position, velocity, acceleration and the pin friction's slip state; masses: the
@@ -104,8 +96,8 @@ def plant_functions(cfg: PlantConfig) -> list[ca.Function]:
                              ca.SX.sym("x_contact"))
     lower = _SymbolicHalf(*ca.vertsplit(p_lower))
     values = ca.vertsplit(masses)
-    dynamics = _frozen_copy(cfg.dynamics, **dict(zip(MASS_FIELDS.values(), values)))
-    drive = _frozen_copy(cfg.mechanism.drive, **dict(zip(DRIVE_FIELDS,
+    dynamics = symbolic_copy(cfg.dynamics, **dict(zip(MASS_FIELDS.values(), values)))
+    drive = symbolic_copy(cfg.mechanism.drive, **dict(zip(DRIVE_FIELDS,
                                                          values[len(MASS_FIELDS):])))
     functions = []
     for name in VARIANTS:
@@ -113,7 +105,7 @@ def plant_functions(cfg: PlantConfig) -> list[ca.Function]:
         mech = dataclasses.replace(cfg.mechanism, lower=lower, upper=upper, dynamics=dynamics,
                                    drive=drive)
         mold = "_mold" in name  # the no-mold variant ignores its x_contact input
-        sym_cfg = _frozen_copy(cfg, mechanism=mech, mu=mu, x_contact=None)
+        sym_cfg = symbolic_copy(cfg, mechanism=mech, mu=mu, x_contact=None)
         outs = plant_outputs(xva[0], xva[1], xva[2], sym_cfg, x_contact if mold else None,
                              slip_state=xva[3])
         functions.append(ca.Function(

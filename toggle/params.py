@@ -364,6 +364,16 @@ class Dynamics:
                 raise ParameterError(f"dynamics.{f.name} must be finite and >= 0, got {value!r}")
 
 
+def symbolic_copy(obj: Any, **values: Any) -> Any:
+    """A copy of a frozen dataclass with some fields set to CasADi symbols, its numeric
+    checks skipped: how the native FMU and the planner keep values as inputs or parameters
+    of generated functions."""
+    copy = object.__new__(type(obj))
+    for f in fields(obj):
+        object.__setattr__(copy, f.name, values.get(f.name, getattr(obj, f.name)))
+    return copy
+
+
 def _section(cls: type, table: Any, origin: str, where: str) -> Any:
     """Build one dataclass section from a TOML table, naming unknown/missing keys."""
     if not isinstance(table, dict):
