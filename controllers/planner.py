@@ -262,12 +262,12 @@ _JET = 10  # rows of a node's plant data: value, gradient (3), Hessian upper tri
 #: jerk regularisation), mold-contact position (m), force scale (N), time scale T_ref (s),
 #: jerk limit (m/s^3), platen speed limit at contact (m/s), pin friction mu; the drive:
 #: travel per motor radian (m/rad), efficiency, reflected mass of rotor and screw (kg),
-#: standstill torque (N m, the torque rows' scale), the factor on the torque-speed curve
+#: the factor on the torque-speed curve
 #: (1, less where minimum_time tightens it), the curve's speeds (rad/s) and torques (N m),
 #: padded to :data:`MAX_CURVE_POINTS` points.
 PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "x_contact", "f_ref", "t_ref",
               "jerk", "contact_speed", "mu", "travel", "efficiency", "drive_mass",
-              "torque_ref", "torque_factor",
+              "torque_factor",
               *(f"curve_speed{k}" for k in range(MAX_CURVE_POINTS)),
               *(f"curve_torque{k}" for k in range(MAX_CURVE_POINTS)))
 _P = {name: k for k, name in enumerate(PARAMETERS)}
@@ -346,14 +346,18 @@ class StrokeProblem:
 
     Constraints, in order (:attr:`rows`): the dynamics (3N), contact at node N1, the force
     epigraph F - s <= 0 and F + s >= 0 at nodes and midpoints, the platen speed at
-    contact, the duration and the velocity at the midpoints (N).
+    contact, the duration and the velocity at the midpoints (N); with ``torque``, the
+    motor torque over the torque-speed curve at nodes and midpoints, in [-1, 1]. Those
+    rows cost a third of the solve time, so the problem without them comes first and its
+    sibling with them (:attr:`with_torque`, built when first asked for) serves the plans
+    the curve limits (:meth:`ClampPlanner._run`).
     """
 
     def __init__(self, cfg: PlantConfig, intervals: int,
-                 variants: tuple[PlantConfig, ...] = ()) -> None:
+                 variants: tuple[PlantConfig, ...] = (), torque: bool = False) -> None:
         if not (isinstance(intervals, int) and intervals >= 4):
             raise ParameterError(f"intervals must be an integer >= 4, got {intervals!r}")
-        self.config, self.variants = cfg, variants
+        self.config, self.variants, self.torque = cfg, variants, torque
         self.plants = (cfg, *variants)
         self.x_open, self.x_final = clamp_stroke(cfg.mechanism)
         lo, hi = cfg.input_range
@@ -367,8 +371,7 @@ class StrokeProblem:
         self.n_forces = (2 * N + 2) * len(self.plants)
         sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
                  "force_lower": self.n_forces, "contact_speed": len(self.plants), "duration": 1,
-                 "mid_velocity": N, "torque_upper": self.n_forces,
-                 "torque_lower": self.n_forces}
+                 "mid_velocity": N, "torque": self.n_forces if torque else 0}
         starts = np.cumsum([0, *sizes.values()])
         self.rows = {name: slice(int(a), int(b)) for name, a, b in
                      zip(sizes, starts[:-1], starts[1:])}
@@ -442,7 +445,7 @@ class StrokeProblem:
             outputs.append(block[0, :] + ca.sum1(block[1:4, :] * d) + quad / 2)
             col += n
         each = len(_OUTPUTS)
-        torque = self._torque_rows(outputs, z, p)
+        torque = self._torque_ratio(outputs, z, p) if self.torque else ca.SX(0, 1)
         F = ca.vertcat(outputs[0].T, outputs[1].T) / p[_P["f_ref"]]  # the first plant's
         scales = p[len(PARAMETERS):len(PARAMETERS) + len(self.plants)]
         forces = ca.vertcat(*[ca.vertcat(*[outputs[k + j].T for j in (0, 1, 3, 4)])
@@ -466,12 +469,13 @@ class StrokeProblem:
                      + p[_P["w_time"]] * duration
                      + p[_P["w_jerk"]] * ca.dot(h, (io / jerk_bound) ** 2))
         return objective, ca.vertcat(dyn, xi[n1], forces - s, forces + s, contact, duration,
-                                     nu_m, *torque)
+                                     nu_m, torque)
 
-    def _torque_rows(self, outputs: list[ca.SX], z: ca.SX, p: ca.SX) -> tuple[ca.SX, ca.SX]:
+    def _torque_ratio(self, outputs: list[ca.SX], z: ca.SX, p: ca.SX) -> ca.SX:
         """The motor torque (:func:`toggle.drive.drive_torque` of each plant's input force
-        and the acceleration) less and plus the torque-speed curve at the motor speed, at
-        the nodes and midpoints, in units of the standstill torque: rows <= 0 and >= 0."""
+        and the acceleration) over the torque-speed curve at the motor speed (times the
+        curve's factor), at the nodes and midpoints: rows in [-1, 1] (one two-sided row
+        each, half the rows, and half the cost of the KKT system, of a pair)."""
         travel = p[_P["travel"]]
         speeds = [p[_P[f"curve_speed{k}"]] for k in range(MAX_CURVE_POINTS)]
         torques = [p[_P[f"curve_torque{k}"]] for k in range(MAX_CURVE_POINTS)]
@@ -483,8 +487,7 @@ class StrokeProblem:
                                            p[_P["efficiency"]], p[_P["drive_mass"]]).T)
                 limit.append(p[_P["torque_factor"]] * torque_speed_limit(
                     states[1, :] / travel, speeds, torques).T)
-        torque, limit = ca.vertcat(*torque), ca.vertcat(*limit)
-        return ((torque - limit) / p[_P["torque_ref"]], (torque + limit) / p[_P["torque_ref"]])
+        return ca.vertcat(*torque) / ca.vertcat(*limit)
 
     def _model_functions(self) -> list[ca.Function]:
         """The model's value (f, g), gradient, constraint Jacobian and Hessian of the
@@ -515,7 +518,7 @@ class StrokeProblem:
         the Lagrangian), each the per-node jets mapped over the nodes feeding the model;
         the jets and the model come compiled from the disk cache where possible."""
         N = self.n1 + self.n2
-        key = _problem_key(self.config, N, self.variants)
+        key = _problem_key(self.config, N, self.variants) + ("\ntorque" if self.torque else "")
         names = _names(len(self.plants))
         fn = dict(zip(names, compiled("stroke", key, names, self._symbolic)))
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
@@ -549,17 +552,25 @@ class StrokeProblem:
         n1, spans = self.n1, self._spans()
         forces = [values[0, col:col + s.stop - s.start] for col, s in
                   zip(np.cumsum([0, *(s.stop - s.start for s in spans)]), spans)]
-        #: input force (N) at the nodes and midpoints, platen speed at contact (m/s)
+        #: input force (N) at the nodes and midpoints, platen speed at contact (m/s), the
+        #: states (x, v, a) at the nodes and midpoints (columns in the forces' order)
         self.monitor = ca.Function("monitor", [W, P], [
             ca.vertcat(forces[0][:n1 + 1].T, forces[1][1:].T, forces[3].T, forces[4].T),
-            forces[2]])
+            forces[2], z])
         lbg, ubg = np.zeros(self.n_constraints), np.zeros(self.n_constraints)
         r = self.rows
         lbg[r["force_upper"]], ubg[r["force_lower"]] = -np.inf, np.inf
         lbg[r["contact_speed"]], ubg[r["contact_speed"]] = -np.inf, 1.0
         ubg[r["duration"]] = np.inf
-        lbg[r["torque_upper"]], ubg[r["torque_lower"]] = -np.inf, np.inf
+        lbg[r["torque"]], ubg[r["torque"]] = -1.0, 1.0
         self.g_bounds = (lbg, ubg)
+
+    @functools.cached_property
+    def with_torque(self) -> StrokeProblem:
+        """The same problem with the torque-speed curve's rows (itself if it has them)."""
+        if self.torque:
+            return self
+        return _problem_for(self.config, self.n1 + self.n2, self.variants, torque=True)
 
     def input_force(self, x: Any, v: Any, a: Any, cfg: PlantConfig) -> np.ndarray:
         """The input force (N) at the points (x, v, a) of the plant ``cfg`` (its mold, pin
@@ -582,11 +593,11 @@ class StrokeProblem:
 
 
 @functools.lru_cache(maxsize=8)
-def _problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = ()
-                 ) -> StrokeProblem:
+def _problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = (),
+                 torque: bool = False) -> StrokeProblem:
     """A built problem, shared by the planners of every mold height, friction, drive and
-    drive limits of one plant (and variants)."""
-    return StrokeProblem(cfg, intervals, variants)
+    drive limits of one plant (and variants), with or without the torque rows."""
+    return StrokeProblem(cfg, intervals, variants, torque)
 
 
 class ClampPlanner:
@@ -629,6 +640,8 @@ class ClampPlanner:
         self.xi_contact = (cfg.x_contact - self.x_open) / self.stroke
         self.force_limit = limits.force(cfg.mechanism.drive)
         self.f_ref = self._reference_force()
+        #: whether this planner's plans need the torque rows (see :meth:`_run`)
+        self._torque = False
 
     @property
     def last(self) -> Plan | None:
@@ -651,7 +664,7 @@ class ClampPlanner:
         drive = self.config.mechanism.drive
         return [*weights, self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
                 self.contact_speed, self.config.friction, travel_per_radian(drive),
-                drive.efficiency, reflected_mass(drive), self.limits.torque, torque_factor,
+                drive.efficiency, reflected_mass(drive), torque_factor,
                 *_curve_parameters(self.limits), 1.0, *self.scales,
                 *(m for plant in (self.config, *self.variants) for m in _masses(plant))]
 
@@ -676,11 +689,12 @@ class ClampPlanner:
         lbx[4 * N + 5], ubx[4 * N + 5] = 0.0, force_limit / self.f_ref
         return lbx, ubx
 
-    def _constraint_bounds(self, t_bounds: tuple[float, float]) -> tuple[np.ndarray, ...]:
+    def _constraint_bounds(self, problem: StrokeProblem, t_bounds: tuple[float, float]
+                           ) -> tuple[np.ndarray, ...]:
         """Bounds of the constraints: the duration's, contact at node N1, the top speed
         (and a monotone stroke) at the interval midpoints."""
-        lbg, ubg = (b.copy() for b in self.problem.g_bounds)
-        rows = self.problem.rows
+        lbg, ubg = (b.copy() for b in problem.g_bounds)
+        rows = problem.rows
         lbg[rows["duration"]], ubg[rows["duration"]] = (t / self.t_ref for t in t_bounds)
         lbg[rows["contact_position"]] = ubg[rows["contact_position"]] = self.xi_contact
         ubg[rows["mid_velocity"]] = self.limits.velocity * self.t_ref / self.stroke
@@ -728,9 +742,10 @@ class ClampPlanner:
                        np.concatenate(([0.0], late.jerk)))
         return self._guess_from(late, duration)
 
-    def _stretched(self, start: Plan, duration: float) -> dict[str, np.ndarray]:
+    def _stretched(self, start: Plan, duration: float, problem: StrokeProblem
+                   ) -> dict[str, np.ndarray]:
         """A previous solution stretched in time to ``duration`` and rescaled to this
-        planner's time and force scales (the warm start)."""
+        planner's time and force scales (the warm start on ``problem``)."""
         N, sol = self.n1 + self.n2, start.solution
         t_ref, f_ref = sol["scales"]
         r = start.duration / duration * self.t_ref / t_ref
@@ -739,23 +754,44 @@ class ClampPlanner:
             w[k * (N + 1):(k + 1) * (N + 1) - (k == 3)] *= r**power
         w[4 * N + 3:4 * N + 5] /= r
         w[4 * N + 5] *= f_ref / self.f_ref
-        return {"x0": w, "lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
+        # the torque rows come last: a start from the problem without them has none
+        lam_g = np.zeros(problem.n_constraints)
+        common = min(lam_g.size, sol["lam_g"].size)
+        lam_g[:common] = sol["lam_g"][:common]
+        return {"x0": w, "lam_x0": sol["lam_x"], "lam_g0": lam_g}
 
     def _run(self, weights: list[float], t_bounds: tuple[float, float], force_limit: float,
              objective: str, start: Plan | None, warm: bool,
              guess: np.ndarray | None = None, torque_factor: float = 1.0) -> tuple[Plan, bool]:
+        """One IPOPT solve. Without the torque rows first (unless an earlier plan of this
+        planner needed them); where that plan's motor torque at the nodes and midpoints
+        exceeds the torque-speed curve, again from it with the rows (and for every later
+        plan of this planner)."""
+        problem = self.problem.with_torque if self._torque else self.problem
+        plan, ok = self._solve_on(problem, weights, t_bounds, force_limit, objective, start,
+                                  warm, guess, torque_factor)
+        if ok and not self._torque and self.node_torque_ratio(plan) > 1.0:
+            self._torque = True
+            plan, ok = self._solve_on(self.problem.with_torque, weights, t_bounds,
+                                      force_limit, objective, plan, True, None, torque_factor)
+        return plan, ok
+
+    def _solve_on(self, problem: StrokeProblem, weights: list[float],
+                  t_bounds: tuple[float, float], force_limit: float, objective: str,
+                  start: Plan | None, warm: bool, guess: np.ndarray | None,
+                  torque_factor: float) -> tuple[Plan, bool]:
         start = start or self.last
-        warm = warm and start is not None and start.solution["x"].size == self.problem.size
+        warm = warm and start is not None and start.solution["x"].size == problem.size
         lbx, ubx = self._bounds(force_limit)
-        lbg, ubg = self._constraint_bounds(t_bounds)
+        lbg, ubg = self._constraint_bounds(problem, t_bounds)
         target = min(max(2 * self.t_ref, t_bounds[0]), t_bounds[1])
         if guess is not None:
             args, warm = {"x0": guess}, False
         else:
-            args = (self._stretched(start, target) if warm
+            args = (self._stretched(start, target, problem) if warm
                     else {"x0": self._initial_guess(target)})
         args["x0"] = np.clip(args["x0"], lbx, ubx)
-        solver = self.problem.solver(warm, energy=weights[1] > 0)
+        solver = problem.solver(warm, energy=weights[1] > 0)
         tic = time.perf_counter()
         sol = solver(p=self._parameters(weights, torque_factor), lbx=lbx, ubx=ubx, lbg=lbg,
                      ubg=ubg, **args)
@@ -868,6 +904,7 @@ class ClampPlanner:
                 break
             imposed -= 1.5 * max(excess, 0.0)
             factor /= 1.0 + 1.5 * max(over, 0.0)
+            self._torque = self._torque or over > 0
             reached = self._fastest(imposed, plan, True, factor)
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
@@ -935,8 +972,16 @@ class ClampPlanner:
     def node_forces(self, plan: Plan) -> tuple[np.ndarray, float]:
         """Input force at the nodes and interval midpoints (N), platen speed at contact
         (m/s), from the plan's solution."""
-        F, contact = self.problem.monitor(plan.solution["x"], self._parameters([0] * 4))
+        F, contact, _ = self.problem.monitor(plan.solution["x"], self._parameters([0] * 4))
         return np.asarray(F).ravel(), float(contact)
+
+    def node_torque_ratio(self, plan: Plan) -> float:
+        """The plan's largest motor torque over the torque-speed curve at the nodes and
+        midpoints (the plant, not its variants), from its solution: cheap, no sampling."""
+        F, _, z = self.problem.monitor(plan.solution["x"], self._parameters([0] * 4))
+        z = np.asarray(z)
+        return self.limits.torque_ratio(self.config.mechanism.drive, z[1], z[2],
+                                        np.asarray(F).ravel())
 
     def worst_peak(self, plan: Plan) -> float:
         """The plan's peak input force (1 ms samples through the plant), N: the worst over
