@@ -277,7 +277,7 @@ def test_a_change_of_the_drive_reuses_the_compiled_problem(chang, tmp_path, monk
                                           heavier.samples.acceleration),
         heavier.samples.input_force, rtol=1e-9, atol=1e-9)
     monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
-    ClampPlanner(cfg, limits, intervals=8)
+    ClampPlanner(cfg, limits, intervals=8).problem.with_torque  # noqa: B018 - both problems
     monkeypatch.setattr("controllers.planner.compiled", _no_compile)
     other = ClampPlanner(heavy, steep, intervals=8)
     assert other.problem._force.class_name() == "External"

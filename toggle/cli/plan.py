@@ -265,7 +265,8 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--j-max", type=positive("jerk in m/s^3", 1e6, 1e-4), default=None,
                    help="jerk limit, m/s^3 (default: the preset's drive)")
     p.add_argument("--torque-max", type=positive("torque in N m", 1e5, 1e-4), default=None,
-                   help="motor torque limit, N m (default: the preset's drive)")
+                   help="motor torque at standstill, N m, scaling the torque-speed curve "
+                        "(default: the preset's drive)")
     errors = p.add_argument_group("dimensional errors, m (named as the FMU's delta_* "
                                   "parameters; seed 000's names)")
     for name in ERRORS:
