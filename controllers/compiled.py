@@ -78,11 +78,13 @@ def _imported(path: Path, roots: tuple[str, ...]) -> set[str]:
     return {n for n in names if n.split(".")[0] in roots}
 
 
-def code_digest(*modules: str) -> str:
-    """Hash of the source text of the modules and of every module of their top-level
-    packages that they import, directly or not: the code a compiled problem uses, so that
-    editing another module (plots, the CLI) keeps the cache."""
-    roots = tuple({m.split(".")[0] for m in modules})
+#: The project's packages whose code a compiled problem can use.
+PROJECT_PACKAGES = ("controllers", "toggle")
+
+
+def code_modules(*modules: str, roots: tuple[str, ...] = PROJECT_PACKAGES) -> dict[str, Path]:
+    """The modules given and every module of the packages ``roots`` they import at module
+    level, directly or not, with their source files: the code a compiled problem uses."""
     seen: dict[str, Path] = {}
     todo = list(modules)
     while todo:
@@ -97,10 +99,16 @@ def code_digest(*modules: str) -> str:
             continue  # an attribute imported from a module, not a module
         seen[name] = Path(spec.origin)
         todo.extend(_imported(seen[name], roots))
+    return seen
+
+
+def code_digest(*modules: str, roots: tuple[str, ...] = PROJECT_PACKAGES) -> str:
+    """Hash of the source text of :func:`code_modules`, so that editing the plant
+    recompiles and editing another module (plots, the CLI) keeps the cache."""
     digest = hashlib.sha256()
-    for name in sorted(seen):
+    for name, path in sorted(code_modules(*modules, roots=roots).items()):
         digest.update(f"{name}\0".encode())
-        digest.update(seen[name].read_bytes())
+        digest.update(path.read_bytes())
     return digest.hexdigest()
 
 

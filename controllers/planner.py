@@ -85,18 +85,16 @@ from controllers.profiles import (
     s_curve,
 )
 from toggle.drive import drive_torque, reflected_mass, torque_speed_limit, travel_per_radian
-from toggle.elastics import ClampingError, clamp_state, clamp_stroke, contact_position
+from toggle.elastics import ClampingError, clamp_stroke, contact_for_clamp_force
 from toggle.params import (
-    HALVES,
     MAX_CURVE_POINTS,
     Drive,
     Dynamics,
     Mechanism,
     ParameterError,
-    load_preset,
     symbolic_copy,
 )
-from toggle.plant import PlantConfig, plant_outputs, with_errors
+from toggle.plant import PlantConfig, configure, plant_outputs
 
 OBJECTIVES = ("peak", "rms")
 CONTACT_SPEED = 5e-3  # m/s, default limit on the platen's speed at mold contact
@@ -172,59 +170,30 @@ def plan_config(
     masses: dict[str, float] | None = None,
     errors: dict[str, float] | None = None,
 ) -> PlantConfig:
-    """The plant to plan for, with the mold-contact position set.
-
-    ``errors`` adds dimensional errors by seed 000's names, as the FMU's ``delta_*``
-    parameters do (:func:`toggle.plant.with_errors`).
+    """The plant to plan for (:func:`toggle.plant.configure`, the one plant configuration
+    the FMU also uses), with the mold-contact position set.
 
     Give the mold-contact crosshead position ``x_contact`` or the clamp force
-    ``clamp_force`` (N) to hold at rest in the locked position, not both;
-    without either the preset's final tie-bar force sets it
-    (:func:`toggle.elastics.contact_position`). ``masses`` overrides or, for a
-    preset without [dynamics], supplies crosshead, links, platen (kg) and
+    ``clamp_force`` (N) to hold at rest in the locked position, not both; without
+    either the preset's final tie-bar force is that clamp force
+    (:func:`toggle.elastics.contact_for_clamp_force`). ``errors`` adds dimensional errors
+    by seed 000's names, as the FMU's ``delta_*`` parameters do; ``masses`` overrides or,
+    for a preset without [dynamics], supplies crosshead, links, platen (kg) and
     guide_damping (N s/m).
     """
-    mech = load_preset(mechanism) if isinstance(mechanism, str) else mechanism
-    mech = with_errors(mech, errors)[0]
-    if masses:
-        dynamics = (replace(mech.dynamics, **masses) if mech.dynamics
-                    else Dynamics(**masses) if {"crosshead", "links", "platen"} <= set(masses)
-                    else None)
-        mech = replace(mech, dynamics=dynamics)
-    if mech.dynamics is None:
-        raise ParameterError(f"preset {mech.name!r} has no [dynamics] section: give the masses "
-                             "(crosshead, links, platen)")
-    mu = mech.clamp.mu if mu is None and mech.clamp else mu
+    cfg = configure(mechanism, masses=masses, errors=errors)
+    mech = cfg.mechanism
+    mu = cfg.friction if mu is None else mu
     x_open, x_final = clamp_stroke(mech)
     if x_contact is not None and clamp_force is not None:
         raise ParameterError("give either the mold-contact position or the clamp force")
-    if clamp_force is not None:
-        x_contact = _contact_for_clamp_force(mech, mu, clamp_force, x_open, x_final)
-    elif x_contact is None:
-        x_contact = contact_position(mech, mu, mech.clamp.final_tiebar_force)
+    if x_contact is None:
+        force = mech.clamp.final_tiebar_force if clamp_force is None else clamp_force
+        x_contact = contact_for_clamp_force(mech, mu, force)
     elif not (x_open < x_contact < x_final):
         raise ClampingError(f"mold-contact position {x_contact!r} m is outside the stroke "
                             f"({x_open:.6g}, {x_final:.6g}) m")
-    return PlantConfig(mech, mu=mu, x_contact=x_contact)
-
-
-def _contact_for_clamp_force(mech: Mechanism, mu: float, force: float, x_open: float,
-                             x_final: float) -> float:
-    """Contact position whose clamp force at rest in the locked position is ``force``."""
-    if not (math.isfinite(force) and force > 0):
-        raise ClampingError(f"clamp force must be positive, got {force!r} N")
-
-    def at_rest(xc: float) -> float:  # the plant's clamp force at v = 0 (friction direction 0)
-        states = [clamp_state(x_final, xc, mech, mu, 0.0, half=h) for h in HALVES]
-        return 0.5 * sum(float(s.clamp_force) for s in states)
-
-    reach = at_rest(x_open)
-    if force >= reach:
-        raise ClampingError(
-            f"a clamp force of {force:.6g} N is beyond reach: with the molds touching at the "
-            f"open position the stroke builds only {reach:.6g} N"
-        )
-    return float(brentq(lambda xc: at_rest(xc) - force, x_open, x_final, xtol=1e-15))
+    return cfg.with_(mu=mu, x_contact=x_contact)
 
 
 def _min_jerk(tau: np.ndarray) -> tuple[np.ndarray, ...]:

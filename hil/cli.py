@@ -110,7 +110,7 @@ def _print_summary(summary: dict, run_dir: Path, count: int, cycles: int, backen
         stat = summary.get(key)
         if not isinstance(stat, dict):
             continue
-        spread = (f"3 sigma {stat['three_sigma'] * scale:.4g} {unit}"
+        spread = (f"3 sigma {stat['three_sigma'] * scale:.4f} {unit}"
                   if stat["three_sigma"] is not None else "one cycle: no spread")
         print(f"  {label:16s} {stat['mean'] * scale:10.4f} {unit:2s}  ({spread})")
     if backend == "fmu" and done > 1:

@@ -17,6 +17,7 @@ from toggle.elastics import (
     clamp_state,
     clamp_stroke,
     clamping_curves,
+    contact_for_clamp_force,
     contact_position,
 )
 from toggle.params import load_preset
@@ -157,3 +158,22 @@ def test_cli_plot_writes_figures(tmp_path):
     names = {p.name for p in tmp_path.glob("*.png")}
     assert {"fig4_tiebar_force.png", "fig5_mechanical_advantage.png", "fig6_thrust.png",
             "fig7_thrust_max.png", "fig8_motor_torque.png"} <= names
+
+
+@pytest.mark.parametrize("delta_r8", [0.0, 0.3e-3])
+def test_contact_for_clamp_force_is_the_plants_exact_inverse(delta_r8):
+    """The plant at rest in the final position holds exactly the requested clamp force
+    (both halves, unequal ones too); the paper's linearised Eq 25 lands micrometres away."""
+    from toggle.plant import PlantConfig, plant_outputs
+
+    mech = CHANG.with_error("upper", "r5", delta_r8) if delta_r8 else CHANG
+    mu, force = CHANG.clamp.mu, 1500.0
+    x_c = contact_for_clamp_force(mech, mu, force)
+    x_final = clamp_stroke(mech)[1]
+    held = plant_outputs(x_final, 0.0, 0.0, PlantConfig(mech, mu=mu, x_contact=x_c)).clamp_force
+    assert float(held) == pytest.approx(force, rel=1e-9)
+    assert 0 < abs(x_c - contact_position(mech, mu, force)) < 20e-6
+    with pytest.raises(ClampingError, match="beyond reach"):
+        contact_for_clamp_force(mech, mu, 1e9)
+    with pytest.raises(ClampingError, match="positive"):
+        contact_for_clamp_force(mech, mu, float("nan"))

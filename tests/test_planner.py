@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controllers.compiled import code_digest, compiled
+from controllers.compiled import code_digest, code_modules, compiled
 from controllers.compiled import compiled as _real_compiled
 from controllers.limits import drive_limits
 from controllers.planner import (
@@ -35,7 +35,7 @@ from controllers.profiles import (
     write_profile_csv,
 )
 from toggle.cli import main
-from toggle.elastics import ClampingError
+from toggle.elastics import ClampingError, clamp_stroke
 from toggle.fmu_build import build_fmu
 from toggle.params import Dynamics, load_preset
 from toggle.plant import plant_outputs
@@ -228,13 +228,22 @@ def test_the_cache_key_covers_the_plant_and_the_code_it_uses(tmp_path):
     import sys
     sys.path.insert(0, str(tmp_path))
     try:
-        before = code_digest("fakepkg.model")
+        before = code_digest("fakepkg.model", roots=("fakepkg",))
         (package / "plots.py").write_text("STYLE = 2\n")  # not imported by the model
-        assert code_digest("fakepkg.model") == before
+        assert code_digest("fakepkg.model", roots=("fakepkg",)) == before
         (package / "helper.py").write_text("K = 2\n")  # imported by the model
-        assert code_digest("fakepkg.model") != before
+        assert code_digest("fakepkg.model", roots=("fakepkg",)) != before
     finally:
         sys.path.remove(str(tmp_path))
+
+
+def test_the_planners_key_covers_the_plant_it_compiles_and_nothing_else():
+    """The compiled problem holds the plant's equations: editing toggle/plant.py (or what it
+    imports) must recompile; the key once followed only controllers/ and kept a stale plant."""
+    used = code_modules("controllers.planner")
+    assert {"toggle.plant", "toggle.kinematics", "toggle.statics", "toggle.asymmetry",
+            "controllers.profiles"} <= set(used)
+    assert not {"toggle.plots", "toggle.press", "toggle.cli", "hil.cli"} & set(used)
 
 
 def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, tmp_path, monkeypatch):
@@ -376,6 +385,21 @@ def test_torque_limit_and_unreachable_clamp_force():
         planner_for(cfg, weak, intervals=60).solve(DURATION)
     with pytest.raises(ClampingError, match="beyond reach"):
         plan_config("chang2021", clamp_force=1e12)
+
+
+def test_plan_config_is_the_plants_configuration_with_the_preset_clamp_force():
+    """One plant configuration (the FMU's) and one contact solver: the default mold is the
+    preset's clamp force held by the plant, exactly what --clamp-force of it gives."""
+    from toggle.plant import configure
+
+    cfg = plan_config("chang2021", errors={"r8": 0.25e-3}, masses={"platen": 4.0})
+    same = configure("chang2021", errors={"r8": 0.25e-3}, masses={"platen": 4.0})
+    assert cfg.mechanism == same.mechanism
+    force = cfg.mechanism.clamp.final_tiebar_force
+    assert cfg.x_contact == plan_config("chang2021", errors={"r8": 0.25e-3}, masses={
+        "platen": 4.0}, clamp_force=force).x_contact
+    held = plant_outputs(clamp_stroke(cfg.mechanism)[1], 0.0, 0.0, cfg).clamp_force
+    assert float(held) == pytest.approx(force, rel=1e-9)
 
 
 @settings(max_examples=30, deadline=None)

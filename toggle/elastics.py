@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import brentq, minimize_scalar
 
 from toggle.kinematics import half_pose, stroke_limits
-from toggle.params import ClampData, HalfDims, Mechanism
+from toggle.params import HALVES, ClampData, HalfDims, Mechanism
 from toggle.statics import CLOSING, check_friction, force_ratios, linkage_angles
 
 #: |F0 / F_cl| below this counts as zero thrust (the frictionless toggle, where the
@@ -175,6 +175,32 @@ def contact_position(
         )
     return float(brentq(lambda v: float(half_pose(v, dims).L) - (l_final - s_bar), x_open, x_final,
                         xtol=1e-15, rtol=4 * np.finfo(float).eps))
+
+
+def contact_for_clamp_force(mech: Mechanism, mu: float, force: float) -> float:
+    """Crosshead position x_contact at which the molds must touch so that the dynamic
+    plant (:func:`toggle.plant.plant_outputs`: the mean of both halves' :func:`clamp_state`)
+    holds the clamp force ``force`` N at rest in the final position.
+
+    The exact inverse of the plant's force, for planning and simulating a machine set to a
+    clamp force; :func:`contact_position` is the paper's linearised route (Eq 25), which
+    lands a few micrometres away (2.5 um on chang2021) and reproduces the paper's tables.
+    """
+    if not (math.isfinite(force) and force > 0):
+        raise ClampingError(f"clamp force must be positive, got {force!r} N")
+    x_open, x_final = clamp_stroke(mech)
+
+    def at_rest(xc: float) -> float:  # friction direction 0: at rest
+        return 0.5 * sum(float(clamp_state(x_final, xc, mech, mu, 0.0, half=h).clamp_force)
+                         for h in HALVES)
+
+    reach = at_rest(x_open)
+    if force >= reach:
+        raise ClampingError(
+            f"a clamp force of {force:.6g} N is beyond reach: with the molds touching at the "
+            f"open position the stroke builds only {reach:.6g} N"
+        )
+    return float(brentq(lambda xc: at_rest(xc) - force, x_open, x_final, xtol=1e-15))
 
 
 @dataclass(frozen=True)

@@ -301,8 +301,9 @@ def configure(
     overrides named as the FMU names its parameters.
 
     ``masses`` overrides fields of the preset's [dynamics] (crosshead, links,
-    platen, guide_damping); ``drive`` fields of its [drive] (rotor_inertia,
-    screw_inertia, ...); ``errors`` adds dimensional errors by seed 000's
+    platen, guide_damping) or, for a preset without one, supplies them (crosshead,
+    links and platen at least); ``drive`` overrides fields of its [drive]
+    (rotor_inertia, screw_inertia, ...); ``errors`` adds dimensional errors by seed 000's
     names (for example ``{"r8": 0.5e-3}`` lengthens link 8 of the upper half).
     A contact position at or beyond the toggle means no mold. Every bad value
     raises :class:`ParameterError` naming it.
@@ -310,9 +311,11 @@ def configure(
     mech, changed = with_errors(
         preset if isinstance(preset, Mechanism) else load_preset(preset), errors)
     if masses:
-        if mech.dynamics is None:
-            raise ParameterError(f"preset {mech.name!r} has no [dynamics] section to override")
-        mech = replace(mech, dynamics=replace(mech.dynamics, **masses))
+        if mech.dynamics is None and not {"crosshead", "links", "platen"} <= set(masses):
+            raise ParameterError(f"preset {mech.name!r} has no [dynamics] section: give the "
+                                 "masses (crosshead, links, platen)")
+        mech = replace(mech, dynamics=replace(mech.dynamics, **masses) if mech.dynamics
+                       else Dynamics(**masses))
     if drive:
         if mech.drive is None:
             raise ParameterError(f"preset {mech.name!r} has no [drive] section to override")
