@@ -180,6 +180,7 @@ def run(args: argparse.Namespace) -> int:
         "binding_limits": planner.binding_limits(plan, args.force_limit),
         "limits": {"velocity": limits.velocity, "acceleration": limits.acceleration,
                    "jerk": limits.jerk, "torque": limits.torque,
+                   "torque_speed": [list(point) for point in limits.curve],
                    "input_force": force_limit,
                    "contact_platen_speed": args.contact_speed},
         "solve_time": plan.solve_time,
