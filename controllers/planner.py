@@ -82,6 +82,7 @@ from controllers.profiles import (
     ProfileSamples,
     minimum_time,
     predict,
+    ramp_time,
     s_curve,
 )
 from toggle.drive import drive_torque, reflected_mass, torque_speed_limit, travel_per_radian
@@ -613,6 +614,31 @@ class ClampPlanner:
         self._torque = False
 
     @property
+    def creep_speed(self) -> float:
+        """The slowest crosshead speed the plans keep while clamping, m/s."""
+        return CREEP_FACTOR * self.config.velocity_epsilon
+
+    def clamping_creeps(self, settle: int) -> bool:
+        """Whether the clamping (mold contact to the final position) is long enough to hold
+        the creep floor on all but its last ``settle`` of n2 intervals: the floor holds for
+        at least (n2 - settle) / settle times the fastest stop from :attr:`creep_speed`, so
+        the clamping must be longer than that travel. A shorter one (a mold set within
+        ~0.2 mm of the toggle on chang2021) builds so little force that its friction cannot
+        be exploited, and the floor would make it infeasible."""
+        lim, v = self.limits, min(self.creep_speed, self.limits.velocity)
+        stop = ramp_time(v, lim.acceleration, lim.jerk)  # creep speed to rest
+        travel = v * stop * ((self.n2 - settle) / settle + 0.5)
+        return self.x_final - self.config.x_contact > travel
+
+    @property
+    def longest(self) -> float:
+        """The longest duration planned, s: the S-curve cruising at :attr:`creep_speed`
+        (slower strokes, the plan's and the baselines', would cross the clamping where the
+        smoothed friction model fades)."""
+        return minimum_time(self.stroke, min(self.creep_speed, self.limits.velocity),
+                            self.limits.acceleration, self.limits.jerk)
+
+    @property
     def last(self) -> Plan | None:
         """The latest plan on this planner's problem (any mold height)."""
         return self.problem.last
@@ -649,8 +675,10 @@ class ClampPlanner:
             lbx[k * (N + 1):(k + 1) * (N + 1)], ubx[k * (N + 1):(k + 1) * (N + 1)] = lo, hi
         lbx[3 * N + 3:4 * N + 3], ubx[3 * N + 3:4 * N + 3] = -self.jerk_bound, self.jerk_bound
         # no creeping through the clamping below the friction model's smoothing speed
-        creep = CREEP_FACTOR * self.config.velocity_epsilon * t_ref / S
-        lbx[N + 1 + self.n1:2 * N + 1 - max(2, self.n2 // 10)] = creep
+        # (unless the clamping is too short to cross at creep speed and still settle)
+        settle = max(2, self.n2 // 10)
+        if self.clamping_creeps(settle):
+            lbx[N + 1 + self.n1:2 * N + 1 - settle] = self.creep_speed * t_ref / S
         for k in (N + 1, 2 * N + 2, 2 * N + 1, 3 * N + 2):  # rest at both ends
             lbx[k] = ubx[k] = 0.0
         ubx[0], lbx[N] = 0.0, 1.0  # from the open position to the toggle
@@ -789,10 +817,7 @@ class ClampPlanner:
         the integral of its square (``"rms"``); raises :class:`PlanningError` if none exists."""
         if objective not in OBJECTIVES:
             raise ParameterError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
-        if not (math.isfinite(duration) and duration > 0):
-            raise ParameterError(f"duration must be a positive time, got {duration!r} s")
-        if duration < self.t_ref:
-            self._too_short(duration)
+        self.check_duration(duration)
         weights = _WEIGHTS[objective]
         plan, ok = self._run(weights, (duration, duration), self.force_limit, objective, start,
                              warm)
@@ -803,6 +828,22 @@ class ClampPlanner:
             self._too_short(duration)
         self.problem.last = plan
         return plan
+
+    def check_duration(self, duration: float) -> None:
+        """Refuse a stroke duration no plan (or baseline) can honestly have: not positive,
+        shorter than the kinematic minimum under the drive limits, longer than
+        :attr:`longest`."""
+        if not (math.isfinite(duration) and duration > 0):
+            raise ParameterError(f"duration must be a positive time, got {duration!r} s")
+        if duration < self.t_ref:
+            self._too_short(duration)
+        if duration > self.longest:
+            raise PlanningError(
+                f"duration {duration:.4g} s is too long for the plant's friction model: the "
+                f"stroke would creep below {self.creep_speed * 1e3:.3g} mm/s "
+                f"({CREEP_FACTOR:g} x its smoothing speed velocity_epsilon), where the "
+                f"smoothed Coulomb friction fades and plans and baselines alike would be "
+                f"compared on an artefact; the longest stroke planned is {self.longest:.4g} s")
 
     def best(self, duration: float, objective: str = "peak") -> Plan:
         """:meth:`solve` from several starts, the best plan: the polynomial guess, the
@@ -833,8 +874,7 @@ class ClampPlanner:
         """A lower bound on the peak input force of any stroke under this planner's
         limits, of any duration (:func:`controllers.bounds.peak_lower_bound`), N."""
         return peak_lower_bound(self.config, self.x_final, self.limits.velocity,
-                                self.limits.acceleration,
-                                CREEP_FACTOR * self.config.velocity_epsilon)
+                                self.limits.acceleration, self.creep_speed)
 
     def minimum_time(self, force_limit: float | None = None, *, start: Plan | None = None,
                      warm: bool = True) -> Plan:

@@ -77,8 +77,8 @@ def _advance(x, v, a, j, dt):
     return (x + dt * (v + dt * (a / 2 + dt * j / 6)), v + dt * (a + dt * j / 2), a + dt * j)
 
 
-def _accel_time(v: float, a_max: float, j_max: float) -> float:
-    """Time from rest to speed v with acceleration and jerk limits (symmetric ramp)."""
+def ramp_time(v: float, a_max: float, j_max: float) -> float:
+    """Time from rest to speed v (or from v to rest) at full acceleration and jerk, s."""
     if math.isinf(j_max):
         return v / a_max
     if v >= a_max * a_max / j_max:
@@ -98,7 +98,7 @@ def _accel_segments(v: float, a_max: float, j_max: float) -> tuple[list, list]:
 def _top_speed(S: float, v_max: float, a_max: float, j_max: float) -> float:
     """Highest cruise speed a rest-to-rest stroke S can reach under the limits."""
     def cruise(v: float) -> float:  # distance left for cruising at speed v
-        return S - v * _accel_time(v, a_max, j_max)
+        return S - v * ramp_time(v, a_max, j_max)
 
     return v_max if cruise(v_max) >= 0 else brentq(cruise, 1e-12 * v_max, v_max, xtol=1e-15)
 
@@ -107,7 +107,7 @@ def minimum_time(S: float, v_max: float, a_max: float, j_max: float = math.inf) 
     """Shortest rest-to-rest time for stroke S under velocity, acceleration and jerk limits
     (the S-curve at full limits is time-optimal for the triple integrator)."""
     v = _top_speed(S, v_max, a_max, j_max)
-    return S / v + _accel_time(v, a_max, j_max)
+    return S / v + ramp_time(v, a_max, j_max)
 
 
 def _move(x_start: float, x_end: float, v: float, a_max: float, j_max: float) -> Profile:
@@ -115,7 +115,7 @@ def _move(x_start: float, x_end: float, v: float, a_max: float, j_max: float) ->
     and jerk on the ramps, the mirrored ramp down, a zero-length rest segment at the end."""
     S, sign = abs(x_end - x_start), math.copysign(1.0, x_end - x_start)
     d, j = _accel_segments(v, a_max, j_max)
-    durations = np.array([*d, max(S / v - _accel_time(v, a_max, j_max), 0.0), *d[::-1], 0.0])
+    durations = np.array([*d, max(S / v - ramp_time(v, a_max, j_max), 0.0), *d[::-1], 0.0])
     jerks = sign * np.array([*j, 0.0, *(-np.array(j)), 0.0])
     accel = sign * np.array([a_max, 0.0, -a_max, 0.0]) if math.isinf(j_max) else None
     return Profile.build(x_start, durations, jerks, accel)
@@ -145,7 +145,7 @@ def s_curve(x_start: float, x_end: float, duration: float, v_max: float, a_max: 
             f"(v {v_max:.4g} m/s, a {a_max:.4g} m/s^2, j {j_max:.4g} m/s^3)"
         )
     v = v_top if duration <= t_min else brentq(
-        lambda u: S / u + _accel_time(u, a_max, j_max) - duration, 0.5 * S / duration, v_top,
+        lambda u: S / u + ramp_time(u, a_max, j_max) - duration, 0.5 * S / duration, v_top,
         xtol=1e-14)
     return _move(x_start, x_end, v, a_max, j_max)
 

@@ -523,3 +523,39 @@ def test_trade_off_is_monotone_and_ends_near_the_bound(chang, capsys):
     with pytest.raises(SystemExit) as refused:  # an argparse usage error
         main(["plan", "--trade-off", "1"])
     assert refused.value.code == 2
+
+
+def test_durations_beyond_the_friction_models_creep_speed_are_refused_up_front(chang, capsys):
+    """A 1e4 s stroke once took 10 min and 6 GB and compared the plan with baselines whose
+    friction had faded (tanh(v / v_eps) at 5 um/s): 10 N 'baselines' under a 14.9 N bound."""
+    cfg, limits, planner, _ = chang
+    longest = planner.longest
+    assert longest == pytest.approx(
+        minimum_time(planner.stroke, 10 * cfg.velocity_epsilon, limits.acceleration,
+                     limits.jerk), rel=1e-12)
+    with pytest.raises(PlanningError, match=f"longest stroke planned is {longest:.4g} s"):
+        planner.solve(longest * 1.01)
+    slow = predict(baseline_stroke(cfg, limits, longest), cfg)  # the slowest baseline kept
+    assert slow.peak_force >= planner.lower_bound()
+    for extra in ([], ["--robust", "--delta-r8", "0.25e-3"]):
+        assert main(["plan", "--preset", "chang2021", "--duration", "1e4", *extra]) == 2
+        assert "too long for the plant's friction model" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("x_contact", [0.0515, 0.05156])
+def test_a_mold_set_at_the_toggle_is_planned(chang, x_contact, capsys):
+    """Molds within 0.1 mm of the toggle ran 8-19 s and were reported infeasible ("the motor
+    torque limit binds"): the creep floor left no room to stop in such a short clamping."""
+    cfg, limits, planner, _ = chang
+    near = planner_for(cfg.with_(x_contact=x_contact), limits)
+    assert near.problem is planner.problem and not near.clamping_creeps(2)
+    plan = near.solve(DURATION, warm=False)
+    s = plan.samples
+    assert s.position[-1] == pytest.approx(near.x_final, abs=1e-9)
+    s_curve_peak = baselines(cfg.with_(x_contact=x_contact), limits, DURATION)["s_curve"]
+    assert s.peak_force < s_curve_peak.peak_force
+    assert planner.clamping_creeps(max(2, planner.n2 // 10))  # the preset's mold keeps it
+    assert main(["plan", "--x-contact", str(x_contact), "--duration", str(DURATION),
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["gap_to_bound_percent"] is None or report["peak_force_lower_bound"] > 0

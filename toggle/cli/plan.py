@@ -89,6 +89,7 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     erroneous = cfg.with_(mechanism=with_errors(cfg.mechanism, _errors(args))[0])
     nominal = planner_for(cfg, limits, args.contact_speed, args.intervals)
     duration = args.duration or default_duration(nominal)
+    nominal.check_duration(duration)  # before predicting a baseline of that length
     stroke = baseline_stroke(cfg, limits, duration)
     curve = {"nominal": predict(stroke, cfg), "erroneous": predict(stroke, erroneous)}
     scale = curve["erroneous"].peak_force / curve["nominal"].peak_force
@@ -164,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
         "clamp_force": planner.clamp_force(),
         "peak_force": peak,
         "peak_force_lower_bound": bound,
-        "gap_to_bound_percent": 100.0 * (peak - bound) / bound,
+        "gap_to_bound_percent": 100.0 * (peak - bound) / bound if bound > 0 else None,
         "dimension_errors": {f"delta_{k}": v for k, v in _errors(args).items()},
         "robust": robust,
         "rms_force": plan.rms_force,
@@ -193,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"{cfg.mechanism.name}: {result['mode'].replace('_', ' ')} stroke of "
           f"{plan.duration:.4g} s, mold contact at {plan.t_contact:.4g} s, clamp force "
-          f"{result['clamp_force'] / 1e3:.4g} kN")
+          f"{result['clamp_force']:.5g} N")
     rows = [(name, samples.peak_force, samples.rms_force)
             for name, samples in (("planned", plan.samples), ("trapezoid", base["trapezoidal"]),
                                   ("S-curve", base["s_curve"]))]
@@ -206,8 +207,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"the {name.replace('_', '-')} baseline breaks the input-force limit of "
                   f"{force_limit:.4g} N or the motor's torque-speed curve: its reduction "
                   "compares with an infeasible stroke")
-    print(f"no stroke of any duration peaks below {bound:.4g} N (lower bound; the plan is "
-          f"{result['gap_to_bound_percent']:.2f} % above it)")
+    if bound > 0:
+        print(f"no stroke of any duration peaks below {bound:.4g} N (lower bound; the plan "
+              f"is {result['gap_to_bound_percent']:.2f} % above it)")
+    else:
+        print("lower bound 0 N: the clamping is too short to force any peak")
     print(f"binding limits: {', '.join(result['binding_limits']) or 'none'}")
     if robust:
         rows = [(name, *values.values()) for name, values in robust.items()]
