@@ -3,19 +3,20 @@
 Cold: a new ClampPlanner for chang2021 (its functions loaded from the disk cache of
 compiled code, controllers.compiled; the NLP and IPOPT instance built) and a solve from the
 polynomial guess, with new planner objects every run (nothing built is reused in the
-process, though the operating system keeps the shared library mapped); then the same in
-new processes (imports excluded), where the IPOPT plugin is loaded too. First-ever: a new
+process, though the operating system keeps the shared library mapped); then the same in new
+processes (imports excluded), where the IPOPT plugin is loaded too. First-ever: a new
 process with an empty cache directory (TOGGLE_CACHE_DIR), which builds the functions
 symbolically and compiles them (one run). Warm: the same planner re-plans a 2 % longer or
 shorter stroke from the previous solution (primal and dual). Mold: a planner for another
 mold height (+-0.1 mm of contact position) on the same built problem re-plans from the
-previous solution. Limits: planners with another top speed (+-5 %) or pin friction
-(+-10 %) on the same built problem (these are parameters of the compiled problem: no
-rebuild, no compile) re-plan from the previous solution. Best: the multi-start plan
-(ClampPlanner.best) and minimum time under a 15.0 N force limit (continuation in the
-limit), on new planners over the loaded problem. Medians over several runs with iteration
-counts, each also as a ratio to the baseline measured in the same run: the cold plan with
-the cache filled. Targets 0.3 s cold and 20 ms warm.
+previous solution. Limits: planners with another top speed (+-5 %) or pin friction (+-10 %)
+on the same built problem (these are parameters of the compiled problem: no rebuild, no
+compile) re-plan from the previous solution. Drive: the same with another rotor inertia
+(x2), torque-speed curve (x0.8) or platen mass (+10 %), also parameters. Best: the multi-
+start plan (ClampPlanner.best) and minimum time under a 15.0 N force limit (continuation in
+the limit), on new planners over the loaded problem. Medians over several runs with
+iteration counts, each also as a ratio to the baseline measured in the same run: the cold
+plan with the cache filled. Targets 0.3 s cold and 20 ms warm.
 Run: python benchmarks/bench_planner.py [--runs 5] [--intervals 200]
 """
 
@@ -79,9 +80,15 @@ def main() -> None:
     limits = drive_limits(cfg.mechanism)
     colds = [cold(args.intervals, args.duration) for _ in range(args.runs)]
     fresh = [_in_new_process(args, None) for _ in range(args.runs)]
-    times: dict[str, list[float]] = {"warm": [], "mold": [], "limits": [], "best": [],
-                                     "min_time": []}
-    iters: dict[str, list[int]] = {"warm": [], "mold": [], "limits": []}
+    times: dict[str, list[float]] = {"warm": [], "mold": [], "limits": [], "drive": [],
+                                     "best": [], "min_time": []}
+    iters: dict[str, list[int]] = {"warm": [], "mold": [], "limits": [], "drive": []}
+    mech, drive = cfg.mechanism, cfg.mechanism.drive
+    rotor = cfg.with_(mechanism=replace(mech, drive=replace(
+        drive, rotor_inertia=2 * drive.rotor_inertia)))
+    platen = cfg.with_(mechanism=replace(mech, dynamics=replace(
+        mech.dynamics, platen=1.1 * mech.dynamics.platen)))
+    weaker = replace(limits, torque=0.8 * limits.torque)
     for _ in range(args.runs):
         planner = ClampPlanner(cfg, limits, intervals=args.intervals)
         plan = planner.solve(args.duration, warm=False)
@@ -107,6 +114,11 @@ def main() -> None:
             elapsed, replan = _timed(other.solve, args.duration)
             times["limits"].append(elapsed)
             iters["limits"].append(replan.iterations)
+        for other_cfg, other_limits in ((rotor, limits), (cfg, weaker), (platen, limits)):
+            other = ClampPlanner(other_cfg, other_limits, problem=planner.problem)
+            elapsed, replan = _timed(other.solve, args.duration)
+            times["drive"].append(elapsed)
+            iters["drive"].append(replan.iterations)
     for _ in range(max(1, args.runs // 2)):
         fresh_planner = ClampPlanner(cfg, limits, problem=planner.problem)
         fresh_planner.lower_bound()  # computed once per planner, timed apart
@@ -138,7 +150,8 @@ def main() -> None:
           "empty cache)")
     for key, label in (("warm", "warm re-plan (duration +-2 %): "),
                        ("mold", "warm re-plan (mold +-0.1 mm):  "),
-                       ("limits", "re-plan (v_max +-5 %, mu +-10 %):")):
+                       ("limits", "re-plan (v_max +-5 %, mu +-10 %):"),
+                       ("drive", "re-plan (J_m, curve, platen):  ")):
         m = statistics.median(times[key])
         print(f"{label}{m * 1e3:8.1f} ms median, {ratio(m)} "
               f"({statistics.median(iters[key]):.0f} iterations, no rebuild)")

@@ -10,34 +10,45 @@ torque. Where the preset is silent the defaults below are stated assumptions:
   over its steps per turn, times the screw travel per turn (R * lead);
 * acceleration: the top speed reached in ``ACCEL_TIME``; jerk: that
   acceleration reached in ``JERK_TIME``;
-* torque: ``PEAK_TORQUE_FACTOR`` times the servo's rated torque (servos give
-  about three times rated torque for short peaks), or ``STEPPER_TORQUE`` for a
-  stepper, whose preset gives no torque.
+* torque: the preset's torque-speed curve (``[drive] torque_speed``); without one,
+  flat at ``PEAK_TORQUE_FACTOR`` times the servo's rated torque (servos give
+  about three times rated torque for short peaks), or at ``STEPPER_TORQUE`` for a
+  stepper, whose preset gives no torque. A torque given here sets the curve's
+  standstill value and scales the whole curve.
+
+The torque the motor must deliver is :func:`toggle.drive.motor_torque` (thrust and the
+drive's reflected inertia), the limit :meth:`DriveLimits.torque_at` at the motor speed.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
-from toggle.drive import drive_data, motor_speed, motor_torque
-from toggle.params import Drive, Mechanism, ParameterError
+import numpy as np
+
+from toggle.drive import drive_data, motor_speed, motor_torque, torque_speed_limit
+from toggle.params import Drive, Mechanism, ParameterError, torque_speed_points
 
 STEP_RATE = 200e3  # steps/s, assumption: pulse-input limit of a microstepping driver
 ACCEL_TIME = 0.1  # s, assumption: 0 to top speed
 JERK_TIME = 0.05  # s, assumption: 0 to full acceleration
 PEAK_TORQUE_FACTOR = 3.0  # assumption: servo peak over rated torque
-STEPPER_TORQUE = 0.3  # N m, assumption: usable pull-out torque of the desktop rig's stepper
+STEPPER_TORQUE = 0.3  # N m, assumption: usable torque of a stepper preset without a curve
 
 
 @dataclass(frozen=True)
 class DriveLimits:
-    """Limits on the crosshead motion: m/s, m/s^2, m/s^3 and motor torque, N m."""
+    """Limits on the crosshead motion: m/s, m/s^2, m/s^3 and motor torque, N m: ``torque``
+    at standstill, falling with motor speed as the curve ``torque_speed`` ((rad/s, N m)
+    points, scaled to ``torque`` at speed 0; empty: flat)."""
 
     velocity: float
     acceleration: float
     jerk: float
     torque: float
+    torque_speed: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("velocity", "acceleration", "jerk", "torque"):
@@ -45,9 +56,33 @@ class DriveLimits:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ParameterError(
                     f"drive limit {name} must be a finite number > 0, got {value!r}")
+        if self.torque_speed:
+            object.__setattr__(self, "torque_speed", torque_speed_points(self.torque_speed))
+
+    @property
+    def curve(self) -> tuple[tuple[float, float], ...]:
+        """The torque-speed curve's points (rad/s, N m), its standstill torque ``torque``."""
+        if not self.torque_speed:
+            return ((0.0, self.torque),)
+        scale = self.torque / self.torque_speed[0][1]
+        return tuple((w, scale * t) for w, t in self.torque_speed)
+
+    def torque_at(self, speed: Any) -> Any:
+        """The usable motor torque (N m) at motor speed ``speed`` (rad/s)."""
+        speeds, torques = zip(*self.curve)
+        return torque_speed_limit(speed, speeds, torques)
+
+    def torque_ratio(self, drive: Drive, velocity: Any, acceleration: Any, force: Any
+                     ) -> float:
+        """The largest ratio of the motor torque (:func:`toggle.drive.motor_torque`) to the
+        usable torque at the motor's speed over samples of crosshead velocity (m/s),
+        acceleration (m/s^2) and input force (N): at most 1 within the curve."""
+        torque = motor_torque(np.asarray(force), drive, np.asarray(acceleration))
+        return float(np.max(np.abs(torque) / self.torque_at(motor_speed(
+            np.asarray(velocity), drive))))
 
     def force(self, drive: Drive) -> float:
-        """Largest crosshead thrust the torque limit allows, N (Eq 32 inverted)."""
+        """Largest crosshead thrust the standstill torque holds, N (Eq 32 inverted)."""
         return self.torque / float(motor_torque(1.0, drive))
 
 
@@ -71,7 +106,8 @@ def drive_limits(
     v = max_velocity(drive) if velocity is None else velocity
     a = v / ACCEL_TIME if acceleration is None else acceleration
     j = a / JERK_TIME if jerk is None else jerk
+    curve = drive.torque_speed or ()
     if torque is None:
-        torque = (PEAK_TORQUE_FACTOR * drive.rated_torque if drive.rated_torque is not None
-                  else STEPPER_TORQUE)
-    return DriveLimits(velocity=v, acceleration=a, jerk=j, torque=torque)
+        torque = (curve[0][1] if curve else PEAK_TORQUE_FACTOR * drive.rated_torque
+                  if drive.rated_torque is not None else STEPPER_TORQUE)
+    return DriveLimits(velocity=v, acceleration=a, jerk=j, torque=torque, torque_speed=curve)

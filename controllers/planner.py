@@ -18,9 +18,11 @@ own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
   optimum unique) or the integral of F^2; the minimum-time mode minimises the
   duration under |F| <= force limit;
 * constraints: rest at the open position and at the toggle, monotone stroke
-  inside the stroke limits, velocity (nodes and midpoints), acceleration, jerk
-  and motor-torque limits (:mod:`controllers.limits`), platen speed at mold
-  contact, and no creeping through the clamping (``CREEP_FACTOR``).
+  inside the stroke limits, velocity (nodes and midpoints), acceleration and
+  jerk limits (:mod:`controllers.limits`), the motor torque with the drive's
+  inertia (:func:`toggle.drive.drive_torque`) within the torque-speed curve at
+  the motor's speed (nodes and midpoints), platen speed at mold contact, and no
+  creeping through the clamping (``CREEP_FACTOR``).
 
 The opening (break-away) stroke, ``planner_for(..., opening=True)``, is the same
 problem run backwards in time (the plant evaluated at -v): its plans are reversed
@@ -41,15 +43,17 @@ Variables are scaled by the stroke, a reference time (the kinematic minimum)
 and a reference force; the interval lengths of the two phases are variables
 and the duration is a constraint whose bounds fix it or leave it free. The
 objective weights, the mold-contact position, the pin friction, the scales,
-the jerk and contact-speed limits are parameters (:data:`PARAMETERS`) and
-the other limits bounds. So one built problem (:class:`StrokeProblem`,
-shared by :func:`planner_for`) serves every duration, mode, mold height,
-friction and drive limit, and a re-plan warm-starts IPOPT from the previous
+the jerk and contact-speed limits, the drive (travel per radian, efficiency,
+the rotor's and screw's reflected mass, the torque-speed curve) and the masses
+are parameters (:data:`PARAMETERS`, :data:`MASSES`) and the other limits
+bounds. So one built problem (:class:`StrokeProblem`, shared by
+:func:`planner_for`) serves every duration, mode, mold height, friction,
+mass, drive and drive limit, and a re-plan warm-starts IPOPT from the previous
 primal and dual solution, stretched in time to the new duration. IPOPT's
 functions are per-node jets of the plant feeding a model of the rest (see
 :class:`StrokeProblem`), compiled to machine code once and kept on disk
 under a hash of what determines them (the code this module imports, not
-plots or the CLI; the plant without mold and friction; N:
+plots or the CLI; the plant's geometry and friction model; N:
 :mod:`controllers.compiled`), so a new process builds a problem in
 milliseconds; without a C compiler they are built symbolically and
 interpreted.
@@ -68,7 +72,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import astuple, dataclass, field
+from dataclasses import astuple, dataclass, field, fields, replace
 from typing import Any
 
 import casadi as ca
@@ -80,14 +84,23 @@ from controllers.compiled import Unit, code_digest, compiled
 from controllers.limits import DriveLimits
 from controllers.profiles import (
     Profile,
+    ProfileError,
     ProfileSamples,
     minimum_time,
     predict,
     ramp_time,
     s_curve,
 )
+from toggle.drive import drive_torque, reflected_mass, torque_speed_limit, travel_per_radian
 from toggle.elastics import ClampingError, clamp_stroke, contact_for_clamp_force
-from toggle.params import Mechanism, ParameterError
+from toggle.params import (
+    MAX_CURVE_POINTS,
+    Drive,
+    Dynamics,
+    Mechanism,
+    ParameterError,
+    symbolic_copy,
+)
 from toggle.plant import PlantConfig, configure, plant_outputs
 
 OBJECTIVES = ("peak", "rms")
@@ -111,6 +124,7 @@ _WEIGHTS = {"peak": [1.0, 0.0, 0.0, _REGULARISATION], "rms": [0.0, 1.0, 0.0, 0.0
 _LATE_STARTS = (1.0, 1.1, 1.25)
 _GAP = 3e-3
 _LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's continuation
+_BASELINE_STEP = 0.8  # factor on a baseline's acceleration while it breaks the torque curve
 _TIGHTEN = 4  # re-plans of minimum_time with the limit tightened by the excess between nodes
 #: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
 #: scaling of every KKT matrix only costs time (a tenth of a warm re-plan).
@@ -264,20 +278,58 @@ _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 _JET = 10  # rows of a node's plant data: value, gradient (3), Hessian upper triangle (6)
 #: The problem's parameters, in order: objective weights (peak, force integral, duration,
 #: jerk regularisation), mold-contact position (m), force scale (N), time scale T_ref (s),
-#: jerk limit (m/s^3), platen speed limit at contact (m/s), pin friction mu, the
-#: mold-protection zone's platen speed cap (m/s) and input-force cap (N).
+#: jerk limit (m/s^3), platen speed limit at contact (m/s), pin friction mu; the drive:
+#: travel per motor radian (m/rad), efficiency, reflected mass of rotor and screw (kg),
+#: the factor on the torque-speed curve
+#: (1, less where minimum_time tightens it), the curve's speeds (rad/s) and torques (N m),
+#: padded to :data:`MAX_CURVE_POINTS` points; the mold-protection zone's platen speed cap
+#: (m/s) and input-force cap (N).
 PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "x_contact", "f_ref", "t_ref",
-              "jerk", "contact_speed", "mu", "protect_speed", "protect_force")
+              "jerk", "contact_speed", "mu", "travel", "efficiency", "drive_mass",
+              "torque_factor",
+              *(f"curve_speed{k}" for k in range(MAX_CURVE_POINTS)),
+              *(f"curve_torque{k}" for k in range(MAX_CURVE_POINTS)),
+              "protect_speed", "protect_force")
 _P = {name: k for k, name in enumerate(PARAMETERS)}
+#: The masses and guide friction of each plant (:class:`toggle.params.Dynamics`), parameters
+#: of the problem after the plants' force scales, in this order for each plant.
+MASSES = tuple(f.name for f in fields(Dynamics))
+#: A drive and masses whose values are all parameters of the problem: what its plants
+#: carry, so that neither is part of the compile key (:func:`_neutral`).
+_NEUTRAL_DRIVE = Drive(ratio=1.0, lead=1.0, efficiency=1.0, pulses_per_rev=1)
+_NEUTRAL_DYNAMICS = Dynamics(crosshead=1.0, links=1.0, platen=1.0)
+
+
+def _neutral(cfg: PlantConfig) -> PlantConfig:
+    """The plant as a problem is built for it: without mold and friction, with the neutral
+    drive and masses (all parameters of the problem)."""
+    return cfg.with_(x_contact=None, mu=None, mechanism=replace(
+        cfg.mechanism, drive=_NEUTRAL_DRIVE, dynamics=_NEUTRAL_DYNAMICS))
+
+
+def _masses(cfg: PlantConfig) -> list[float]:
+    """The plant's :data:`MASSES` (kg, N s/m, N), parameters of the problem."""
+    return [float(getattr(cfg.dynamics, name)) for name in MASSES]
+
+
+def _curve_parameters(limits: DriveLimits) -> list[float]:
+    """The torque-speed curve's speeds and torques, padded to :data:`MAX_CURVE_POINTS`
+    points by flat steps beyond the last (which add nothing to the curve)."""
+    speeds, torques = (list(c) for c in zip(*limits.curve))
+    while len(speeds) < MAX_CURVE_POINTS:
+        speeds.append(speeds[-1] + 1.0)
+        torques.append(torques[-1])
+    return [*speeds, *torques]
 
 
 def _problem_key(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = (),
                  opening: bool = False) -> str:
     """Everything that determines a :class:`StrokeProblem`'s functions, the key of their
     disk cache: the code the problem uses, the plants (every field of the frozen parameters,
-    floats in their exact repr; mold height, friction and drive limits are parameters of
-    the problem, not part of the key), N and the direction (opening or closing)."""
-    plants = [astuple(c.with_(x_contact=None, mu=None)) for c in (cfg, *variants)]
+    floats in their exact repr; mold height, friction, masses, the drive and its limits
+    are parameters of the problem, not part of the key: :func:`_neutral`), N and the
+    direction (opening or closing)."""
+    plants = [astuple(_neutral(c)) for c in (cfg, *variants)]
     return "\n".join((_SOURCE, *map(repr, (*plants, intervals)), *(("opening",) * opening)))
 
 
@@ -297,8 +349,9 @@ def _jets(name: str, output: ca.SX, z: ca.SX, prm: ca.SX, nodes: int
 
 class StrokeProblem:
     """The optimal control problem for one mold-free plant and N, built once; the mold
-    height, the pin friction, the drive limits and the contact-speed limit are parameters
-    (:data:`PARAMETERS`) or bounds, so changing them neither rebuilds nor recompiles.
+    height, the pin friction, the masses, the drive, its limits and the contact-speed limit
+    are parameters (:data:`PARAMETERS`, :data:`MASSES`) or bounds, so changing them neither
+    rebuilds nor recompiles.
 
     Variables are scaled: position xi = (x - x_open) / S, velocity, acceleration and jerk
     in units of S / T_ref^k, interval lengths theta in units of T_ref (T_ref a parameter).
@@ -314,18 +367,26 @@ class StrokeProblem:
 
     Constraints, in order (:attr:`rows`): the dynamics (3N), contact at node N1, the force
     epigraph F - s <= 0 and F + s >= 0 at nodes and midpoints, the platen speed at
-    contact, the duration, the velocity at the midpoints (N), then the mold-protection
-    zone: its entry at node NA, the platen speed and the input force over its nodes and
-    midpoints. The closing stroke has three phases, each of equal intervals: the approach
-    (NA intervals, length w[4N+3]), the protection zone up to contact (N1 - NA, w[4N+6])
-    and the clamp-up (N - N1, w[4N+4]).
+    contact, the duration and the velocity at the midpoints (N); with ``torque``, the
+    motor torque over the torque-speed curve at nodes and midpoints, in [-1, 1]. Those
+    rows cost a third of the solve time, so the problem without them comes first and its
+    sibling with them (:attr:`with_torque`, built when first asked for) serves the plans
+    the curve limits (:meth:`ClampPlanner._run`); they come last, after the mold-protection
+    zone's: its entry at node NA, the tie of its interval length to the approach's (without
+    caps), the platen speed and the input force over its nodes and midpoints. The closing
+    stroke has three phases, each of equal intervals: the approach (NA intervals, length
+    w[4N+3]), the protection zone up to contact (N1 - NA, w[4N+6]) and the clamp-up (N - N1,
+    w[4N+4]).
+    ``opening``: the same problem run backwards in time (the opening stroke).
     """
 
     def __init__(self, cfg: PlantConfig, intervals: int,
-                 variants: tuple[PlantConfig, ...] = (), opening: bool = False) -> None:
+                 variants: tuple[PlantConfig, ...] = (), torque: bool = False,
+                 opening: bool = False) -> None:
         if not (isinstance(intervals, int) and intervals >= 4):
             raise ParameterError(f"intervals must be an integer >= 4, got {intervals!r}")
-        self.config, self.variants, self.opening = cfg, variants, opening
+        self.config, self.variants, self.torque = cfg, variants, torque
+        self.opening = opening
         self.plants = (cfg, *variants)
         self.x_open, self.x_final = clamp_stroke(cfg.mechanism)
         lo, hi = cfg.input_range
@@ -343,13 +404,15 @@ class StrokeProblem:
                  "force_lower": self.n_forces, "contact_speed": len(self.plants), "duration": 1,
                  "mid_velocity": N, "zone_position": 1, "zone_steps": 1,
                  "zone_speed": (2 * self.nz + 1) * len(self.plants),
-                 "zone_force": (2 * self.nz + 1) * len(self.plants)}
+                 "zone_force": (2 * self.nz + 1) * len(self.plants),
+                 "torque": self.n_forces if torque else 0}
         starts = np.cumsum([0, *sizes.values()])
         self.rows = {name: slice(int(a), int(b)) for name, a, b in
                      zip(sizes, starts[:-1], starts[1:])}
         self.n_constraints = int(starts[-1])
-        #: :data:`PARAMETERS`, then each plant's force scale (its forces count divided by it)
-        self.n_parameters = len(PARAMETERS) + len(self.plants)
+        #: :data:`PARAMETERS`, then each plant's force scale (its forces count divided by it),
+        #: then each plant's :data:`MASSES`
+        self.n_parameters = len(PARAMETERS) + len(self.plants) * (1 + len(MASSES))
         self._solvers: dict[tuple[bool, bool], Any] = {}
         self.last: Plan | None = None  # the latest plan, for any mold height
         self._build()
@@ -390,9 +453,12 @@ class StrokeProblem:
     def _symbolic(self) -> list[Unit]:
         """The per-node jets of :data:`_OUTPUTS` and the model as SX functions, in
         compilation units (see :data:`_OPTIMISATION`)."""
-        z, prm = ca.SX.sym("z", 3), ca.SX.sym("prm", 2)  # prm: x_contact, mu
+        # prm: x_contact, mu, the plant's MASSES
+        z, prm = ca.SX.sym("z", 3), ca.SX.sym("prm", 2 + len(MASSES))
+        dynamics = symbolic_copy(_NEUTRAL_DYNAMICS, **dict(zip(MASSES, ca.vertsplit(prm[2:]))))
         jets = []
         for k, plant in enumerate(self.plants):
+            plant = plant.with_(mechanism=replace(plant.mechanism, dynamics=dynamics))
             # the opening stroke is the closing one run backwards in time: v -> -v
             v = -z[1] if self.opening else z[1]
             free = plant_outputs(z[0], v, z[2], plant, mu=prm[1])
@@ -426,8 +492,9 @@ class StrokeProblem:
             outputs.append(block[0, :] + ca.sum1(block[1:4, :] * d) + quad / 2)
             col += n
         each = len(_OUTPUTS)
+        torque = self._torque_ratio(outputs, z, p) if self.torque else ca.SX(0, 1)
         F = ca.vertcat(outputs[0].T, outputs[1].T) / p[_P["f_ref"]]  # the first plant's
-        scales = p[len(PARAMETERS):]
+        scales = p[len(PARAMETERS):len(PARAMETERS) + len(self.plants)]
         forces = ca.vertcat(*[ca.vertcat(*[outputs[k + j].T for j in (0, 1, 3, 4)])
                               / scales[k // each] for k in range(0, len(outputs), each)]
                             ) / p[_P["f_ref"]]
@@ -454,7 +521,25 @@ class StrokeProblem:
                      + p[_P["w_time"]] * duration
                      + p[_P["w_jerk"]] * ca.dot(h, (io / jerk_bound) ** 2))
         return objective, ca.vertcat(dyn, xi[n1], forces - s, forces + s, contact, duration,
-                                     nu_m, xi[na], th1 - thz, zone_speed, zone_force)
+                                     nu_m, xi[na], th1 - thz, zone_speed, zone_force, torque)
+
+    def _torque_ratio(self, outputs: list[ca.SX], z: ca.SX, p: ca.SX) -> ca.SX:
+        """The motor torque (:func:`toggle.drive.drive_torque` of each plant's input force
+        and the acceleration) over the torque-speed curve at the motor speed (times the
+        curve's factor), at the nodes and midpoints: rows in [-1, 1] (one two-sided row
+        each, half the rows, and half the cost of the KKT system, of a pair)."""
+        travel = p[_P["travel"]]
+        speeds = [p[_P[f"curve_speed{k}"]] for k in range(MAX_CURVE_POINTS)]
+        torques = [p[_P[f"curve_torque{k}"]] for k in range(MAX_CURVE_POINTS)]
+        torque, limit = [], []
+        for k in range(0, len(outputs), len(_OUTPUTS)):
+            for j in (0, 1, 3, 4):
+                states = z[:, self._spans()[j]]
+                torque.append(drive_torque(outputs[k + j], states[2, :], travel,
+                                           p[_P["efficiency"]], p[_P["drive_mass"]]).T)
+                limit.append(p[_P["torque_factor"]] * torque_speed_limit(
+                    states[1, :] / travel, speeds, torques).T)
+        return ca.vertcat(*torque) / ca.vertcat(*limit)
 
     def _model_functions(self) -> list[ca.Function]:
         """The model's value (f, g), gradient, constraint Jacobian and Hessian of the
@@ -485,16 +570,19 @@ class StrokeProblem:
         the Lagrangian), each the per-node jets mapped over the nodes feeding the model;
         the jets and the model come compiled from the disk cache where possible."""
         N = self.n1 + self.n2
-        key = _problem_key(self.config, N, self.variants, self.opening)
+        key = _problem_key(self.config, N, self.variants, self.opening) + (
+            "\ntorque" if self.torque else "")
         names = _names(len(self.plants))
         fn = dict(zip(names, compiled("stroke", key, names, self._symbolic)))
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
         L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.n_constraints)
         z = self._nodes(W, P[_P["t_ref"]])[-1]
-        prm = ca.vertcat(P[_P["x_contact"]], P[_P["mu"]])
+        first, n = len(PARAMETERS) + len(self.plants), len(MASSES)
+        prm = [ca.vertcat(P[_P["x_contact"]], P[_P["mu"]], P[first + n * k:first + n * (k + 1)])
+               for k in range(len(self.plants))]
 
         def node_data(order: int) -> ca.MX:
-            return ca.horzcat(*[fn[f"{name}{k}_{order}"](z[:, nodes], prm)
+            return ca.horzcat(*[fn[f"{name}{k}_{order}"](z[:, nodes], prm[k])
                                 for k in range(len(self.plants))
                                 for name, nodes in zip(_OUTPUTS, self._spans())])
 
@@ -517,10 +605,11 @@ class StrokeProblem:
         n1, spans = self.n1, self._spans()
         forces = [values[0, col:col + s.stop - s.start] for col, s in
                   zip(np.cumsum([0, *(s.stop - s.start for s in spans)]), spans)]
-        #: input force (N) at the nodes and midpoints, platen speed at contact (m/s)
+        #: input force (N) at the nodes and midpoints, platen speed at contact (m/s), the
+        #: states (x, v, a) at the nodes and midpoints (columns in the forces' order)
         self.monitor = ca.Function("monitor", [W, P], [
             ca.vertcat(forces[0][:n1 + 1].T, forces[1][1:].T, forces[3].T, forces[4].T),
-            forces[2]])
+            forces[2], z])
         lbg, ubg = np.zeros(self.n_constraints), np.zeros(self.n_constraints)
         r = self.rows
         lbg[r["force_upper"]], ubg[r["force_lower"]] = -np.inf, np.inf
@@ -528,14 +617,24 @@ class StrokeProblem:
         lbg[r["zone_speed"]], ubg[r["zone_speed"]] = -np.inf, 1.0
         lbg[r["zone_force"]], ubg[r["zone_force"]] = -1.0, 1.0
         ubg[r["duration"]] = np.inf
+        lbg[r["torque"]], ubg[r["torque"]] = -1.0, 1.0
         self.g_bounds = (lbg, ubg)
 
-    def input_force(self, x: Any, v: Any, a: Any, x_contact: float, mu: float) -> np.ndarray:
-        """The plant's input force (N) at the points (x, v, a) with the mold at ``x_contact``
-        and pin friction ``mu`` (the function of the clamping phase's jets, exact before
+    @functools.cached_property
+    def with_torque(self) -> StrokeProblem:
+        """The same problem with the torque-speed curve's rows (itself if it has them)."""
+        if self.torque:
+            return self
+        return _problem_for(self.config, self.n1 + self.n2, self.variants, torque=True,
+                            opening=self.opening)
+
+    def input_force(self, x: Any, v: Any, a: Any, cfg: PlantConfig) -> np.ndarray:
+        """The input force (N) at the points (x, v, a) of the plant ``cfg`` (its mold, pin
+        friction and masses; the function of the clamping phase's jets, exact before
         contact too, compiled)."""
         z = np.vstack(np.broadcast_arrays(x, v, a)).astype(float)
-        return np.asarray(self._force(z, [x_contact, mu]))[0]
+        return np.asarray(self._force(z, [cfg.x_contact, cfg.friction,
+                                          *_masses(cfg)]))[0]
 
     def solver(self, warm: bool, energy: bool) -> Any:
         """The IPOPT instance, cold or with the warm-start options, for an objective with
@@ -551,10 +650,11 @@ class StrokeProblem:
 
 @functools.lru_cache(maxsize=8)
 def _problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = (),
-                 opening: bool = False) -> StrokeProblem:
-    """A built problem, shared by the planners of every mold height, friction and drive
-    limits of one plant (and variants) and direction."""
-    return StrokeProblem(cfg, intervals, variants, opening)
+                 torque: bool = False, opening: bool = False) -> StrokeProblem:
+    """A built problem, shared by the planners of every mold height, friction, drive and
+    drive limits of one plant (and variants), with or without the torque rows, closing or
+    opening."""
+    return StrokeProblem(cfg, intervals, variants, torque, opening)
 
 
 class ClampPlanner:
@@ -583,8 +683,7 @@ class ClampPlanner:
         if not (math.isfinite(contact_speed) and contact_speed > 0):
             raise ParameterError(f"contact speed must be > 0 m/s, got {contact_speed!r}")
         self.problem = problem or StrokeProblem(
-            cfg.with_(x_contact=None, mu=None), intervals,
-            tuple(v.with_(x_contact=None, mu=None) for v in variants))
+            _neutral(cfg), intervals, tuple(_neutral(v) for v in variants))
         pr = self.problem
         self.config, self.limits, self.contact_speed = cfg, limits, contact_speed
         self.variants = tuple(v.with_(x_contact=cfg.x_contact, mu=cfg.mu) for v in variants)
@@ -605,6 +704,8 @@ class ClampPlanner:
         self.capped = (protection.speed, protection.force) != (None, None)
         self.force_limit = limits.force(cfg.mechanism.drive)
         self.f_ref = self._reference_force()
+        #: whether this planner's plans need the torque rows (see :meth:`_run`)
+        self._torque = False
 
     @property
     def creep_speed(self) -> float:
@@ -638,7 +739,7 @@ class ClampPlanner:
 
     def _force(self, x: Any, v: Any, a: Any) -> np.ndarray:
         """The plant's input force at the points (x, v, a) with this planner's mold, N."""
-        return self.problem.input_force(x, v, a, self.config.x_contact, self.config.friction)
+        return self.problem.input_force(x, v, a, self.config)
 
     def _reference_force(self) -> float:
         """Scale of the input force: its quasi-static peak at the reference speed, N."""
@@ -646,13 +747,18 @@ class ClampPlanner:
         f = self._force(xs, self.stroke / self.t_ref, 0.0)
         return max(float(np.max(np.abs(f))), 1e-6)
 
-    def _parameters(self, weights: list[float],
+    def _parameters(self, weights: list[float], torque_factor: float = 1.0,
                     caps: tuple[float | None, float | None] = (None, None)) -> list[float]:
-        """The problem's :data:`PARAMETERS` for these objective weights and protection caps
-        (speed, force; None: none), then the plants' force scales."""
+        """The problem's :data:`PARAMETERS` for these objective weights, factor on the
+        torque-speed curve and protection caps (speed, force; None: none), then the plants'
+        force scales."""
+        drive = self.config.mechanism.drive
         return [*weights, self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
-                self.contact_speed, self.config.friction,
-                *(_NO_CAP if c is None else c for c in caps), 1.0, *self.scales]
+                self.contact_speed, self.config.friction, travel_per_radian(drive),
+                drive.efficiency, reflected_mass(drive), torque_factor,
+                *_curve_parameters(self.limits), *(_NO_CAP if c is None else c for c in caps),
+                1.0, *self.scales,
+                *(m for plant in (self.config, *self.variants) for m in _masses(plant))]
 
     # ---- solving --------------------------------------------------------------------
 
@@ -678,11 +784,12 @@ class ClampPlanner:
         lbx[4 * N + 6], ubx[4 * N + 6] = 1e-6, np.inf
         return lbx, ubx
 
-    def _constraint_bounds(self, t_bounds: tuple[float, float]) -> tuple[np.ndarray, ...]:
+    def _constraint_bounds(self, problem: StrokeProblem, t_bounds: tuple[float, float]
+                           ) -> tuple[np.ndarray, ...]:
         """Bounds of the constraints: the duration's, contact at node N1, the top speed
         (and a monotone stroke) at the interval midpoints."""
-        lbg, ubg = (b.copy() for b in self.problem.g_bounds)
-        rows = self.problem.rows
+        lbg, ubg = (b.copy() for b in problem.g_bounds)
+        rows = problem.rows
         lbg[rows["duration"]], ubg[rows["duration"]] = (t / self.t_ref for t in t_bounds)
         lbg[rows["contact_position"]] = ubg[rows["contact_position"]] = self.xi_contact
         if self.capped:  # the zone's entry on node NA, its own interval length
@@ -755,9 +862,10 @@ class ClampPlanner:
                        np.concatenate(([0.0], late.jerk)))
         return self._guess_from(late, duration)
 
-    def _stretched(self, start: Plan, duration: float) -> dict[str, np.ndarray]:
+    def _stretched(self, start: Plan, duration: float, problem: StrokeProblem
+                   ) -> dict[str, np.ndarray]:
         """A previous solution stretched in time to ``duration`` and rescaled to this
-        planner's time and force scales (the warm start)."""
+        planner's time and force scales (the warm start on ``problem``)."""
         N, sol = self.n1 + self.n2, start.solution
         t_ref, f_ref = sol["scales"]
         r = start.duration / duration * self.t_ref / t_ref
@@ -766,16 +874,20 @@ class ClampPlanner:
             w[k * (N + 1):(k + 1) * (N + 1) - (k == 3)] *= r**power
         w[[4 * N + 3, 4 * N + 4, 4 * N + 6]] /= r
         w[4 * N + 5] *= f_ref / self.f_ref
-        return {"x0": w, "lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
+        # the torque rows come last: a start from the problem without them has none
+        lam_g = np.zeros(problem.n_constraints)
+        common = min(lam_g.size, sol["lam_g"].size)
+        lam_g[:common] = sol["lam_g"][:common]
+        return {"x0": w, "lam_x0": sol["lam_x"], "lam_g0": lam_g}
 
     def _run(self, weights: list[float], t_bounds: tuple[float, float], force_limit: float,
              objective: str, start: Plan | None, warm: bool,
-             guess: np.ndarray | None = None) -> tuple[Plan, bool]:
+             guess: np.ndarray | None = None, torque_factor: float = 1.0) -> tuple[Plan, bool]:
         """Solve; with protection caps, where the plan's 1 ms samples exceed a cap between
         the nodes, impose it tighter by the excess and re-solve from the plan."""
         caps = imposed = (self.protect_speed, self.protect_force)
-        plan, ok = self._solve_once(weights, t_bounds, force_limit, objective, start, warm,
-                                    guess, caps)
+        plan, ok = self._solve_torque(weights, t_bounds, force_limit, objective, start, warm,
+                                      guess, torque_factor, caps)
         for _ in range(_TIGHTEN if caps != (None, None) else 0):
             zone = self.protection(plan)
             reached = (zone["peak_platen_speed"], zone["peak_input_force"])
@@ -783,28 +895,48 @@ class ClampPlanner:
             if not ok or not any(excess):
                 break
             imposed = tuple(c if c is None else c - 1.5 * e for c, e in zip(imposed, excess))
-            plan, ok = self._solve_once(weights, t_bounds, force_limit, objective, plan, True,
-                                        None, imposed)
+            plan, ok = self._solve_torque(weights, t_bounds, force_limit, objective, plan, True,
+                                          None, torque_factor, imposed)
         return plan, ok
 
-    def _solve_once(self, weights: list[float], t_bounds: tuple[float, float],
-                    force_limit: float, objective: str, start: Plan | None, warm: bool,
-                    guess: np.ndarray | None, caps: tuple[float | None, float | None]
-                    ) -> tuple[Plan, bool]:
+    def _solve_torque(self, weights: list[float], t_bounds: tuple[float, float],
+                      force_limit: float, objective: str, start: Plan | None, warm: bool,
+                      guess: np.ndarray | None, torque_factor: float,
+                      caps: tuple[float | None, float | None]) -> tuple[Plan, bool]:
+        """One IPOPT solve. Without the torque rows first (unless an earlier plan of this
+        planner needed them); where that plan's motor torque at the nodes and midpoints
+        exceeds the torque-speed curve, again from it with the rows (and for every later
+        plan of this planner)."""
+        problem = self.problem.with_torque if self._torque else self.problem
+        plan, ok = self._solve_on(problem, weights, t_bounds, force_limit, objective, start,
+                                  warm, guess, torque_factor, caps)
+        if ok and not self._torque and self.node_torque_ratio(plan) > 1.0:
+            self._torque = True
+            plan, ok = self._solve_on(self.problem.with_torque, weights, t_bounds,
+                                      force_limit, objective, plan, True, None, torque_factor,
+                                      caps)
+        return plan, ok
+
+    def _solve_on(self, problem: StrokeProblem, weights: list[float],
+                  t_bounds: tuple[float, float], force_limit: float, objective: str,
+                  start: Plan | None, warm: bool, guess: np.ndarray | None,
+                  torque_factor: float, caps: tuple[float | None, float | None]
+                  ) -> tuple[Plan, bool]:
         start = start or self.last
-        warm = warm and start is not None and start.solution["x"].size == self.problem.size
+        warm = warm and start is not None and start.solution["x"].size == problem.size
         lbx, ubx = self._bounds(force_limit)
-        lbg, ubg = self._constraint_bounds(t_bounds)
+        lbg, ubg = self._constraint_bounds(problem, t_bounds)
         target = min(max(2 * self.t_ref, t_bounds[0]), t_bounds[1])
         if guess is not None:
             args, warm = {"x0": guess}, False
         else:
-            args = (self._stretched(start, target) if warm
+            args = (self._stretched(start, target, problem) if warm
                     else {"x0": self._initial_guess(target)})
         args["x0"] = np.clip(args["x0"], lbx, ubx)
-        solver = self.problem.solver(warm, energy=weights[1] > 0)
+        solver = problem.solver(warm, energy=weights[1] > 0)
         tic = time.perf_counter()
-        sol = solver(p=self._parameters(weights, caps), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **args)
+        sol = solver(p=self._parameters(weights, torque_factor, caps), lbx=lbx, ubx=ubx,
+                     lbg=lbg, ubg=ubg, **args)
         elapsed = time.perf_counter() - tic
         stats = solver.stats()
         solution = {k: np.asarray(sol[k]).ravel() for k in ("x", "lam_x", "lam_g")}
@@ -903,9 +1035,9 @@ class ClampPlanner:
         under the torque limit alone, then lowers the force limit from that plan's peak to
         the requested one in steps of at most :data:`_LIMIT_STEP`, each warm-started from
         the last (a cold start under a tight limit stalls in a slow local optimum). The
-        limit is imposed at the nodes and interval midpoints; where the plan's 1 ms
-        samples through the plant still exceed it, the limit is tightened by the excess and
-        the plan repeated."""
+        limit and the motor's torque-speed curve are imposed at the nodes and interval
+        midpoints; where the plan's 1 ms samples through the plant still exceed either, it
+        is tightened by the excess and the plan repeated."""
         limit = self.force_limit if force_limit is None else min(force_limit, self.force_limit)
         if not (math.isfinite(limit) and limit > 0):
             raise ParameterError(f"force limit must be > 0 N, got {force_limit!r}")
@@ -924,12 +1056,15 @@ class ClampPlanner:
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
+        factor = 1.0
         for _ in range(_TIGHTEN):  # between the nodes: the 1 ms samples decide
-            excess = self.worst_peak(plan) - limit
-            if excess <= 0:
+            excess, over = self.worst_peak(plan) - limit, self.torque_ratio(plan) - 1.0
+            if excess <= 0 and over <= 0:
                 break
-            imposed -= 1.5 * excess
-            reached = self._fastest(imposed, plan, True)
+            imposed -= 1.5 * max(excess, 0.0)
+            factor /= 1.0 + 1.5 * max(over, 0.0)
+            self._torque = self._torque or over > 0
+            reached = self._fastest(imposed, plan, True, factor)
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
@@ -969,19 +1104,24 @@ class ClampPlanner:
         steps = min(math.ceil(math.log(peak / limit) / math.log1p(_LIMIT_STEP)), 40)
         return [float(v) for v in np.geomspace(peak, limit, steps + 1)[1:]]
 
-    def _fastest(self, limit: float, start: Plan | None, warm: bool) -> Plan | None:
-        """The minimum-time plan under the force limit imposed at nodes and midpoints, or
-        None if IPOPT finds none (warm, then cold)."""
+    def _fastest(self, limit: float, start: Plan | None, warm: bool,
+                 torque_factor: float = 1.0) -> Plan | None:
+        """The minimum-time plan under the force limit and the torque-speed curve (times
+        ``torque_factor``) imposed at nodes and midpoints, or None if IPOPT finds none
+        (warm, then cold)."""
         bounds, weights = (self.t_ref, 100 * self.t_ref), [0.0, 0.0, 1.0, _REGULARISATION]
-        plan, ok = self._run(weights, bounds, limit, "time", start, warm)
+        plan, ok = self._run(weights, bounds, limit, "time", start, warm,
+                             torque_factor=torque_factor)
         if not ok and warm:
-            plan, ok = self._run(weights, bounds, limit, "time", None, False)
+            plan, ok = self._run(weights, bounds, limit, "time", None, False,
+                                 torque_factor=torque_factor)
         return plan if ok else None
 
     def _unreachable(self, limit: float, best: Plan | None) -> str:
         """Why no stroke meets ``limit``: which limit binds, the lowest peak reached."""
         which = ("the force limit" if limit < self.force_limit
-                 else f"the motor torque limit ({self.limits.torque:.4g} N m)")
+                 else f"the motor's torque-speed curve ({self.limits.torque:.4g} N m at "
+                      "standstill)")
         caps = [f"{name} {value:.4g} {unit}" for name, value, unit in (
             ("input force", self.protect_force, "N"),
             ("platen speed", self.protect_speed, "m/s")) if value is not None]
@@ -999,8 +1139,16 @@ class ClampPlanner:
     def node_forces(self, plan: Plan) -> tuple[np.ndarray, float]:
         """Input force at the nodes and interval midpoints (N), platen speed at contact
         (m/s), from the plan's solution."""
-        F, contact = self.problem.monitor(plan.solution["x"], self._parameters([0] * 4))
+        F, contact, _ = self.problem.monitor(plan.solution["x"], self._parameters([0] * 4))
         return np.asarray(F).ravel(), float(contact)
+
+    def node_torque_ratio(self, plan: Plan) -> float:
+        """The plan's largest motor torque over the torque-speed curve at the nodes and
+        midpoints (the plant, not its variants), from its solution: cheap, no sampling."""
+        F, _, z = self.problem.monitor(plan.solution["x"], self._parameters([0] * 4))
+        z = np.asarray(z)
+        return self.limits.torque_ratio(self.config.mechanism.drive, z[1], z[2],
+                                        np.asarray(F).ravel())
 
     def protection(self, plan: Plan) -> dict[str, float]:
         """The plan in the mold-protection zone on its 1 ms samples through the plant: the
@@ -1034,6 +1182,13 @@ class ClampPlanner:
         return max([plan.peak_force, *(predict(plan.profile, v).peak_force / k
                                        for v, k in zip(self.variants, self.scales))])
 
+    def torque_ratio(self, plan: Plan) -> float:
+        """The plan's largest motor torque over the torque-speed curve at the motor's speed
+        (1 ms samples through the plant and its variants): at most 1 within the curve."""
+        drive = self.config.mechanism.drive
+        return max(self.limits.torque_ratio(drive, s.velocity, s.acceleration, s.input_force)
+                   for s in (plan.samples, *(predict(plan.profile, v) for v in self.variants)))
+
     def binding_limits(self, plan: Plan, force_limit: float | None = None) -> list[str]:
         """Names of the limits the plan runs at (within 1 %), the force limit judged by the
         plan's 1 ms samples through the plant."""
@@ -1045,8 +1200,8 @@ class ClampPlanner:
             f"acceleration (max {lim.acceleration:.4g} m/s^2)":
                 np.max(np.abs(pr.a)) / lim.acceleration,
             f"jerk (max {lim.jerk:.4g} m/s^3)": np.max(np.abs(pr.jerk)) / lim.jerk,
-            f"motor torque (max {lim.torque:.4g} N m, {self.force_limit:.4g} N thrust)":
-                peak / self.force_limit,
+            f"motor torque (torque-speed curve, {lim.torque:.4g} N m at standstill)":
+                self.torque_ratio(plan),
             f"platen speed at mold contact (max {self.contact_speed * 1e3:.4g} mm/s)":
                 contact / self.contact_speed,
         }
@@ -1085,8 +1240,8 @@ def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CO
     for any mold height, friction, drive limits or protection zone, neither rebuilds nor
     starts cold. ``opening``: the opening (break-away) stroke from the toggle back to the
     open position instead of the closing one (:class:`ClampPlanner`)."""
-    problem = _problem_for(cfg.with_(x_contact=None, mu=None), intervals,
-                           tuple(v.with_(x_contact=None, mu=None) for v in variants), opening)
+    problem = _problem_for(_neutral(cfg), intervals, tuple(_neutral(v) for v in variants),
+                           opening=opening)
     return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
                         problem=problem, variants=variants, scales=scales,
                         protection=protection)
@@ -1095,10 +1250,40 @@ def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CO
 def baseline_stroke(cfg: PlantConfig, limits: DriveLimits, duration: float,
                     jerk: float | None = None) -> Profile:
     """The S-curve stroke of the plant's clamp in ``duration`` under the limits (the jerk
-    limit's unless ``jerk`` is given; inf: the trapezoidal velocity profile)."""
+    limit's unless ``jerk`` is given; inf: the trapezoidal velocity profile), held to the
+    motor's torque-speed curve: where the stroke at full acceleration breaks it (the
+    drive's inertia needs torque), the acceleration is lowered, in steps of
+    :data:`_BASELINE_STEP` and then by bisection, to the highest that keeps the curve, as
+    far as the duration allows (else the stroke at full acceleration, which the caller
+    reports as breaking the curve: :meth:`DriveLimits.torque_ratio`)."""
     x_open, x_final = clamp_stroke(cfg.mechanism)
-    return s_curve(x_open, x_final, duration, limits.velocity, limits.acceleration,
-                   limits.jerk if jerk is None else jerk)
+    jerk = limits.jerk if jerk is None else jerk
+    drive = cfg.mechanism.drive
+
+    def stroke(factor: float) -> Profile:
+        return s_curve(x_open, x_final, duration, limits.velocity,
+                       factor * limits.acceleration, jerk)
+
+    def within(factor: float) -> bool:
+        try:
+            s = predict(stroke(factor), cfg)
+        except ProfileError:  # too slow an acceleration for the duration
+            return False
+        return limits.torque_ratio(drive, s.velocity, s.acceleration, s.input_force) <= 1.0
+
+    if within(1.0):
+        return stroke(1.0)
+    high, low = 1.0, _BASELINE_STEP
+    while not within(low):
+        if low < 1e-3:
+            return stroke(1.0)
+        high, low = low, low * _BASELINE_STEP
+    for _ in range(20):  # the highest acceleration within the curve, to 0.01 %
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if within(middle) else (low, middle)
+        if high - low < 1e-4 * high:
+            break
+    return stroke(low)
 
 
 def baselines(cfg: PlantConfig, limits: DriveLimits, duration: float

@@ -29,6 +29,9 @@ ERRORS = tuple(name for half in ("lower", "upper") for name in PAPER_NAMES[half]
 MAX_ERROR = 5e-3  # m: a dimensional error, not a redesign
 MASSES = {"m_crosshead": "crosshead", "m_links": "links", "m_platen": "platen",
           "guide_damping": "guide_damping"}
+#: The drive's rotating inertias (toggle.drive.reflected_mass), kg m^2.
+INERTIAS = {"rotor_inertia": "Motor rotor inertia (with its pulley)",
+            "screw_inertia": "Ball-screw inertia (with its pulley and coupling)"}
 OUTPUTS = (
     ("x", "m", "Input-link (crosshead) position"),
     ("velocity", "m/s", "Input-link velocity"),
@@ -41,7 +44,8 @@ OUTPUTS = (
     ("mechanical_advantage", "1", "Clamp force over input force with pin friction"),
     ("toggle_angle", "rad", "Toggle angle alpha (theta4 of the lower half)"),
     ("asymmetry", "m", "Upper minus lower half output position"),
-    ("motor_torque", "N.m", "Drive motor torque (ball screw and belt)"),
+    ("motor_torque", "N.m", "Drive motor torque: thrust through ball screw and belt, and the "
+     "rotor's and screw's inertia"),
 )
 
 
@@ -64,6 +68,9 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
               else f"{field.capitalize()} mass", start=float(getattr(dyn, field)), min=0.0,
               max=mass_max * (1e3 if field == "guide_damping" else 1.0))
           for name, field in MASSES.items()),
+        *(Var(name, "parameter", "kg.m2", text, start=float(getattr(mech.drive, name)),
+              min=0.0, max=100 * max(mech.drive.rotor_inertia, mech.drive.screw_inertia, 0.01))
+          for name, text in INERTIAS.items()),
         Var("drive_bandwidth", "parameter", "Hz",
             "Drive tracking bandwidth; 0: ideal position source", start=0.0, min=0.0, max=1e3),
         Var("drive_damping", "parameter", "1", "Drive tracking damping ratio", start=0.7,
@@ -100,6 +107,7 @@ class ToggleClamp(DeclaredSlave):
             mu=self.mu,
             x_contact=self.x_contact,
             masses={field: getattr(self, name) for name, field in MASSES.items()},
+            drive={name: getattr(self, name) for name in INERTIAS},
             errors={n: getattr(self, f"delta_{n}") for n in ERRORS},
         )
 

@@ -4,20 +4,28 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from importlib import resources
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from toggle.cli import main
 from toggle.drive import (
     contact_from_pulses,
     encoder_pulses,
     motor_speed,
     motor_torque,
+    reflected_mass,
     torque_history,
+    torque_speed_limit,
     travel_from_pulses,
 )
 from toggle.elastics import ClampingError, analyse_clamping
-from toggle.params import ParameterError, load_preset
+from toggle.kinematics import stroke_limits
+from toggle.params import ParameterError, load_mechanism, load_preset
+from toggle.plant import configure, plant_outputs
 
 SM55 = load_preset("lin2003_sm55")
 RPM = 2 * math.pi / 60  # rad/s per rpm
@@ -91,3 +99,111 @@ def test_invalid_drive_data_is_rejected():
         dataclasses.replace(SM55.drive, efficiency=1.5)
     with pytest.raises(ParameterError, match="lead"):
         dataclasses.replace(SM55.drive, lead=-0.02)
+
+
+# ---- the drive's inertia and torque-speed curve ------------------------------------------
+
+CHANG = load_preset("chang2021")
+
+
+def test_reflected_mass_by_hand():
+    """m_drive = (J_m + R^2 J_s) (2 pi / (R lead))^2: the rotor turns 1/R times the screw."""
+    d = CHANG.drive  # direct drive, 5 mm lead
+    assert reflected_mass(d) == pytest.approx((2.8e-5 + 5.0e-6) * (2 * math.pi / 5e-3) ** 2)
+    assert reflected_mass(d) == pytest.approx(52.11, abs=0.01)
+    s = SM55.drive  # belt 30/42, 20 mm lead
+    by_hand = 6e-3 * (2 * math.pi / (30 / 42 * 0.020)) ** 2 + 6e-3 * (2 * math.pi / 0.020) ** 2
+    assert reflected_mass(s) == pytest.approx(by_hand)
+    a = 2.0  # m/s^2: the rotor and screw torque is m_drive a times travel per radian
+    assert motor_torque(0.0, s, a) == pytest.approx(
+        (6e-3 + (30 / 42) ** 2 * 6e-3) * a / (30 / 42 * 0.020 / (2 * math.pi)))
+
+
+@settings(max_examples=25, deadline=None)
+@given(rotor=st.floats(0.0, 1e-3), screw=st.floats(0.0, 1e-3), platen=st.floats(0.5, 20.0),
+       stroke=st.floats(0.2, 0.9), duration=st.floats(0.2, 2.0))
+def test_motor_power_is_the_rate_of_kinetic_energy_with_the_rotor(rotor, screw, platen, stroke,
+                                                                 duration):
+    """Friction off (pins, guides, efficiency 1), no mold: the motor's power T omega equals
+    the rate of change of the kinetic energy of crosshead, links, platen, rotor and screw,
+    so its work from rest is that kinetic energy."""
+    cfg = configure("chang2021", mu=0.0,
+                    masses={"platen": platen, "guide_damping": 0.0, "guide_friction": 0.0},
+                    drive={"rotor_inertia": rotor, "screw_inertia": screw, "efficiency": 1.0})
+    d, dyn = cfg.mechanism.drive, cfg.dynamics
+    x0, x1 = cfg.input_range
+    x_open, x_toggle = stroke_limits(CHANG.lower)
+    span = stroke * (x_toggle - x_open)
+    t = np.linspace(0.0, duration, 20001)
+    s = t / duration  # from rest, accelerating to speed (a quintic's first half)
+    x = x_open + span * s**3 * (10 - 15 * s + 6 * s**2)
+    v = span / duration * 30 * s**2 * (1 - s) ** 2
+    a = span / duration**2 * 60 * s * (1 - s) * (1 - 2 * s)
+    assert x0 <= x.min() and x.max() <= x1
+    out = plant_outputs(x, v, a, cfg)
+    power = np.asarray(out.motor_torque) * motor_speed(v, d)
+    work = np.concatenate(([0.0], np.cumsum(np.diff(t) * (power[1:] + power[:-1]) / 2)))
+    m_in, m_out = dyn.crosshead + 0.5 * dyn.links, dyn.platen + 0.5 * dyn.links
+    kinetic = 0.5 * ((m_in + reflected_mass(d)) * v**2 + m_out * np.asarray(out.platen_velocity)**2)
+    scale = float(np.max(kinetic)) + 1e-12
+    np.testing.assert_allclose(work, kinetic, atol=2e-6 * scale)
+
+
+def test_torque_speed_limit_interpolates_and_holds_beyond_the_last_point():
+    speeds, torques = (0.0, 10.0, 30.0), (1.0, 0.8, 0.2)
+    w = np.array([0.0, 5.0, 10.0, 20.0, 30.0, 100.0, -5.0])
+    np.testing.assert_allclose(torque_speed_limit(w, speeds, torques),
+                               [1.0, 0.9, 0.8, 0.5, 0.2, 0.2, 0.9])
+    np.testing.assert_allclose(torque_speed_limit(w, speeds, torques),
+                               np.interp(np.abs(w), speeds, torques))
+    assert torque_speed_limit(3.0, (0.0,), (0.3,)) == 0.3
+
+
+BAD_CURVES = [
+    ("[[0.0, 0.5], [10.0, 0.6]]", "must not rise"),
+    ("[[0.0, 0.5], [10.0, 0.4], [5.0, 0.3]]", "speeds must increase"),
+    ("[[1.0, 0.5], [10.0, 0.4]]", "start at speed 0"),
+    ("[[0.0, 0.5], [10.0, -0.1]]", "must be > 0"),
+    ("[[0.0, nan], [10.0, 0.1]]", "pair of finite numbers"),
+    ("[[0.0, 0.5, 1.0]]", "pair of finite numbers"),
+    ("[]", "1 to 8"),
+    ("0.5", "list of"),
+    ('[["fast", 0.5]]', "pair of finite numbers"),
+    ("[" + ", ".join(f"[{k}.0, 0.5]" for k in range(9)) + "]", "1 to 8"),
+]
+
+
+def _preset_with(tmp_path, line: str):
+    """chang2021 as a user's file with the line of one [drive] key replaced by ``line``."""
+    text = (resources.files("toggle") / "presets" / "chang2021.toml").read_text()
+    start = text.index("\n" + line.split(" = ")[0] + " = ") + 1
+    path = tmp_path / "mine.toml"
+    path.write_text(text[:start] + line + text[text.index("\n", start):])
+    return path
+
+
+@pytest.mark.parametrize("curve, named", BAD_CURVES)
+def test_a_bad_torque_speed_curve_is_refused_naming_file_and_key(tmp_path, curve, named):
+    path = _preset_with(tmp_path, f"torque_speed = {curve}")
+    with pytest.raises(ParameterError, match=named) as info:
+        load_mechanism(path)
+    assert str(path) in str(info.value) and "[drive]" in str(info.value)
+    assert "torque_speed" in str(info.value)
+
+
+@pytest.mark.parametrize("line, named", [("rotor_inertia = -1e-5", "rotor_inertia"),
+                                         ('screw_inertia = "big"', "screw_inertia"),
+                                         ("rotor_inertia = inf", "rotor_inertia")])
+def test_a_bad_inertia_is_refused(tmp_path, line, named):
+    path = _preset_with(tmp_path, line)
+    with pytest.raises(ParameterError, match=named):
+        load_mechanism(path)
+
+
+def test_toggle_plan_refuses_a_bad_curve_with_one_line(tmp_path, capsys):
+    path = _preset_with(tmp_path, "torque_speed = [[0.0, 0.5], [10.0, 0.9]]")
+    assert main(["plan", "--preset", str(path), "--min-time"]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert captured.out == "" and len(err.splitlines()) == 1 and "Traceback" not in err
+    assert str(path) in err and "torque_speed" in err and "must not rise" in err

@@ -30,6 +30,7 @@ from fmu_support import (
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from toggle.drive import motor_torque
 from toggle.fmu_build import DEFAULT_SLAVE, build_fmu
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
@@ -61,7 +62,8 @@ def _reference(x, v, a, slip=None, before=(), **start) -> PlantOutputs:
     the slip state ``slip`` (default: carried from rest along the positions ``before`` and
     then the reported path)."""
     errors = {k.removeprefix("delta_"): val for k, val in start.items() if k.startswith("delta_")}
-    cfg = configure("chang2021", x_contact=start.get("x_contact"), errors=errors)
+    drive = {k: start[k] for k in ("rotor_inertia", "screw_inertia") if k in start}
+    cfg = configure("chang2021", x_contact=start.get("x_contact"), errors=errors, drive=drive)
     if slip is None:
         slip = slip_along([*before, *np.atleast_1d(x)], cfg.asymmetry.slip_distance)[len(before):]
     return plant_outputs(np.asarray(x), np.asarray(v), np.asarray(a), cfg, slip_state=slip)
@@ -162,6 +164,20 @@ def test_stroke_outputs_equal_the_library(unzipped: Path, bandwidth: float):
     assert abs(res["asymmetry"][-1]) > 0.1 * DELTA_R8
 
 
+def test_motor_torque_is_the_drives_with_the_rotor_inertia(unzipped: Path):
+    """With other rotor and screw inertias than the preset's, the FMU's motor_torque is
+    toggle.drive.motor_torque of its input force and acceleration (the one equation)."""
+    inertias = {"rotor_inertia": 3e-4, "screw_inertia": 4e-5}
+    res = _simulate_stroke(unzipped, drive_bandwidth=20.0, **MOLD, **inertias)
+    _assert_outputs_match(res, _reference(res["x"], res["velocity"], res["acceleration"],
+                                          **MOLD, **inertias))
+    drive = configure("chang2021", drive=inertias).mechanism.drive
+    torque = motor_torque(res["input_force"], drive, res["acceleration"])
+    np.testing.assert_allclose(res["motor_torque"], torque, rtol=1e-12, atol=1e-15)
+    inertia = motor_torque(0.0, drive, res["acceleration"])
+    assert np.max(np.abs(inertia)) > 0.1 * np.max(np.abs(torque))  # the rotor matters here
+
+
 def test_ideal_drive_puts_the_input_link_at_the_command(unzipped: Path):
     res = _simulate_stroke(unzipped, **MOLD)
     np.testing.assert_array_equal(res["x"], res["x_cmd"])
@@ -241,6 +257,8 @@ def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: f
         ({"drive_bandwidth": 10.0, "drive_damping": -1.0}, "drive_damping"),
         ({"mu": -0.2}, "mu"),
         ({"m_platen": float("nan")}, "m_platen"),
+        ({"rotor_inertia": -1e-5}, "rotor_inertia"),
+        ({"screw_inertia": math.inf}, "screw_inertia"),
     ],
 )
 def test_invalid_parameter_fails_initialisation_with_the_parameter_named(unzipped: Path, start,

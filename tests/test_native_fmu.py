@@ -23,6 +23,7 @@ from fmpy.fmi2 import fmi2Error
 from fmpy.model_description import read_build_description
 from fmu_support import close_slave, run_libcosim, run_steps, slip_along, validator_problems
 
+from toggle.drive import motor_torque
 from toggle.fmu_build import build_fmu
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
@@ -165,6 +166,22 @@ def test_native_and_pythonfmu_agree_over_the_stroke(unzipped: Path, python_fmu: 
     assert (abs(native["asymmetry"]).max() > 1e-4) == (delta_r8 != 0)
 
 
+def test_native_fmu_takes_the_rotor_inertia_as_a_parameter(unzipped: Path, python_fmu: Path):
+    """Another rotor and screw inertia: the native FMU's outputs are the Python FMU's, its
+    motor_torque the library's (toggle.drive.motor_torque, the one equation)."""
+    inertias = {"rotor_inertia": 3e-4, "screw_inertia": 4e-5}
+    native, python = _both(unzipped, python_fmu, **inertias)
+    for name in OUTPUTS:
+        want = python[name]
+        np.testing.assert_allclose(native[name], want, rtol=REL,
+                                   atol=REL * 1e-3 * float(np.max(np.abs(want))), err_msg=name)
+    drive = configure("chang2021", drive=inertias).mechanism.drive
+    torque = motor_torque(native["input_force"], drive, native["acceleration"])
+    np.testing.assert_allclose(native["motor_torque"], torque, rtol=1e-12, atol=1e-15)
+    default = _both(unzipped, python_fmu)[0]["motor_torque"]
+    assert np.max(np.abs(native["motor_torque"] - default)) > 1e-3  # N m: the rotor counts
+
+
 def test_lagging_drive_agrees_to_rounding_and_the_plant_exactly(unzipped: Path,
                                                                 python_fmu: Path):
     """With a 20 Hz drive lag the two FMUs' motions differ by rounding only (their ZOH
@@ -247,6 +264,7 @@ def test_state_get_set_serialize_and_reset_reproduce_outputs(unzipped: Path):
         ({"x_cmd": 0.5}, "x_cmd = 0.5 is outside"),
         ({"delta_r7b": 1.0}, "delta_r7b"),
         ({"drive_bandwidth": 10.0, "drive_damping": -1.0}, "drive_damping"),
+        ({"rotor_inertia": -1e-5}, "rotor_inertia"),
     ],
 )
 def test_bad_parameter_fails_initialisation_with_a_message(unzipped: Path, start, named):

@@ -207,12 +207,19 @@ def test_the_cache_key_covers_the_plant_and_the_code_it_uses(tmp_path):
     cfg = plan_config("chang2021").with_(x_contact=None)
     key = _problem_key(cfg, 200)
     changed = [_problem_key(cfg.with_(velocity_epsilon=2e-4), 200), _problem_key(cfg, 100),
-               _problem_key(replace(cfg, mechanism=replace(
-                   cfg.mechanism, dynamics=replace(cfg.dynamics, platen=2.6))), 200)]
+               _problem_key(cfg.with_(mechanism=cfg.mechanism.with_error("upper", "r5", 1e-4)),
+                            200)]
     assert key == _problem_key(cfg, 200) and key not in changed
     assert len(set(changed)) == len(changed)
-    # mold height and friction are parameters of the problem, not part of the key
+    # mold height, friction, masses and the drive are parameters of the problem, not part of
+    # the key
     assert _problem_key(cfg.with_(mu=0.06, x_contact=0.04), 200) == key
+    assert _problem_key(replace(cfg, mechanism=replace(
+        cfg.mechanism, dynamics=replace(cfg.dynamics, platen=2.6))), 200) == key
+    other_drive = replace(cfg.mechanism.drive, rotor_inertia=1e-4, lead=4e-3,
+                          torque_speed=((0.0, 0.2), (40.0, 0.1)))
+    assert _problem_key(cfg.with_(mechanism=replace(cfg.mechanism, drive=other_drive)),
+                        200) == key
     package = tmp_path / "fakepkg"
     package.mkdir()
     (package / "__init__.py").write_text("")
@@ -261,6 +268,67 @@ def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, tmp_path, mo
                          intervals=8)
     assert other.problem._force.class_name() == "External"
     assert other.solve(DURATION).profile.v.max() <= 0.03 * (1 + 1e-6)  # at the nodes
+
+
+def test_a_change_of_the_drive_reuses_the_compiled_problem(chang, tmp_path, monkeypatch):
+    """Rotor inertia, torque-speed curve and masses are parameters of the compiled problem:
+    another rotor, curve or platen neither rebuilds the problem in this process nor
+    recompiles in a new one; the masses count (a heavier platen, more inertia force)."""
+    cfg, limits, planner, plan = chang
+    heavy = cfg.with_(mechanism=replace(
+        cfg.mechanism, drive=replace(cfg.mechanism.drive, rotor_inertia=2e-4),
+        dynamics=replace(cfg.dynamics, platen=25.0)))
+    steep = replace(limits, torque=0.03, torque_speed=STEEP)
+    assert planner_for(heavy, steep).problem is planner.problem
+    heavier = planner_for(heavy, limits).solve(DURATION, start=plan)
+    assert heavier.peak_force > plan.peak_force
+    np.testing.assert_allclose(  # the planner's compiled force is the plant's
+        planner_for(heavy, limits)._force(heavier.samples.position, heavier.samples.velocity,
+                                          heavier.samples.acceleration),
+        heavier.samples.input_force, rtol=1e-9, atol=1e-9)
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
+    ClampPlanner(cfg, limits, intervals=8).problem.with_torque  # noqa: B018 - both problems
+    monkeypatch.setattr("controllers.planner.compiled", _no_compile)
+    other = ClampPlanner(heavy, steep, intervals=8)
+    assert other.problem._force.class_name() == "External"
+    assert other.solve(DURATION).duration == pytest.approx(DURATION)
+
+
+#: A torque-speed curve that binds on chang2021 (its drive needs ~0.03 N m at full
+#: acceleration, mostly for the rotor's and screw's 52 kg reflected mass).
+STEEP = ((0.0, 0.03), (25.0, 0.02), (50.0, 0.012))
+STEEPER = ((0.0, 0.025), (25.0, 0.015), (50.0, 0.01))
+
+
+def test_minimum_time_holds_the_torque_speed_curve_and_a_steeper_one_is_slower(chang):
+    """The curve at the motor's speed, with the drive's inertia, on the 1 ms samples; the
+    steeper the curve, the slower the fastest stroke; the S-curve baseline of the same
+    duration is held to the curve by a lower acceleration where the duration allows."""
+    cfg, limits, _, _ = chang
+    durations = []
+    for curve in (None, STEEP, STEEPER):
+        lim = limits if curve is None else replace(limits, torque=curve[0][1],
+                                                   torque_speed=curve)
+        planner = planner_for(cfg, lim)
+        plan = planner.minimum_time()
+        s = plan.samples
+        assert lim.torque_ratio(cfg.mechanism.drive, s.velocity, s.acceleration,
+                                s.input_force) <= 1.0
+        assert planner.torque_ratio(plan) <= 1.0
+        durations.append(plan.duration)
+        if curve is not None:
+            assert any("torque-speed curve" in b for b in planner.binding_limits(plan))
+    assert durations[0] < durations[1] < durations[2]
+    lim = replace(limits, torque=STEEPER[0][1], torque_speed=STEEPER)
+    x_open, x_final = planner.x_open, planner.x_final
+    plain = predict(s_curve(x_open, x_final, DURATION, lim.velocity, lim.acceleration,
+                            lim.jerk), cfg)
+    held = predict(baseline_stroke(cfg, lim, DURATION), cfg)
+    ratio = lambda p: lim.torque_ratio(cfg.mechanism.drive, p.velocity,  # noqa: E731
+                                       p.acceleration, p.input_force)
+    assert ratio(plain) > 1.0 >= ratio(held) > 0.99
+    assert held.time[-1] == pytest.approx(DURATION)
+    assert np.abs(held.acceleration).max() < lim.acceleration
 
 
 def _no_compile(name, key, names, build):
@@ -314,7 +382,7 @@ def test_too_short_a_duration_names_the_limit_and_the_shortest(chang):
 def test_torque_limit_and_unreachable_clamp_force():
     cfg = plan_config("chang2021")
     weak = drive_limits(cfg.mechanism, torque=0.012)  # 13.6 N of thrust, below the ~15 N peak
-    with pytest.raises(PlanningError, match="motor torque limit .*binds"):
+    with pytest.raises(PlanningError, match="torque-speed curve .*binds"):
         planner_for(cfg, weak, intervals=60).solve(DURATION)
     with pytest.raises(ClampingError, match="beyond reach"):
         plan_config("chang2021", clamp_force=1e12)

@@ -33,6 +33,7 @@ CAPS: dict[tuple[str, ...], list[str]] = {
     ("plot", "sweep"): ["--points", "3"],
     ("plot", "clamp"): ["--mu", "0.1"],
     ("plan",): ["--intervals", "4"],
+    ("plot", "trade-off"): ["--intervals", "4", "--points", "2"],
     ("calibrate",): ["--fit", "free_play", "--speeds", "5e-3"],
 }
 

@@ -8,12 +8,24 @@ to the driver gear), so
 
 As in the paper, the encoder's zero is the final clamping position and the
 pulses count the crosshead travel U_E of Eq 8 (:func:`toggle.elastics.crosshead_travel`).
-Deceleration torque and inertia are neglected, as there.
+
+Beyond the paper, the drive's own inertia: the rotor J_m turns at the motor speed
+omega = v / p (p = R lead / 2 pi, :func:`travel_per_radian`), the screw J_s at R omega,
+so their kinetic energy is that of a mass m_drive = (J_m + R^2 J_s) / p^2 moving with the
+crosshead (:func:`reflected_mass`), and the motor torque for crosshead thrust F (the load
+cell's input force) and acceleration a is
+
+    T_m = p (F / eta + m_drive a)           (:func:`drive_torque`, Eq 32 at a = 0)
+
+the efficiency applying to the thrust (the screw's and belt's losses), not to the
+rotating parts' own inertia. The motor delivers at most its torque-speed curve
+(:func:`torque_speed_limit`), a table of the preset (``[drive] torque_speed``).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -41,9 +53,42 @@ def travel_per_radian(drive: Drive) -> float:
     return drive.ratio * drive.lead / (2.0 * math.pi)
 
 
-def motor_torque(thrust: Any, drive: Drive) -> Any:
-    """Motor torque T_m (N m) for crosshead thrust F0 (N), Eq 32."""
-    return thrust * travel_per_radian(drive) / drive.efficiency
+def reflected_mass(drive: Drive) -> Any:
+    """The rotor's and the screw's inertia as a mass moving with the crosshead,
+    m_drive = (J_m + R^2 J_s) / p^2, kg (p = :func:`travel_per_radian`)."""
+    return ((drive.rotor_inertia + drive.ratio**2 * drive.screw_inertia)
+            / travel_per_radian(drive)**2)
+
+
+def drive_torque(thrust: Any, acceleration: Any, travel: Any, efficiency: Any,
+                 mass: Any) -> Any:
+    """Motor torque T_m = p (F / eta + m_drive a), N m, for crosshead thrust F (N) and
+    acceleration a (m/s^2), with travel per radian p (m/rad), efficiency eta and reflected
+    drive mass m_drive (kg): the one torque equation, on floats, arrays or CasADi symbols
+    (the planner's drive values are symbols of its compiled problem)."""
+    return travel * (thrust / efficiency + mass * acceleration)
+
+
+def motor_torque(thrust: Any, drive: Drive, acceleration: Any = 0.0) -> Any:
+    """Motor torque T_m (N m) for crosshead thrust F0 (N), Eq 32, and the torque that
+    accelerates the rotor and the screw at crosshead acceleration ``acceleration`` (m/s^2)."""
+    return drive_torque(thrust, acceleration, travel_per_radian(drive), drive.efficiency,
+                        reflected_mass(drive))
+
+
+def torque_speed_limit(speed: Any, speeds: Sequence[Any], torques: Sequence[Any]) -> Any:
+    """The torque-speed curve through the points (``speeds`` rad/s, increasing from 0;
+    ``torques`` N m) at motor speed ``speed`` (either sign): linear between the points,
+    constant beyond the last. Written as a sum of ramps max(|w| - w_k, 0), so that it
+    evaluates on floats, arrays and CasADi symbols alike (the points may be symbols)."""
+    w = np.fabs(speed)
+    limit = torques[0] + 0.0 * w
+    slope = 0.0
+    for k in range(1, len(speeds)):
+        new = (torques[k] - torques[k - 1]) / (speeds[k] - speeds[k - 1])
+        limit = limit + (new - slope) * np.maximum(w - speeds[k - 1], 0.0)
+        slope = new
+    return limit - slope * np.maximum(w - speeds[-1], 0.0)
 
 
 def motor_speed(crosshead_speed: Any, drive: Drive) -> Any:

@@ -2,7 +2,8 @@
 
 :func:`build_native_fmu` evaluates :func:`toggle.plant.plant_outputs` on
 CasADi symbols, with the dimensions of both halves, the pin friction, the
-masses and the mold-contact position as *inputs* of the generated functions,
+masses, the drive's inertias and the mold-contact position as *inputs* of the
+generated functions,
 so one binary serves a preset and all its parameter variants. Four variants
 are generated (with and without mold, equal and unequal halves: the plant's
 own branches on ``x_contact`` and ``Mechanism.symmetric``) plus the geometry
@@ -40,7 +41,7 @@ from toggle.fmu_build import (
 from toggle.fmu_build import number_text as _number
 from toggle.fmu_slave import Var
 from toggle.kinematics import half_pose
-from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES, load_preset
+from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES, load_preset, symbolic_copy
 from toggle.plant import PlantConfig, PlantOutputs, configure, plant_outputs
 
 MODEL = "ToggleClampNative"
@@ -49,6 +50,9 @@ WRAPPER = C_DIR / "fmi2_clamp.c"
 GENERATED = "clamp_model"  # clamp_model.c / clamp_model.h
 MASS_FIELDS = {"m_crosshead": "crosshead", "m_links": "links", "m_platen": "platen",
                "guide_damping": "guide_damping"}
+#: The drive's inertias, after the masses in the generated functions' ``masses`` input.
+DRIVE_FIELDS = ("rotor_inertia", "screw_inertia")
+N_MASSES = len(MASS_FIELDS) + len(DRIVE_FIELDS)
 #: Names of the generated functions, indexed by (mold, unequal halves) in the C wrapper.
 VARIANTS = ("tgc_free_equal", "tgc_free_unequal", "tgc_mold_equal", "tgc_mold_unequal")
 CFLAGS = ("-std=c99", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror", "-fvisibility=hidden")
@@ -82,29 +86,26 @@ class _SymbolicHalf(NamedTuple):
         return id(self)
 
 
-def _frozen_copy(obj: Any, **fields: Any) -> Any:
-    """A frozen dataclass with some fields set to symbols (its numeric checks skipped)."""
-    copy = object.__new__(type(obj))
-    for f in dataclasses.fields(obj):
-        object.__setattr__(copy, f.name, fields.get(f.name, getattr(obj, f.name)))
-    return copy
-
-
 def plant_functions(cfg: PlantConfig) -> list[ca.Function]:
-    """The plant as CasADi functions (xvaz[4], lower[8], upper[8], mu, masses[4], x_contact);
-    xvaz: position, velocity, acceleration and the pin friction's slip state."""
+    """The plant as CasADi functions (xvaz[4], lower[8], upper[8], mu, masses[6], x_contact);
+    xvaz: position, velocity, acceleration and the pin friction's slip state; masses: the
+    four of :data:`MASS_FIELDS`, then the drive's inertias (:data:`DRIVE_FIELDS`)."""
     xva = ca.SX.sym("xvaz", 4)
     p_lower, p_upper = (ca.SX.sym(h, len(DIMENSIONS)) for h in HALVES)
-    mu, masses, x_contact = ca.SX.sym("mu"), ca.SX.sym("masses", 4), ca.SX.sym("x_contact")
+    mu, masses, x_contact = (ca.SX.sym("mu"), ca.SX.sym("masses", N_MASSES),
+                             ca.SX.sym("x_contact"))
     lower = _SymbolicHalf(*ca.vertsplit(p_lower))
-    dynamics = _frozen_copy(cfg.dynamics, **dict(zip(MASS_FIELDS.values(),
-                                                     ca.vertsplit(masses))))
+    values = ca.vertsplit(masses)
+    dynamics = symbolic_copy(cfg.dynamics, **dict(zip(MASS_FIELDS.values(), values)))
+    drive = symbolic_copy(cfg.mechanism.drive, **dict(zip(DRIVE_FIELDS,
+                                                         values[len(MASS_FIELDS):])))
     functions = []
     for name in VARIANTS:
         upper = lower if name.endswith("_equal") else _SymbolicHalf(*ca.vertsplit(p_upper))
-        mech = dataclasses.replace(cfg.mechanism, lower=lower, upper=upper, dynamics=dynamics)
+        mech = dataclasses.replace(cfg.mechanism, lower=lower, upper=upper, dynamics=dynamics,
+                                   drive=drive)
         mold = "_mold" in name  # the no-mold variant ignores its x_contact input
-        sym_cfg = _frozen_copy(cfg, mechanism=mech, mu=mu, x_contact=None)
+        sym_cfg = symbolic_copy(cfg, mechanism=mech, mu=mu, x_contact=None)
         outs = plant_outputs(xva[0], xva[1], xva[2], sym_cfg, x_contact if mold else None,
                              slip_state=xva[3])
         functions.append(ca.Function(
@@ -135,7 +136,8 @@ def _roles(variables: Sequence[Var]) -> dict[str, int]:
     vr = {v.name: i for i, v in enumerate(reals)}
     # dims[8 * half + i] = nominal + delta of DIMENSIONS[i] of that half, in the wrapper
     errors = [f"delta_{PAPER_NAMES[half][dim]}" for half in HALVES for dim in DIMENSIONS]
-    known = {"mu", "x_contact", *MASS_FIELDS, "drive_bandwidth", "drive_damping", "x_cmd",
+    known = {"mu", "x_contact", *MASS_FIELDS, *DRIVE_FIELDS, "drive_bandwidth",
+             "drive_damping", "x_cmd",
              *errors, *PlantOutputs._fields}
     unknown = sorted(set(vr) - known)
     missing = sorted(known - set(vr))
@@ -146,7 +148,7 @@ def _roles(variables: Sequence[Var]) -> dict[str, int]:
              "VR_X_CMD": vr["x_cmd"], "VR_MASS0": vr["m_crosshead"],
              "VR_DELTA0": vr[errors[0]], "VR_OUT0": vr[PlantOutputs._fields[0]]}
     # the wrapper indexes masses, errors and outputs from their first reference
-    for first, names in (("VR_MASS0", list(MASS_FIELDS)), ("VR_DELTA0", errors),
+    for first, names in (("VR_MASS0", [*MASS_FIELDS, *DRIVE_FIELDS]), ("VR_DELTA0", errors),
                          ("VR_OUT0", list(PlantOutputs._fields))):
         if [vr[n] - roles[first] for n in names] != list(range(len(names))):
             raise ValueError(f"variables {names} must be consecutive in the table")
@@ -178,6 +180,7 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         f"#define CLAMP_N_REAL {len(reals)}",
         f"#define CLAMP_N_OUT {len(PlantOutputs._fields)}",
         f"#define CLAMP_N_DIMS {len(DIMENSIONS)}",
+        f"#define CLAMP_N_MASSES {N_MASSES}",
         f"#define CLAMP_SLIP_DISTANCE {cfg.asymmetry.slip_distance!r}",
         *(f"#define {k} {v}" for k, v in roles.items()),
         *(f"#define CLAMP_{k.upper()} {v}" for k, v in sizes.items()),

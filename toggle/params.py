@@ -149,9 +149,13 @@ class Mechanism:
 # --- Real-mold clamping data (seed 001, Lin & Hsiao 2003), all SI ---------------------------
 
 
-def _check_positive(obj: Any, optional: tuple[str, ...] = ()) -> None:
-    """Every field of a section must be a finite positive number (optional ones may be None)."""
+def _check_positive(obj: Any, optional: tuple[str, ...] = (), skip: tuple[str, ...] = ()
+                    ) -> None:
+    """Every field of a section but ``skip`` must be a finite positive number (optional ones
+    may be None)."""
     for f in fields(obj):
+        if f.name in skip:
+            continue
         value = getattr(obj, f.name)
         if value is None and f.name in optional:
             continue
@@ -262,6 +266,11 @@ class ClampData:
             )
 
 
+#: Most points of a drive's torque-speed curve (the planner keeps them as parameters of its
+#: compiled problem, padded to this many).
+MAX_CURVE_POINTS = 8
+
+
 @dataclass(frozen=True)
 class Drive:
     """Servo motor, belt and ball screw driving the crosshead (Eqs 31-32).
@@ -269,7 +278,13 @@ class Drive:
     ratio: R, the velocity ratio of driven to driver gear (motor turns x R =
     screw turns); lead: ball-screw lead, m; efficiency: eta of belt and screw;
     pulses_per_rev: encoder pulses per motor turn (N_s); rated_torque (N m) and
-    rated_speed (rad/s) of the motor, when known.
+    rated_speed (rad/s) of the motor, when known. rotor_inertia: J_m of the
+    motor's rotor (with its pulley), kg m^2; screw_inertia: J_s of the ball
+    screw (with its pulley and coupling), kg m^2 (:func:`toggle.drive.reflected_mass`).
+    torque_speed: the motor's usable torque against speed, ((speed rad/s, torque N m),
+    ...) from speed 0, speeds increasing, torques not increasing, interpolated linearly
+    and constant beyond the last point (:func:`toggle.drive.torque_speed_limit`); None:
+    the planner's flat default (:mod:`controllers.limits`).
     """
 
     ratio: float
@@ -278,11 +293,50 @@ class Drive:
     pulses_per_rev: int
     rated_torque: float | None = None
     rated_speed: float | None = None
+    rotor_inertia: float = 0.0
+    screw_inertia: float = 0.0
+    torque_speed: tuple[tuple[float, float], ...] | None = None
 
     def __post_init__(self) -> None:
-        _check_positive(self, optional=("rated_torque", "rated_speed"))
+        _check_positive(self, optional=("rated_torque", "rated_speed"),
+                        skip=("rotor_inertia", "screw_inertia", "torque_speed"))
         if self.efficiency > 1:
             raise ParameterError(f"drive efficiency must be in (0, 1], got {self.efficiency}")
+        for name in ("rotor_inertia", "screw_inertia"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+                    math.isfinite(value) and value >= 0):
+                raise ParameterError(f"{name} must be a finite number >= 0 (kg m^2), "
+                                     f"got {value!r}")
+        if self.torque_speed is not None:
+            object.__setattr__(self, "torque_speed", torque_speed_points(self.torque_speed))
+
+
+def torque_speed_points(points: Any) -> tuple[tuple[float, float], ...]:
+    """A torque-speed curve checked and as a tuple of (speed rad/s, torque N m) pairs: 1 to
+    :data:`MAX_CURVE_POINTS` points, the first at speed 0, speeds increasing, torques
+    positive and not increasing; otherwise :class:`ParameterError` naming the fault."""
+    what = "torque_speed must be a list of [speed rad/s, torque N m] pairs"
+    if not isinstance(points, (list, tuple)) or not 1 <= len(points) <= MAX_CURVE_POINTS:
+        raise ParameterError(f"{what}, 1 to {MAX_CURVE_POINTS} of them, got {points!r}")
+    out = []
+    for point in points:
+        if not (isinstance(point, (list, tuple)) and len(point) == 2 and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in point)):
+            raise ParameterError(f"{what}; {point!r} is not a pair of finite numbers")
+        out.append((float(point[0]), float(point[1])))
+    speeds, torques = zip(*out)
+    if speeds[0] != 0.0:
+        raise ParameterError(f"torque_speed must start at speed 0, got {speeds[0]!r} rad/s")
+    if any(b <= a for a, b in zip(speeds, speeds[1:])):
+        raise ParameterError(f"torque_speed speeds must increase, got {list(speeds)} rad/s")
+    if min(torques) <= 0:
+        raise ParameterError(f"torque_speed torques must be > 0, got {list(torques)} N m")
+    if any(b > a for a, b in zip(torques, torques[1:])):
+        raise ParameterError("torque_speed torques must not rise with speed (a motor's "
+                             f"usable torque falls), got {list(torques)} N m")
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -308,6 +362,16 @@ class Dynamics:
             value = getattr(self, f.name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ParameterError(f"dynamics.{f.name} must be finite and >= 0, got {value!r}")
+
+
+def symbolic_copy(obj: Any, **values: Any) -> Any:
+    """A copy of a frozen dataclass with some fields set to CasADi symbols, its numeric
+    checks skipped: how the native FMU and the planner keep values as inputs or parameters
+    of generated functions."""
+    copy = object.__new__(type(obj))
+    for f in fields(obj):
+        object.__setattr__(copy, f.name, values.get(f.name, getattr(obj, f.name)))
+    return copy
 
 
 def _section(cls: type, table: Any, origin: str, where: str) -> Any:

@@ -192,7 +192,7 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
         mechanical_advantage=ma,
         toggle_angle=theta4,
         asymmetry=terms[1][0] - terms[0][0],
-        motor_torque=motor_torque(force, mech.drive),
+        motor_torque=motor_torque(force, mech.drive, a),
     )
 
 
@@ -295,13 +295,15 @@ def configure(
     x_contact: float | None = None,
     masses: dict[str, float] | None = None,
     errors: dict[str, float] | None = None,
+    drive: dict[str, Any] | None = None,
 ) -> PlantConfig:
     """A plant from a preset (a name, a TOML path or a loaded :class:`Mechanism`), with
     overrides named as the FMU names its parameters.
 
     ``masses`` overrides fields of the preset's [dynamics] (crosshead, links,
     platen, guide_damping) or, for a preset without one, supplies them (crosshead,
-    links and platen at least); ``errors`` adds dimensional errors by seed 000's
+    links and platen at least); ``drive`` overrides fields of its [drive]
+    (rotor_inertia, screw_inertia, ...); ``errors`` adds dimensional errors by seed 000's
     names (for example ``{"r8": 0.5e-3}`` lengthens link 8 of the upper half).
     A contact position at or beyond the toggle means no mold. Every bad value
     raises :class:`ParameterError` naming it.
@@ -314,6 +316,10 @@ def configure(
                                  "masses (crosshead, links, platen)")
         mech = replace(mech, dynamics=replace(mech.dynamics, **masses) if mech.dynamics
                        else Dynamics(**masses))
+    if drive:
+        if mech.drive is None:
+            raise ParameterError(f"preset {mech.name!r} has no [drive] section to override")
+        mech = replace(mech, drive=replace(mech.drive, **drive))
     for h in HALVES:
         try:
             toggle_position(mech.half(h))

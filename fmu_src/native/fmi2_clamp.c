@@ -20,7 +20,7 @@
 #include "clamp_model.h"
 #include "clamp_model_data.h"
 
-#define STATE_VERSION 4u
+#define STATE_VERSION 5u
 #define GRID 4001
 #define N_IN 6
 #define PI 3.14159265358979323846
@@ -34,7 +34,7 @@ typedef struct {
     double r[CLAMP_N_REAL];      /* every Real variable, by value reference */
     double drive[6];             /* x, v, a of the input link; last command, its slope, step */
     double slip[2];              /* last position and slip state of the pin friction */
-    double dims[2 * CLAMP_N_DIMS], mu, masses[4], x_lo, x_hi;
+    double dims[2 * CLAMP_N_DIMS], mu, masses[CLAMP_N_MASSES], x_lo, x_hi;
     uint64_t checksum;           /* FNV-1a of everything before it */
 } State;
 
@@ -178,7 +178,7 @@ static fmi2Status initialise(Instance *c) {
     double tp[2], lo[2], hi[2], y[CLAMP_N_OUT];
     if (!in_ranges(c)) return fmi2Error;
     s->mu = s->r[VR_MU];
-    for (int i = 0; i < 4; i++) s->masses[i] = s->r[VR_MASS0 + i];
+    for (int i = 0; i < CLAMP_N_MASSES; i++) s->masses[i] = s->r[VR_MASS0 + i];
     for (int i = 0; i < 2 * CLAMP_N_DIMS; i++) s->dims[i] = CLAMP_NOMINAL[i] + s->r[VR_DELTA0 + i];
     s->unequal = 0;
     for (int h = 0; h < 2; h++) {

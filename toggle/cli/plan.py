@@ -205,8 +205,12 @@ def run(args: argparse.Namespace) -> int:
     peak = plan.peak_force
     trap, scurve = base["trapezoidal"].peak_force, base["s_curve"].peak_force
     force_limit = min(args.force_limit or np.inf, planner.force_limit)
-    # the baselines are held to the plan's limits: one that breaks them is no comparison
-    feasible = {name: bool(samples.peak_force <= force_limit) for name, samples in base.items()}
+    # the baselines are held to the plan's limits (the input force, the motor's torque-speed
+    # curve): one that breaks them is no comparison
+    drive = cfg.mechanism.drive
+    feasible = {name: bool(samples.peak_force <= force_limit and limits.torque_ratio(
+                    drive, samples.velocity, samples.acceleration, samples.input_force) <= 1.0)
+                for name, samples in base.items()}
     result = {
         "preset": cfg.mechanism.name,
         "mode": "minimum_time" if args.min_time else "fixed_duration",
@@ -236,10 +240,12 @@ def run(args: argparse.Namespace) -> int:
         "reduction_percent": 100.0 * (trap - peak) / trap,
         "s_curve_reduction_percent": 100.0 * (scurve - peak) / scurve,
         "baselines_within_limits": feasible,
-        "peak_motor_torque": float(motor_torque(peak, cfg.mechanism.drive)),
+        "peak_motor_torque": float(np.max(np.abs(motor_torque(
+            plan.samples.input_force, drive, plan.samples.acceleration)))),
         "binding_limits": planner.binding_limits(plan, args.force_limit),
         "limits": {"velocity": limits.velocity, "acceleration": limits.acceleration,
                    "jerk": limits.jerk, "torque": limits.torque,
+                   "torque_speed": [list(point) for point in limits.curve],
                    "input_force": force_limit,
                    "contact_platen_speed": args.contact_speed},
         "solve_time": plan.solve_time,
@@ -263,7 +269,8 @@ def run(args: argparse.Namespace) -> int:
     for name, ok in feasible.items():
         if not ok:
             print(f"the {name.replace('_', '-')} baseline breaks the input-force limit of "
-                  f"{force_limit:.4g} N: its reduction compares with an infeasible stroke")
+                  f"{force_limit:.4g} N or the motor's torque-speed curve: its reduction "
+                  "compares with an infeasible stroke")
     if bound > 0:
         print(f"no stroke of any duration peaks below {bound:.4g} N (lower bound; the plan "
               f"is {result['gap_to_bound_percent']:.2f} % above it)")
@@ -376,7 +383,8 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--j-max", type=positive("jerk in m/s^3", 1e6, 1e-4), default=None,
                    help="jerk limit, m/s^3 (default: the preset's drive)")
     p.add_argument("--torque-max", type=positive("torque in N m", 1e5, 1e-4), default=None,
-                   help="motor torque limit, N m (default: the preset's drive)")
+                   help="motor torque at standstill, N m, scaling the torque-speed curve "
+                        "(default: the preset's drive)")
     errors = p.add_argument_group("dimensional errors, m (named as the FMU's delta_* "
                                   "parameters; seed 000's names)")
     for name in ERRORS:
