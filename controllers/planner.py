@@ -382,11 +382,11 @@ class StrokeProblem:
 
     def __init__(self, cfg: PlantConfig, intervals: int,
                  variants: tuple[PlantConfig, ...] = (), torque: bool = False,
-                 opening: bool = False) -> None:
+                 opening: bool = False, zone: bool = False) -> None:
         if not (isinstance(intervals, int) and intervals >= 4):
             raise ParameterError(f"intervals must be an integer >= 4, got {intervals!r}")
         self.config, self.variants, self.torque = cfg, variants, torque
-        self.opening = opening
+        self.opening, self.zone = opening, zone
         self.plants = (cfg, *variants)
         self.x_open, self.x_final = clamp_stroke(cfg.mechanism)
         lo, hi = cfg.input_range
@@ -403,8 +403,8 @@ class StrokeProblem:
         sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
                  "force_lower": self.n_forces, "contact_speed": len(self.plants), "duration": 1,
                  "mid_velocity": N, "zone_position": 1, "zone_steps": 1,
-                 "zone_speed": (2 * self.nz + 1) * len(self.plants),
-                 "zone_force": (2 * self.nz + 1) * len(self.plants),
+                 "zone_speed": (2 * self.nz + 1) * len(self.plants) if zone else 0,
+                 "zone_force": (2 * self.nz + 1) * len(self.plants) if zone else 0,
                  "torque": self.n_forces if torque else 0}
         starts = np.cumsum([0, *sizes.values()])
         self.rows = {name: slice(int(a), int(b)) for name, a, b in
@@ -521,7 +521,8 @@ class StrokeProblem:
                      + p[_P["w_time"]] * duration
                      + p[_P["w_jerk"]] * ca.dot(h, (io / jerk_bound) ** 2))
         return objective, ca.vertcat(dyn, xi[n1], forces - s, forces + s, contact, duration,
-                                     nu_m, xi[na], th1 - thz, zone_speed, zone_force, torque)
+                                     nu_m, xi[na], th1 - thz,
+                                     *((zone_speed, zone_force) if self.zone else ()), torque)
 
     def _torque_ratio(self, outputs: list[ca.SX], z: ca.SX, p: ca.SX) -> ca.SX:
         """The motor torque (:func:`toggle.drive.drive_torque` of each plant's input force
@@ -571,7 +572,7 @@ class StrokeProblem:
         the jets and the model come compiled from the disk cache where possible."""
         N = self.n1 + self.n2
         key = _problem_key(self.config, N, self.variants, self.opening) + (
-            "\ntorque" if self.torque else "")
+            "\ntorque" if self.torque else "") + ("\nzone" if self.zone else "")
         names = _names(len(self.plants))
         fn = dict(zip(names, compiled("stroke", key, names, self._symbolic)))
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
@@ -626,7 +627,16 @@ class StrokeProblem:
         if self.torque:
             return self
         return _problem_for(self.config, self.n1 + self.n2, self.variants, torque=True,
-                            opening=self.opening)
+                            opening=self.opening, zone=self.zone)
+
+    @functools.cached_property
+    def with_zone(self) -> StrokeProblem:
+        """The same problem with the mold-protection caps' rows (itself if it has them):
+        the plans without caps do without them."""
+        if self.zone:
+            return self
+        return _problem_for(self.config, self.n1 + self.n2, self.variants, torque=self.torque,
+                            opening=self.opening, zone=True)
 
     def input_force(self, x: Any, v: Any, a: Any, cfg: PlantConfig) -> np.ndarray:
         """The input force (N) at the points (x, v, a) of the plant ``cfg`` (its mold, pin
@@ -650,11 +660,12 @@ class StrokeProblem:
 
 @functools.lru_cache(maxsize=8)
 def _problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = (),
-                 torque: bool = False, opening: bool = False) -> StrokeProblem:
+                 torque: bool = False, opening: bool = False, zone: bool = False
+                 ) -> StrokeProblem:
     """A built problem, shared by the planners of every mold height, friction, drive and
     drive limits of one plant (and variants), with or without the torque rows, closing or
     opening."""
-    return StrokeProblem(cfg, intervals, variants, torque, opening)
+    return StrokeProblem(cfg, intervals, variants, torque, opening, zone)
 
 
 class ClampPlanner:
@@ -874,9 +885,11 @@ class ClampPlanner:
             w[k * (N + 1):(k + 1) * (N + 1) - (k == 3)] *= r**power
         w[[4 * N + 3, 4 * N + 4, 4 * N + 6]] /= r
         w[4 * N + 5] *= f_ref / self.f_ref
-        # the torque rows come last: a start from the problem without them has none
+        # the rows of the caps and the torque come last: a start from a sibling problem
+        # (without them, or with others) shares only the rows before them
         lam_g = np.zeros(problem.n_constraints)
-        common = min(lam_g.size, sol["lam_g"].size)
+        common = (lam_g.size if sol["lam_g"].size == lam_g.size
+                  else min(problem.rows["zone_steps"].stop, sol["lam_g"].size))
         lam_g[:common] = sol["lam_g"][:common]
         return {"x0": w, "lam_x0": sol["lam_x"], "lam_g0": lam_g}
 
@@ -899,6 +912,12 @@ class ClampPlanner:
                                           None, torque_factor, imposed)
         return plan, ok
 
+    def _problem(self, torque: bool) -> StrokeProblem:
+        """This planner's problem, with the torque rows or not, with the caps' rows if it
+        has caps."""
+        problem = self.problem.with_torque if torque else self.problem
+        return problem.with_zone if self.capped else problem
+
     def _solve_torque(self, weights: list[float], t_bounds: tuple[float, float],
                       force_limit: float, objective: str, start: Plan | None, warm: bool,
                       guess: np.ndarray | None, torque_factor: float,
@@ -907,12 +926,12 @@ class ClampPlanner:
         planner needed them); where that plan's motor torque at the nodes and midpoints
         exceeds the torque-speed curve, again from it with the rows (and for every later
         plan of this planner)."""
-        problem = self.problem.with_torque if self._torque else self.problem
+        problem = self._problem(self._torque)
         plan, ok = self._solve_on(problem, weights, t_bounds, force_limit, objective, start,
                                   warm, guess, torque_factor, caps)
         if ok and not self._torque and self.node_torque_ratio(plan) > 1.0:
             self._torque = True
-            plan, ok = self._solve_on(self.problem.with_torque, weights, t_bounds,
+            plan, ok = self._solve_on(self._problem(True), weights, t_bounds,
                                       force_limit, objective, plan, True, None, torque_factor,
                                       caps)
         return plan, ok
