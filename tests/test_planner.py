@@ -675,6 +675,7 @@ def test_cli_cycle_and_protection_report(tmp_path, capsys):
     (["--protect-speed", "0"], "--protect-speed"),
     (["--protect-force", "-1"], "--protect-force"),
     (["--cycle", "--trade-off", "2"], "--cycle"),
+    (["--break-speed", "0.005"], "--cycle"),
 ])
 def test_cli_refuses_bad_protection_values_in_one_line(argv, message, capsys):
     try:

@@ -172,6 +172,8 @@ def run(args: argparse.Namespace) -> int:
         check_writable(args.out, "--out")  # before solving, not after
     if args.trade_off and args.cycle:
         raise ParameterError("--cycle plans one cycle: not with --trade-off")
+    if args.break_speed is not None and not args.cycle:
+        raise ParameterError("--break-speed caps the opening stroke: give --cycle too")
     cfg, limits = _plant(args, errors=not args.robust)
     if args.trade_off:
         return _trade_off(args, cfg, limits)
