@@ -478,7 +478,8 @@ def test_best_plan_finds_the_lower_optimum_and_respects_the_bound(chang):
     _, _, planner, single = chang
     bound = planner.lower_bound()
     plan = planner.best(DURATION)
-    assert plan.peak_force <= 14.99 < single.peak_force
+    # (a single cold start may stop at the other family's optimum, near 15.0 N)
+    assert plan.peak_force <= min(14.99, single.peak_force * (1 + 1e-9))
     assert bound <= plan.peak_force <= bound * 1.005
     assert 14.9 < bound  # the quasi-static peak at creep speed is 15.18 N
 
