@@ -473,7 +473,7 @@ def test_minimum_time_under_a_force_limit_met_only_with_inertia_relief(chang, ca
 
 
 def test_best_plan_finds_the_lower_optimum_and_respects_the_bound(chang):
-    """The default-duration peak plan: below 14.99 N (a single cold start stops at a local
+    """The default-duration peak plan: below 14.99 N (a single cold start may stop at a local
     optimum near 15.04 N) and above the reachable-set bound, within 0.5 % of it."""
     _, _, planner, single = chang
     bound = planner.lower_bound()
