@@ -67,7 +67,7 @@ import functools
 import math
 import time
 from dataclasses import astuple, dataclass, field, fields, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -296,6 +296,26 @@ def _jets(name: str, output: ca.SX, z: ca.SX, prm: ca.SX, nodes: int
         f"{name}{k}", "serial", nodes, [1], []) for k, r in enumerate(rows))
 
 
+class Layout(NamedTuple):
+    """Where each scaled variable sits in the decision vector of N intervals: position,
+    velocity and acceleration at the N + 1 nodes, the jerk of each interval, the interval
+    lengths of the two phases (approach, clamping) and the peak's epigraph variable s."""
+
+    position: slice
+    velocity: slice
+    acceleration: slice
+    jerk: slice
+    steps: slice
+    peak: int
+    size: int
+
+    @classmethod
+    def of(cls, N: int) -> Layout:
+        nodes = [slice(k * (N + 1), (k + 1) * (N + 1)) for k in range(3)]
+        return cls(*nodes, slice(3 * N + 3, 4 * N + 3), slice(4 * N + 3, 4 * N + 5),
+                   4 * N + 5, 4 * N + 6)
+
+
 class StrokeProblem:
     """The optimal control problem for one mold-free plant and N, built once; the mold
     height, the pin friction, the masses, the drive, its limits and the contact-speed limit
@@ -336,7 +356,8 @@ class StrokeProblem:
         self.stroke = self.x_final - self.x_open
         N = intervals
         self.n1, self.n2 = N - N // 2, N // 2
-        self.size = 4 * N + 6
+        self.layout = Layout.of(N)
+        self.size = self.layout.size
         # input force at the N + 2 phase nodes and N midpoints, of each plant
         self.n_forces = (2 * N + 2) * len(self.plants)
         sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
@@ -356,9 +377,9 @@ class StrokeProblem:
     def _nodes(self, w: Any, t_ref: Any) -> tuple[Any, ...]:
         """Scaled variables -> (xi, nu, al, jerk, th1, th2, s, nu at the midpoints) and the
         states (3 x 2N+1: the N+1 nodes, then the N interval midpoints)."""
-        n1, N = self.n1, self.n1 + self.n2
-        xi, nu, al = (w[k * (N + 1):(k + 1) * (N + 1)] for k in range(3))
-        io, th1, th2 = w[3 * N + 3:4 * N + 3], w[4 * N + 3], w[4 * N + 4]
+        n1, N, lay = self.n1, self.n1 + self.n2, self.layout
+        xi, nu, al, io = (w[part] for part in lay[:4])
+        th1, th2 = w[lay.steps.start], w[lay.steps.start + 1]
         h = ca.vertcat(ca.repmat(th1 / 2, n1, 1), ca.repmat(th2 / 2, N - n1, 1))
         xi_m = xi[:-1] + h * (nu[:-1] + h * (al[:-1] / 2 + h * io / 6))
         nu_m = nu[:-1] + h * (al[:-1] + h * io / 2)
@@ -367,7 +388,7 @@ class StrokeProblem:
         z = ca.vertcat(self.x_open + S * ca.horzcat(xi.T, xi_m.T),
                        S / t_ref * ca.horzcat(nu.T, nu_m.T),
                        S / t_ref**2 * ca.horzcat(al.T, al_m.T))
-        return xi, nu, al, io, th1, th2, w[4 * N + 5], nu_m, z
+        return xi, nu, al, io, th1, th2, w[lay.peak], nu_m, z
 
     def _spans(self) -> tuple[slice, ...]:
         """The columns of the states (:meth:`_nodes`) of each of :data:`_OUTPUTS`: the
@@ -667,23 +688,26 @@ class ClampPlanner:
 
     def _bounds(self, force_limit: float) -> tuple[np.ndarray, np.ndarray]:
         N, S, t_ref, lim = self.n1 + self.n2, self.stroke, self.t_ref, self.limits
-        lbx, ubx = np.empty(4 * N + 6), np.empty(4 * N + 6)
+        lay = self.problem.layout
+        lbx, ubx = np.empty(lay.size), np.empty(lay.size)
         spans = ((0.0, 1.0),  # stroke limits
                  (0.0, lim.velocity * t_ref / S),  # monotone stroke, top speed
-                 (-lim.acceleration * t_ref**2 / S, lim.acceleration * t_ref**2 / S))
-        for k, (lo, hi) in enumerate(spans):
-            lbx[k * (N + 1):(k + 1) * (N + 1)], ubx[k * (N + 1):(k + 1) * (N + 1)] = lo, hi
-        lbx[3 * N + 3:4 * N + 3], ubx[3 * N + 3:4 * N + 3] = -self.jerk_bound, self.jerk_bound
+                 (-lim.acceleration * t_ref**2 / S, lim.acceleration * t_ref**2 / S),
+                 (-self.jerk_bound, self.jerk_bound))
+        for part, (lo, hi) in zip(lay, spans):
+            lbx[part], ubx[part] = lo, hi
         # no creeping through the clamping below the friction model's smoothing speed
         # (unless the clamping is too short to cross at creep speed and still settle)
         settle = max(2, self.n2 // 10)
         if self.clamping_creeps(settle):
-            lbx[N + 1 + self.n1:2 * N + 1 - settle] = self.creep_speed * t_ref / S
-        for k in (N + 1, 2 * N + 2, 2 * N + 1, 3 * N + 2):  # rest at both ends
-            lbx[k] = ubx[k] = 0.0
-        ubx[0], lbx[N] = 0.0, 1.0  # from the open position to the toggle
-        lbx[4 * N + 3:4 * N + 5], ubx[4 * N + 3:4 * N + 5] = 1e-6, np.inf
-        lbx[4 * N + 5], ubx[4 * N + 5] = 0.0, force_limit / self.f_ref
+            v0 = lay.velocity.start
+            lbx[v0 + self.n1:v0 + N - settle] = self.creep_speed * t_ref / S
+        for part in (lay.velocity, lay.acceleration):  # rest at both ends
+            lbx[part.start] = ubx[part.start] = lbx[part.stop - 1] = ubx[part.stop - 1] = 0.0
+        ubx[lay.position.start] = 0.0  # from the open position
+        lbx[lay.position.stop - 1] = 1.0  # to the toggle
+        lbx[lay.steps], ubx[lay.steps] = 1e-6, np.inf
+        lbx[lay.peak], ubx[lay.peak] = 0.0, force_limit / self.f_ref
         return lbx, ubx
 
     def _constraint_bounds(self, problem: StrokeProblem, t_bounds: tuple[float, float]
@@ -743,14 +767,14 @@ class ClampPlanner:
                    ) -> dict[str, np.ndarray]:
         """A previous solution stretched in time to ``duration`` and rescaled to this
         planner's time and force scales (the warm start on ``problem``)."""
-        N, sol = self.n1 + self.n2, start.solution
+        sol, lay = start.solution, problem.layout
         t_ref, f_ref = sol["scales"]
         r = start.duration / duration * self.t_ref / t_ref
         w = sol["x"].copy()
-        for k, power in enumerate((1, 2, 3), start=1):
-            w[k * (N + 1):(k + 1) * (N + 1) - (k == 3)] *= r**power
-        w[4 * N + 3:4 * N + 5] /= r
-        w[4 * N + 5] *= f_ref / self.f_ref
+        for part, power in ((lay.velocity, 1), (lay.acceleration, 2), (lay.jerk, 3)):
+            w[part] *= r**power
+        w[lay.steps] /= r
+        w[lay.peak] *= f_ref / self.f_ref
         # the torque rows come last: a start from the problem without them has none
         lam_g = np.zeros(problem.n_constraints)
         common = min(lam_g.size, sol["lam_g"].size)
@@ -801,13 +825,15 @@ class ClampPlanner:
 
     def _plan(self, sol: dict[str, np.ndarray], objective: str, elapsed: float, iterations: int,
               warm: bool) -> Plan:
-        N, n1, S, t_ref = self.n1 + self.n2, self.n1, self.stroke, self.t_ref
+        n1, S, t_ref, lay = self.n1, self.stroke, self.t_ref, self.problem.layout
         w = sol["x"]
-        steps = t_ref * np.concatenate([np.full(n1, w[4 * N + 3]), np.full(self.n2, w[4 * N + 4])])
+        h1, h2 = w[lay.steps]
+        steps = t_ref * np.concatenate([np.full(n1, h1), np.full(self.n2, h2)])
         profile = Profile(knots=np.concatenate(([0.0], np.cumsum(steps))),
-                          x=self.x_open + S * w[:N], v=S / t_ref * w[N + 1:2 * N + 1],
-                          a=S / t_ref**2 * w[2 * N + 2:3 * N + 2],
-                          jerk=S / t_ref**3 * w[3 * N + 3:4 * N + 3])
+                          x=self.x_open + S * w[lay.position][:-1],
+                          v=S / t_ref * w[lay.velocity][:-1],
+                          a=S / t_ref**2 * w[lay.acceleration][:-1],
+                          jerk=S / t_ref**3 * w[lay.jerk])
         return Plan(profile, self.config, objective,
                     float(profile.knots[n1]), elapsed, iterations, warm, sol)
 
