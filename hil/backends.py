@@ -35,6 +35,7 @@ from hil.homing import APPROACH_SPEED, START_TOLERANCE
 from hil.samples import Sample, Status, Trajectory, TrajectoryError
 from toggle.kinematics import output_position, stroke_limits
 from toggle.params import load_preset
+from toggle.rig_tables import rig_errors
 
 if TYPE_CHECKING:
     from hil import protocol as p
@@ -55,7 +56,8 @@ class RigSetup:
     """What a run needs to know about the clamp, SI units.
 
     delta_r8: length error of link 8 (upper half), m (simulated back-end and
-    emulator only: on the real rig it is set with the adjustable link);
+    emulator only: on the real rig it is set with the adjustable link; they add it to
+    the rig's as-built errors, :attr:`errors`);
     force_limit: host-side stop on |input force|, N (below the +-500 N cell).
     """
 
@@ -73,6 +75,12 @@ class RigSetup:
             raise ValueError(f"force_limit must be > 0 N, got {self.force_limit!r}")
         if not (math.isfinite(self.period) and self.period > 0):
             raise ValueError(f"period must be > 0 s, got {self.period!r}")
+
+    @property
+    def errors(self) -> dict[str, float]:
+        """The simulated rig's dimensional errors (seed 000's names, m): the preset's rig as
+        built plus delta_r8 (:func:`toggle.rig_tables.rig_errors`, as the rig tables)."""
+        return rig_errors(self.preset, self.delta_r8)
 
     @property
     def stroke(self) -> tuple[float, float]:
@@ -240,7 +248,8 @@ class FmuPlant(Plant):
         if not path.is_file():
             raise RunStoppedError(f"no FMU at {path}")
         self._dir = extract(str(path), tempfile.mkdtemp(prefix="toggle_hil_"))
-        start = {"preset": s.preset, "delta_r8": s.delta_r8, "x_cmd": x_open}
+        start = {"preset": s.preset, "x_cmd": x_open,
+                 **{f"delta_{name}": delta for name, delta in s.errors.items()}}
         if s.mu is not None:
             start["mu"] = s.mu
         if s.x_contact is not None:

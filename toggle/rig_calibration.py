@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -25,8 +25,9 @@ from scipy.optimize import least_squares
 from toggle.asymmetry import AsymmetryError, AsymmetryParams
 from toggle.calibration import PAPER_TABLES
 from toggle.kinematics import AssemblyError
-from toggle.params import Mechanism, PinRadii, tomllib
+from toggle.params import PAPER_NAMES, Mechanism, PinRadii, tomllib
 from toggle.rig_tables import (
+    CHANG2021_AS_BUILT,
     CHANG2021_READING,
     FORCE_STATISTICS,
     RigReading,
@@ -35,14 +36,19 @@ from toggle.rig_tables import (
     rig_statistics,
 )
 
-#: Plant parameters a force fit may choose (AsymmetryParams fields, the pins' radius and
-#: the guides' Coulomb friction) and their transform.
+#: Prefix of a fittable as-built error of the rig: ``as_built_r6`` is the prototype's own
+#: error of link 6 (the upper half's r3, seed 000's names), m.
+AS_BUILT = "as_built_"
+#: Plant parameters a force fit may choose (AsymmetryParams fields, the pins' radius,
+#: the guides' Coulomb friction, the reading's latency, the rig's as-built errors) and
+#: their transform.
 FORCE_FITTABLE = {
     "free_play": "log", "contact_stiffness": "log", "series_stiffness": "log",
     "drive_stiffness": "log", "mu": "log", "rate_strengthening": "log",
     "hersey_transition": "log", "slip_distance": "log", "pin_radius": "log",
     "guide_friction": "log", "takeup_return": "logit",
     "toggle_latency": "log",
+    **{f"{AS_BUILT}{n}": "linear" for names in PAPER_NAMES.values() for n in names.values()},
 }
 MAX_FORCE_FITTED = 6
 STATISTICS = (*FORCE_STATISTICS, "stroke")
@@ -94,8 +100,12 @@ class RigModel:
     params: AsymmetryParams = AsymmetryParams()
     guide_friction: float | None = None  # N; None: the preset's
     reading: RigReading = CHANG2021_READING
+    #: the rig's own dimensional errors besides the set link-8 error (seed 000's names, m)
+    as_built: dict[str, float] = field(default_factory=lambda: dict(CHANG2021_AS_BUILT))
 
     def value(self, name: str) -> float:
+        if name.startswith(AS_BUILT):
+            return self.as_built.get(name.removeprefix(AS_BUILT), 0.0)
         if name == "toggle_latency":
             return self.reading.toggle_latency
         if name == "pin_radius":
@@ -106,6 +116,8 @@ class RigModel:
 
     def with_values(self, values: dict[str, float]) -> RigModel:
         changes = dict(values)
+        as_built = {**self.as_built, **{n.removeprefix(AS_BUILT): changes.pop(n)
+                                        for n in values if n.startswith(AS_BUILT)}}
         guide = changes.pop("guide_friction", self.guide_friction)
         reading = replace(self.reading, toggle_latency=changes.pop(
             "toggle_latency", self.reading.toggle_latency))
@@ -113,10 +125,10 @@ class RigModel:
             r = changes.pop("pin_radius")
             changes["pins"] = PinRadii(B=r, C=r, D=r)
         return replace(self, params=self.params.replace(**changes), guide_friction=guide,
-                       reading=reading)
+                       reading=reading, as_built=as_built)
 
     def statistics(self, nominal: Mechanism, speed: float, delta_r8: float) -> RigStatistics:
-        cfg = rig_config(nominal, delta_r8, self.params, self.guide_friction)
+        cfg = rig_config(nominal, delta_r8, self.params, self.guide_friction, self.as_built)
         return rig_statistics(cfg, speed, self.reading)
 
 

@@ -28,7 +28,7 @@ from scipy.optimize import brentq
 from toggle.asymmetry import AsymmetryParams, slip_state_along
 from toggle.kinematics import stroke_limits
 from toggle.params import Mechanism
-from toggle.plant import PlantConfig, plant_outputs
+from toggle.plant import PlantConfig, plant_outputs, with_errors
 
 #: The encoder's resolution, m: F_TP is read where the platen first comes this close to
 #: its end position (the rig's 1 um optical encoder, hil.mcu_model).
@@ -85,6 +85,27 @@ class RigReading:
 CHANG2021_READING = RigReading(datum=0.4346e-3, lever=0.8371, compliance=1.462e-6)
 
 
+#: The prototype's own dimensional errors (seed 000's names, m) besides the set link-8
+#: error: fitted with the force model on Tables 6-7 (``toggle tables --fit as_built_...``,
+#: docs/unequal-halves.md section 9). Data of the rig, not of the model: the mechanism of
+#: a preset stays as its file writes it, and only the simulated rig (:func:`rig_errors`)
+#: adds these.
+CHANG2021_AS_BUILT: dict[str, float] = {}
+#: As-built errors of the rigs whose tables the project has, by preset name.
+AS_BUILT = {"chang2021": CHANG2021_AS_BUILT}
+
+
+def rig_errors(preset: str, delta_r8: float, as_built: dict[str, float] | None = None
+               ) -> dict[str, float]:
+    """Dimensional errors (seed 000's names, m) of the rig of ``preset`` with link 8 set
+    ``delta_r8`` off: its as-built errors (``as_built``, default the shipped ones of that
+    rig, none for a preset without a rig) plus delta_r8. What the simulated rig applies:
+    :func:`rig_config`, ``hil run``'s FMU, ``hil emulate``."""
+    errors = dict(AS_BUILT.get(preset, {}) if as_built is None else as_built)
+    errors["r8"] = errors.get("r8", 0.0) + delta_r8
+    return errors
+
+
 class RigStatistics(NamedTuple):
     """One condition's statistics, SI (m, N)."""
 
@@ -100,9 +121,11 @@ class RigStatistics(NamedTuple):
 
 
 def rig_config(nominal: Mechanism, delta_r8: float, params: AsymmetryParams,
-               guide_friction: float | None = None) -> PlantConfig:
-    """The plant of the prototype with link 8 off by delta_r8 (m), no mold."""
-    mech = nominal.with_error("upper", "r5", delta_r8) if delta_r8 else nominal
+               guide_friction: float | None = None,
+               as_built: dict[str, float] | None = None) -> PlantConfig:
+    """The plant of the rig of ``nominal`` with link 8 off by delta_r8 (m), no mold:
+    :func:`rig_errors` (its as-built errors, default the shipped ones) applied."""
+    mech, _ = with_errors(nominal, rig_errors(nominal.name, delta_r8, as_built))
     if guide_friction is not None:
         mech = replace(mech, dynamics=replace(mech.dynamics, guide_friction=guide_friction))
     return PlantConfig(mech, asymmetry=params)
