@@ -81,22 +81,22 @@ class AsymmetryParams:
     """
 
     free_play: float = 0.0  # delta0, m: platen tilt in the bushings + pin clearances
-    contact_stiffness: float = 3.734e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
+    contact_stiffness: float = 3.213e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
     series_stiffness: float = 3.3e7  # k_s, N/m: links 4b and 5 of both halves in series (A6061)
-    drive_stiffness: float = 2.988e5  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
+    drive_stiffness: float = 2.554e5  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
     mu: float = 0.3  # pin friction coefficient at the reference slip speed (SUS304 pin in A6061)
     rate_strengthening: float = 0.04342  # a - b of the steady-state rate-and-state law
     reference_slip: float = 1.0e-3  # v_ref, m/s: slip speed at which the coefficient is mu
     slip_velocity: float = 1.0e-6  # v_c, m/s: regularises the log law at rest
     #: h_s, m/(s N): Hersey ratio (pin slip speed / pin load) at which the lubricant film has
     #: lowered the friction to 1/e of boundary friction; inf = boundary lubrication only.
-    hersey_transition: float = 2.183e-6
+    hersey_transition: float = math.inf
     pins: PinRadii = PinRadii(B=4.0e-3, C=4.0e-3, D=4.0e-3)
     #: Internal force above which the halves cannot be forced together elastically (yield), N.
     max_internal_force: float = 2.0e4
     #: lambda, 1: share of the take-up work the clamp gives back (1: the take-up is elastic,
     #: the stateless model of issue 8; 0: it is all lost in friction-locked slip)
-    takeup_return: float = 0.0
+    takeup_return: float = 0.1385
     #: x_s, m: crosshead travel over which the slip state turns after a reversal (Dahl)
     slip_distance: float = 0.1e-3
 
