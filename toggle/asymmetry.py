@@ -75,9 +75,10 @@ class AsymmetryParams:
     """Physical parameters of the forced-agreement model, SI.
 
     Defaults: the desktop clamp of Chang et al. 2021, fitted on every force statistic of
-    Tables 6 and 7 (contact_stiffness, drive_stiffness, rate_strengthening, takeup_return;
-    free_play went to 0, boundary friction) with the rest from its materials and sizes
-    (docs/unequal-halves.md, sections 4 and 9).
+    Tables 6 and 7 with the prototype's as-built error (contact_stiffness,
+    drive_stiffness, takeup_return; rate_strengthening from the earlier fit, at its limit
+    of zero friction at rest; free_play 0 and boundary friction, which the fits chose) and
+    the rest from its materials and sizes (docs/unequal-halves.md, sections 4 and 9).
     """
 
     free_play: float = 0.0  # delta0, m: platen tilt in the bushings + pin clearances

@@ -1,11 +1,12 @@
 """Fit the rig model to any chosen statistics and speeds of seed 000's Tables 3-8.
 
-The force statistics (Tables 6-8) are fitted with a handful of plant parameters
-(:data:`FORCE_FITTABLE`) by weighted least squares in transformed coordinates (log for
-positive values, logit for the returned take-up share); the stroke (Tables 3-5) with the
-two parameters of the encoder reading (:class:`toggle.rig_tables.RigReading`), which
-no force parameter touches, by linear least squares. Each residual is measured in the
-acceptance scale of the comparison, max(printed 3 sigma, 25 % of the mean); the
+The force statistics (Tables 6-8) are fitted with a handful of plant parameters and
+as-built errors of the rig (:data:`FORCE_FITTABLE`) by weighted least squares in
+transformed coordinates (log for positive values, logit for the returned take-up share,
+linear for the signed errors and the latency), from one or several starts (the lowest
+cost is kept); the stroke (Tables 3-5) with the three parameters of the encoder reading
+(:class:`toggle.rig_tables.RigReading`), which no force statistic depends on, by linear
+least squares. Each residual is measured in units of the printed 3 sigma; the
 parameter uncertainty is the Gauss-Newton covariance (J^T J)^-1 scaled by the residual
 variance (the model's misfit, not the scatter of the data, dominates). Rows are
 reported with their residual in units of the printed 3 sigma.
@@ -47,8 +48,8 @@ FORCE_FITTABLE = {
     "drive_stiffness": "log", "mu": "log", "rate_strengthening": "log",
     "hersey_transition": "log", "slip_distance": "log", "pin_radius": "log",
     "guide_friction": "log", "takeup_return": "logit",
-    "toggle_latency": "log",
-    **{f"{AS_BUILT}{n}": "linear" for names in PAPER_NAMES.values() for n in names.values()},
+    "toggle_latency": "time",
+    **{f"{AS_BUILT}{n}": "length" for names in PAPER_NAMES.values() for n in names.values()},
 }
 MAX_FORCE_FITTED = 6
 STATISTICS = (*FORCE_STATISTICS, "stroke")
@@ -150,25 +151,27 @@ class Fit(NamedTuple):
     cost: float  # mean squared residual (units of the printed 3 sigma)
 
 
-#: Scale of the linear (signed length) coordinates, m.
-_LINEAR = 1e-4
+#: Scales of the linear coordinates: a signed length (m), a time that may be 0 (s).
+_LINEAR = {"length": 1e-4, "time": 0.1}
 
 
 def _forward(kind: str, value: float) -> float:
-    if kind == "linear":
-        return value / _LINEAR
+    if kind in _LINEAR:
+        return value / _LINEAR[kind]
     return math.log(value) if kind == "log" else math.log(value / (1 - value))
 
 
 def _inverse(kind: str, z: float) -> float:
-    if kind == "linear":
-        return z * _LINEAR
+    if kind in _LINEAR:
+        return z * _LINEAR[kind]
     return math.exp(z) if kind == "log" else 1 / (1 + math.exp(-z))
 
 
 def _slope(kind: str, value: float) -> float:
     """d value / d z of the transform at value."""
-    return {"log": value, "logit": value * (1 - value), "linear": _LINEAR}[kind]
+    if kind in _LINEAR:
+        return _LINEAR[kind]
+    return value if kind == "log" else value * (1 - value)
 
 
 def _weights(tables: PaperTables, stat: str) -> np.ndarray:
@@ -178,10 +181,14 @@ def _weights(tables: PaperTables, stat: str) -> np.ndarray:
 def calibrate_rig(
     tables: PaperTables, nominal: Mechanism, speeds: Sequence[float],
     fit: Sequence[str], statistics: Sequence[str] = STATISTICS,
-    start: RigModel | None = None,
+    start: RigModel | None = None, starts: Sequence[dict[str, float]] = (),
 ) -> Fit:
     """Fit ``fit`` (at most :data:`MAX_FORCE_FITTED`) on the rows at ``speeds`` (m/s) and
-    the chosen ``statistics``; the stroke reading is fitted when "stroke" is among them."""
+    the chosen ``statistics``; the stroke reading is fitted when "stroke" is among them.
+
+    The fit starts from ``start`` (default the shipped model) and from each of ``starts``
+    (values of fitted parameters put into ``start``); the result of least cost is kept.
+    """
     start = start or RigModel()
     fit = tuple(fit)
     unknown = [n for n in fit if n not in FORCE_FITTABLE]
@@ -221,8 +228,11 @@ def calibrate_rig(
     errors: dict[str, float] = {}
     model, cost = start, 0.0
     if forces:
-        z0 = np.array([_forward(k, start.value(n)) for n, k in zip(fit, kinds)])
-        result = least_squares(residuals, z0, diff_step=1e-4)
+        models = [start, *(start.with_values(values) for values in starts)]
+        result = min((least_squares(residuals, np.array([_forward(k, m.value(n))
+                                                         for n, k in zip(fit, kinds)]),
+                                    diff_step=1e-4) for m in models),
+                     key=lambda r: r.cost)
         model = model_at(result.x)
         dof = max(result.fun.size - len(fit), 1)
         cost = float(np.mean(result.fun**2))

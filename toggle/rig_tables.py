@@ -33,9 +33,10 @@ from toggle.plant import PlantConfig, plant_outputs, with_errors
 #: The encoder's resolution, m: F_TP is read where the platen first comes this close to
 #: its end position (the rig's 1 um optical encoder, hil.mcu_model).
 TOGGLE_BAND = 1e-6
-#: How long before the encoder reached the toggle the prototype's rig sampled F_TP, s:
-#: fitted (``toggle tables``) on Tables 6-7, docs/unequal-halves.md section 9. The HIL
-#: run summaries read F_TP the same way.
+#: How long before the encoder reached the toggle the prototype's rig sampled F_TP, s
+#: (fittable, ``toggle tables --fit toggle_latency``): 0, since with the prototype's
+#: as-built error a latency no longer improves the fit of Tables 6-7 (0.07 +- 0.21 s),
+#: docs/unequal-halves.md section 9.4. The HIL run summaries read F_TP the same way.
 F_TP_LATENCY = 0.0
 #: Points per stroke of the quasi-static evaluation (RMS converged to 0.1 %).
 POINTS = 801
@@ -86,10 +87,12 @@ CHANG2021_READING = RigReading(datum=0.4351e-3, lever=2.130, compliance=2.003e-6
 
 
 #: The prototype's own dimensional errors (seed 000's names, m) besides the set link-8
-#: error: fitted with the force model on Tables 6-7 (``toggle tables --fit as_built_...``,
-#: docs/unequal-halves.md section 9). Data of the rig, not of the model: the mechanism of
-#: a preset stays as its file writes it, and only the simulated rig (:func:`rig_errors`)
-#: adds these.
+#: error: the height of the upper half's link-7 pivot (r1U), whose mismatch vanishes at
+#: both ends of the stroke, fitted on Tables 6-7 (``toggle tables --fit as_built_r1U``:
+#: 1.58 +- 0.31 mm) and held at 1.2 mm, below the 1.22-1.25 mm beyond which the upper
+#: half has no toggle (docs/unequal-halves.md section 9.4). Data of the rig, not of the
+#: model: a preset's mechanism stays as its file writes it (equal halves add nothing),
+#: and only the simulated rig (:func:`rig_errors`) adds these.
 CHANG2021_AS_BUILT: dict[str, float] = {"r1U": 1.2e-3}
 #: As-built errors of the rigs whose tables the project has, by preset name.
 AS_BUILT = {"chang2021": CHANG2021_AS_BUILT}
