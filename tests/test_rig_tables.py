@@ -176,13 +176,15 @@ def test_measured_stroke_from_the_reading_model(shipped):
 
 def test_calibration_recovers_known_parameters_with_their_uncertainty(tables):
     """Synthetic tables from a known model (an as-built error and a stiffness off the
-    shipped ones): fitting both on one speed from the shipped values recovers them, with
-    finite reported errors."""
+    shipped ones): fitting both on one speed from the shipped values and from a far start
+    (the least cost kept) recovers them, with finite reported errors."""
     truth = RigModel().with_values({"as_built_r1U": 1.0e-3, "drive_stiffness": 2.0e5})
     synthetic = simulate_tables(tables, NOMINAL, truth)
     data = type(tables)(tables.speeds, tables.errors, synthetic, tables.three_sigma)
     fit = calibrate_rig(data, NOMINAL, [15e-3], ["as_built_r1U", "drive_stiffness"],
-                        statistics=["force_forward_max", "force_forward_rms", "force_toggle"])
+                        statistics=["force_forward_max", "force_forward_rms", "force_toggle"],
+                        starts=[{"as_built_r1U": 0.3e-3, "drive_stiffness": 1e6}])
+    assert fit.cost < 1e-12
     assert fit.values["as_built_r1U"] == pytest.approx(1.0e-3, rel=1e-3)
     assert fit.values["drive_stiffness"] == pytest.approx(2.0e5, rel=1e-3)
     assert all(math.isfinite(e) for e in fit.std_error.values())
