@@ -267,6 +267,13 @@ class FmuPlant(Plant):
         self._zero = self._slave.getReal([self._out[0]])[0]
         self._x, self._time = x_open, 0.0
 
+    def describe(self) -> dict[str, object]:
+        """The simulated rig also records its dimensional errors (as built plus delta_r8)."""
+        info = super().describe()
+        if self.setup is not None:
+            info["dimensional_errors_m"] = self.setup.errors
+        return info
+
     def _step(self, x: float, h: float) -> tuple[float, float]:
         """Command ``x`` (m) for one step of ``h`` s; (platen from its zero m, force N)."""
         slave = self._slave

@@ -230,7 +230,8 @@ def test_tables_cli_json_and_figures(tmp_path, capsys):
 
 def test_hil_run_at_0_75_mm_stays_under_the_force_limit_and_matches_table8(tmp_path, tables):
     """``hil run --delta-r8 0.75e-3 --speed 25e-3 --cycles 2`` with the default 400 N limit
-    completes; its F_TP (read as the rig read it) and F_F(max) are within 25 % of Table 8."""
+    completes with the rig's as-built error recorded; its F_TP (read as the rig read it) and
+    F_F(max) are within 25 % of Table 8."""
     from hil.cli import main as hil_main
 
     out = tmp_path / "run"
@@ -238,6 +239,8 @@ def test_hil_run_at_0_75_mm_stays_under_the_force_limit_and_matches_table8(tmp_p
                      "--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["cycles_complete"] == 2 and not summary["aborted"]
+    meta = json.loads((out / "meta.json").read_text())  # the rig's errors: as built + dr8
+    assert meta["plant"]["dimensional_errors_m"] == rig_errors("chang2021", 0.75e-3)
     i, j = tables.speed_index(25e-3), 3
     for key in ("force_toggle", "force_forward_max"):
         measured = tables.mean[key][i, j]
