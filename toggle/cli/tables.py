@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json({
             "fitted": fit.values if fit else {}, "std_error": fit.std_error if fit else {},
-            "reading": model.reading.__dict__,
+            "reading": model.reading.__dict__, "as_built": model.as_built,
             "reading_std_error": fit.stroke_std_error if fit else {},
             "fit_speeds": sorted(fitted_speeds),
             "rows": [{**r._asdict(), "in_three_sigma": r.in_sigma, "holds": r.holds()}
@@ -80,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
               f"{r.measured * scale:9.3f} +-{r.three_sigma * scale:7.3f} "
               f"{r.simulated * scale:10.3f} {r.in_sigma:+7.1f} {100 * r.relative:+7.1f}  "
               f"{role:10} {'holds' if r.holds() else 'MISSES'}")
+    print("as-built errors of the rig (m): "
+          + ", ".join(f"{n} = {v:.4g}" for n, v in model.as_built.items()))
     held = sum(r.holds() for r in rows)
     print(f"{held} of {len(rows)} rows hold (units: mm for S, N for forces)")
     return 0
