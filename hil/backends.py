@@ -57,7 +57,7 @@ class RigSetup:
 
     delta_r8: length error of link 8 (upper half), m (simulated back-end and
     emulator only: on the real rig it is set with the adjustable link; they add it to
-    the rig's as-built errors, :attr:`errors`);
+    the rig's as-built errors, :attr:`errors`, unless as_built is False);
     force_limit: host-side stop on |input force|, N (below the +-500 N cell).
     """
 
@@ -67,6 +67,7 @@ class RigSetup:
     x_contact: float | None = None
     force_limit: float = 400.0
     period: float = 1e-3
+    as_built: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.delta_r8) and abs(self.delta_r8) < 5e-3):
@@ -79,8 +80,9 @@ class RigSetup:
     @property
     def errors(self) -> dict[str, float]:
         """The simulated rig's dimensional errors (seed 000's names, m): the preset's rig as
-        built plus delta_r8 (:func:`toggle.rig_tables.rig_errors`, as the rig tables)."""
-        return rig_errors(self.preset, self.delta_r8)
+        built (unless ``as_built`` is False) plus delta_r8 (:func:`toggle.rig_tables.rig_errors`,
+        as the rig tables)."""
+        return rig_errors(self.preset, self.delta_r8, None if self.as_built else {})
 
     @property
     def stroke(self) -> tuple[float, float]:
