@@ -180,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
 def _run(s: RunSettings, guard: SignalGuard) -> int:
     trajectory, source = _trajectory(s, guard)
     setup = RigSetup(preset=s.preset, delta_r8=s.delta_r8, mu=s.mu, x_contact=s.x_contact,
-                     force_limit=s.force_limit)
+                     force_limit=s.force_limit, as_built=s.as_built)
     plant = _backend(s)
     plant.configure(setup)
     plant.check(trajectory)
@@ -262,6 +262,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use the real rig (or an emulator) on --port instead of the FMU")
     p.add_argument("--port", default=None, help="serial URL of the rig: /dev/ttyACM0, a pty, "
                                                 "socket://host:port (needs --real)")
+    p.add_argument("--no-as-built", action="store_const", const=False, dest="as_built",
+                   default=None, help="simulate the model's clamp, without the prototype's "
+                                      "as-built errors (for example to replay a plan on the "
+                                      "clamp it was planned for)")
     p.add_argument("--preset", default=None,
                    help="clamp preset with [dynamics] masses: chang2021, lin2003_sm55 or a TOML "
                         "file (li_micro has no masses, dong2022 is a press; default chang2021)")

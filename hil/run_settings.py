@@ -26,7 +26,7 @@ from toggle.params import ParameterError, load_preset, tomllib
 RUN_DEFAULTS: dict[str, Any] = {
     "backend": "fmu", "port": None, "preset": "chang2021", "profile": None, "cycles": 3,
     "speed": None, "delta_r8": 0.0, "mu": None, "x_contact": None, "force_limit": 400.0,
-    "out": None, "watchdog_ms": None, "max_duration": 3600.0, "fmu": None,
+    "out": None, "watchdog_ms": None, "max_duration": 3600.0, "fmu": None, "as_built": True,
 }
 #: The load cell's range, N: a force limit above it could never trip.
 LOAD_CELL_RANGE = 500.0
@@ -37,6 +37,7 @@ PROFILE_KEYS = ("preset", "x_contact", "mu", "delta_r8")
 
 _TEXT = ("backend", "port", "preset", "profile", "out", "fmu")
 _INTEGER = ("cycles",)
+_BOOLEAN = ("as_built",)
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,8 @@ class RunSettings:
     watchdog_ms: float | None
     max_duration: float
     fmu: Path | None
+    #: the simulated rig carries the prototype's as-built errors (toggle.rig_tables)
+    as_built: bool
     json: bool = False
     quiet: bool = False
     profile_sha256: str | None = None
@@ -108,6 +111,8 @@ def read_config(path: Path) -> dict[str, Any]:
             ok = isinstance(value, str)
         elif key in _INTEGER:
             ok = isinstance(value, int) and not isinstance(value, bool)
+        elif key in _BOOLEAN:
+            ok = isinstance(value, bool)
         else:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         if not ok:
