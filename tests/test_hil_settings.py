@@ -168,6 +168,30 @@ def test_a_replayed_plan_reproduces_the_planners_peak(tmp_path, capsys) -> None:
     assert meta["settings"]["x_contact"] == pytest.approx(plan["x_contact"], rel=1e-9)
 
 
+def test_the_default_job_plans_for_the_rig_as_built(tmp_path) -> None:
+    """The default job plans for the clamp it drives (the prototype as built: its as-built
+    error plus delta_r8): the run peaks where its plan does, well below the nominal plan
+    replayed on the same rig (50.8 N against 69.9 N on chang2021)."""
+    from controllers.limits import drive_limits
+    from controllers.planner import default_duration, plan_config, planner_for
+    from controllers.profiles import predict
+    from toggle.rig_tables import rig_errors
+
+    out = tmp_path / "run"
+    assert main(["run", "--cycles", "1", "--out", str(out), "--quiet"]) == 0
+    meta = json.loads((out / "meta.json").read_text())
+    assert "delta_r1U" in meta["profile"]
+    rig = plan_config("chang2021", errors=rig_errors("chang2021", 0.0))
+    planner = planner_for(rig, drive_limits(rig.mechanism))
+    plan = planner.best(default_duration(planner))
+    data = read_samples(out / "samples.csv")
+    forward = data.force[data.t <= plan.duration + 1e-9]
+    assert forward.max() == pytest.approx(planner.worst_peak(plan), rel=0.01)
+    nominal = plan_config("chang2021")
+    plain = planner_for(nominal, drive_limits(nominal.mechanism)).best(plan.duration)
+    assert forward.max() < 0.85 * predict(plain.profile, rig).peak_force
+
+
 def test_either_fmu_gives_the_same_run(tmp_path) -> None:
     """The pythonfmu FMU (default, or given) and the native FMU: identical summaries."""
     from toggle.native_fmu import build_native_fmu
