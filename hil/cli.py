@@ -17,13 +17,6 @@ from pathlib import Path
 
 from hil import cli_rig, cli_rsm, experiment
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
-from hil.cli_args import (
-    add_version,
-    join_negative_numbers,
-    path,
-    quiet_broken_pipe,
-    use_help_formatter,
-)
 from hil.experiment import CycleCounter, profile_cycles, reciprocating_trajectory
 from hil.interrupts import Interrupted, SignalGuard
 from hil.recording import RecordingError, RunMeta, RunRecorder
@@ -35,6 +28,13 @@ from hil.run_settings import (
     resolve_settings,
 )
 from hil.samples import Trajectory, TrajectoryError
+from toggle.cli.args import (
+    add_version,
+    join_negative_numbers,
+    path,
+    quiet_broken_pipe,
+    use_help_formatter,
+)
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset
 

@@ -18,7 +18,7 @@ from typing import Any
 
 from controllers.profiles import read_profile_settings
 from hil.backends import MAX_SPEED
-from hil.cli_args import check_writable_dir
+from toggle.cli.args import check_writable_dir
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset, tomllib
 from toggle.rig_tables import rig_errors

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import argparse
 
-from hil.cli_args import check_writable_dir, path
+from toggle.cli.args import check_writable_dir, path
 from toggle.cli.common import (
     MM,
     SPEED,
