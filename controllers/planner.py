@@ -73,7 +73,7 @@ import functools
 import math
 import time
 from dataclasses import astuple, dataclass, field, fields, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -347,6 +347,28 @@ def _jets(name: str, output: ca.SX, z: ca.SX, prm: ca.SX, nodes: int
         f"{name}{k}", "serial", nodes, [1], []) for k, r in enumerate(rows))
 
 
+class Layout(NamedTuple):
+    """Where each scaled variable sits in the decision vector of N intervals: position,
+    velocity and acceleration at the N + 1 nodes, the jerk of each interval, the interval
+    lengths of the approach and the clamping, the peak's epigraph variable s, and the
+    interval length of the mold-protection zone (:meth:`StrokeProblem.steps`)."""
+
+    position: slice
+    velocity: slice
+    acceleration: slice
+    jerk: slice
+    steps: slice
+    peak: int
+    zone_step: int
+    size: int
+
+    @classmethod
+    def of(cls, N: int) -> Layout:
+        nodes = [slice(k * (N + 1), (k + 1) * (N + 1)) for k in range(3)]
+        return cls(*nodes, slice(3 * N + 3, 4 * N + 3), slice(4 * N + 3, 4 * N + 5),
+                   4 * N + 5, 4 * N + 6, 4 * N + 7)
+
+
 class StrokeProblem:
     """The optimal control problem for one mold-free plant and N, built once; the mold
     height, the pin friction, the masses, the drive, its limits and the contact-speed limit
@@ -397,7 +419,8 @@ class StrokeProblem:
         self.n1, self.n2 = N - N // 2, N // 2
         self.nz = max(1, self.n1 // 4)  # intervals in the mold-protection zone
         self.na = self.n1 - self.nz
-        self.size = 4 * N + 7
+        self.layout = Layout.of(N)
+        self.size = self.layout.size
         # input force at the N + 2 phase nodes and N midpoints, of each plant
         self.n_forces = (2 * N + 2) * len(self.plants)
         sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
@@ -420,16 +443,17 @@ class StrokeProblem:
     def steps(self, w: Any) -> Any:
         """The interval lengths (scaled) of the three phases: approach, protection zone,
         clamp-up."""
-        N = self.n1 + self.n2
-        return ca.vertcat(ca.repmat(w[4 * N + 3], self.na, 1), ca.repmat(w[4 * N + 6], self.nz, 1),
-                          ca.repmat(w[4 * N + 4], self.n2, 1))
+        lay = self.layout
+        return ca.vertcat(ca.repmat(w[lay.steps.start], self.na, 1),
+                          ca.repmat(w[lay.zone_step], self.nz, 1),
+                          ca.repmat(w[lay.steps.start + 1], self.n2, 1))
 
     def _nodes(self, w: Any, t_ref: Any) -> tuple[Any, ...]:
         """Scaled variables -> (xi, nu, al, jerk, th1, th2, s, nu at the midpoints) and the
         states (3 x 2N+1: the N+1 nodes, then the N interval midpoints)."""
-        N = self.n1 + self.n2
-        xi, nu, al = (w[k * (N + 1):(k + 1) * (N + 1)] for k in range(3))
-        io, th1, th2 = w[3 * N + 3:4 * N + 3], w[4 * N + 3], w[4 * N + 4]
+        lay = self.layout
+        xi, nu, al, io = (w[part] for part in lay[:4])
+        th1, th2 = w[lay.steps.start], w[lay.steps.start + 1]
         h = self.steps(w) / 2
         xi_m = xi[:-1] + h * (nu[:-1] + h * (al[:-1] / 2 + h * io / 6))
         nu_m = nu[:-1] + h * (al[:-1] + h * io / 2)
@@ -438,7 +462,7 @@ class StrokeProblem:
         z = ca.vertcat(self.x_open + S * ca.horzcat(xi.T, xi_m.T),
                        S / t_ref * ca.horzcat(nu.T, nu_m.T),
                        S / t_ref**2 * ca.horzcat(al.T, al_m.T))
-        return xi, nu, al, io, th1, th2, w[4 * N + 5], nu_m, z
+        return xi, nu, al, io, th1, th2, w[lay.peak], nu_m, z
 
     def _spans(self) -> tuple[slice, ...]:
         """The columns of the states (:meth:`_nodes`) of each of :data:`_OUTPUTS`: the
@@ -481,7 +505,7 @@ class StrokeProblem:
         outputs' nodes :meth:`_spans`)."""
         n1, na, t_ref = self.n1, self.na, p[_P["t_ref"]]
         xi, nu, al, io, th1, th2, s, nu_m, z = self._nodes(w, t_ref)
-        thz = w[-1]
+        thz = w[self.layout.zone_step]
         dz = z - self._nodes(w0, t_ref)[-1]
         outputs, col = [], 0
         for nodes in self._spans() * len(self.plants):
@@ -775,24 +799,27 @@ class ClampPlanner:
 
     def _bounds(self, force_limit: float) -> tuple[np.ndarray, np.ndarray]:
         N, S, t_ref, lim = self.n1 + self.n2, self.stroke, self.t_ref, self.limits
-        lbx, ubx = np.empty(4 * N + 7), np.empty(4 * N + 7)
+        lay = self.problem.layout
+        lbx, ubx = np.empty(lay.size), np.empty(lay.size)
         spans = ((0.0, 1.0),  # stroke limits
                  (0.0, lim.velocity * t_ref / S),  # monotone stroke, top speed
-                 (-lim.acceleration * t_ref**2 / S, lim.acceleration * t_ref**2 / S))
-        for k, (lo, hi) in enumerate(spans):
-            lbx[k * (N + 1):(k + 1) * (N + 1)], ubx[k * (N + 1):(k + 1) * (N + 1)] = lo, hi
-        lbx[3 * N + 3:4 * N + 3], ubx[3 * N + 3:4 * N + 3] = -self.jerk_bound, self.jerk_bound
+                 (-lim.acceleration * t_ref**2 / S, lim.acceleration * t_ref**2 / S),
+                 (-self.jerk_bound, self.jerk_bound))
+        for part, (lo, hi) in zip(lay, spans):
+            lbx[part], ubx[part] = lo, hi
         # no creeping through the clamping below the friction model's smoothing speed
         # (unless the clamping is too short to cross at creep speed and still settle)
         settle = max(2, self.n2 // 10)
         if self.clamping_creeps(settle):
-            lbx[N + 1 + self.n1:2 * N + 1 - settle] = self.creep_speed * t_ref / S
-        for k in (N + 1, 2 * N + 2, 2 * N + 1, 3 * N + 2):  # rest at both ends
-            lbx[k] = ubx[k] = 0.0
-        ubx[0], lbx[N] = 0.0, 1.0  # from the open position to the toggle
-        lbx[4 * N + 3:4 * N + 5], ubx[4 * N + 3:4 * N + 5] = 1e-6, np.inf
-        lbx[4 * N + 5], ubx[4 * N + 5] = 0.0, force_limit / self.f_ref
-        lbx[4 * N + 6], ubx[4 * N + 6] = 1e-6, np.inf
+            v0 = lay.velocity.start
+            lbx[v0 + self.n1:v0 + N - settle] = self.creep_speed * t_ref / S
+        for part in (lay.velocity, lay.acceleration):  # rest at both ends
+            lbx[part.start] = ubx[part.start] = lbx[part.stop - 1] = ubx[part.stop - 1] = 0.0
+        ubx[lay.position.start] = 0.0  # from the open position
+        lbx[lay.position.stop - 1] = 1.0  # to the toggle
+        lbx[lay.steps], ubx[lay.steps] = 1e-6, np.inf
+        lbx[lay.peak], ubx[lay.peak] = 0.0, force_limit / self.f_ref
+        lbx[lay.zone_step], ubx[lay.zone_step] = 1e-6, np.inf
         return lbx, ubx
 
     def _constraint_bounds(self, problem: StrokeProblem, t_bounds: tuple[float, float]
@@ -877,14 +904,15 @@ class ClampPlanner:
                    ) -> dict[str, np.ndarray]:
         """A previous solution stretched in time to ``duration`` and rescaled to this
         planner's time and force scales (the warm start on ``problem``)."""
-        N, sol = self.n1 + self.n2, start.solution
+        sol, lay = start.solution, problem.layout
         t_ref, f_ref = sol["scales"]
         r = start.duration / duration * self.t_ref / t_ref
         w = sol["x"].copy()
-        for k, power in enumerate((1, 2, 3), start=1):
-            w[k * (N + 1):(k + 1) * (N + 1) - (k == 3)] *= r**power
-        w[[4 * N + 3, 4 * N + 4, 4 * N + 6]] /= r
-        w[4 * N + 5] *= f_ref / self.f_ref
+        for part, power in ((lay.velocity, 1), (lay.acceleration, 2), (lay.jerk, 3)):
+            w[part] *= r**power
+        w[lay.steps] /= r
+        w[lay.zone_step] /= r
+        w[lay.peak] *= f_ref / self.f_ref
         # the rows of the caps and the torque come last: a start from a sibling problem
         # (without them, or with others) shares only the rows before them
         lam_g = np.zeros(problem.n_constraints)
@@ -965,13 +993,14 @@ class ClampPlanner:
 
     def _plan(self, sol: dict[str, np.ndarray], objective: str, elapsed: float, iterations: int,
               warm: bool) -> Plan:
-        n1, S, t_ref = self.n1, self.stroke, self.t_ref
-        N, w = n1 + self.n2, sol["x"]
+        n1, S, t_ref, lay = self.n1, self.stroke, self.t_ref, self.problem.layout
+        w = sol["x"]
         steps = t_ref * np.asarray(self.problem.steps(ca.DM(w))).ravel()
         profile = Profile(knots=np.concatenate(([0.0], np.cumsum(steps))),
-                          x=self.x_open + S * w[:N], v=S / t_ref * w[N + 1:2 * N + 1],
-                          a=S / t_ref**2 * w[2 * N + 2:3 * N + 2],
-                          jerk=S / t_ref**3 * w[3 * N + 3:4 * N + 3])
+                          x=self.x_open + S * w[lay.position][:-1],
+                          v=S / t_ref * w[lay.velocity][:-1],
+                          a=S / t_ref**2 * w[lay.acceleration][:-1],
+                          jerk=S / t_ref**3 * w[lay.jerk])
         t_contact = float(profile.knots[n1])
         if self.problem.opening:  # solved backwards in time
             profile = profile.reversed()

@@ -35,6 +35,7 @@ from hil.homing import APPROACH_SPEED, START_TOLERANCE
 from hil.samples import Sample, Status, Trajectory, TrajectoryError
 from toggle.kinematics import output_position, stroke_limits
 from toggle.params import load_preset
+from toggle.rig_tables import rig_errors
 
 if TYPE_CHECKING:
     from hil import protocol as p
@@ -55,7 +56,8 @@ class RigSetup:
     """What a run needs to know about the clamp, SI units.
 
     delta_r8: length error of link 8 (upper half), m (simulated back-end and
-    emulator only: on the real rig it is set with the adjustable link);
+    emulator only: on the real rig it is set with the adjustable link; they add it to
+    the rig's as-built errors, :attr:`errors`, unless as_built is False);
     force_limit: host-side stop on |input force|, N (below the +-500 N cell).
     """
 
@@ -65,6 +67,7 @@ class RigSetup:
     x_contact: float | None = None
     force_limit: float = 400.0
     period: float = 1e-3
+    as_built: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.delta_r8) and abs(self.delta_r8) < 5e-3):
@@ -73,6 +76,13 @@ class RigSetup:
             raise ValueError(f"force_limit must be > 0 N, got {self.force_limit!r}")
         if not (math.isfinite(self.period) and self.period > 0):
             raise ValueError(f"period must be > 0 s, got {self.period!r}")
+
+    @property
+    def errors(self) -> dict[str, float]:
+        """The simulated rig's dimensional errors (seed 000's names, m): the preset's rig as
+        built (unless ``as_built`` is False) plus delta_r8 (:func:`toggle.rig_tables.rig_errors`,
+        as the rig tables)."""
+        return rig_errors(self.preset, self.delta_r8, None if self.as_built else {})
 
     @property
     def stroke(self) -> tuple[float, float]:
@@ -240,7 +250,8 @@ class FmuPlant(Plant):
         if not path.is_file():
             raise RunStoppedError(f"no FMU at {path}")
         self._dir = extract(str(path), tempfile.mkdtemp(prefix="toggle_hil_"))
-        start = {"preset": s.preset, "delta_r8": s.delta_r8, "x_cmd": x_open}
+        start = {"preset": s.preset, "x_cmd": x_open,
+                 **{f"delta_{name}": delta for name, delta in s.errors.items()}}
         if s.mu is not None:
             start["mu"] = s.mu
         if s.x_contact is not None:
@@ -257,6 +268,13 @@ class FmuPlant(Plant):
         self._out = [self._refs[n] for n in ("platen_position", "input_force")]
         self._zero = self._slave.getReal([self._out[0]])[0]
         self._x, self._time = x_open, 0.0
+
+    def describe(self) -> dict[str, object]:
+        """The simulated rig also records its dimensional errors (as built plus delta_r8)."""
+        info = super().describe()
+        if self.setup is not None:
+            info["dimensional_errors_m"] = self.setup.errors
+        return info
 
     def _step(self, x: float, h: float) -> tuple[float, float]:
         """Command ``x`` (m) for one step of ``h`` s; (platen from its zero m, force N)."""

@@ -17,13 +17,6 @@ from pathlib import Path
 
 from hil import cli_rig, cli_rsm, experiment
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
-from hil.cli_args import (
-    add_version,
-    join_negative_numbers,
-    path,
-    quiet_broken_pipe,
-    use_help_formatter,
-)
 from hil.experiment import CycleCounter, profile_cycles, reciprocating_trajectory
 from hil.interrupts import Interrupted, SignalGuard
 from hil.recording import RecordingError, RunMeta, RunRecorder
@@ -35,6 +28,13 @@ from hil.run_settings import (
     resolve_settings,
 )
 from hil.samples import Trajectory, TrajectoryError
+from toggle.cli.args import (
+    add_version,
+    join_negative_numbers,
+    path,
+    quiet_broken_pipe,
+    use_help_formatter,
+)
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset
 
@@ -52,8 +52,9 @@ SUMMARY_ROWS = (
 ANNOUNCE_AFTER = 60.0
 
 
-def _trajectory(s: RunSettings, guard: SignalGuard) -> tuple[Trajectory, str]:
-    period = RigSetup.period
+def _trajectory(s: RunSettings, guard: SignalGuard, setup: RigSetup
+                ) -> tuple[Trajectory, str]:
+    period = setup.period
     if s.profile is not None:
         forward = Trajectory.from_csv(s.profile, period=period)
         return _guarded(profile_cycles(forward, s.cycles), s), f"profile {s.profile}"
@@ -63,10 +64,15 @@ def _trajectory(s: RunSettings, guard: SignalGuard) -> tuple[Trajectory, str]:
         _guard_duration(2 * s.cycles * (x_tp - x_open) / s.speed, s)  # before building it
         return reciprocating_trajectory(nominal, s.speed, s.cycles, period), (
             f"reciprocating at {s.speed * 1e3:g} mm/s")
-    print(f"hil run: planning the default profile for {s.preset}", file=sys.stderr)
-    forward = experiment.planned_trajectory(s.preset, period)
+    errors = {name: delta for name, delta in setup.errors.items() if delta}
+    built = ", ".join(f"delta_{name} {delta * 1e3:g} mm" for name, delta in errors.items())
+    print(f"hil run: planning the default profile for {s.preset}"
+          f"{f' as the rig is built ({built})' if built else ''}", file=sys.stderr)
+    forward = experiment.planned_trajectory(s.preset, period, mu=s.mu, x_contact=s.x_contact,
+                                            errors=errors)
     guard.check()  # IPOPT swallows Ctrl-C: act on it before anything moves
-    return _guarded(profile_cycles(forward, s.cycles), s), "planned (minimum peak input force)"
+    return _guarded(profile_cycles(forward, s.cycles), s), (
+        f"planned (minimum peak input force){f' for {built}' if built else ''}")
 
 
 def _guarded(trajectory: Trajectory, s: RunSettings) -> Trajectory:
@@ -178,9 +184,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(s: RunSettings, guard: SignalGuard) -> int:
-    trajectory, source = _trajectory(s, guard)
     setup = RigSetup(preset=s.preset, delta_r8=s.delta_r8, mu=s.mu, x_contact=s.x_contact,
-                     force_limit=s.force_limit)
+                     force_limit=s.force_limit, as_built=s.as_built)
+    trajectory, source = _trajectory(s, guard, setup)
     plant = _backend(s)
     plant.configure(setup)
     plant.check(trajectory)
@@ -262,6 +268,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use the real rig (or an emulator) on --port instead of the FMU")
     p.add_argument("--port", default=None, help="serial URL of the rig: /dev/ttyACM0, a pty, "
                                                 "socket://host:port (needs --real)")
+    p.add_argument("--no-as-built", action="store_const", const=False, dest="as_built",
+                   default=None, help="simulate the model's clamp, without the prototype's "
+                                      "as-built errors (for example to replay a plan on the "
+                                      "clamp it was planned for)")
     p.add_argument("--preset", default=None,
                    help="clamp preset with [dynamics] masses: chang2021, lin2003_sm55 or a TOML "
                         "file (li_micro has no masses, dong2022 is a press; default chang2021)")

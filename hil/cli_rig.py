@@ -12,9 +12,9 @@ from typing import Any
 
 from hil import protocol as p
 from hil.backends import fault_names
-from hil.cli_args import PROBABILITY, TIME, number
 from hil.homing import home
 from hil.serial_link import CommandError, RigError, SerialLink
+from toggle.cli.args import PROBABILITY, TIME, number
 
 
 def add_emulator_options(e: argparse.ArgumentParser) -> None:

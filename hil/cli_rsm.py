@@ -6,7 +6,6 @@ import argparse
 import json
 from typing import Any
 
-from hil.cli_args import path
 from hil.rsm import (
     RESPONSES,
     TERMS,
@@ -17,6 +16,7 @@ from hil.rsm import (
     plot_rsm,
     toggle_cos_theta8,
 )
+from toggle.cli.args import path
 from toggle.params import load_preset
 
 

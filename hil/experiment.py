@@ -82,12 +82,16 @@ def profile_cycles(forward: Trajectory, cycles: int) -> Trajectory:
     return _repeat_cycles(forward.x_cmd, forward.x_cmd[::-1], cycles, forward.period)
 
 
-def planned_trajectory(preset: str, period: float = DEFAULT_PERIOD) -> Trajectory:
-    """The preset's default plan (the planner's best minimum-peak stroke of the default
-    duration, :meth:`controllers.planner.ClampPlanner.best`) sampled every ``period`` s."""
+def planned_trajectory(preset: str, period: float = DEFAULT_PERIOD, *,
+                       mu: float | None = None, x_contact: float | None = None,
+                       errors: dict[str, float] | None = None) -> Trajectory:
+    """The default plan for the clamp a run drives: the planner's best minimum-peak stroke
+    of the default duration (:meth:`controllers.planner.ClampPlanner.best`) for the preset
+    with its friction ``mu``, mold ``x_contact`` and dimensional ``errors`` (the simulated
+    rig's as built), sampled every ``period`` s."""
     from controllers.planner import default_duration, plan_config, planner_for
 
-    cfg = plan_config(preset)
+    cfg = plan_config(preset, mu=mu, x_contact=x_contact, errors=errors)
     planner = planner_for(cfg, drive_limits(cfg.mechanism))
     plan = planner.best(default_duration(planner))
     t = np.arange(0.0, plan.duration + period / 2, period)

@@ -3,9 +3,11 @@
 Implements :class:`hil.mcu_model.RigPhysics` for the emulator: the MCU model
 passes the commanded input position once per telemetry period; velocity and
 acceleration follow by backward differences over that period, as in the FMU's
-ideal drive; the plant carries the hysteretic slip state of the friction
-(:class:`toggle.plant.HystereticPlant`). The MCU's trajectory clock, not the
-host's jittery wall clock, is what the drive follows, so the differences use the nominal period.
+ideal drive; the rig's dimensional errors are those of the simulated rig
+(:func:`toggle.rig_tables.rig_errors`: its as-built ones plus delta_r8); the plant
+carries the hysteretic slip state of the friction (:class:`toggle.plant.HystereticPlant`).
+The MCU's trajectory clock, not the host's jittery wall clock, is what the drive follows,
+so the differences use the nominal period.
 Picklable (the model is compiled on first use), so the emulator can run it in
 its own process.
 """
@@ -16,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from toggle.plant import DriveState, HystereticPlant, configure, follow
+from toggle.rig_tables import rig_errors
 
 
 @dataclass
@@ -40,7 +43,7 @@ class ClampPhysics:
     def __call__(self, x: float, t: float) -> tuple[float, float]:
         if self._plant is None:
             cfg = configure(self.preset, mu=self.mu, x_contact=self.x_contact,
-                            errors={"r8": self.delta_r8})
+                            errors=rig_errors(self.preset, self.delta_r8))
             self._plant = HystereticPlant(cfg)
         if self._state is None:
             self._state = DriveState.at_rest(x)

@@ -18,15 +18,16 @@ from typing import Any
 
 from controllers.profiles import read_profile_settings
 from hil.backends import MAX_SPEED
-from hil.cli_args import check_writable_dir
+from toggle.cli.args import check_writable_dir
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset, tomllib
+from toggle.rig_tables import rig_errors
 
 #: Built-in defaults of every setting a --config file may hold.
 RUN_DEFAULTS: dict[str, Any] = {
     "backend": "fmu", "port": None, "preset": "chang2021", "profile": None, "cycles": 3,
     "speed": None, "delta_r8": 0.0, "mu": None, "x_contact": None, "force_limit": 400.0,
-    "out": None, "watchdog_ms": None, "max_duration": 3600.0, "fmu": None,
+    "out": None, "watchdog_ms": None, "max_duration": 3600.0, "fmu": None, "as_built": True,
 }
 #: The load cell's range, N: a force limit above it could never trip.
 LOAD_CELL_RANGE = 500.0
@@ -37,6 +38,7 @@ PROFILE_KEYS = ("preset", "x_contact", "mu", "delta_r8")
 
 _TEXT = ("backend", "port", "preset", "profile", "out", "fmu")
 _INTEGER = ("cycles",)
+_BOOLEAN = ("as_built",)
 
 
 @dataclass(frozen=True)
@@ -57,6 +59,8 @@ class RunSettings:
     watchdog_ms: float | None
     max_duration: float
     fmu: Path | None
+    #: the simulated rig carries the prototype's as-built errors (toggle.rig_tables)
+    as_built: bool
     json: bool = False
     quiet: bool = False
     profile_sha256: str | None = None
@@ -108,6 +112,8 @@ def read_config(path: Path) -> dict[str, Any]:
             ok = isinstance(value, str)
         elif key in _INTEGER:
             ok = isinstance(value, int) and not isinstance(value, bool)
+        elif key in _BOOLEAN:
+            ok = isinstance(value, bool)
         else:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         if not ok:
@@ -193,10 +199,13 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     check(values)
     if values["profile"] is None and values["speed"] is None and values["x_contact"] is None:
         # the default job clamps a mold: the plan's contact position (the preset's final
-        # tie-bar force) is the simulated mold height too
+        # tie-bar force held by the rig as built) is the simulated mold height too
         from controllers.planner import plan_config
 
-        values["x_contact"] = plan_config(values["preset"], mu=values["mu"]).x_contact
+        errors = rig_errors(values["preset"], values["delta_r8"],
+                            None if values["as_built"] else {})
+        values["x_contact"] = plan_config(values["preset"], mu=values["mu"],
+                                          errors=errors).x_contact
     for key in ("profile", "out", "fmu"):
         if values[key] is not None:
             values[key] = Path(values[key])

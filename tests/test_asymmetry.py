@@ -147,8 +147,10 @@ def test_force_rises_near_end_of_forward_stroke():
     mech = MECH.with_error("upper", "r5", 0.5e-3)
     xs, fwd, _ = force_curves(mech, 5e-3, points=200)
     early, late = fwd[xs < 30e-3], fwd[xs >= 35e-3]
-    assert late.max() > 5 * early.max()
-    assert fwd[-1] > 20 * fwd[0]
+    # 3x and 15x since issue 18's refit with the as-built error (a stiffer drive side,
+    # 2.6e5 N/m per half, spreads the force over the stroke); 5x and 20x before
+    assert late.max() > 3 * early.max()
+    assert fwd[-1] > 15 * fwd[0]
 
 
 def test_symbolic_matches_numeric():

@@ -39,6 +39,7 @@ def test_command_line_wins_over_config(tmp_path) -> None:
     ("force_limt = 50.0\n", "unknown key(s) force_limt"),
     ('cycles = "3"\n', "cycles = '3' has the wrong type"),
     ("force_limit = true\n", "wrong type"),
+    ("as_built = 1\n", "as_built = 1 has the wrong type"),
     ('backend = "moon"\n', "backend"),
     ("force_limit = 900.0\n", "load cell"),
     ("force_limit = nan\n", "--force-limit"),
@@ -101,11 +102,13 @@ def test_long_runs_are_announced(tmp_path, capsys) -> None:
 def test_meta_records_every_setting_that_shaped_the_run(tmp_path) -> None:
     out = tmp_path / "run"
     assert main(["run", "--speed", "40e-3", "--cycles", "1", "--mu", "0.1", "--x-contact",
-                 "0.045", "--force-limit", "300", "--out", str(out), "--quiet"]) == 0
+                 "0.045", "--force-limit", "300", "--no-as-built", "--out", str(out),
+                 "--quiet"]) == 0
     meta = json.loads((out / "meta.json").read_text())
     s = meta["settings"]
     assert (s["mu"], s["x_contact"], s["force_limit"], s["backend"]) == (0.1, 0.045, 300.0,
                                                                          "fmu")
+    assert s["as_built"] is False and meta["plant"]["dimensional_errors_m"] == {"r8": 0.0}
     assert meta["plant"]["backend"] == "fmu" and s["max_duration"] == 3600.0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["aborted"] is False and summary["link"] == {}
@@ -117,9 +120,9 @@ def test_profile_settings_are_applied_and_clashes_refused(tmp_path, capsys) -> N
     rows = "\n".join(f"{i * 1e-3:.6f},{xi:.9f}" for i, xi in enumerate(x))
     profile.write_text('# preset = "chang2021"\n# x_contact = 0.045\n# mu = 0.08\n'
                        f"time [s],position [m]\n{rows}\n")
-    out = tmp_path / "run"
-    assert main(["run", "--profile", str(profile), "--cycles", "1", "--out", str(out),
-                 "--quiet"]) == 0
+    out = tmp_path / "run"  # the model's clamp: the prototype's as-built error adds ~70 N
+    assert main(["run", "--profile", str(profile), "--cycles", "1", "--no-as-built", "--out",
+                 str(out), "--quiet"]) == 0
     s = json.loads((out / "meta.json").read_text())["settings"]
     assert (s["x_contact"], s["mu"]) == (0.045, 0.08)
     assert len(s["profile_sha256"]) == 64
@@ -147,7 +150,8 @@ def test_profile_away_from_the_start_is_approached_and_a_too_fast_one_refused(
 
 
 def test_a_replayed_plan_reproduces_the_planners_peak(tmp_path, capsys) -> None:
-    """`toggle plan --out` carries the mold, preset and friction; `hil run --profile` uses them."""
+    """`toggle plan --out` carries the mold, preset and friction; `hil run --profile` uses them
+    (on the clamp it was planned for: the model, --no-as-built)."""
     from toggle.cli import main as toggle_main
 
     profile = tmp_path / "p.csv"
@@ -155,13 +159,37 @@ def test_a_replayed_plan_reproduces_the_planners_peak(tmp_path, capsys) -> None:
                         "--out", str(profile)]) == 0
     plan = json.loads(capsys.readouterr().out)
     out = tmp_path / "run"
-    assert main(["run", "--profile", str(profile), "--cycles", "1", "--out", str(out),
-                 "--quiet"]) == 0
+    assert main(["run", "--profile", str(profile), "--cycles", "1", "--no-as-built", "--out",
+                 str(out), "--quiet"]) == 0
     data = read_samples(out / "samples.csv")
     forward = data.force[data.t <= plan["duration"] + 1e-9]
     assert forward.max() == pytest.approx(plan["peak_force"], rel=0.01)
     meta = json.loads((out / "meta.json").read_text())
     assert meta["settings"]["x_contact"] == pytest.approx(plan["x_contact"], rel=1e-9)
+
+
+def test_the_default_job_plans_for_the_rig_as_built(tmp_path) -> None:
+    """The default job plans for the clamp it drives (the prototype as built: its as-built
+    error plus delta_r8): the run peaks where its plan does, well below the nominal plan
+    replayed on the same rig (50.8 N against 69.9 N on chang2021)."""
+    from controllers.limits import drive_limits
+    from controllers.planner import default_duration, plan_config, planner_for
+    from controllers.profiles import predict
+    from toggle.rig_tables import rig_errors
+
+    out = tmp_path / "run"
+    assert main(["run", "--cycles", "1", "--out", str(out), "--quiet"]) == 0
+    meta = json.loads((out / "meta.json").read_text())
+    assert "delta_r1U" in meta["profile"]
+    rig = plan_config("chang2021", errors=rig_errors("chang2021", 0.0))
+    planner = planner_for(rig, drive_limits(rig.mechanism))
+    plan = planner.best(default_duration(planner))
+    data = read_samples(out / "samples.csv")
+    forward = data.force[data.t <= plan.duration + 1e-9]
+    assert forward.max() == pytest.approx(planner.worst_peak(plan), rel=0.01)
+    nominal = plan_config("chang2021")
+    plain = planner_for(nominal, drive_limits(nominal.mechanism)).best(plan.duration)
+    assert forward.max() < 0.85 * predict(plain.profile, rig).peak_force
 
 
 def test_either_fmu_gives_the_same_run(tmp_path) -> None:

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hil.backends import RigSetup
 from toggle.asymmetry import (
     AsymmetryParams,
     advance_slip_state,
@@ -20,7 +21,13 @@ from toggle.asymmetry import (
 from toggle.cli import main
 from toggle.kinematics import stroke_limits
 from toggle.params import load_preset
-from toggle.plant import CompiledPlant, DriveState, HystereticPlant, PlantConfig
+from toggle.plant import (
+    CompiledPlant,
+    DriveState,
+    HystereticPlant,
+    PlantConfig,
+    plant_outputs,
+)
 from toggle.rig_calibration import (
     RELATIVE,
     RigModel,
@@ -29,15 +36,17 @@ from toggle.rig_calibration import (
     load_paper_tables,
     simulate_tables,
 )
+from toggle.rig_tables import CHANG2021_AS_BUILT, rig_config, rig_errors
 
 NOMINAL = load_preset("chang2021")
 X_OPEN, X_TP = stroke_limits(NOMINAL.lower)
-#: Rows of the predicted Tables 5 and 8 (delta_r8 > 0) the shipped model misses, as
+#: Rows of the predicted Tables 5 and 8 (25 mm/s) the shipped model misses, as
 #: (statistic, delta_r8 in mm); asserted to miss, so an improvement is noticed.
-#: docs/unequal-halves.md section 9 says why.
+#: docs/unequal-halves.md section 9.5 says why (delta_r8 = 0: by the printed 3 sigma).
 KNOWN_MISSES = {
-    ("force_forward_max", 0.25), ("force_backward_min", 0.25), ("force_backward_rms", 0.25),
-    ("force_toggle", 0.25), ("stroke", 0.75),
+    ("force_forward_max", 0.0), ("force_forward_rms", 0.0), ("force_backward_min", 0.0),
+    ("force_backward_rms", 0.0), ("force_forward_max", 0.25), ("force_forward_rms", 0.25),
+    ("force_backward_min", 0.25), ("force_backward_rms", 0.25), ("force_toggle", 0.25),
 }
 
 
@@ -128,32 +137,34 @@ def test_steady_sliding_is_the_stateless_plant():
 
 
 def test_forces_and_stroke_of_the_predicted_tables(shipped):
-    """Table 8 and Table 5 (25 mm/s) predicted by the model fitted on 5 and 15 mm/s: each
-    delta_r8 > 0 row within 25 % or the printed 3 sigma (stroke: 0.05 mm), except the
-    listed misses; the F_TP = 0 row within its absolute band."""
+    """Table 8 and Table 5 (25 mm/s) predicted by the model fitted on 5 and 15 mm/s: every
+    row asserted, each within 25 % or the printed 3 sigma (stroke: 0.05 mm; delta_r8 = 0:
+    the printed 3 sigma only) except the listed misses, which are asserted to miss."""
     predicted = [r for r in shipped if r.speed == pytest.approx(25e-3)]
+    assert len(predicted) == 24
     for r in predicted:
         key = (r.statistic, round(r.error * 1e3, 2))
-        if r.error == 0:
-            continue
         assert r.holds() == (key not in KNOWN_MISSES), (key, r)
-    tp0 = next(r for r in predicted if r.statistic == "force_toggle" and r.error == 0)
-    assert abs(tp0.in_sigma) <= 1.0
-    # the misses are near misses: every predicted force within 2 x the criterion at 0.5+ mm
+    # every force at 0.5 and 0.75 mm within 25 % (not only within 3 sigma)
     for r in predicted:
         if r.error >= 0.5e-3 and r.statistic != "stroke":
-            assert abs(r.relative) <= 2 * RELATIVE, r
+            assert abs(r.relative) <= RELATIVE, r
 
 
-def test_the_forward_peak_and_antisymmetry_follow_the_data(shipped):
-    """What the stateless model missed (issue 18): F_F(max) within 15 % of the measured
-    at 0.75 mm, and the backward extreme at least 0.7 of the forward one."""
-    by = {(r.statistic, r.speed, r.error): r for r in shipped}
-    for v in (5e-3, 15e-3, 25e-3):
-        fmax = by[("force_forward_max", v, 0.75e-3)]
-        bmin = by[("force_backward_min", v, 0.75e-3)]
-        assert abs(fmax.relative) <= 0.15
-        assert -bmin.simulated >= 0.7 * fmax.simulated
+def test_the_prototypes_own_error_makes_the_zero_rows(shipped):
+    """delta_r8 = 0: the as-built error gives the forces along the stroke (equal halves
+    gave ~0 N) and still almost nothing at the toggle: every F_TP within its band; the
+    other forces of the predicted table within 50 % (section 9.5 says why not 25 %), and
+    at every speed at least a third of the measured, with its sign."""
+    for r in shipped:
+        if r.error != 0 or r.statistic == "stroke":
+            continue
+        if r.statistic == "force_toggle":
+            assert abs(r.in_sigma) <= 1.0, r
+            continue
+        assert r.simulated * r.measured > 0 and abs(r.simulated) >= abs(r.measured) / 3, r
+        if r.speed == pytest.approx(25e-3):
+            assert abs(r.relative) <= 0.5, r
 
 
 def test_measured_stroke_from_the_reading_model(shipped):
@@ -163,16 +174,39 @@ def test_measured_stroke_from_the_reading_model(shipped):
             assert 0.38e-3 <= r.simulated - 45.003e-3 <= 0.67e-3
 
 
-def test_calibration_recovers_a_known_parameter_with_its_uncertainty(tables):
-    """Synthetic tables from a known model: fitting one parameter on one speed recovers it
-    within two of its reported standard errors (and the reported error is finite)."""
-    truth = RigModel().with_values({"drive_stiffness": 8.0e4})
+def test_calibration_recovers_known_parameters_with_their_uncertainty(tables):
+    """Synthetic tables from a known model (an as-built error and a stiffness off the
+    shipped ones): fitting both on one speed from the shipped values and from a far start
+    (the least cost kept) recovers them, with finite reported errors."""
+    truth = RigModel().with_values({"as_built_r1U": 1.0e-3, "drive_stiffness": 2.0e5})
     synthetic = simulate_tables(tables, NOMINAL, truth)
     data = type(tables)(tables.speeds, tables.errors, synthetic, tables.three_sigma)
-    fit = calibrate_rig(data, NOMINAL, [5e-3], ["drive_stiffness"],
-                        statistics=["force_forward_max", "force_toggle"])
-    assert fit.values["drive_stiffness"] == pytest.approx(8.0e4, rel=1e-3)
-    assert math.isfinite(fit.std_error["drive_stiffness"])
+    fit = calibrate_rig(data, NOMINAL, [15e-3], ["as_built_r1U", "drive_stiffness"],
+                        statistics=["force_forward_max", "force_forward_rms", "force_toggle"],
+                        starts=[{"as_built_r1U": 0.3e-3, "drive_stiffness": 1e6}])
+    assert fit.cost < 1e-12
+    assert fit.values["as_built_r1U"] == pytest.approx(1.0e-3, rel=1e-3)
+    assert fit.values["drive_stiffness"] == pytest.approx(2.0e5, rel=1e-3)
+    assert all(math.isfinite(e) for e in fit.std_error.values())
+
+
+def test_the_as_built_error_is_the_rigs_not_the_models():
+    """The preset stays symmetric (equal halves add exactly nothing); the simulated rig of
+    chang2021 (rig tables, hil run's FMU, the emulator: one rig_errors) adds its as-built
+    error to delta_r8; a preset without a rig gets delta_r8 alone."""
+    assert NOMINAL.symmetric
+    assert rig_errors("chang2021", 0.5e-3) == {**CHANG2021_AS_BUILT,
+                                               "r8": CHANG2021_AS_BUILT.get("r8", 0.0) + 0.5e-3}
+    assert rig_errors("lin2003_sm55", 0.5e-3) == {"r8": 0.5e-3}
+    assert RigSetup(delta_r8=0.25e-3).errors == rig_errors("chang2021", 0.25e-3)
+    params = AsymmetryParams()
+    assert not rig_config(NOMINAL, 0.0, params).mechanism.symmetric
+    bare = rig_config(NOMINAL, 0.0, params, as_built={})
+    assert bare.mechanism == NOMINAL
+    xs = np.linspace(X_OPEN, X_TP, 50)
+    out = plant_outputs(xs, 10e-3, 0.0, bare, slip_state=0.3)
+    model = plant_outputs(xs, 10e-3, 0.0, PlantConfig(NOMINAL), slip_state=0.3)
+    assert np.array_equal(out.input_force, model.input_force)
 
 
 def test_calibration_refuses_bad_requests(tables):
@@ -196,7 +230,8 @@ def test_tables_cli_json_and_figures(tmp_path, capsys):
 
 def test_hil_run_at_0_75_mm_stays_under_the_force_limit_and_matches_table8(tmp_path, tables):
     """``hil run --delta-r8 0.75e-3 --speed 25e-3 --cycles 2`` with the default 400 N limit
-    completes; its F_TP (read as the rig read it) and F_F(max) are within 25 % of Table 8."""
+    completes with the rig's as-built error recorded; its F_TP (read as the rig read it) and
+    F_F(max) are within 25 % of Table 8."""
     from hil.cli import main as hil_main
 
     out = tmp_path / "run"
@@ -204,6 +239,8 @@ def test_hil_run_at_0_75_mm_stays_under_the_force_limit_and_matches_table8(tmp_p
                      "--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["cycles_complete"] == 2 and not summary["aborted"]
+    meta = json.loads((out / "meta.json").read_text())  # the rig's errors: as built + dr8
+    assert meta["plant"]["dimensional_errors_m"] == rig_errors("chang2021", 0.75e-3)
     i, j = tables.speed_index(25e-3), 3
     for key in ("force_toggle", "force_forward_max"):
         measured = tables.mean[key][i, j]

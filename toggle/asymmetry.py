@@ -75,15 +75,16 @@ class AsymmetryParams:
     """Physical parameters of the forced-agreement model, SI.
 
     Defaults: the desktop clamp of Chang et al. 2021, fitted on every force statistic of
-    Tables 6 and 7 (contact_stiffness, drive_stiffness, rate_strengthening, takeup_return;
-    free_play went to 0, boundary friction) with the rest from its materials and sizes
-    (docs/unequal-halves.md, sections 4 and 9).
+    Tables 6 and 7 with the prototype's as-built error (contact_stiffness,
+    drive_stiffness, takeup_return; rate_strengthening from the earlier fit, at its limit
+    of zero friction at rest; free_play 0 and boundary friction, which the fits chose) and
+    the rest from its materials and sizes (docs/unequal-halves.md, sections 4 and 9).
     """
 
     free_play: float = 0.0  # delta0, m: platen tilt in the bushings + pin clearances
-    contact_stiffness: float = 2.715e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
+    contact_stiffness: float = 3.213e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
     series_stiffness: float = 3.3e7  # k_s, N/m: links 4b and 5 of both halves in series (A6061)
-    drive_stiffness: float = 7.089e4  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
+    drive_stiffness: float = 2.554e5  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
     mu: float = 0.3  # pin friction coefficient at the reference slip speed (SUS304 pin in A6061)
     rate_strengthening: float = 0.04342  # a - b of the steady-state rate-and-state law
     reference_slip: float = 1.0e-3  # v_ref, m/s: slip speed at which the coefficient is mu
@@ -96,7 +97,7 @@ class AsymmetryParams:
     max_internal_force: float = 2.0e4
     #: lambda, 1: share of the take-up work the clamp gives back (1: the take-up is elastic,
     #: the stateless model of issue 8; 0: it is all lost in friction-locked slip)
-    takeup_return: float = 0.2786
+    takeup_return: float = 0.1385
     #: x_s, m: crosshead travel over which the slip state turns after a reversal (Dahl)
     slip_distance: float = 0.1e-3
 

@@ -1,11 +1,12 @@
 """Fit the rig model to any chosen statistics and speeds of seed 000's Tables 3-8.
 
-The force statistics (Tables 6-8) are fitted with a handful of plant parameters
-(:data:`FORCE_FITTABLE`) by weighted least squares in transformed coordinates (log for
-positive values, logit for the returned take-up share); the stroke (Tables 3-5) with the
-two parameters of the encoder reading (:class:`toggle.rig_tables.RigReading`), which
-no force parameter touches, by linear least squares. Each residual is measured in the
-acceptance scale of the comparison, max(printed 3 sigma, 25 % of the mean); the
+The force statistics (Tables 6-8) are fitted with a handful of plant parameters and
+as-built errors of the rig (:data:`FORCE_FITTABLE`) by weighted least squares in
+transformed coordinates (log for positive values, logit for the returned take-up share,
+linear for the signed errors and the latency), from one or several starts (the lowest
+cost is kept); the stroke (Tables 3-5) with the three parameters of the encoder reading
+(:class:`toggle.rig_tables.RigReading`), which no force statistic depends on, by linear
+least squares. Each residual is measured in units of the printed 3 sigma; the
 parameter uncertainty is the Gauss-Newton covariance (J^T J)^-1 scaled by the residual
 variance (the model's misfit, not the scatter of the data, dominates). Rows are
 reported with their residual in units of the printed 3 sigma.
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -25,8 +26,9 @@ from scipy.optimize import least_squares
 from toggle.asymmetry import AsymmetryError, AsymmetryParams
 from toggle.calibration import PAPER_TABLES
 from toggle.kinematics import AssemblyError
-from toggle.params import Mechanism, PinRadii, tomllib
+from toggle.params import PAPER_NAMES, Mechanism, PinRadii, tomllib
 from toggle.rig_tables import (
+    CHANG2021_AS_BUILT,
     CHANG2021_READING,
     FORCE_STATISTICS,
     RigReading,
@@ -35,14 +37,19 @@ from toggle.rig_tables import (
     rig_statistics,
 )
 
-#: Plant parameters a force fit may choose (AsymmetryParams fields, the pins' radius and
-#: the guides' Coulomb friction) and their transform.
+#: Prefix of a fittable as-built error of the rig: ``as_built_r6`` is the prototype's own
+#: error of link 6 (the upper half's r3, seed 000's names), m.
+AS_BUILT = "as_built_"
+#: Plant parameters a force fit may choose (AsymmetryParams fields, the pins' radius,
+#: the guides' Coulomb friction, the reading's latency, the rig's as-built errors) and
+#: their transform.
 FORCE_FITTABLE = {
     "free_play": "log", "contact_stiffness": "log", "series_stiffness": "log",
     "drive_stiffness": "log", "mu": "log", "rate_strengthening": "log",
     "hersey_transition": "log", "slip_distance": "log", "pin_radius": "log",
     "guide_friction": "log", "takeup_return": "logit",
-    "toggle_latency": "log",
+    "toggle_latency": "time",
+    **{f"{AS_BUILT}{n}": "length" for names in PAPER_NAMES.values() for n in names.values()},
 }
 MAX_FORCE_FITTED = 6
 STATISTICS = (*FORCE_STATISTICS, "stroke")
@@ -94,8 +101,12 @@ class RigModel:
     params: AsymmetryParams = AsymmetryParams()
     guide_friction: float | None = None  # N; None: the preset's
     reading: RigReading = CHANG2021_READING
+    #: the rig's own dimensional errors besides the set link-8 error (seed 000's names, m)
+    as_built: dict[str, float] = field(default_factory=lambda: dict(CHANG2021_AS_BUILT))
 
     def value(self, name: str) -> float:
+        if name.startswith(AS_BUILT):
+            return self.as_built.get(name.removeprefix(AS_BUILT), 0.0)
         if name == "toggle_latency":
             return self.reading.toggle_latency
         if name == "pin_radius":
@@ -106,6 +117,8 @@ class RigModel:
 
     def with_values(self, values: dict[str, float]) -> RigModel:
         changes = dict(values)
+        as_built = {**self.as_built, **{n.removeprefix(AS_BUILT): changes.pop(n)
+                                        for n in values if n.startswith(AS_BUILT)}}
         guide = changes.pop("guide_friction", self.guide_friction)
         reading = replace(self.reading, toggle_latency=changes.pop(
             "toggle_latency", self.reading.toggle_latency))
@@ -113,10 +126,10 @@ class RigModel:
             r = changes.pop("pin_radius")
             changes["pins"] = PinRadii(B=r, C=r, D=r)
         return replace(self, params=self.params.replace(**changes), guide_friction=guide,
-                       reading=reading)
+                       reading=reading, as_built=as_built)
 
     def statistics(self, nominal: Mechanism, speed: float, delta_r8: float) -> RigStatistics:
-        cfg = rig_config(nominal, delta_r8, self.params, self.guide_friction)
+        cfg = rig_config(nominal, delta_r8, self.params, self.guide_friction, self.as_built)
         return rig_statistics(cfg, speed, self.reading)
 
 
@@ -138,25 +151,27 @@ class Fit(NamedTuple):
     cost: float  # mean squared residual (units of the printed 3 sigma)
 
 
-#: Scale of the linear (signed length) coordinates, m.
-_LINEAR = 1e-4
+#: Scales of the linear coordinates: a signed length (m), a time that may be 0 (s).
+_LINEAR = {"length": 1e-4, "time": 0.1}
 
 
 def _forward(kind: str, value: float) -> float:
-    if kind == "linear":
-        return value / _LINEAR
+    if kind in _LINEAR:
+        return value / _LINEAR[kind]
     return math.log(value) if kind == "log" else math.log(value / (1 - value))
 
 
 def _inverse(kind: str, z: float) -> float:
-    if kind == "linear":
-        return z * _LINEAR
+    if kind in _LINEAR:
+        return z * _LINEAR[kind]
     return math.exp(z) if kind == "log" else 1 / (1 + math.exp(-z))
 
 
 def _slope(kind: str, value: float) -> float:
     """d value / d z of the transform at value."""
-    return {"log": value, "logit": value * (1 - value), "linear": _LINEAR}[kind]
+    if kind in _LINEAR:
+        return _LINEAR[kind]
+    return value if kind == "log" else value * (1 - value)
 
 
 def _weights(tables: PaperTables, stat: str) -> np.ndarray:
@@ -166,10 +181,14 @@ def _weights(tables: PaperTables, stat: str) -> np.ndarray:
 def calibrate_rig(
     tables: PaperTables, nominal: Mechanism, speeds: Sequence[float],
     fit: Sequence[str], statistics: Sequence[str] = STATISTICS,
-    start: RigModel | None = None,
+    start: RigModel | None = None, starts: Sequence[dict[str, float]] = (),
 ) -> Fit:
     """Fit ``fit`` (at most :data:`MAX_FORCE_FITTED`) on the rows at ``speeds`` (m/s) and
-    the chosen ``statistics``; the stroke reading is fitted when "stroke" is among them."""
+    the chosen ``statistics``; the stroke reading is fitted when "stroke" is among them.
+
+    The fit starts from ``start`` (default the shipped model) and from each of ``starts``
+    (values of fitted parameters put into ``start``); the result of least cost is kept.
+    """
     start = start or RigModel()
     fit = tuple(fit)
     unknown = [n for n in fit if n not in FORCE_FITTABLE]
@@ -209,8 +228,11 @@ def calibrate_rig(
     errors: dict[str, float] = {}
     model, cost = start, 0.0
     if forces:
-        z0 = np.array([_forward(k, start.value(n)) for n, k in zip(fit, kinds)])
-        result = least_squares(residuals, z0, diff_step=1e-4)
+        models = [start, *(start.with_values(values) for values in starts)]
+        result = min((least_squares(residuals, np.array([_forward(k, m.value(n))
+                                                         for n, k in zip(fit, kinds)]),
+                                    diff_step=1e-4) for m in models),
+                     key=lambda r: r.cost)
         model = model_at(result.x)
         dof = max(result.fun.size - len(fit), 1)
         cost = float(np.mean(result.fun**2))

@@ -12,7 +12,12 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from hil.cli_args import add_version, join_negative_numbers, quiet_broken_pipe, use_help_formatter
+from toggle.cli.args import (
+    add_version,
+    join_negative_numbers,
+    quiet_broken_pipe,
+    use_help_formatter,
+)
 from toggle.kinematics import AssemblyError
 from toggle.params import ParameterError
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hil.cli_args import check_writable_dir, path
+from toggle.cli.args import check_writable_dir, path
 from toggle.fmu_build import build_fmu
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
-from hil.cli_args import path
 from toggle.calibration import (
     FITTABLE,
     MAX_FITTED,
@@ -21,6 +20,7 @@ from toggle.calibration import (
     load_force_table,
     table_mechanism,
 )
+from toggle.cli.args import path
 from toggle.cli.common import (
     MM,
     SPEED,

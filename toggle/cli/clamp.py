@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.cli_args import path, positive
+from toggle.cli.args import path, positive
 from toggle.cli.common import (
     FORCE,
     FRICTION,

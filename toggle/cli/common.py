@@ -1,6 +1,6 @@
 """Helpers shared by the command modules: preset option, argument types, JSON and tables.
 
-The argument types are :mod:`hil.cli_args`'s, so ``toggle`` and ``hil`` judge a value alike.
+The argument types are :mod:`toggle.cli.args`'s, so ``toggle`` and ``hil`` judge a value alike.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from hil.cli_args import integer, number, path, positive
+from toggle.cli.args import integer, number, path, positive
 from toggle.params import Mechanism, load_preset
 
 MM = 1e3  # metres to millimetres, for tables only

@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from hil.cli_args import integer
+from toggle.cli.args import integer
 from toggle.cli.common import (
     MM,
     add_json_argument,

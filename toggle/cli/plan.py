@@ -28,7 +28,7 @@ from controllers.planner import (
     planner_for,
 )
 from controllers.profiles import predict, read_profile_csv, write_profile_csv
-from hil.cli_args import atomic_path, check_writable, integer, path, positive
+from toggle.cli.args import atomic_path, check_writable, integer, path, positive
 from toggle.cli.common import (
     FRICTION,
     LINK_ERROR,

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from hil.cli_args import integer, number
+from toggle.cli.args import integer, number
 from toggle.cli.common import (
     MM,
     POINTS,

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import argparse
 
-from hil.cli_args import check_writable_dir, path
+from toggle.cli.args import check_writable_dir, path
 from toggle.cli.common import (
     MM,
     SPEED,
@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json({
             "fitted": fit.values if fit else {}, "std_error": fit.std_error if fit else {},
-            "reading": model.reading.__dict__,
+            "reading": model.reading.__dict__, "as_built": model.as_built,
             "reading_std_error": fit.stroke_std_error if fit else {},
             "fit_speeds": sorted(fitted_speeds),
             "rows": [{**r._asdict(), "in_three_sigma": r.in_sigma, "holds": r.holds()}
@@ -80,9 +80,18 @@ def run(args: argparse.Namespace) -> int:
               f"{r.measured * scale:9.3f} +-{r.three_sigma * scale:7.3f} "
               f"{r.simulated * scale:10.3f} {r.in_sigma:+7.1f} {100 * r.relative:+7.1f}  "
               f"{role:10} {'holds' if r.holds() else 'MISSES'}")
+    print("as-built errors of the rig (m): "
+          + ", ".join(f"{n} = {v:.4g}" for n, v in model.as_built.items()))
     held = sum(r.holds() for r in rows)
     print(f"{held} of {len(rows)} rows hold (units: mm for S, N for forces)")
     return 0
+
+
+def _fittable(name: str) -> str:
+    """A --fit name (the list, with the as-built errors of each dimension, is in --help)."""
+    if name not in FORCE_FITTABLE:
+        raise argparse.ArgumentTypeError(f"{name!r} is not fittable (see toggle tables --help)")
+    return name
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -90,7 +99,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="the simulated rig against seed 000 Tables 3-8 (fit, predict, plot)")
     add_preset_argument(p, accepts=("chang2021",),
                         why="the paper's tables were measured on the chang2021 rig")
-    p.add_argument("--fit", nargs="+", choices=tuple(FORCE_FITTABLE), metavar="PARAM",
+    p.add_argument("--fit", nargs="+", type=_fittable, metavar="PARAM",
                    default=[], help=f"refit at most {MAX_FORCE_FITTED} of: "
                                     f"{', '.join(FORCE_FITTABLE)}")
     p.add_argument("--speeds", type=SPEED, nargs="+", default=[5e-3, 15e-3],

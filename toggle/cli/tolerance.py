@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
-from hil.cli_args import integer
+from toggle.cli.args import integer
 from toggle.cli.common import (
     IT_GRADE,
     MM,
