@@ -394,8 +394,8 @@ class StrokeProblem:
     rows cost a third of the solve time, so the problem without them comes first and its
     sibling with them (:attr:`with_torque`, built when first asked for) serves the plans
     the curve limits (:meth:`ClampPlanner._run`); they come last, after the mold-protection
-    zone's: its entry at node NA, the tie of its interval length to the approach's (without
-    caps), the platen speed and the input force over its nodes and midpoints. The closing
+    zone's (only in :attr:`with_zone`, for plans with caps): its entry at node NA, the
+    platen speed and the input force over its nodes and midpoints. The closing
     stroke has three phases, each of equal intervals: the approach (NA intervals, length
     w[4N+3]), the protection zone up to contact (N1 - NA, w[4N+6]) and the clamp-up (N - N1,
     w[4N+4]).
@@ -425,7 +425,7 @@ class StrokeProblem:
         self.n_forces = (2 * N + 2) * len(self.plants)
         sizes = {"dynamics": 3 * N, "contact_position": 1, "force_upper": self.n_forces,
                  "force_lower": self.n_forces, "contact_speed": len(self.plants), "duration": 1,
-                 "mid_velocity": N, "zone_position": 1, "zone_steps": 1,
+                 "mid_velocity": N, "zone_position": 1 if zone else 0,
                  "zone_speed": (2 * self.nz + 1) * len(self.plants) if zone else 0,
                  "zone_force": (2 * self.nz + 1) * len(self.plants) if zone else 0,
                  "torque": self.n_forces if torque else 0}
@@ -442,10 +442,12 @@ class StrokeProblem:
 
     def steps(self, w: Any) -> Any:
         """The interval lengths (scaled) of the three phases: approach, protection zone,
-        clamp-up."""
+        clamp-up (without the caps' rows the zone's are the approach's: the zone's own
+        length is then a variable fixed by its bounds, unused)."""
         lay = self.layout
         return ca.vertcat(ca.repmat(w[lay.steps.start], self.na, 1),
-                          ca.repmat(w[lay.zone_step], self.nz, 1),
+                          ca.repmat(w[lay.zone_step if self.zone else lay.steps.start],
+                                    self.nz, 1),
                           ca.repmat(w[lay.steps.start + 1], self.n2, 1))
 
     def _nodes(self, w: Any, t_ref: Any) -> tuple[Any, ...]:
@@ -505,7 +507,7 @@ class StrokeProblem:
         outputs' nodes :meth:`_spans`)."""
         n1, na, t_ref = self.n1, self.na, p[_P["t_ref"]]
         xi, nu, al, io, th1, th2, s, nu_m, z = self._nodes(w, t_ref)
-        thz = w[self.layout.zone_step]
+        thz = w[self.layout.zone_step] if self.zone else th1
         dz = z - self._nodes(w0, t_ref)[-1]
         outputs, col = [], 0
         for nodes in self._spans() * len(self.plants):
@@ -545,8 +547,8 @@ class StrokeProblem:
                      + p[_P["w_time"]] * duration
                      + p[_P["w_jerk"]] * ca.dot(h, (io / jerk_bound) ** 2))
         return objective, ca.vertcat(dyn, xi[n1], forces - s, forces + s, contact, duration,
-                                     nu_m, xi[na], th1 - thz,
-                                     *((zone_speed, zone_force) if self.zone else ()), torque)
+                                     nu_m, *((xi[na], zone_speed, zone_force) if self.zone else ()),
+                                     torque)
 
     def _torque_ratio(self, outputs: list[ca.SX], z: ca.SX, p: ca.SX) -> ca.SX:
         """The motor torque (:func:`toggle.drive.drive_torque` of each plant's input force
@@ -819,7 +821,8 @@ class ClampPlanner:
         lbx[lay.position.stop - 1] = 1.0  # to the toggle
         lbx[lay.steps], ubx[lay.steps] = 1e-6, np.inf
         lbx[lay.peak], ubx[lay.peak] = 0.0, force_limit / self.f_ref
-        lbx[lay.zone_step], ubx[lay.zone_step] = 1e-6, np.inf
+        # the zone's own interval length: free with the caps' rows, else fixed and unused
+        lbx[lay.zone_step], ubx[lay.zone_step] = (1e-6, np.inf) if self.capped else (1.0, 1.0)
         return lbx, ubx
 
     def _constraint_bounds(self, problem: StrokeProblem, t_bounds: tuple[float, float]
@@ -830,11 +833,7 @@ class ClampPlanner:
         rows = problem.rows
         lbg[rows["duration"]], ubg[rows["duration"]] = (t / self.t_ref for t in t_bounds)
         lbg[rows["contact_position"]] = ubg[rows["contact_position"]] = self.xi_contact
-        if self.capped:  # the zone's entry on node NA, its own interval length
-            lbg[rows["zone_position"]] = ubg[rows["zone_position"]] = self.xi_zone
-            lbg[rows["zone_steps"]], ubg[rows["zone_steps"]] = -np.inf, np.inf
-        else:  # no caps: one interval length from the open position to contact
-            lbg[rows["zone_position"]], ubg[rows["zone_position"]] = -np.inf, np.inf
+        lbg[rows["zone_position"]] = ubg[rows["zone_position"]] = self.xi_zone  # with caps
         ubg[rows["mid_velocity"]] = self.limits.velocity * self.t_ref / self.stroke
         return lbg, ubg
 
@@ -917,7 +916,7 @@ class ClampPlanner:
         # (without them, or with others) shares only the rows before them
         lam_g = np.zeros(problem.n_constraints)
         common = (lam_g.size if sol["lam_g"].size == lam_g.size
-                  else min(problem.rows["zone_steps"].stop, sol["lam_g"].size))
+                  else min(problem.rows["mid_velocity"].stop, sol["lam_g"].size))
         lam_g[:common] = sol["lam_g"][:common]
         return {"x0": w, "lam_x0": sol["lam_x"], "lam_g0": lam_g}
 
@@ -988,14 +987,14 @@ class ClampPlanner:
         stats = solver.stats()
         solution = {k: np.asarray(sol[k]).ravel() for k in ("x", "lam_x", "lam_g")}
         solution["scales"] = np.array([self.t_ref, self.f_ref])
-        plan = self._plan(solution, objective, elapsed, int(stats["iter_count"]), warm)
+        plan = self._plan(problem, solution, objective, elapsed, int(stats["iter_count"]), warm)
         return plan, bool(stats["success"])
 
-    def _plan(self, sol: dict[str, np.ndarray], objective: str, elapsed: float, iterations: int,
-              warm: bool) -> Plan:
+    def _plan(self, problem: StrokeProblem, sol: dict[str, np.ndarray], objective: str,
+              elapsed: float, iterations: int, warm: bool) -> Plan:
         n1, S, t_ref, lay = self.n1, self.stroke, self.t_ref, self.problem.layout
         w = sol["x"]
-        steps = t_ref * np.asarray(self.problem.steps(ca.DM(w))).ravel()
+        steps = t_ref * np.asarray(problem.steps(ca.DM(w))).ravel()
         profile = Profile(knots=np.concatenate(([0.0], np.cumsum(steps))),
                           x=self.x_open + S * w[lay.position][:-1],
                           v=S / t_ref * w[lay.velocity][:-1],
