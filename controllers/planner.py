@@ -929,10 +929,12 @@ class ClampPlanner:
         plan, ok = self._solve_torque(weights, t_bounds, force_limit, objective, start, warm,
                                       guess, torque_factor, caps)
         for _ in range(_TIGHTEN if caps != (None, None) else 0):
+            if not ok:
+                break
             zone = self.protection(plan)
             reached = (zone["peak_platen_speed"], zone["peak_input_force"])
             excess = [0.0 if c is None else max(r - c, 0.0) for c, r in zip(caps, reached)]
-            if not ok or not any(excess):
+            if not any(excess):
                 break
             imposed = tuple(c if c is None else c - 1.5 * e for c, e in zip(imposed, excess))
             plan, ok = self._solve_torque(weights, t_bounds, force_limit, objective, plan, True,
@@ -994,6 +996,8 @@ class ClampPlanner:
               elapsed: float, iterations: int, warm: bool) -> Plan:
         n1, S, t_ref, lay = self.n1, self.stroke, self.t_ref, self.problem.layout
         w = sol["x"]
+        if not problem.zone:  # the zone's intervals are the approach's: a start for with_zone
+            w[lay.zone_step] = w[lay.steps.start]
         steps = t_ref * np.asarray(problem.steps(ca.DM(w))).ravel()
         profile = Profile(knots=np.concatenate(([0.0], np.cumsum(steps))),
                           x=self.x_open + S * w[lay.position][:-1],
