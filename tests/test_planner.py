@@ -512,21 +512,6 @@ def test_dimension_errors_are_named_as_the_fmu_names_them():
     assert longer.mechanism.upper.r5 == pytest.approx(nominal.mechanism.upper.r5 + 0.25e-3)
 
 
-def test_trade_off_is_monotone_and_ends_near_the_bound(chang, capsys):
-    """``toggle plan --trade-off``: each lower force limit costs stroke time; the last point
-    is within 0.5 % of the lower bound, every peak within its limit on the 1 ms samples."""
-    assert main(["plan", "--trade-off", "3", "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    points = report["trade_off"]
-    peaks, times = ([p[k] for p in points] for k in ("peak_force", "duration"))
-    assert len(points) == 3
-    assert all(np.diff(peaks) < 0) and all(np.diff(times) > 0)
-    assert peaks[-1] <= report["peak_force_lower_bound"] * 1.005
-    with pytest.raises(SystemExit) as refused:  # an argparse usage error
-        main(["plan", "--trade-off", "1"])
-    assert refused.value.code == 2
-
-
 def test_durations_beyond_the_friction_models_creep_speed_are_refused_up_front(chang, capsys):
     """A 1e4 s stroke once took 10 min and 6 GB and compared the plan with baselines whose
     friction had faded (tanh(v / v_eps) at 5 um/s): 10 N 'baselines' under a 14.9 N bound."""
@@ -557,24 +542,41 @@ def test_a_mold_set_at_the_toggle_is_planned(chang, x_contact, capsys):
     s_curve_peak = baselines(cfg.with_(x_contact=x_contact), limits, DURATION)["s_curve"]
     assert s.peak_force < s_curve_peak.peak_force
     assert planner.clamping_creeps(max(2, planner.n2 // 10))  # the preset's mold keeps it
-    assert main(["plan", "--x-contact", str(x_contact), "--duration", str(DURATION),
-                 "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert report["gap_to_bound_percent"] is None or report["peak_force_lower_bound"] > 0
+    if x_contact == 0.0515:  # the command too (a zero bound divided by zero there)
+        assert main(["plan", "--x-contact", str(x_contact), "--duration", str(DURATION),
+                     "--json"]) == 0
+        report = json.loads(capsys.readouterr().out)
+        assert report["gap_to_bound_percent"] is None or report["peak_force_lower_bound"] > 0
 
 
-def test_trade_off_with_the_mold_and_in_a_dry_cycle(tmp_path, capsys):
-    """Stroke time against peak force (issue 17): each curve buys force with time, the dry
-    cycle (the mold at the toggle) needs far less force than clamping, the mold's curve
-    stays above its lower bound; the figure is written."""
+def test_trade_off_with_the_mold_and_in_a_dry_cycle(tmp_path, capsys, monkeypatch):
+    """``toggle plan --trade-off`` (issue 17): each curve buys force with time, the mold's
+    ends within 0.5 % of the lower bound and never below it, the dry cycle (the mold at the
+    toggle) needs far less force; ``toggle plot trade-off`` draws the same curves."""
+    from controllers.planner import ClampPlanner
+
+    computed, real = {}, ClampPlanner.trade_off
+
+    def keep(self: ClampPlanner, points: int = 6) -> list:
+        computed[self.config.x_contact] = real(self, points)
+        return computed[self.config.x_contact]
+
+    monkeypatch.setattr(ClampPlanner, "trade_off", keep)
     assert main(["plan", "--trade-off", "2", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     for name in ("trade_off", "trade_off_dry_cycle"):
         (fast, slow) = report[name]
         assert slow["duration"] > fast["duration"] and slow["peak_force"] < fast["peak_force"]
-    assert report["trade_off"][-1]["peak_force"] >= report["peak_force_lower_bound"]
+    bound = report["peak_force_lower_bound"]
+    assert bound <= report["trade_off"][-1]["peak_force"] <= bound * 1.005
     assert report["trade_off_dry_cycle"][0]["peak_force"] < 0.5 * report["trade_off"][-1][
         "peak_force"]
+    with pytest.raises(SystemExit) as refused:  # an argparse usage error
+        main(["plan", "--trade-off", "1"])
+    assert refused.value.code == 2
+    # the figure from the same plans (each curve costs tens of seconds to plan again)
+    monkeypatch.setattr(ClampPlanner, "trade_off",
+                        lambda self, points=6: computed[self.config.x_contact])
     out = tmp_path / "t.png"
     assert main(["plot", "trade-off", "--points", "2", "--out", str(out)]) == 0
     assert out.stat().st_size > 10_000
