@@ -81,12 +81,18 @@ def recorded_samples(run_dir: Path) -> list[int]:
 
 
 def sent_samples(log: EmulatorLog, first: int) -> list[int]:
-    """What the emulator sent intact for the run whose first sample is ``first``: from the
-    run's START to the first sample at standstill (docs/rig-protocol.md, section 11)."""
-    boot = next(b for b, s in log.run_starts if s == first)
+    """What the emulator sent intact for the run whose first recorded sample is ``first``: from
+    the run's START to the first sample at standstill (docs/rig-protocol.md, section 11).
+
+    The run is the latest START at or before ``first`` in a boot that sent ``first`` intact:
+    the START's own sample may have been corrupted on the wire (the dropped-bytes fault), so the
+    first recorded sample can follow it."""
+    sent_first = {b for b, sample, _, intact in log.written if sample == first and intact}
+    boot, start = next((b, s) for b, s in reversed(log.run_starts)
+                       if s <= first and b in sent_first)
     out = []
     for b, sample, state, intact in log.written:
-        if b != boot or sample < first or not intact:
+        if b != boot or sample < start or not intact:
             continue
         out.append(sample)
         if state not in (p.State.RUNNING, p.State.STOPPING):
