@@ -18,7 +18,7 @@ from pythonfmu import DefaultExperiment
 
 from toggle.fmu_slave import DeclaredSlave, Var
 from toggle.kinematics import stroke_limits
-from toggle.params import PAPER_NAMES, Mechanism, load_preset
+from toggle.params import DYNAMICS_PARAMETERS, PAPER_NAMES, Mechanism, load_preset
 from toggle.plant import DriveState, HystereticPlant, PlantConfig, configure, follow
 
 _PRESET_FILE = Path(__file__).with_name("preset.toml")
@@ -27,8 +27,6 @@ MECHANISM = load_preset(str(_PRESET_FILE) if _PRESET_FILE.is_file() else "chang2
 #: Dimensional errors, one parameter per dimension of each half (seed 000's names).
 ERRORS = tuple(name for half in ("lower", "upper") for name in PAPER_NAMES[half].values())
 MAX_ERROR = 5e-3  # m: a dimensional error, not a redesign
-MASSES = {"m_crosshead": "crosshead", "m_links": "links", "m_platen": "platen",
-          "guide_damping": "guide_damping"}
 #: The drive's rotating inertias (toggle.drive.reflected_mass), kg m^2.
 INERTIAS = {"rotor_inertia": "Motor rotor inertia (with its pulley)",
             "screw_inertia": "Ball-screw inertia (with its pulley and coupling)"}
@@ -56,6 +54,9 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
     x_lo, x_hi = cfg.input_range
     dyn = mech.dynamics
     mass_max = 100 * max(dyn.crosshead, dyn.links, dyn.platen, 1.0)
+    # bounds: masses 100 times the largest; damping in N s/m and frictions in N beyond any
+    # clamp this size (1e3 times the mass bound; a friction of 1e5 N per kg of it)
+    top = {"kg": mass_max, "N.s/m": 1e3 * mass_max, "N": 1e3 * mass_max}
     return (
         Var("preset", "parameter", "", "Preset this FMU is built for (fixed; build another "
             "with toggle build-fmu --preset)", start=mech.name),
@@ -63,11 +64,9 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
             min=0.0, max=1.0),
         Var("x_contact", "parameter", "m", "Crosshead position at mold contact; the toggle "
             "position (start and max): no mold", start=x_toggle, min=x_open, max=x_toggle),
-        *(Var(name, "parameter", "N.s/m" if field == "guide_damping" else "kg",
-              "Viscous guide friction referred to the input link" if field == "guide_damping"
-              else f"{field.capitalize()} mass", start=float(getattr(dyn, field)), min=0.0,
-              max=mass_max * (1e3 if field == "guide_damping" else 1.0))
-          for name, field in MASSES.items()),
+        *(Var(name, "parameter", unit, text, start=float(getattr(dyn, field)), min=0.0,
+              max=top[unit])
+          for name, (field, unit, text) in DYNAMICS_PARAMETERS.items()),
         *(Var(name, "parameter", "kg.m2", text, start=float(getattr(mech.drive, name)),
               min=0.0, max=100 * max(mech.drive.rotor_inertia, mech.drive.screw_inertia, 0.01))
           for name, text in INERTIAS.items()),
@@ -106,7 +105,8 @@ class ToggleClamp(DeclaredSlave):
             MECHANISM,
             mu=self.mu,
             x_contact=self.x_contact,
-            masses={field: getattr(self, name) for name, field in MASSES.items()},
+            masses={field: getattr(self, name)
+                    for name, (field, _, _) in DYNAMICS_PARAMETERS.items()},
             drive={name: getattr(self, name) for name in INERTIAS},
             errors={n: getattr(self, f"delta_{n}") for n in ERRORS},
         )

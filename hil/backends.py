@@ -34,8 +34,8 @@ from hil.experiment import stroke_positions
 from hil.homing import APPROACH_SPEED, START_TOLERANCE
 from hil.samples import Sample, Status, Trajectory, TrajectoryError
 from toggle.kinematics import output_position, stroke_limits
-from toggle.params import load_preset
-from toggle.rig_tables import rig_errors
+from toggle.params import DYNAMICS_PARAMETERS, load_preset
+from toggle.rig_tables import rig_dynamics, rig_errors
 
 if TYPE_CHECKING:
     from hil import protocol as p
@@ -83,6 +83,12 @@ class RigSetup:
         built (unless ``as_built`` is False) plus delta_r8 (:func:`toggle.rig_tables.rig_errors`,
         as the rig tables)."""
         return rig_errors(self.preset, self.delta_r8, None if self.as_built else {})
+
+    @property
+    def dynamics(self) -> dict[str, float]:
+        """The simulated rig's [dynamics] beyond its preset (its platen's friction, SI),
+        unless ``as_built`` is False (:func:`toggle.rig_tables.rig_dynamics`)."""
+        return rig_dynamics(self.preset, None if self.as_built else {})
 
     @property
     def stroke(self) -> tuple[float, float]:
@@ -251,7 +257,9 @@ class FmuPlant(Plant):
             raise RunStoppedError(f"no FMU at {path}")
         self._dir = extract(str(path), tempfile.mkdtemp(prefix="toggle_hil_"))
         start = {"preset": s.preset, "x_cmd": x_open,
-                 **{f"delta_{name}": delta for name, delta in s.errors.items()}}
+                 **{f"delta_{name}": delta for name, delta in s.errors.items()},
+                 **{name: s.dynamics[field] for name, (field, _, _) in DYNAMICS_PARAMETERS.items()
+                    if field in s.dynamics}}
         if s.mu is not None:
             start["mu"] = s.mu
         if s.x_contact is not None:
@@ -270,10 +278,12 @@ class FmuPlant(Plant):
         self._x, self._time = x_open, 0.0
 
     def describe(self) -> dict[str, object]:
-        """The simulated rig also records its dimensional errors (as built plus delta_r8)."""
+        """The simulated rig also records its dimensional errors (as built plus delta_r8)
+        and its [dynamics] beyond the preset's (SI)."""
         info = super().describe()
         if self.setup is not None:
             info["dimensional_errors_m"] = self.setup.errors
+            info["dynamics_beyond_preset"] = self.setup.dynamics
         return info
 
     def _step(self, x: float, h: float) -> tuple[float, float]:

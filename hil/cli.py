@@ -65,11 +65,12 @@ def _trajectory(s: RunSettings, guard: SignalGuard, setup: RigSetup
         return reciprocating_trajectory(nominal, s.speed, s.cycles, period), (
             f"reciprocating at {s.speed * 1e3:g} mm/s")
     errors = {name: delta for name, delta in setup.errors.items() if delta}
-    built = ", ".join(f"delta_{name} {delta * 1e3:g} mm" for name, delta in errors.items())
+    built = ", ".join([*(f"delta_{name} {delta * 1e3:g} mm" for name, delta in errors.items()),
+                       *(f"{name} {value:g} N" for name, value in setup.dynamics.items())])
     print(f"hil run: planning the default profile for {s.preset}"
           f"{f' as the rig is built ({built})' if built else ''}", file=sys.stderr)
     forward = experiment.planned_trajectory(s.preset, period, mu=s.mu, x_contact=s.x_contact,
-                                            errors=errors)
+                                            errors=errors, masses=setup.dynamics)
     guard.check()  # IPOPT swallows Ctrl-C: act on it before anything moves
     return _guarded(profile_cycles(forward, s.cycles), s), (
         f"planned (minimum peak input force){f' for {built}' if built else ''}")
@@ -120,7 +121,8 @@ def _print_summary(summary: dict, run_dir: Path, count: int, cycles: int, backen
                   if stat["three_sigma"] is not None else "one cycle: no spread")
         print(f"  {label:16s} {stat['mean'] * scale:10.4f} {unit:2s}  ({spread})")
     if backend == "fmu" and done > 1:
-        print("  (a spread of 0: the simulated rig is deterministic; the real rig's is not)")
+        print("  (the simulated rig is deterministic: its spread is only the first cycle's "
+              "start with the friction at rest; the real rig's is not)")
     link = summary.get("link") or {}
     if link:
         print(f"  link: {link_errors(link) or 'no errors'}, {link['retransmissions']} "

@@ -84,14 +84,15 @@ def profile_cycles(forward: Trajectory, cycles: int) -> Trajectory:
 
 def planned_trajectory(preset: str, period: float = DEFAULT_PERIOD, *,
                        mu: float | None = None, x_contact: float | None = None,
-                       errors: dict[str, float] | None = None) -> Trajectory:
+                       errors: dict[str, float] | None = None,
+                       masses: dict[str, float] | None = None) -> Trajectory:
     """The default plan for the clamp a run drives: the planner's best minimum-peak stroke
     of the default duration (:meth:`controllers.planner.ClampPlanner.best`) for the preset
-    with its friction ``mu``, mold ``x_contact`` and dimensional ``errors`` (the simulated
-    rig's as built), sampled every ``period`` s."""
+    with its friction ``mu``, mold ``x_contact``, dimensional ``errors`` and [dynamics]
+    fields ``masses`` (the simulated rig's as built), sampled every ``period`` s."""
     from controllers.planner import default_duration, plan_config, planner_for
 
-    cfg = plan_config(preset, mu=mu, x_contact=x_contact, errors=errors)
+    cfg = plan_config(preset, mu=mu, x_contact=x_contact, errors=errors, masses=masses)
     planner = planner_for(cfg, drive_limits(cfg.mechanism))
     plan = planner.best(default_duration(planner))
     t = np.arange(0.0, plan.duration + period / 2, period)

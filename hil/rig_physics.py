@@ -4,7 +4,8 @@ Implements :class:`hil.mcu_model.RigPhysics` for the emulator: the MCU model
 passes the commanded input position once per telemetry period; velocity and
 acceleration follow by backward differences over that period, as in the FMU's
 ideal drive; the rig's dimensional errors are those of the simulated rig
-(:func:`toggle.rig_tables.rig_errors`: its as-built ones plus delta_r8); the plant
+(:func:`toggle.rig_tables.rig_errors`: its as-built ones plus delta_r8) and its platen's
+friction (:func:`toggle.rig_tables.rig_dynamics`); the plant
 carries the hysteretic slip state of the friction (:class:`toggle.plant.HystereticPlant`).
 The MCU's trajectory clock, not the host's jittery wall clock, is what the drive follows,
 so the differences use the nominal period.
@@ -18,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from toggle.plant import DriveState, HystereticPlant, configure, follow
-from toggle.rig_tables import rig_errors
+from toggle.rig_tables import rig_dynamics, rig_errors
 
 
 @dataclass
@@ -43,7 +44,8 @@ class ClampPhysics:
     def __call__(self, x: float, t: float) -> tuple[float, float]:
         if self._plant is None:
             cfg = configure(self.preset, mu=self.mu, x_contact=self.x_contact,
-                            errors=rig_errors(self.preset, self.delta_r8))
+                            errors=rig_errors(self.preset, self.delta_r8),
+                            masses=rig_dynamics(self.preset))
             self._plant = HystereticPlant(cfg)
         if self._state is None:
             self._state = DriveState.at_rest(x)

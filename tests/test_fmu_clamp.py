@@ -34,6 +34,7 @@ from toggle.drive import motor_torque
 from toggle.fmu_build import DEFAULT_SLAVE, build_fmu
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
+from toggle.params import DYNAMICS_PARAMETERS
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
 SLAVE = load_module(DEFAULT_SLAVE, "toggle_clamp_fmu_inproc").ToggleClamp
@@ -63,7 +64,9 @@ def _reference(x, v, a, slip=None, before=(), **start) -> PlantOutputs:
     then the reported path)."""
     errors = {k.removeprefix("delta_"): val for k, val in start.items() if k.startswith("delta_")}
     drive = {k: start[k] for k in ("rotor_inertia", "screw_inertia") if k in start}
-    cfg = configure("chang2021", x_contact=start.get("x_contact"), errors=errors, drive=drive)
+    masses = {field: start[k] for k, (field, _, _) in DYNAMICS_PARAMETERS.items() if k in start}
+    cfg = configure("chang2021", x_contact=start.get("x_contact"), errors=errors, drive=drive,
+                    masses=masses)
     if slip is None:
         slip = slip_along([*before, *np.atleast_1d(x)], cfg.asymmetry.slip_distance)[len(before):]
     return plant_outputs(np.asarray(x), np.asarray(v), np.asarray(a), cfg, slip_state=slip)
@@ -176,6 +179,26 @@ def test_motor_torque_is_the_drives_with_the_rotor_inertia(unzipped: Path):
     np.testing.assert_allclose(res["motor_torque"], torque, rtol=1e-12, atol=1e-15)
     inertia = motor_torque(0.0, drive, res["acceleration"])
     assert np.max(np.abs(inertia)) > 0.1 * np.max(np.abs(torque))  # the rotor matters here
+
+
+def test_platen_and_guide_friction_are_the_plants(unzipped: Path):
+    """The Coulomb frictions of the platen's bushings and the crosshead guide are FMU
+    parameters: the outputs are the plant's with them; the platen's is referred to the
+    input by dL/dx, so it adds about its value times the velocity ratio while the platen
+    moves and nothing once it rests on the mold."""
+    frictions = {"platen_friction": 26.6, "guide_friction": 1.5}
+    res = _simulate_stroke(unzipped, **MOLD, **frictions)
+    _assert_outputs_match(res, _reference(res["x"], res["velocity"], res["acceleration"],
+                                          **MOLD, **frictions))
+    bare = _simulate_stroke(unzipped, **MOLD)
+    np.testing.assert_array_equal(res["x"], bare["x"])
+    extra = res["input_force"] - bare["input_force"]
+    # the closing stroke, once the slip state (from 0 at rest) has turned over: 1 mm on
+    forward = ((res["velocity"] > 1e-3) & (res["x"] > X_OPEN + 1e-3)
+               & (res["x"] < X_CONTACT - 1e-4))
+    ratio = res["platen_velocity"][forward] / res["velocity"][forward]
+    assert forward.sum() > 100 and ratio.max() > 1.0
+    np.testing.assert_allclose(extra[forward], 26.6 * ratio + 1.5, rtol=1e-3)
 
 
 def test_ideal_drive_puts_the_input_link_at_the_command(unzipped: Path):

@@ -170,26 +170,29 @@ def test_a_replayed_plan_reproduces_the_planners_peak(tmp_path, capsys) -> None:
 
 def test_the_default_job_plans_for_the_rig_as_built(tmp_path) -> None:
     """The default job plans for the clamp it drives (the prototype as built: its as-built
-    error plus delta_r8): the run peaks where its plan does, well below the nominal plan
-    replayed on the same rig (50.8 N against 69.9 N on chang2021)."""
+    error and platen friction plus delta_r8), and the run peaks where the plan does
+    (55.2 N on chang2021: the platen's friction at the stroke's start, which no profile
+    avoids, so the nominal clamp's plan replayed on the rig is hardly worse, 55.6 N)."""
     from controllers.limits import drive_limits
     from controllers.planner import default_duration, plan_config, planner_for
     from controllers.profiles import predict
-    from toggle.rig_tables import rig_errors
+    from toggle.rig_tables import rig_dynamics, rig_errors
 
     out = tmp_path / "run"
     assert main(["run", "--cycles", "1", "--out", str(out), "--quiet"]) == 0
     meta = json.loads((out / "meta.json").read_text())
-    assert "delta_r1U" in meta["profile"]
-    rig = plan_config("chang2021", errors=rig_errors("chang2021", 0.0))
+    assert "delta_r1U" in meta["profile"] and "platen_friction" in meta["profile"]
+    rig = plan_config("chang2021", errors=rig_errors("chang2021", 0.0),
+                      masses=rig_dynamics("chang2021"))
     planner = planner_for(rig, drive_limits(rig.mechanism))
     plan = planner.best(default_duration(planner))
     data = read_samples(out / "samples.csv")
-    forward = data.force[data.t <= plan.duration + 1e-9]
+    stroke = data.t <= plan.duration + 1e-9
+    forward = data.force[stroke]
     assert forward.max() == pytest.approx(planner.worst_peak(plan), rel=0.01)
     nominal = plan_config("chang2021")
     plain = planner_for(nominal, drive_limits(nominal.mechanism)).best(plan.duration)
-    assert forward.max() < 0.85 * predict(plain.profile, rig).peak_force
+    assert forward.max() <= predict(plain.profile, rig).peak_force
 
 
 def test_either_fmu_gives_the_same_run(tmp_path) -> None:

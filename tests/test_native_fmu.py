@@ -153,10 +153,12 @@ def _both(unzipped: Path, python_fmu: Path, **start: float) -> list:
                          start_values=start, output=OUTPUTS) for d in (unzipped, python_fmu)]
 
 
-@pytest.mark.parametrize("delta_r8", [0.0, 0.5e-3])
+@pytest.mark.parametrize("delta_r8, frictions", [
+    (0.0, {}), (0.5e-3, {}), (0.5e-3, {"platen_friction": 26.6, "guide_friction": 1.5})])
 def test_native_and_pythonfmu_agree_over_the_stroke(unzipped: Path, python_fmu: Path,
-                                                    delta_r8: float):
-    native, python = _both(unzipped, python_fmu, delta_r8=delta_r8)
+                                                    delta_r8: float, frictions: dict):
+    """Also with the guides' Coulomb frictions set (parameters of both, from one table)."""
+    native, python = _both(unzipped, python_fmu, delta_r8=delta_r8, **frictions)
     for name in OUTPUTS:
         want = python[name]
         np.testing.assert_allclose(native[name], want, rtol=REL,

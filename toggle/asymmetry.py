@@ -62,6 +62,9 @@ _SIGN_EPS = 1e-6
 _LOAD_EPS = 1e-9
 #: Pin radii for the frictionless statics (unused at mu = 0; any valid radii).
 _NO_PINS = PinRadii(B=1e-3, C=1e-3, D=1e-3)
+#: Floor of the clearance excess in the internal force's start, m (an attometre: below
+#: any clearance; the force is 0 there anyway).
+_EXCESS_FLOOR = 1e-18
 #: Newton steps for the internal force (monotone from an upper bound; 1e-15 relative).
 _NEWTON_STEPS = 12
 
@@ -75,16 +78,16 @@ class AsymmetryParams:
     """Physical parameters of the forced-agreement model, SI.
 
     Defaults: the desktop clamp of Chang et al. 2021, fitted on every force statistic of
-    Tables 6 and 7 with the prototype's as-built error (contact_stiffness,
-    drive_stiffness, takeup_return; rate_strengthening from the earlier fit, at its limit
-    of zero friction at rest; free_play 0 and boundary friction, which the fits chose) and
+    Tables 6 and 7 with the prototype's as-built error and platen friction (free_play,
+    contact_stiffness, drive_stiffness, takeup_return; rate_strengthening from an earlier
+    fit, at its limit of zero friction at rest; boundary friction, which the fits chose) and
     the rest from its materials and sizes (docs/unequal-halves.md, sections 4 and 9).
     """
 
-    free_play: float = 0.0  # delta0, m: platen tilt in the bushings + pin clearances
-    contact_stiffness: float = 3.213e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
+    free_play: float = 0.1514e-3  # delta0, m: platen tilt in the bushings + pin clearances
+    contact_stiffness: float = 5.950e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
     series_stiffness: float = 3.3e7  # k_s, N/m: links 4b and 5 of both halves in series (A6061)
-    drive_stiffness: float = 2.554e5  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
+    drive_stiffness: float = 2.700e4  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
     mu: float = 0.3  # pin friction coefficient at the reference slip speed (SUS304 pin in A6061)
     rate_strengthening: float = 0.04342  # a - b of the steady-state rate-and-state law
     reference_slip: float = 1.0e-3  # v_ref, m/s: slip speed at which the coefficient is mu
@@ -97,7 +100,7 @@ class AsymmetryParams:
     max_internal_force: float = 2.0e4
     #: lambda, 1: share of the take-up work the clamp gives back (1: the take-up is elastic,
     #: the stateless model of issue 8; 0: it is all lost in friction-locked slip)
-    takeup_return: float = 0.1385
+    takeup_return: float = 0.1517
     #: x_s, m: crosshead travel over which the slip state turns after a reversal (Dahl)
     slip_distance: float = 0.1e-3
 
@@ -167,12 +170,12 @@ def _pin_loads(x: Any, pose: Any, dims: Any, n: Any) -> tuple[Any, Any, Any, Any
     u3 = (cos th3, sin th3).
     """
     ratios = force_ratios(x, dims, _NO_PINS, 0.0)
-    f5, t3 = n * ratios.link1, n * ratios.crosshead_link
     th3, th5 = pose.theta3, pose.theta5
-    rc_x = f5 * np.cos(th5) - t3 * np.cos(th3)
-    rc_y = f5 * np.sin(th5) - t3 * np.sin(th3)
-    f5, t3 = np.fabs(f5), np.fabs(t3)
-    return f5, f5, np.sqrt(rc_x * rc_x + rc_y * rc_y), t3, t3
+    # pin C per unit n: |n| outside the root keeps its derivative finite at n = 0 (free play)
+    c_x = ratios.link1 * np.cos(th5) - ratios.crosshead_link * np.cos(th3)
+    c_y = ratios.link1 * np.sin(th5) - ratios.crosshead_link * np.sin(th3)
+    f5, t3 = np.fabs(n * ratios.link1), np.fabs(n * ratios.crosshead_link)
+    return f5, f5, np.fabs(n) * np.sqrt(c_x * c_x + c_y * c_y), t3, t3
 
 
 def _friction_power(x: Any, v: Any, dims: Any, n: Any, q: Any) -> Any:
@@ -199,11 +202,14 @@ def _internal_force(excess: Any, compliance: Any, k_contact: Any) -> Any:
     upper bound min(sqrt(s / a), cbrt(s / c)) decreases monotonically to the root.
     """
     a = k_contact ** (-2.0 / 3.0)
-    y = np.fmin(np.sqrt(excess / a), (excess / compliance) ** (1.0 / 3.0))
+    # the start's roots from a floor: at excess 0 (within the free play) their derivatives
+    # are infinite, and 0 times infinity is NaN in the planner's exact derivatives
+    s = np.fmax(excess, _EXCESS_FLOOR)
+    y = np.fmin(np.sqrt(s / a), (s / compliance) ** (1.0 / 3.0))
     for _ in range(_NEWTON_STEPS):
         g = compliance * y**3 + a * y * y - excess
         y = y - g / (3 * compliance * y * y + 2 * a * y + 1e-300)
-    return y**3
+    return y**3 * (excess > 0)  # exactly 0 within the free play
 
 
 @functools.cache

@@ -41,15 +41,22 @@ from toggle.fmu_build import (
 from toggle.fmu_build import number_text as _number
 from toggle.fmu_slave import Var
 from toggle.kinematics import half_pose
-from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES, load_preset, symbolic_copy
+from toggle.params import (
+    DIMENSIONS,
+    DYNAMICS_PARAMETERS,
+    HALVES,
+    PAPER_NAMES,
+    load_preset,
+    symbolic_copy,
+)
 from toggle.plant import PlantConfig, PlantOutputs, configure, plant_outputs
 
 MODEL = "ToggleClampNative"
 C_DIR = Path(__file__).resolve().parent.parent / "fmu_src" / "native"
 WRAPPER = C_DIR / "fmi2_clamp.c"
 GENERATED = "clamp_model"  # clamp_model.c / clamp_model.h
-MASS_FIELDS = {"m_crosshead": "crosshead", "m_links": "links", "m_platen": "platen",
-               "guide_damping": "guide_damping"}
+#: The [dynamics] fields by FMU parameter name, first in the generated functions' ``masses``.
+MASS_FIELDS = {name: field for name, (field, _, _) in DYNAMICS_PARAMETERS.items()}
 #: The drive's inertias, after the masses in the generated functions' ``masses`` input.
 DRIVE_FIELDS = ("rotor_inertia", "screw_inertia")
 N_MASSES = len(MASS_FIELDS) + len(DRIVE_FIELDS)
@@ -87,9 +94,9 @@ class _SymbolicHalf(NamedTuple):
 
 
 def plant_functions(cfg: PlantConfig) -> list[ca.Function]:
-    """The plant as CasADi functions (xvaz[4], lower[8], upper[8], mu, masses[6], x_contact);
+    """The plant as CasADi functions (xvaz[4], lower[8], upper[8], mu, masses, x_contact);
     xvaz: position, velocity, acceleration and the pin friction's slip state; masses: the
-    four of :data:`MASS_FIELDS`, then the drive's inertias (:data:`DRIVE_FIELDS`)."""
+    fields of :data:`MASS_FIELDS`, then the drive's inertias (:data:`DRIVE_FIELDS`)."""
     xva = ca.SX.sym("xvaz", 4)
     p_lower, p_upper = (ca.SX.sym(h, len(DIMENSIONS)) for h in HALVES)
     mu, masses, x_contact = (ca.SX.sym("mu"), ca.SX.sym("masses", N_MASSES),

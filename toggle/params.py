@@ -348,7 +348,9 @@ class Dynamics:
     platen (kg); platen: the moving platen with its mold half (kg);
     guide_damping: viscous friction of the crosshead and platen guides,
     referred to the input link (N s/m); guide_friction: their Coulomb friction
-    (and the ball screw's), referred to the input link (N).
+    (and the ball screw's), referred to the input link (N); platen_friction: the
+    moving platen's Coulomb friction on its tie-bars, at the platen (N), referred to
+    the input by the velocity ratio dL/dx, so it fades to nothing at the toggle.
     """
 
     crosshead: float
@@ -356,12 +358,28 @@ class Dynamics:
     platen: float
     guide_damping: float = 0.0
     guide_friction: float = 0.0
+    platen_friction: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ParameterError(f"dynamics.{f.name} must be finite and >= 0, got {value!r}")
+
+
+#: The FMUs' parameter name of each [dynamics] field, with its unit and description: one
+#: table for the Python and the native FMU (their parameters, in this order) and the CLI.
+DYNAMICS_PARAMETERS: dict[str, tuple[str, str, str]] = {
+    "m_crosshead": ("crosshead", "kg", "Crosshead mass"),
+    "m_links": ("links", "kg", "Links mass"),
+    "m_platen": ("platen", "kg", "Platen mass"),
+    "guide_damping": ("guide_damping", "N.s/m",
+                      "Viscous guide friction referred to the input link"),
+    "guide_friction": ("guide_friction", "N",
+                       "Coulomb friction of the crosshead guide and ball screw, at the input"),
+    "platen_friction": ("platen_friction", "N",
+                        "Coulomb friction of the moving platen on the tie-bars, at the platen"),
+}
 
 
 def symbolic_copy(obj: Any, **values: Any) -> Any:

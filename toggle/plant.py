@@ -176,7 +176,10 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
         ma = 1.0 / np.maximum(np.fabs(q), 1.0 / MA_CAP)
     inertia = m_in * a + moving * m_out * g * (g * a + gp * v * v)
     guide = direction if slip_state is None else slip_state
-    force = inertia + dyn.guide_damping * v + dyn.guide_friction * guide + thrust
+    # the platen's bushings: a Coulomb force at the platen, times dL/dx at the input
+    platen_friction = moving * dyn.platen_friction * np.fabs(g) * guide
+    force = (inertia + dyn.guide_damping * v + dyn.guide_friction * guide + platen_friction
+             + thrust)
     if not mech.symmetric:  # a parameter decision: equal halves add exactly nothing
         extra = asymmetry(x, v, mech.lower, mech.upper, cfg.asymmetry)
         force = force + (extra.force if slip_state is None

@@ -29,6 +29,7 @@ from toggle.kinematics import AssemblyError
 from toggle.params import PAPER_NAMES, Mechanism, PinRadii, tomllib
 from toggle.rig_tables import (
     CHANG2021_AS_BUILT,
+    CHANG2021_DYNAMICS,
     CHANG2021_READING,
     FORCE_STATISTICS,
     RigReading,
@@ -37,6 +38,9 @@ from toggle.rig_tables import (
     rig_statistics,
 )
 
+#: Coulomb frictions of the dynamics a fit may choose: the crosshead guide's (at the input)
+#: and the platen's on its tie-bars (at the platen, referred by dL/dx), N.
+DYNAMICS_FITTABLE = ("guide_friction", "platen_friction")
 #: Prefix of a fittable as-built error of the rig: ``as_built_r6`` is the prototype's own
 #: error of link 6 (the upper half's r3, seed 000's names), m.
 AS_BUILT = "as_built_"
@@ -47,7 +51,7 @@ FORCE_FITTABLE = {
     "free_play": "log", "contact_stiffness": "log", "series_stiffness": "log",
     "drive_stiffness": "log", "mu": "log", "rate_strengthening": "log",
     "hersey_transition": "log", "slip_distance": "log", "pin_radius": "log",
-    "guide_friction": "log", "takeup_return": "logit",
+    **dict.fromkeys(DYNAMICS_FITTABLE, "log"), "takeup_return": "logit",
     "toggle_latency": "time",
     **{f"{AS_BUILT}{n}": "length" for names in PAPER_NAMES.values() for n in names.values()},
 }
@@ -99,7 +103,8 @@ class RigModel:
     """Everything the simulated rig's statistics depend on beyond the mechanism."""
 
     params: AsymmetryParams = AsymmetryParams()
-    guide_friction: float | None = None  # N; None: the preset's
+    #: the rig's [dynamics] fields beyond its preset's (:func:`toggle.rig_tables.rig_dynamics`)
+    dynamics: dict[str, float] = field(default_factory=lambda: dict(CHANG2021_DYNAMICS))
     reading: RigReading = CHANG2021_READING
     #: the rig's own dimensional errors besides the set link-8 error (seed 000's names, m)
     as_built: dict[str, float] = field(default_factory=lambda: dict(CHANG2021_AS_BUILT))
@@ -111,25 +116,26 @@ class RigModel:
             return self.reading.toggle_latency
         if name == "pin_radius":
             return self.params.pins.C
-        if name == "guide_friction":
-            return self.guide_friction if self.guide_friction is not None else 0.0
+        if name in DYNAMICS_FITTABLE:
+            return self.dynamics.get(name, 0.0)
         return getattr(self.params, name)
 
     def with_values(self, values: dict[str, float]) -> RigModel:
         changes = dict(values)
         as_built = {**self.as_built, **{n.removeprefix(AS_BUILT): changes.pop(n)
                                         for n in values if n.startswith(AS_BUILT)}}
-        guide = changes.pop("guide_friction", self.guide_friction)
+        dynamics = {**self.dynamics, **{n: changes.pop(n) for n in values
+                                        if n in DYNAMICS_FITTABLE}}
         reading = replace(self.reading, toggle_latency=changes.pop(
             "toggle_latency", self.reading.toggle_latency))
         if "pin_radius" in changes:
             r = changes.pop("pin_radius")
             changes["pins"] = PinRadii(B=r, C=r, D=r)
-        return replace(self, params=self.params.replace(**changes), guide_friction=guide,
+        return replace(self, params=self.params.replace(**changes), dynamics=dynamics,
                        reading=reading, as_built=as_built)
 
     def statistics(self, nominal: Mechanism, speed: float, delta_r8: float) -> RigStatistics:
-        cfg = rig_config(nominal, delta_r8, self.params, self.guide_friction, self.as_built)
+        cfg = rig_config(nominal, delta_r8, self.params, self.dynamics, self.as_built)
         return rig_statistics(cfg, speed, self.reading)
 
 

@@ -83,19 +83,36 @@ class RigReading:
 
 #: The prototype's reading, fitted with the force model on Tables 3-4 and 6-7
 #: (``toggle tables --fit ...``, docs/unequal-halves.md section 9).
-CHANG2021_READING = RigReading(datum=0.4351e-3, lever=2.130, compliance=2.003e-6)
+CHANG2021_READING = RigReading(datum=0.4087e-3, lever=-0.139, compliance=0.474e-6)
 
 
 #: The prototype's own dimensional errors (seed 000's names, m) besides the set link-8
 #: error: the height of the upper half's link-7 pivot (r1U), whose mismatch vanishes at
-#: both ends of the stroke, fitted on Tables 6-7 (``toggle tables --fit as_built_r1U``:
-#: 1.58 +- 0.31 mm) and held at 1.2 mm, below the 1.22-1.25 mm beyond which the upper
-#: half has no toggle (docs/unequal-halves.md section 9.4). Data of the rig, not of the
-#: model: a preset's mechanism stays as its file writes it (equal halves add nothing),
-#: and only the simulated rig (:func:`rig_errors`) adds these.
-CHANG2021_AS_BUILT: dict[str, float] = {"r1U": 1.2e-3}
+#: both ends of the stroke, fitted on Tables 6-7 with the platen's friction below
+#: (``toggle tables --fit as_built_r1U ...``: 0.97 +- 0.88 mm; docs/unequal-halves.md
+#: section 9.4). Data of the rig, not of the model: a preset's mechanism stays as its file
+#: writes it (equal halves add nothing), and only the simulated rig (:func:`rig_errors`)
+#: adds these.
+CHANG2021_AS_BUILT: dict[str, float] = {"r1U": 0.965e-3}
 #: As-built errors of the rigs whose tables the project has, by preset name.
 AS_BUILT = {"chang2021": CHANG2021_AS_BUILT}
+#: The prototype's [dynamics] beyond its preset: the Coulomb friction of its moving platen's
+#: four oil-free bronze bushings on the tie-bars (seed 000, section 4), N, fitted on
+#: Tables 6-7 (``toggle tables --fit platen_friction ...``: 26.6 +- 2.0 N). Referred to the
+#: input by dL/dx it drags the stroke's start (x 2.1) and fades to nothing at the toggle,
+#: so it gives the delta_r8 = 0 rows their force without an F_TP (section 9.4). Data of
+#: the rig like the as-built errors: the preset, the planner's and the FMU's defaults
+#: stay without it; the simulated rig (:func:`rig_dynamics`) adds it.
+CHANG2021_DYNAMICS: dict[str, float] = {"platen_friction": 26.6}
+#: [dynamics] fields of the rigs whose tables the project has, by preset name.
+RIG_DYNAMICS = {"chang2021": CHANG2021_DYNAMICS}
+
+
+def rig_dynamics(preset: str, dynamics: dict[str, float] | None = None) -> dict[str, float]:
+    """[dynamics] fields (:class:`toggle.params.Dynamics`, SI) the rig of ``preset`` has
+    beyond its preset (``dynamics``, default the shipped ones of that rig, none for a preset
+    without a rig). What the simulated rig applies with :func:`rig_errors`."""
+    return dict(RIG_DYNAMICS.get(preset, {}) if dynamics is None else dynamics)
 
 
 def rig_errors(preset: str, delta_r8: float, as_built: dict[str, float] | None = None
@@ -124,13 +141,17 @@ class RigStatistics(NamedTuple):
 
 
 def rig_config(nominal: Mechanism, delta_r8: float, params: AsymmetryParams,
-               guide_friction: float | None = None,
+               dynamics: dict[str, float] | None = None,
                as_built: dict[str, float] | None = None) -> PlantConfig:
     """The plant of the rig of ``nominal`` with link 8 off by delta_r8 (m), no mold:
-    :func:`rig_errors` (its as-built errors, default the shipped ones) applied."""
+    :func:`rig_errors` and :func:`rig_dynamics` (default the shipped ones) applied."""
     mech, _ = with_errors(nominal, rig_errors(nominal.name, delta_r8, as_built))
-    if guide_friction is not None:
-        mech = replace(mech, dynamics=replace(mech.dynamics, guide_friction=guide_friction))
+    changes = rig_dynamics(nominal.name, dynamics)
+    if changes and mech.dynamics is None:
+        raise RigError(f"the rig's {', '.join(changes)} needs a preset with [dynamics]; "
+                       f"{nominal.name} has none")
+    if changes:
+        mech = replace(mech, dynamics=replace(mech.dynamics, **changes))
     return PlantConfig(mech, asymmetry=params)
 
 

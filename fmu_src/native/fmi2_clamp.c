@@ -20,7 +20,7 @@
 #include "clamp_model.h"
 #include "clamp_model_data.h"
 
-#define STATE_VERSION 5u
+#define STATE_VERSION 6u
 #define GRID 4001
 #define N_IN 6
 #define PI 3.14159265358979323846

@@ -40,10 +40,10 @@ from toggle.cli.common import (
 )
 from toggle.drive import motor_torque
 from toggle.elastics import clamp_stroke
-from toggle.params import HALVES, PAPER_NAMES, ParameterError
+from toggle.params import DYNAMICS_PARAMETERS, HALVES, PAPER_NAMES, ParameterError
 from toggle.plant import PlantConfig, with_errors
 
-MASS_FIELDS = ("crosshead", "links", "platen", "guide_damping")
+MASS_FIELDS = tuple(field for field, _, _ in DYNAMICS_PARAMETERS.values())
 #: The dimensional errors, named as the FMU names its delta_* parameters.
 ERRORS = tuple(name for half in HALVES for name in PAPER_NAMES[half].values())
 _SHOWN = ("r8",)  # the one of them --help describes
@@ -52,7 +52,8 @@ DRY_CONTACT = 1e-6
 
 
 def _masses(text: str | None) -> dict[str, float] | None:
-    """Parse ``crosshead=40,links=120,platen=500`` (kg; guide_damping in N s/m)."""
+    """Parse ``crosshead=40,links=120,platen=500`` (kg; guide_damping in N s/m, the
+    frictions in N)."""
     if not text:
         return None
     out = {}
@@ -377,7 +378,7 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
                            "(default: the preset's final tie-bar force)")
     p.add_argument("--masses", default=None,
                    help="override or supply [dynamics]: crosshead=kg,links=kg,platen=kg"
-                        "[,guide_damping=N s/m]")
+                        "[,guide_damping=N s/m,guide_friction=N,platen_friction=N]")
     p.add_argument("--v-max", type=positive("speed in m/s", 10.0, 1e-4), default=None,
                    help="crosshead speed limit, m/s (default: the preset's drive)")
     p.add_argument("--a-max", type=positive("acceleration in m/s^2", 1e3, 1e-4), default=None,

@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
         print_json({
             "fitted": fit.values if fit else {}, "std_error": fit.std_error if fit else {},
             "reading": model.reading.__dict__, "as_built": model.as_built,
+            "dynamics": model.dynamics,
             "reading_std_error": fit.stroke_std_error if fit else {},
             "fit_speeds": sorted(fitted_speeds),
             "rows": [{**r._asdict(), "in_three_sigma": r.in_sigma, "holds": r.holds()}
@@ -82,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
               f"{role:10} {'holds' if r.holds() else 'MISSES'}")
     print("as-built errors of the rig (m): "
           + ", ".join(f"{n} = {v:.4g}" for n, v in model.as_built.items()))
+    print("the rig's dynamics beyond its preset (N): "
+          + ", ".join(f"{n} = {v:.4g}" for n, v in model.dynamics.items()))
     held = sum(r.holds() for r in rows)
     print(f"{held} of {len(rows)} rows hold (units: mm for S, N for forces)")
     return 0
