@@ -1178,8 +1178,11 @@ class ClampPlanner:
             ("platen speed", self.protect_speed, "m/s")) if value is not None]
         if caps:
             which += f" or the mold-protection caps ({', '.join(caps)})"
-        text = (f"{which} {'bind' if caps else 'binds'}: the planner found no stroke clamping to "
-                f"{self.clamp_force():.6g} N with an input force of at most {limit:.4g} N")
+        force = f"{self.clamp_force():.6g} N"
+        stroke = (f"opening from a clamp force of {force}" if self.problem.opening
+                  else f"clamping to {force}")
+        text = (f"{which} {'bind' if caps else 'binds'}: the planner found no stroke {stroke} "
+                f"with an input force of at most {limit:.4g} N")
         if best is not None:
             text += (f"; the lowest peak it reached is {self.worst_peak(best):.4g} N, in a stroke "
                      f"of {best.duration:.4g} s")

@@ -655,6 +655,9 @@ def test_opening_stroke_breaks_away_and_ends_open_at_rest(chang):
                            cfg.with_(x_contact=None)).platen_velocity
     assert np.abs(platen).max() <= 5e-3 * (1 + 1e-6)
     assert opener.protection(plan)["time"] == pytest.approx(after.sum() * 1e-3, abs=2e-3)
+    # a refusal names the stroke it is about (it said "clamping" for the opening too)
+    assert "no stroke opening from a clamp force of" in opener._unreachable(0.5, plan)
+    assert "no stroke clamping to" in planner._unreachable(0.5, None)
 
 
 def test_cli_cycle_and_protection_report(tmp_path, capsys):
