@@ -55,8 +55,9 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
     dyn = mech.dynamics
     mass_max = 100 * max(dyn.crosshead, dyn.links, dyn.platen, 1.0)
     # bounds: masses 100 times the largest; damping in N s/m and frictions in N beyond any
-    # clamp this size (1e3 times the mass bound; a friction of 1e5 N per kg of it)
-    top = {"kg": mass_max, "N.s/m": 1e3 * mass_max, "N": 1e3 * mass_max}
+    # clamp this size (1e3 times the mass bound; a friction of 1e5 N per kg of it); a
+    # friction's rate strengthening of 100 per e-fold of speed
+    top = {"kg": mass_max, "N.s/m": 1e3 * mass_max, "N": 1e3 * mass_max, "1": 100.0}
     return (
         Var("preset", "parameter", "", "Preset this FMU is built for (fixed; build another "
             "with toggle build-fmu --preset)", start=mech.name),

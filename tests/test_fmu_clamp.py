@@ -182,11 +182,11 @@ def test_motor_torque_is_the_drives_with_the_rotor_inertia(unzipped: Path):
 
 
 def test_platen_and_guide_friction_are_the_plants(unzipped: Path):
-    """The Coulomb frictions of the platen's bushings and the crosshead guide are FMU
-    parameters: the outputs are the plant's with them; the platen's is referred to the
-    input by dL/dx, so it adds about its value times the velocity ratio while the platen
-    moves and nothing once it rests on the mold."""
-    frictions = {"platen_friction": 26.6, "guide_friction": 1.5}
+    """The frictions of the platen's bushings (with its rate strengthening) and of the
+    crosshead guide are FMU parameters: the outputs are the plant's with them; the
+    platen's is referred to the input by dL/dx, so it adds its value times the velocity
+    ratio while the platen moves and nothing once it rests on the mold."""
+    frictions = {"platen_friction": 4.0, "platen_rate": 1.8, "guide_friction": 1.5}
     res = _simulate_stroke(unzipped, **MOLD, **frictions)
     _assert_outputs_match(res, _reference(res["x"], res["velocity"], res["acceleration"],
                                           **MOLD, **frictions))
@@ -198,7 +198,8 @@ def test_platen_and_guide_friction_are_the_plants(unzipped: Path):
                & (res["x"] < X_CONTACT - 1e-4))
     ratio = res["platen_velocity"][forward] / res["velocity"][forward]
     assert forward.sum() > 100 and ratio.max() > 1.0
-    np.testing.assert_allclose(extra[forward], 26.6 * ratio + 1.5, rtol=1e-3)
+    rate = 1 + 1.8 * np.log1p(res["platen_velocity"][forward] / 1e-3)  # the rate law
+    np.testing.assert_allclose(extra[forward], 4.0 * ratio * rate + 1.5, rtol=1e-3)
 
 
 def test_ideal_drive_puts_the_input_link_at_the_command(unzipped: Path):

@@ -170,9 +170,9 @@ def test_a_replayed_plan_reproduces_the_planners_peak(tmp_path, capsys) -> None:
 
 def test_the_default_job_plans_for_the_rig_as_built(tmp_path) -> None:
     """The default job plans for the clamp it drives (the prototype as built: its as-built
-    error and platen friction plus delta_r8), and the run peaks where the plan does
-    (55.2 N on chang2021: the platen's friction at the stroke's start, which no profile
-    avoids, so the nominal clamp's plan replayed on the rig is hardly worse, 55.6 N)."""
+    error and platen friction plus delta_r8): the run peaks where its plan does, well below
+    the nominal clamp's plan replayed on the same rig (45.1 N against 55.6 N on chang2021:
+    the nominal plan starts fast, where the platen's friction is largest)."""
     from controllers.limits import drive_limits
     from controllers.planner import default_duration, plan_config, planner_for
     from controllers.profiles import predict
@@ -189,10 +189,12 @@ def test_the_default_job_plans_for_the_rig_as_built(tmp_path) -> None:
     data = read_samples(out / "samples.csv")
     stroke = data.t <= plan.duration + 1e-9
     forward = data.force[stroke]
-    assert forward.max() == pytest.approx(planner.worst_peak(plan), rel=0.01)
+    # within 2 %: the planner's friction is steady sliding, the run's slip state turns over
+    # the first 0.1 mm from rest, where the platen's friction peaks
+    assert forward.max() == pytest.approx(planner.worst_peak(plan), rel=0.02)
     nominal = plan_config("chang2021")
     plain = planner_for(nominal, drive_limits(nominal.mechanism)).best(plan.duration)
-    assert forward.max() <= predict(plain.profile, rig).peak_force
+    assert forward.max() < 0.85 * predict(plain.profile, rig).peak_force
 
 
 def test_either_fmu_gives_the_same_run(tmp_path) -> None:

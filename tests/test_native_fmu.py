@@ -154,7 +154,8 @@ def _both(unzipped: Path, python_fmu: Path, **start: float) -> list:
 
 
 @pytest.mark.parametrize("delta_r8, frictions", [
-    (0.0, {}), (0.5e-3, {}), (0.5e-3, {"platen_friction": 26.6, "guide_friction": 1.5})])
+    (0.0, {}), (0.5e-3, {}),
+    (0.5e-3, {"platen_friction": 4.26, "platen_rate": 1.81, "guide_friction": 1.5})])
 def test_native_and_pythonfmu_agree_over_the_stroke(unzipped: Path, python_fmu: Path,
                                                     delta_r8: float, frictions: dict):
     """Also with the guides' Coulomb frictions set (parameters of both, from one table)."""

@@ -79,15 +79,16 @@ class AsymmetryParams:
 
     Defaults: the desktop clamp of Chang et al. 2021, fitted on every force statistic of
     Tables 6 and 7 with the prototype's as-built error and platen friction (free_play,
-    contact_stiffness, drive_stiffness, takeup_return; rate_strengthening from an earlier
-    fit, at its limit of zero friction at rest; boundary friction, which the fits chose) and
+    contact_stiffness, drive_stiffness; takeup_return and rate_strengthening from earlier
+    fits, the latter at its limit of zero friction at rest; boundary friction, which the
+    fits chose) and
     the rest from its materials and sizes (docs/unequal-halves.md, sections 4 and 9).
     """
 
-    free_play: float = 0.1514e-3  # delta0, m: platen tilt in the bushings + pin clearances
-    contact_stiffness: float = 5.950e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
+    free_play: float = 0.1441e-3  # delta0, m: platen tilt in the bushings + pin clearances
+    contact_stiffness: float = 5.775e8  # K_c, N/m^1.5: N = K_c s_c^1.5 for the closed clearances
     series_stiffness: float = 3.3e7  # k_s, N/m: links 4b and 5 of both halves in series (A6061)
-    drive_stiffness: float = 2.700e4  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
+    drive_stiffness: float = 2.941e4  # k_d, N/m per half: crosshead tilt on its shaft, link 3, pins
     mu: float = 0.3  # pin friction coefficient at the reference slip speed (SUS304 pin in A6061)
     rate_strengthening: float = 0.04342  # a - b of the steady-state rate-and-state law
     reference_slip: float = 1.0e-3  # v_ref, m/s: slip speed at which the coefficient is mu

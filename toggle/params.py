@@ -350,7 +350,9 @@ class Dynamics:
     referred to the input link (N s/m); guide_friction: their Coulomb friction
     (and the ball screw's), referred to the input link (N); platen_friction: the
     moving platen's Coulomb friction on its tie-bars, at the platen (N), referred to
-    the input by the velocity ratio dL/dx, so it fades to nothing at the toggle.
+    the input by the velocity ratio dL/dx, so it fades to nothing at the toggle;
+    platen_rate: its rate strengthening, the friction being platen_friction times
+    1 + platen_rate ln(1 + |platen speed| / 1 mm/s) (1).
     """
 
     crosshead: float
@@ -359,6 +361,7 @@ class Dynamics:
     guide_damping: float = 0.0
     guide_friction: float = 0.0
     platen_friction: float = 0.0
+    platen_rate: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -379,6 +382,8 @@ DYNAMICS_PARAMETERS: dict[str, tuple[str, str, str]] = {
                        "Coulomb friction of the crosshead guide and ball screw, at the input"),
     "platen_friction": ("platen_friction", "N",
                         "Coulomb friction of the moving platen on the tie-bars, at the platen"),
+    "platen_rate": ("platen_rate", "1", "Rate strengthening of the platen friction: "
+                    "x (1 + platen_rate ln(1 + platen speed / 1 mm/s))"),
 }
 
 

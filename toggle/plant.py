@@ -61,6 +61,8 @@ from toggle.statics import force_ratios
 
 #: Mechanical advantage reported where it is unbounded (the frictionless toggle).
 MA_CAP = 1e12
+#: Platen speed scale of the platen friction's rate strengthening, m/s.
+PLATEN_RATE_SPEED = 1e-3
 
 
 class PlantError(ValueError):
@@ -176,8 +178,11 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
         ma = 1.0 / np.maximum(np.fabs(q), 1.0 / MA_CAP)
     inertia = m_in * a + moving * m_out * g * (g * a + gp * v * v)
     guide = direction if slip_state is None else slip_state
-    # the platen's bushings: a Coulomb force at the platen, times dL/dx at the input
-    platen_friction = moving * dyn.platen_friction * np.fabs(g) * guide
+    # the platen's bushings: a friction at the platen, rate-strengthening with the platen's
+    # speed |g v| (smooth: g >= 0 over the stroke, v tanh(v / eps) ~ |v|), times dL/dx
+    platen_speed = np.fabs(g) * v * direction
+    platen_friction = moving * dyn.platen_friction * np.fabs(g) * guide * (
+        1 + dyn.platen_rate * np.log1p(platen_speed / PLATEN_RATE_SPEED))
     force = (inertia + dyn.guide_damping * v + dyn.guide_friction * guide + platen_friction
              + thrust)
     if not mech.symmetric:  # a parameter decision: equal halves add exactly nothing

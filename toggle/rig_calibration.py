@@ -38,9 +38,9 @@ from toggle.rig_tables import (
     rig_statistics,
 )
 
-#: Coulomb frictions of the dynamics a fit may choose: the crosshead guide's (at the input)
-#: and the platen's on its tie-bars (at the platen, referred by dL/dx), N.
-DYNAMICS_FITTABLE = ("guide_friction", "platen_friction")
+#: Frictions of the dynamics a fit may choose: the crosshead guide's (at the input, N), the
+#: platen's on its tie-bars (at the platen, referred by dL/dx, N) and its rate strengthening.
+DYNAMICS_FITTABLE = ("guide_friction", "platen_friction", "platen_rate")
 #: Prefix of a fittable as-built error of the rig: ``as_built_r6`` is the prototype's own
 #: error of link 6 (the upper half's r3, seed 000's names), m.
 AS_BUILT = "as_built_"

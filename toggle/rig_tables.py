@@ -83,27 +83,29 @@ class RigReading:
 
 #: The prototype's reading, fitted with the force model on Tables 3-4 and 6-7
 #: (``toggle tables --fit ...``, docs/unequal-halves.md section 9).
-CHANG2021_READING = RigReading(datum=0.4087e-3, lever=-0.139, compliance=0.474e-6)
+CHANG2021_READING = RigReading(datum=0.4032e-3, lever=0.648, compliance=0.869e-6)
 
 
 #: The prototype's own dimensional errors (seed 000's names, m) besides the set link-8
 #: error: the height of the upper half's link-7 pivot (r1U), whose mismatch vanishes at
 #: both ends of the stroke, fitted on Tables 6-7 with the platen's friction below
-#: (``toggle tables --fit as_built_r1U ...``: 0.97 +- 0.88 mm; docs/unequal-halves.md
+#: (``toggle tables --fit as_built_r1U ...``: 0.96 +- 0.78 mm; docs/unequal-halves.md
 #: section 9.4). Data of the rig, not of the model: a preset's mechanism stays as its file
 #: writes it (equal halves add nothing), and only the simulated rig (:func:`rig_errors`)
 #: adds these.
-CHANG2021_AS_BUILT: dict[str, float] = {"r1U": 0.965e-3}
+CHANG2021_AS_BUILT: dict[str, float] = {"r1U": 0.961e-3}
 #: As-built errors of the rigs whose tables the project has, by preset name.
 AS_BUILT = {"chang2021": CHANG2021_AS_BUILT}
-#: The prototype's [dynamics] beyond its preset: the Coulomb friction of its moving platen's
-#: four oil-free bronze bushings on the tie-bars (seed 000, section 4), N, fitted on
-#: Tables 6-7 (``toggle tables --fit platen_friction ...``: 26.6 +- 2.0 N). Referred to the
-#: input by dL/dx it drags the stroke's start (x 2.1) and fades to nothing at the toggle,
-#: so it gives the delta_r8 = 0 rows their force without an F_TP (section 9.4). Data of
-#: the rig like the as-built errors: the preset, the planner's and the FMU's defaults
-#: stay without it; the simulated rig (:func:`rig_dynamics`) adds it.
-CHANG2021_DYNAMICS: dict[str, float] = {"platen_friction": 26.6}
+#: The prototype's [dynamics] beyond its preset: the friction of its moving platen's four
+#: oil-free bronze bushings on the tie-bars (seed 000, section 4), fitted on Tables 6-7
+#: (``toggle tables --fit platen_friction platen_rate ...``): 4.26 N near rest, rising with
+#: the log of the platen's speed (platen_rate 1.81: 23 N at 10 mm/s, 35 N at 50 mm/s).
+#: Referred to the input by dL/dx it drags the stroke's start (x 2.1) and fades to nothing
+#: at the toggle, so it gives the delta_r8 = 0 rows their force without an F_TP
+#: (docs/unequal-halves.md section 9.5). Data of the rig like the as-built errors: the
+#: preset, the planner's and the FMU's defaults stay without it; the simulated rig
+#: (:func:`rig_dynamics`) adds it.
+CHANG2021_DYNAMICS: dict[str, float] = {"platen_friction": 4.26, "platen_rate": 1.81}
 #: [dynamics] fields of the rigs whose tables the project has, by preset name.
 RIG_DYNAMICS = {"chang2021": CHANG2021_DYNAMICS}
 

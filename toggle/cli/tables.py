@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
               f"{role:10} {'holds' if r.holds() else 'MISSES'}")
     print("as-built errors of the rig (m): "
           + ", ".join(f"{n} = {v:.4g}" for n, v in model.as_built.items()))
-    print("the rig's dynamics beyond its preset (N): "
+    print("the rig's dynamics beyond its preset (SI): "
           + ", ".join(f"{n} = {v:.4g}" for n, v in model.dynamics.items()))
     held = sum(r.holds() for r in rows)
     print(f"{held} of {len(rows)} rows hold (units: mm for S, N for forces)")
