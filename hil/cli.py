@@ -36,7 +36,7 @@ from toggle.cli.args import (
     use_help_formatter,
 )
 from toggle.kinematics import stroke_limits
-from toggle.params import ParameterError, load_preset
+from toggle.params import DYNAMICS_PARAMETERS, ParameterError, load_preset
 
 #: Printed rows of a run summary: (key, label, scale to the printed unit, unit).
 SUMMARY_ROWS = (
@@ -50,6 +50,9 @@ SUMMARY_ROWS = (
 )
 #: Runs longer than this print their estimated duration and file size first, s.
 ANNOUNCE_AFTER = 60.0
+#: The unit of each [dynamics] field as printed (" N", " kg", ...; nothing for a ratio).
+UNITS = {field: "" if unit == "1" else f" {unit}"
+         for field, unit, _ in DYNAMICS_PARAMETERS.values()}
 
 
 def _trajectory(s: RunSettings, guard: SignalGuard, setup: RigSetup
@@ -66,7 +69,8 @@ def _trajectory(s: RunSettings, guard: SignalGuard, setup: RigSetup
             f"reciprocating at {s.speed * 1e3:g} mm/s")
     errors = {name: delta for name, delta in setup.errors.items() if delta}
     built = ", ".join([*(f"delta_{name} {delta * 1e3:g} mm" for name, delta in errors.items()),
-                       *(f"{name} {value:g} N" for name, value in setup.dynamics.items())])
+                       *(f"{name} {value:g}{UNITS[name]}"
+                         for name, value in setup.dynamics.items())])
     print(f"hil run: planning the default profile for {s.preset}"
           f"{f' as the rig is built ({built})' if built else ''}", file=sys.stderr)
     forward = experiment.planned_trajectory(s.preset, period, mu=s.mu, x_contact=s.x_contact,

@@ -181,7 +181,8 @@ def test_the_default_job_plans_for_the_rig_as_built(tmp_path) -> None:
     out = tmp_path / "run"
     assert main(["run", "--cycles", "1", "--out", str(out), "--quiet"]) == 0
     meta = json.loads((out / "meta.json").read_text())
-    assert "delta_r1U" in meta["profile"] and "platen_friction" in meta["profile"]
+    assert "delta_r1U" in meta["profile"] and "platen_friction 4.26 N" in meta["profile"]
+    assert "platen_rate 1.81" in meta["profile"] and "1.81 N" not in meta["profile"]  # a ratio
     rig = plan_config("chang2021", errors=rig_errors("chang2021", 0.0),
                       masses=rig_dynamics("chang2021"))
     planner = planner_for(rig, drive_limits(rig.mechanism))
