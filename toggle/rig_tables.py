@@ -57,12 +57,13 @@ class RigReading:
     rig's force sample and position report are not simultaneous (a USB DAQ and a motion
     card polled by one LabVIEW loop), so at speed v the force is read v * latency early.
 
-    datum: offset of the reading between the open and the toggle end (m): the encoder's
-    reference taken at the open position with the platen not yet seated against the links
-    (the measured stroke error at delta_r8 = 0, 0.40-0.45 mm, is far above any compliance
-    of a 20 N stroke). lever: the encoder's place across the platen, as a fraction of the
-    distance between the halves' joints measured from the platen's centre (positive
-    towards the upper half): a tilted platen reads lever * (L_U - L_L) more there.
+    datum: offset of the reading between the open and the toggle end (m): the platen not
+    yet seated against the links at the open position, a play taken up as the motion turns
+    (the measured stroke error at delta_r8 = 0, 0.40-0.45 mm, is far above any
+    compliance of a 20 N stroke; :meth:`read`). lever: the encoder's place across the
+    platen, as a fraction of the distance between the halves' joints measured from the
+    platen's centre (positive towards the upper half): a tilted platen reads
+    lever * (L_U - L_L) more there.
     compliance: the load-cell force F stretches the frame that carries the scale, which
     reads compliance * F more; the stroke gains compliance * (F_TP - F at the start).
     """
@@ -79,6 +80,16 @@ class RigReading:
                 raise RigError(f"rig reading {name} must be finite, got {value!r}")
         if not 0.0 <= self.toggle_latency <= 1.0:
             raise RigError(f"toggle_latency must lie in [0, 1] s, got {self.toggle_latency!r}")
+
+    def read(self, platen: float, mismatch: float, force: float, play: float) -> float:
+        """The encoder's reading (m) of the platen at ``platen`` (m), the halves' mismatch
+        L_U - L_L (m) and the load-cell force (N), in the play's state p in [-1, 1]: the
+        play of ``datum`` is open after a backward move (p = -1) and taken up after a
+        forward one (p = 1), so a cycle reads datum more than the platen travels. p turns
+        with the crosshead's motion like the friction's slip state (Dahl's law over the
+        slip distance, :func:`toggle.asymmetry.advance_slip_state`)."""
+        return (platen + self.lever * mismatch + self.compliance * force
+                - self.datum * (1.0 - play) / 2.0)
 
 
 #: The prototype's reading, fitted with the force model on Tables 3-4 and 6-7
@@ -188,8 +199,8 @@ def rig_statistics(cfg: PlantConfig, speed: float, reading: RigReading = RigRead
     z_read = float(slip_state_along(np.array([x_open, x_read]), z_back_end, slip)[-1])
     f_tp = float(plant_outputs(x_read, speed, 0.0, cfg, slip_state=z_read).input_force)
     mismatch = [float(plant_outputs(x, 0.0, 0.0, cfg).asymmetry) for x in (x_open, x_tp)]
-    stroke = (end - float(_platen(x_open, cfg)) + reading.datum
-              + reading.lever * (mismatch[1] - mismatch[0])
-              + reading.compliance * (f_tp - float(fwd[0])))
+    stroke = (reading.read(end, mismatch[1], f_tp, float(z_fwd[-1]))
+              - reading.read(float(_platen(x_open, cfg)), mismatch[0], float(fwd[0]),
+                             z_back_end))
     return RigStatistics(float(fwd.max()), float(np.sqrt(np.mean(fwd * fwd))),
                          float(back.min()), float(np.sqrt(np.mean(back * back))), f_tp, stroke)
