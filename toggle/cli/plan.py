@@ -378,7 +378,8 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
                            "(default: the preset's final tie-bar force)")
     p.add_argument("--masses", default=None,
                    help="override or supply [dynamics]: crosshead=kg,links=kg,platen=kg"
-                        "[,guide_damping=N s/m,guide_friction=N,platen_friction=N]")
+                        "[,guide_damping=N s/m,guide_friction=N,platen_friction=N,"
+                        "platen_rate=1]")
     p.add_argument("--v-max", type=positive("speed in m/s", 10.0, 1e-4), default=None,
                    help="crosshead speed limit, m/s (default: the preset's drive)")
     p.add_argument("--a-max", type=positive("acceleration in m/s^2", 1e3, 1e-4), default=None,
