@@ -92,7 +92,8 @@ C_LOOP = textwrap.dedent(
         struct timespec t0, t1;
         clock_gettime(CLOCK_MONOTONIC, &t0);
         for (long k = 0; k < steps; k++) {
-            double x = x0 + 0.0544 * (double)(k % 400) / 400.0;  /* into the mold */
+            double s = (double)(k % 800) / 400.0;  /* into the mold and back out */
+            double x = x0 + 0.0544 * (s > 1.0 ? 2.0 - s : s);
             fmi2SetReal(c, &x_cmd, 1, &x);
             if (fmi2DoStep(c, k * 1e-3, 1e-3, fmi2True) != fmi2OK) return 4;
             fmi2GetReal(c, outs, 12, y);

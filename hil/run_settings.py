@@ -21,7 +21,7 @@ from hil.backends import MAX_SPEED
 from toggle.cli.args import check_writable_dir
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset, tomllib
-from toggle.rig_tables import rig_dynamics, rig_errors
+from toggle.rig_tables import rig_errors
 
 #: Built-in defaults of every setting a --config file may hold.
 RUN_DEFAULTS: dict[str, Any] = {
@@ -202,11 +202,10 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
         # tie-bar force held by the rig as built) is the simulated mold height too
         from controllers.planner import plan_config
 
-        built = None if values["as_built"] else {}
-        values["x_contact"] = plan_config(
-            values["preset"], mu=values["mu"],
-            errors=rig_errors(values["preset"], values["delta_r8"], built),
-            masses=rig_dynamics(values["preset"], built)).x_contact
+        errors = rig_errors(values["preset"], values["delta_r8"],
+                            None if values["as_built"] else {})
+        values["x_contact"] = plan_config(values["preset"], mu=values["mu"],
+                                          errors=errors).x_contact
     for key in ("profile", "out", "fmu"):
         if values[key] is not None:
             values[key] = Path(values[key])

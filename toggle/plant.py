@@ -180,9 +180,9 @@ def plant_outputs(x: Any, v: Any, a: Any, cfg: PlantConfig, x_contact: Any = Non
     guide = direction if slip_state is None else slip_state
     # the platen's bushings: a friction at the platen, rate-strengthening with the platen's
     # speed |g v| (smooth: g >= 0 over the stroke, v tanh(v / eps) ~ |v|), times dL/dx
-    platen_speed = np.fabs(g) * v * direction
-    platen_friction = moving * dyn.platen_friction * np.fabs(g) * guide * (
-        1 + dyn.platen_rate * np.log1p(platen_speed / PLATEN_RATE_SPEED))
+    ratio = np.fabs(g)
+    platen_friction = moving * dyn.platen_friction * ratio * guide * (
+        1 + dyn.platen_rate * np.log1p(ratio * v * direction / PLATEN_RATE_SPEED))
     force = (inertia + dyn.guide_damping * v + dyn.guide_friction * guide + platen_friction
              + thrust)
     if not mech.symmetric:  # a parameter decision: equal halves add exactly nothing

@@ -19,7 +19,7 @@ adds what the plant's platen does not know (:class:`RigReading`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -28,7 +28,7 @@ from scipy.optimize import brentq
 from toggle.asymmetry import AsymmetryParams, slip_state_along
 from toggle.kinematics import stroke_limits
 from toggle.params import Mechanism
-from toggle.plant import PlantConfig, plant_outputs, with_errors
+from toggle.plant import PlantConfig, configure, plant_outputs
 
 #: The encoder's resolution, m: F_TP is read where the platen first comes this close to
 #: its end position (the rig's 1 um optical encoder, hil.mcu_model).
@@ -158,14 +158,8 @@ def rig_config(nominal: Mechanism, delta_r8: float, params: AsymmetryParams,
                as_built: dict[str, float] | None = None) -> PlantConfig:
     """The plant of the rig of ``nominal`` with link 8 off by delta_r8 (m), no mold:
     :func:`rig_errors` and :func:`rig_dynamics` (default the shipped ones) applied."""
-    mech, _ = with_errors(nominal, rig_errors(nominal.name, delta_r8, as_built))
-    changes = rig_dynamics(nominal.name, dynamics)
-    if changes and mech.dynamics is None:
-        raise RigError(f"the rig's {', '.join(changes)} needs a preset with [dynamics]; "
-                       f"{nominal.name} has none")
-    if changes:
-        mech = replace(mech, dynamics=replace(mech.dynamics, **changes))
-    return PlantConfig(mech, asymmetry=params)
+    return configure(nominal, errors=rig_errors(nominal.name, delta_r8, as_built),
+                     masses=rig_dynamics(nominal.name, dynamics)).with_(asymmetry=params)
 
 
 def _platen(x: float, cfg: PlantConfig) -> float:
