@@ -18,7 +18,13 @@ from pythonfmu import DefaultExperiment
 
 from toggle.fmu_slave import DeclaredSlave, Var
 from toggle.kinematics import stroke_limits
-from toggle.params import DYNAMICS_PARAMETERS, PAPER_NAMES, Mechanism, load_preset
+from toggle.params import (
+    DYNAMICS_PARAMETERS,
+    PAPER_NAMES,
+    Mechanism,
+    dynamics_fields,
+    load_preset,
+)
 from toggle.plant import DriveState, HystereticPlant, PlantConfig, configure, follow
 
 _PRESET_FILE = Path(__file__).with_name("preset.toml")
@@ -106,8 +112,7 @@ class ToggleClamp(DeclaredSlave):
             MECHANISM,
             mu=self.mu,
             x_contact=self.x_contact,
-            masses={field: getattr(self, name)
-                    for name, (field, _, _) in DYNAMICS_PARAMETERS.items()},
+            masses=dynamics_fields({name: getattr(self, name) for name in DYNAMICS_PARAMETERS}),
             drive={name: getattr(self, name) for name in INERTIAS},
             errors={n: getattr(self, f"delta_{n}") for n in ERRORS},
         )

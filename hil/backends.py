@@ -34,7 +34,7 @@ from hil.experiment import stroke_positions
 from hil.homing import APPROACH_SPEED, START_TOLERANCE
 from hil.samples import Sample, Status, Trajectory, TrajectoryError
 from toggle.kinematics import output_position, stroke_limits
-from toggle.params import DYNAMICS_PARAMETERS, load_preset
+from toggle.params import dynamics_parameters, load_preset
 from toggle.rig_tables import rig_dynamics, rig_errors
 
 if TYPE_CHECKING:
@@ -258,8 +258,7 @@ class FmuPlant(Plant):
         self._dir = extract(str(path), tempfile.mkdtemp(prefix="toggle_hil_"))
         start = {"preset": s.preset, "x_cmd": x_open,
                  **{f"delta_{name}": delta for name, delta in s.errors.items()},
-                 **{name: s.dynamics[field] for name, (field, _, _) in DYNAMICS_PARAMETERS.items()
-                    if field in s.dynamics}}
+                 **dynamics_parameters(s.dynamics)}
         if s.mu is not None:
             start["mu"] = s.mu
         if s.x_contact is not None:

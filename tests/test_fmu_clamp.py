@@ -10,6 +10,7 @@ peak; about 1e-11 is observed).
 from __future__ import annotations
 
 import math
+from dataclasses import fields as dataclass_fields
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ from toggle.drive import motor_torque
 from toggle.fmu_build import DEFAULT_SLAVE, build_fmu
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
-from toggle.params import DYNAMICS_PARAMETERS
+from toggle.params import DYNAMICS_PARAMETERS, Dynamics, dynamics_fields, dynamics_parameters
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
 SLAVE = load_module(DEFAULT_SLAVE, "toggle_clamp_fmu_inproc").ToggleClamp
@@ -64,7 +65,7 @@ def _reference(x, v, a, slip=None, before=(), **start) -> PlantOutputs:
     then the reported path)."""
     errors = {k.removeprefix("delta_"): val for k, val in start.items() if k.startswith("delta_")}
     drive = {k: start[k] for k in ("rotor_inertia", "screw_inertia") if k in start}
-    masses = {field: start[k] for k, (field, _, _) in DYNAMICS_PARAMETERS.items() if k in start}
+    masses = dynamics_fields(start)
     cfg = configure("chang2021", x_contact=start.get("x_contact"), errors=errors, drive=drive,
                     masses=masses)
     if slip is None:
@@ -383,3 +384,11 @@ def test_two_clamps_and_a_ramp_run_in_libcosim(fmu: Path, tmp_path: Path):
             assert last[name] == pytest.approx(float(getattr(ref, name)), rel=REL, abs=1e-300)
     assert nominal["asymmetry"] == 0 and long_r8["asymmetry"] > 0.25e-3
     assert long_r8["input_force"] != pytest.approx(nominal["input_force"], rel=1e-6)
+
+
+def test_every_dynamics_field_is_a_parameter_of_the_fmus_by_one_name():
+    """A [dynamics] field added without an FMU parameter would be silently fixed at its
+    preset value in both FMUs; the two name maps are each other's inverse."""
+    fields = {f.name: 1.0 + i for i, f in enumerate(dataclass_fields(Dynamics))}
+    assert dynamics_fields(dynamics_parameters(fields)) == fields
+    assert set(dynamics_parameters(fields)) == set(DYNAMICS_PARAMETERS)

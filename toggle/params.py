@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, fields, replace
 from importlib import resources
 from pathlib import Path
@@ -385,6 +386,19 @@ DYNAMICS_PARAMETERS: dict[str, tuple[str, str, str]] = {
     "platen_rate": ("platen_rate", "1", "Rate strengthening of the platen friction: "
                     "x (1 + platen_rate ln(1 + platen speed / 1 mm/s))"),
 }
+
+
+def dynamics_fields(parameters: Mapping[str, Any]) -> dict[str, Any]:
+    """[dynamics] fields from values named as the FMUs name their parameters (the names
+    :data:`DYNAMICS_PARAMETERS` does not list are ignored)."""
+    return {field: parameters[name] for name, (field, _, _) in DYNAMICS_PARAMETERS.items()
+            if name in parameters}
+
+
+def dynamics_parameters(dynamics: Mapping[str, Any]) -> dict[str, Any]:
+    """The FMUs' parameters from [dynamics] fields: the inverse of :func:`dynamics_fields`."""
+    return {name: dynamics[field] for name, (field, _, _) in DYNAMICS_PARAMETERS.items()
+            if field in dynamics}
 
 
 def symbolic_copy(obj: Any, **values: Any) -> Any:
