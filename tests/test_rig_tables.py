@@ -196,6 +196,25 @@ def test_the_prototypes_own_error_makes_the_zero_rows(shipped):
             assert 0.5 <= r.simulated / r.measured <= 2.0, r
 
 
+def test_the_zero_error_series_are_unlike_every_other_series(tables):
+    """The premise of why the delta_r8 = 0 rows at 25 mm/s are not predicted (docs section
+    9.9), checked on the data: (1) at 15 and 25 mm/s their forward stroke has a short spike,
+    F_F(max) / F_F(rms) 5.6 and 4.6, more than 1.5 times the largest of the ten other series
+    (2.9); (2) the direction asymmetry F_F(max) + F_B(min), which only a conservative force
+    (speed-independent) can make, flips from -81 N at 5 mm/s to +68 N at 15 mm/s, beyond
+    the combined printed 3 sigma, where no other series moves by more than 25 N."""
+    mean, band = tables.mean, tables.three_sigma
+    crest = mean["force_forward_max"] / mean["force_forward_rms"]
+    others = np.delete(crest, 0, axis=1).ravel().tolist() + [crest[0, 0]]
+    assert len(others) == 10
+    assert min(crest[1, 0], crest[2, 0]) > 1.5 * max(others)
+    asym = mean["force_forward_max"] + mean["force_backward_min"]
+    spread = band["force_forward_max"] + band["force_backward_min"]
+    assert asym[0, 0] + spread[0, 0] < 0 < asym[1, 0] - spread[1, 0]
+    assert asym[1, 0] - asym[0, 0] > 140
+    assert np.ptp(asym[:, 1:], axis=0).max() < 25
+
+
 def test_measured_stroke_from_the_reading_model(shipped):
     """The stroke reads 0.38-0.67 mm over the 45.003 mm of theory (measured: 0.38-0.56)."""
     for r in shipped:
