@@ -74,8 +74,10 @@ class RunSettings:
 def add_number_options(p: argparse.ArgumentParser) -> None:
     """The numeric options of ``hil run`` (parsed as numbers; judged by :func:`check`)."""
     p.add_argument("--delta-r8", type=float, default=None, dest="delta_r8",
-                   help="length error of link 8 of the simulated clamp, m, e.g. 0.5e-3 "
-                        "(default 0)")
+                   help="length error of link 8, m, e.g. 0.5e-3 (default 0): the simulated "
+                        "clamp's; with --real, the setting of the rig's adjustable link as "
+                        "made by hand (the default job plans for it, meta.json records it; "
+                        "the host cannot check it: hil emulate takes its own --delta-r8)")
     p.add_argument("--mu", type=float, default=None,
                    help="pin friction of the simulated clamp (default: the preset's)")
     p.add_argument("--x-contact", type=float, default=None, dest="x_contact",
