@@ -17,6 +17,7 @@ from hil.cli import main as hil
 from toggle.cli import build_parser as toggle_parser
 from toggle.cli import main as toggle
 from toggle.params import load_preset
+from toggle.rig_tables import CHANG2021_READING
 
 
 def answer(main, argv: list[str], capsys) -> tuple[int, str, str]:
@@ -206,6 +207,26 @@ def test_calibrate_prints_units(capsys):
     code, out, _ = answer(toggle, ["calibrate", "--fit", "free_play", "--speeds", "5e-3"],
                           capsys)
     assert code == 0 and re.search(r"free_play = \S+ m$", out, re.MULTILINE)
+
+
+def test_tables_rows_options_are_never_silently_unused(capsys):
+    """--speeds and --statistics choose the rows of a fit: without --fit they refit the
+    stroke reading alone or are refused by name, never ignored; a --fit with no force
+    statistic to fit on is refused; each row's role says what informed the model shown."""
+    code, _, err = answer(toggle, ["tables", "--statistics", "stroke", "--fit", "mu"], capsys)
+    assert code == 2 and "mu" in err and "none is chosen" in err
+    code, _, err = answer(toggle, ["tables", "--speeds", "25e-3"], capsys)
+    assert code == 2 and "--fit PARAM" in err
+    code, out, _ = answer(toggle, ["tables", "--statistics", "stroke", "--speeds", "25e-3",
+                                   "--json"], capsys)
+    assert code == 0
+    data = json.loads(out)
+    assert data["fit_speeds"] == [0.025] and data["fit_statistics"] == ["stroke"]
+    assert data["reading"]["datum"] != pytest.approx(CHANG2021_READING.datum, rel=1e-3)
+    roles = {(r["statistic"], r["speed"]): r["role"] for r in data["rows"]}
+    assert roles[("stroke", 0.025)] == "fitted" and roles[("stroke", 0.005)] == "predicted"
+    assert roles[("force_toggle", 0.005)] == "fitted"  # the shipped force calibration
+    assert roles[("force_toggle", 0.025)] == "predicted"
 
 
 def test_every_option_with_a_default_shows_it(capsys):

@@ -211,7 +211,13 @@ def calibrate_rig(
         raise RigCalibrationError("give at least one speed to fit")
     forces = [s for s in statistics if s != "stroke"]
     if forces and not fit:
-        raise RigCalibrationError("fitting force statistics needs at least one parameter")
+        raise RigCalibrationError(
+            "fitting force statistics needs at least one parameter (--fit PARAM ...); the "
+            "statistic 'stroke' alone refits only the encoder's reading")
+    if fit and not forces:
+        raise RigCalibrationError(
+            f"{', '.join(fit)} would be fitted on force statistics, and none is chosen "
+            "('stroke' refits only the encoder's reading, which needs no --fit)")
     kinds = [FORCE_FITTABLE[n] for n in fit]
 
     def model_at(z: np.ndarray) -> RigModel:

@@ -28,6 +28,7 @@ from toggle.rig_calibration import (
     SHIPPED_FIT_SPEEDS,
     STATISTICS,
     RigModel,
+    Row,
     calibrate_rig,
     compare_tables,
     load_paper_tables,
@@ -46,12 +47,27 @@ def run(args: argparse.Namespace) -> int:
     tables = load_paper_tables()
     nominal = mechanism(args)
     model, fit = RigModel(), None
-    if args.fit:
-        fit = calibrate_rig(tables, nominal, args.speeds, args.fit, args.statistics)
+    if args.fit or args.speeds is not None or args.statistics is not None:
+        # --speeds and --statistics choose the rows of a fit: never silently unused
+        fit = calibrate_rig(tables, nominal, args.speeds or SHIPPED_FIT_SPEEDS, args.fit,
+                            args.statistics or STATISTICS)
         model = fit.model
     simulated = simulate_tables(tables, nominal, model)
     rows = compare_tables(tables, simulated)
     fitted_speeds = set(fit.speeds) if fit else set(SHIPPED_FIT_SPEEDS)
+    fitted_stats = set(fit.statistics) if fit else set(STATISTICS)
+
+    def role(r: Row) -> str:
+        """"fitted" if the row informed the model shown: a row of this refit, or of the
+        shipped calibration (Tables 3-4, 6-7) for what a refit leaves (the force parameters
+        not refitted; the reading, unless the stroke is refitted, which replaces it)."""
+        if r.speed in fitted_speeds and r.statistic in fitted_stats:
+            return "fitted"
+        reading_refit = fit is not None and "stroke" in fit.statistics
+        shipped = r.speed in SHIPPED_FIT_SPEEDS and not (r.statistic == "stroke"
+                                                          and reading_refit)
+        return "fitted" if shipped else "predicted"
+
     if args.plot is not None:
         for path in plot_tables(tables, simulated, args.plot):
             print(f"wrote {path}")
@@ -62,7 +78,9 @@ def run(args: argparse.Namespace) -> int:
             "dynamics": model.dynamics,
             "reading_std_error": fit.stroke_std_error if fit else {},
             "fit_speeds": sorted(fitted_speeds),
-            "rows": [{**r._asdict(), "in_three_sigma": r.in_sigma, "holds": r.holds()}
+            "fit_statistics": sorted(fitted_stats),
+            "rows": [{**r._asdict(), "in_three_sigma": r.in_sigma, "holds": r.holds(),
+                      "role": role(r)}
                      for r in rows]})
         return 0
     if fit:
@@ -76,11 +94,10 @@ def run(args: argparse.Namespace) -> int:
           f"{'res/3s':>7} {'rel %':>7}  role       verdict")
     for r in rows:
         scale = MM if r.statistic == "stroke" else 1.0
-        role = "fitted" if r.speed in fitted_speeds else "predicted"
         print(f"{LABELS[r.statistic]:>9} {r.speed * MM:7g} {r.error * MM:7.2f} "
               f"{r.measured * scale:9.3f} +-{r.three_sigma * scale:7.3f} "
               f"{r.simulated * scale:10.3f} {r.in_sigma:+7.1f} {100 * r.relative:+7.1f}  "
-              f"{role:10} {'holds' if r.holds() else 'MISSES'}")
+              f"{role(r):10} {'holds' if r.holds() else 'MISSES'}")
     print("as-built errors of the rig (m): "
           + ", ".join(f"{n} = {v:.4g}" for n, v in model.as_built.items()))
     print("the rig's dynamics beyond its preset (SI): "
@@ -105,11 +122,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fit", nargs="+", type=_fittable, metavar="PARAM",
                    default=[], help=f"refit at most {MAX_FORCE_FITTED} of: "
                                     f"{', '.join(FORCE_FITTABLE)}")
-    p.add_argument("--speeds", type=SPEED, nargs="+", default=[5e-3, 15e-3],
-                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3)")
-    p.add_argument("--statistics", nargs="+", choices=STATISTICS, default=list(STATISTICS),
+    p.add_argument("--speeds", type=SPEED, nargs="+", default=None,
+                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3); a refit")
+    p.add_argument("--statistics", nargs="+", choices=STATISTICS, default=None,
                    metavar="STAT",
-                   help=f"statistics fitted (default all: {', '.join(STATISTICS)})")
+                   help=f"statistics fitted (default all: {', '.join(STATISTICS)}); a "
+                        "refit: the forces need --fit, 'stroke' alone refits the reading")
     p.add_argument("--plot", type=path, default=None, metavar="DIR",
                    help="write one PNG per statistic into DIR")
     add_json_argument(p)
