@@ -31,6 +31,7 @@ from toggle.plant import (
     plant_outputs,
 )
 from toggle.rig_calibration import (
+    FORCE_FITTABLE,
     RELATIVE,
     RigModel,
     calibrate_rig,
@@ -38,6 +39,7 @@ from toggle.rig_calibration import (
     load_paper_tables,
     simulate_tables,
 )
+from toggle.rig_calibration import _start as _start  # noqa: PLC2701 (the fit's start)
 from toggle.rig_tables import (
     CHANG2021_AS_BUILT,
     CHANG2021_DYNAMICS,
@@ -258,6 +260,27 @@ def test_the_as_built_error_is_the_rigs_not_the_models():
     out = plant_outputs(xs, 10e-3, 0.0, bare, slip_state=0.3)
     model = plant_outputs(xs, 10e-3, 0.0, PlantConfig(NOMINAL), slip_state=0.3)
     assert np.array_equal(out.input_force, model.input_force)
+
+
+def test_every_fittable_parameter_starts_where_its_model_value_is_an_end(tables):
+    """A parameter the help lists as fittable, sitting at an end of its transform (a
+    friction the preset does not have at 0, the film law's h_s = inf, no free play, a
+    share of 0 or 1), starts the fit at a finite point (it failed with 'math domain
+    error' and 'array must not contain infs or NaNs'); a fit from there converges."""
+    ends = {"log": (0.0, math.inf), "logit": (0.0, 1.0), "length": (0.0,), "time": (0.0,)}
+    model = RigModel()
+    for name, kind in FORCE_FITTABLE.items():
+        assert math.isfinite(_start(name, kind, model.value(name))), name
+        for value in ends[kind]:
+            try:
+                model.with_values({name: value})
+            except (ValueError, TypeError):
+                continue  # outside the parameter's range: a fit never sits there
+            assert math.isfinite(_start(name, kind, value)), (name, value)
+    for name in ("guide_friction", "hersey_transition"):
+        fit = calibrate_rig(tables, NOMINAL, [5e-3], [name], ["force_forward_rms"])
+        assert math.isfinite(fit.values[name]) and fit.values[name] > 0
+        assert math.isfinite(fit.cost)
 
 
 def test_calibration_refuses_bad_requests(tables):

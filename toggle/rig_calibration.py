@@ -56,6 +56,12 @@ FORCE_FITTABLE = {
     **{f"{AS_BUILT}{n}": "length" for names in PAPER_NAMES.values() for n in names.values()},
 }
 MAX_FORCE_FITTED = 6
+#: Where a fit starts a parameter whose model value is an end of its transform (a
+#: log-scaled 0 or inf, a share of 0 or 1), SI: the defaults of the film law (h_s = inf),
+#: the frictions the chang2021 preset does not have (0), no free play or rate law (0).
+FIT_STARTS = {"free_play": 1e-5, "rate_strengthening": 0.01, "hersey_transition": 1e-5,
+              "mu": 0.1, "guide_friction": 1.0, "platen_friction": 1.0, "platen_rate": 0.1,
+              "takeup_return": 0.5}
 STATISTICS = (*FORCE_STATISTICS, "stroke")
 #: Speeds (m/s) of the rows the shipped defaults were fitted on (Tables 3-4, 6-7).
 SHIPPED_FIT_SPEEDS = (5e-3, 15e-3)
@@ -167,6 +173,18 @@ def _forward(kind: str, value: float) -> float:
     return math.log(value) if kind == "log" else math.log(value / (1 - value))
 
 
+def _start(name: str, kind: str, value: float) -> float:
+    """A fit's start in transformed coordinates: the model's value, or :data:`FIT_STARTS`
+    where the transform cannot take it."""
+    at_end = (kind == "log" and not 0 < value < math.inf) or (
+        kind == "logit" and not 0 < value < 1)
+    if at_end:
+        if name not in FIT_STARTS:
+            raise RigCalibrationError(f"cannot start a fit of {name} at {value!r}")
+        value = FIT_STARTS[name]
+    return _forward(kind, value)
+
+
 def _inverse(kind: str, z: float) -> float:
     if kind in _LINEAR:
         return z * _LINEAR[kind]
@@ -241,7 +259,7 @@ def calibrate_rig(
     model, cost = start, 0.0
     if forces:
         models = [start, *(start.with_values(values) for values in starts)]
-        result = min((least_squares(residuals, np.array([_forward(k, m.value(n))
+        result = min((least_squares(residuals, np.array([_start(n, k, m.value(n))
                                                          for n, k in zip(fit, kinds)]),
                                     diff_step=1e-4) for m in models),
                      key=lambda r: r.cost)
