@@ -283,6 +283,18 @@ def test_every_fittable_parameter_starts_where_its_model_value_is_an_end(tables)
         assert math.isfinite(fit.cost)
 
 
+def test_a_parameter_ending_at_a_limit_of_the_model_is_reported_held(tables):
+    """mu cannot fall: the shipped rate law is at its limit of zero friction at rest, which
+    the model refuses beyond. Its difference step crossed the refusal, so its standard
+    error came out as 3.5e-8 (a meaningless certainty); it is now reported at a limit,
+    without one, and the free parameter's error is computed without its column."""
+    fit = calibrate_rig(tables, NOMINAL, [15e-3], ["mu", "free_play"],
+                        ["force_toggle", "force_forward_rms"])
+    assert fit.at_limit == ("mu",)
+    assert math.isnan(fit.std_error["mu"]) and fit.values["mu"] == pytest.approx(0.3, abs=1e-3)
+    assert 0 < fit.std_error["free_play"] < fit.values["free_play"]
+
+
 def test_calibration_refuses_bad_requests(tables):
     with pytest.raises(ValueError, match="cannot fit"):
         calibrate_rig(tables, NOMINAL, [5e-3], ["nonsense"])

@@ -8,7 +8,9 @@ cost is kept); the stroke (Tables 3-5) with the three parameters of the encoder 
 (:class:`toggle.rig_tables.RigReading`), which no force statistic depends on, by linear
 least squares. Each residual is measured in units of the printed 3 sigma; the
 parameter uncertainty is the Gauss-Newton covariance (J^T J)^-1 scaled by the residual
-variance (the model's misfit, not the scatter of the data, dominates). Rows are
+variance (the model's misfit, not the scatter of the data, dominates); a parameter that
+ends where the model refuses to go further (the friction at rest, a range, an assembly) is
+reported as held at that limit, without one, the others' conditional on it. Rows are
 reported with their residual in units of the printed 3 sigma.
 """
 
@@ -161,6 +163,17 @@ class Fit(NamedTuple):
     speeds: tuple[float, ...]  # m/s of the rows fitted
     statistics: tuple[str, ...]
     cost: float  # mean squared residual (units of the printed 3 sigma)
+    #: fitted parameters that ended where the model refuses to go further (a range, the
+    #: friction at rest, an assembly): held there, their standard error is NaN and the
+    #: others' is conditional on them
+    at_limit: tuple[str, ...] = ()
+
+
+#: The residual of every row where the model refuses the parameters (a large misfit the
+#: least-squares steps turn back from).
+REFUSED = 1e3
+#: Step, in transformed coordinates, of the probe for a parameter at a limit.
+_LIMIT_PROBE = 1e-3
 
 
 #: Scales of the linear coordinates: a signed length (m), a time that may be 0 (s).
@@ -252,11 +265,20 @@ def calibrate_rig(
                     out.append((sim - tables.mean[stat][i]) / _weights(tables, stat)[i])
             return np.concatenate(out)
         except (AsymmetryError, AssemblyError, ValueError):
-            return np.full(len(rows) * len(forces) * len(tables.errors), 1e3)
+            return np.full(len(rows) * len(forces) * len(tables.errors), REFUSED)
+
+    def at_limit(z: np.ndarray, i: int) -> bool:
+        """The model refuses a small step of parameter i one way or the other."""
+        for sign in (-1.0, 1.0):
+            probe = z.copy()
+            probe[i] += sign * _LIMIT_PROBE * max(abs(z[i]), 1.0)
+            if np.all(residuals(probe) == REFUSED):
+                return True
+        return False
 
     values: dict[str, float] = {}
     errors: dict[str, float] = {}
-    model, cost = start, 0.0
+    model, cost, limits = start, 0.0, ()
     if forces:
         models = [start, *(start.with_values(values) for values in starts)]
         result = min((least_squares(residuals, np.array([_start(n, k, m.value(n))
@@ -266,15 +288,20 @@ def calibrate_rig(
         model = model_at(result.x)
         dof = max(result.fun.size - len(fit), 1)
         cost = float(np.mean(result.fun**2))
-        cov = _covariance(result.jac, float(result.fun @ result.fun) / dof)
-        for n, k, zi, var in zip(fit, kinds, result.x, np.diag(cov)):
+        limits = tuple(n for i, n in enumerate(fit) if at_limit(result.x, i))
+        free = [i for i, n in enumerate(fit) if n not in limits]
+        # a column whose difference step crossed the limit is meaningless: held parameters out
+        cov = _covariance(result.jac[:, free], float(result.fun @ result.fun) / dof)
+        var = dict(zip(free, np.diag(cov)))
+        for i, (n, k, zi) in enumerate(zip(fit, kinds, result.x)):
             values[n] = _inverse(k, zi)
-            errors[n] = _slope(k, values[n]) * math.sqrt(max(var, 0.0))
+            errors[n] = (_slope(k, values[n]) * math.sqrt(max(var[i], 0.0)) if i in var
+                         else math.nan)
     stroke_errors: dict[str, float] = {}
     if "stroke" in statistics:
         model, stroke_errors = _fit_stroke(tables, nominal, model, rows)
     return Fit(model, fit, values, errors, stroke_errors,
-               tuple(float(tables.speeds[i]) for i in rows), tuple(statistics), cost)
+               tuple(float(tables.speeds[i]) for i in rows), tuple(statistics), cost, limits)
 
 
 def _covariance(jac: np.ndarray, variance: float) -> np.ndarray:

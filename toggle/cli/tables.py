@@ -12,6 +12,7 @@ writes one figure per statistic (measured mean +- 3 sigma against the simulated 
 from __future__ import annotations
 
 import argparse
+import math
 
 from toggle.cli.args import check_writable_dir, path
 from toggle.cli.common import (
@@ -73,7 +74,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"wrote {path}")
     if args.json:
         print_json({
-            "fitted": fit.values if fit else {}, "std_error": fit.std_error if fit else {},
+            "fitted": fit.values if fit else {},
+            # JSON has no NaN or inf: a parameter at a limit, or not identified, has None
+            "std_error": {n: e if math.isfinite(e) else None
+                          for n, e in (fit.std_error if fit else {}).items()},
+            "at_limit": list(fit.at_limit) if fit else [],
             "reading": model.reading.__dict__, "as_built": model.as_built,
             "dynamics": model.dynamics,
             "reading_std_error": fit.stroke_std_error if fit else {},
@@ -87,7 +92,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"{nominal.name}: fitted on {', '.join(f'{s * MM:g}' for s in fit.speeds)} mm/s, "
               f"statistics {', '.join(LABELS[s] for s in fit.statistics)}")
         for name, value in fit.values.items():
-            print(f"  {name} = {value:.5g} +- {fit.std_error[name]:.2g} (SI, 1 s.e.)")
+            if name in fit.at_limit:
+                print(f"  {name} = {value:.5g} (SI; at a limit of the model, held there: "
+                      "no standard error)")
+            else:
+                print(f"  {name} = {value:.5g} +- {fit.std_error[name]:.2g} (SI, 1 s.e.)")
         for name, err in fit.stroke_std_error.items():
             print(f"  reading {name} = {getattr(model.reading, name):.5g} +- {err:.2g} (SI)")
     print(f"{'stat':>9} {'v mm/s':>7} {'dr8 mm':>7} {'measured':>18} {'simulated':>10} "
