@@ -65,6 +65,10 @@ FIT_STARTS = {"free_play": 1e-5, "rate_strengthening": 0.01, "hersey_transition"
               "mu": 0.1, "guide_friction": 1.0, "platen_friction": 1.0, "platen_rate": 0.1,
               "takeup_return": 0.5}
 STATISTICS = (*FORCE_STATISTICS, "stroke")
+#: The paper's symbols of the statistics, for tables and figures.
+STAT_LABELS = {"force_forward_max": "F_F(max)", "force_forward_rms": "F_F(rms)",
+               "force_backward_min": "F_B(min)", "force_backward_rms": "F_B(rms)",
+               "force_toggle": "F_TP", "stroke": "stroke S"}
 #: Speeds (m/s) of the rows the shipped defaults were fitted on (Tables 3-4, 6-7).
 SHIPPED_FIT_SPEEDS = (5e-3, 15e-3)
 #: Relative acceptance of a prediction (issue 18); the weight scale of the fit.
@@ -376,26 +380,36 @@ def compare_tables(tables: PaperTables, simulated: dict[str, np.ndarray],
             for j, d in enumerate(tables.errors)]
 
 
-def plot_tables(tables: PaperTables, simulated: dict[str, np.ndarray], folder: str | Path,
-                statistics: Sequence[str] = STATISTICS) -> list[Path]:
+def plot_tables(tables: PaperTables, nominal: Mechanism, model: RigModel, folder: str | Path,
+                fitted: set[tuple[str, float]] | None = None,
+                statistics: Sequence[str] = STATISTICS, points: int = 31) -> list[Path]:
     """One PNG per statistic: measured mean +- 3 sigma (error bars) and the simulated rig
-    (lines) against delta_r8, one colour per speed. Written as ``tables_<stat>.png``."""
+    (curves over ``points`` link-8 errors) against delta_r8, one colour per speed; the
+    (statistic, speed) rows in ``fitted`` (default: the shipped calibration's, every
+    statistic at :data:`SHIPPED_FIT_SPEEDS`) drawn solid, predicted ones dashed. Written
+    as ``tables_<stat>.png``."""
     from toggle.plots import plt, save_figure
 
+    errors = np.linspace(tables.errors.min(), tables.errors.max(), points)
+    curves = [[model.statistics(nominal, v, d) for d in errors] for v in tables.speeds]
     paths = []
     for stat in statistics:
         scale, unit = (1e3, "mm") if stat == "stroke" else (1.0, "N")
         fig, ax = plt.subplots(figsize=(6, 4))
         for i, v in enumerate(tables.speeds):
             colour = f"C{i}"
+            was_fitted = ((stat, float(v)) in fitted if fitted is not None else
+                          any(math.isclose(v, f, rel_tol=1e-6) for f in SHIPPED_FIT_SPEEDS))
             ax.errorbar(tables.errors * 1e3, tables.mean[stat][i] * scale,
                         yerr=tables.three_sigma[stat][i] * scale, fmt="o", color=colour,
                         capsize=3, label=f"measured, v = {v * 1e3:g} mm/s (mean ± 3σ)")
-            ax.plot(tables.errors * 1e3, simulated[stat][i] * scale, "-", color=colour,
-                    label=f"simulated rig, v = {v * 1e3:g} mm/s")
+            ax.plot(errors * 1e3, [getattr(s, stat) * scale for s in curves[i]],
+                    "-" if was_fitted else "--", color=colour,
+                    label=f"simulated rig, v = {v * 1e3:g} mm/s "
+                          f"({'fitted' if was_fitted else 'predicted'})")
         ax.set_xlabel("link-8 error Δr8 (mm)")
-        ax.set_ylabel(f"{stat} ({unit})")
-        ax.set_title(f"Seed 000 Tables 3-8: {stat}")
+        ax.set_ylabel(f"{STAT_LABELS[stat]} ({unit})")
+        ax.set_title(f"Seed 000 Tables 3-8: {STAT_LABELS[stat]}")
         ax.legend(fontsize=6)
         paths.append(save_figure(fig, Path(folder) / f"tables_{stat}.png"))
     return paths

@@ -27,6 +27,7 @@ from toggle.rig_calibration import (
     FORCE_FITTABLE,
     MAX_FORCE_FITTED,
     SHIPPED_FIT_SPEEDS,
+    STAT_LABELS,
     STATISTICS,
     RigModel,
     Row,
@@ -37,9 +38,7 @@ from toggle.rig_calibration import (
     simulate_tables,
 )
 
-LABELS = {"force_forward_max": "F_F(max)", "force_forward_rms": "F_F(rms)",
-          "force_backward_min": "F_B(min)", "force_backward_rms": "F_B(rms)",
-          "force_toggle": "F_TP", "stroke": "S"}
+LABELS = {**STAT_LABELS, "stroke": "S"}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
         return "fitted" if shipped else "predicted"
 
     if args.plot is not None:
-        for path in plot_tables(tables, simulated, args.plot):
+        fitted_rows = {(r.statistic, r.speed) for r in rows if role(r) == "fitted"}
+        for path in plot_tables(tables, nominal, model, args.plot, fitted_rows):
             print(f"wrote {path}")
     if args.json:
         print_json({
