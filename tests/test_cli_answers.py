@@ -229,6 +229,17 @@ def test_tables_rows_options_are_never_silently_unused(capsys):
     assert roles[("force_toggle", 0.025)] == "predicted"
 
 
+def test_plan_masses_take_commas_or_words_and_refuse_a_field_twice(capsys):
+    """``--masses a=1 b=2`` (words, like every other list option) was refused with the
+    top-level usage ('unrecognized arguments: b=2'); a field given twice took the last."""
+    from toggle.cli.plan import _masses
+
+    assert _masses(["platen_friction=5", "platen_rate=2"]) == _masses(
+        ["platen_friction=5,platen_rate=2"]) == {"platen_friction": 5.0, "platen_rate": 2.0}
+    code, _, err = answer(toggle, ["plan", "--masses", "platen_rate=1,platen_rate=2"], capsys)
+    assert code == 2 and "platen_rate is given twice" in err
+
+
 def test_every_option_with_a_default_shows_it(capsys):
     from cli_fuzz import commands
 

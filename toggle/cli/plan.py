@@ -51,16 +51,18 @@ _SHOWN = ("r8",)  # the one of them --help describes
 DRY_CONTACT = 1e-6
 
 
-def _masses(text: str | None) -> dict[str, float] | None:
+def _masses(words: list[str] | None) -> dict[str, float] | None:
     """Parse ``crosshead=40,links=120,platen=500`` (kg; guide_damping in N s/m, the
-    frictions in N)."""
-    if not text:
+    frictions in N), the items separated by commas or given as separate words."""
+    if not words:
         return None
-    out = {}
-    for item in text.split(","):
+    out: dict[str, float] = {}
+    for item in ",".join(words).split(","):
         name, _, value = item.partition("=")
         if name.strip() not in MASS_FIELDS:
             raise ParameterError(f"--masses: unknown field {name.strip()!r}; use {MASS_FIELDS}")
+        if name.strip() in out:
+            raise ParameterError(f"--masses: {name.strip()} is given twice")
         try:
             out[name.strip()] = float(value)
         except ValueError as exc:
@@ -376,10 +378,10 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
     mold.add_argument("--clamp-force", type=positive("force in N", 1e15), default=None,
                       help="clamp force held in the locked position, N "
                            "(default: the preset's final tie-bar force)")
-    p.add_argument("--masses", default=None,
+    p.add_argument("--masses", default=None, nargs="+", metavar="NAME=VALUE",
                    help="override or supply [dynamics]: crosshead=kg,links=kg,platen=kg"
                         "[,guide_damping=N s/m,guide_friction=N,platen_friction=N,"
-                        "platen_rate=1]")
+                        "platen_rate=1] (commas or spaces between the items)")
     p.add_argument("--v-max", type=positive("speed in m/s", 10.0, 1e-4), default=None,
                    help="crosshead speed limit, m/s (default: the preset's drive)")
     p.add_argument("--a-max", type=positive("acceleration in m/s^2", 1e3, 1e-4), default=None,
