@@ -10,7 +10,6 @@ run stopped early or could not start, 2 a usage error, 130/143 SIGINT/SIGTERM.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -35,6 +34,7 @@ from toggle.cli.args import (
     quiet_broken_pipe,
     use_help_formatter,
 )
+from toggle.json_text import json_text
 from toggle.kinematics import stroke_limits
 from toggle.params import DYNAMICS_PARAMETERS, ParameterError, load_preset
 
@@ -214,7 +214,7 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
     if reason is not None:
         print(f"hil run: stopped: {reason}", file=sys.stderr)
     if s.json:
-        print(json.dumps({"run_dir": str(rec.dir), "samples": rec.count, **summary}, indent=2))
+        print(json_text({"run_dir": str(rec.dir), "samples": rec.count, **summary}))
     else:
         _print_summary(summary, rec.dir, rec.count, s.cycles, plant.name)
     if interrupted is None and guard.received is not None:  # while summarising: after the run

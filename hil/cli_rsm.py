@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from typing import Any
 
 from hil.rsm import (
@@ -17,6 +16,7 @@ from hil.rsm import (
     toggle_cos_theta8,
 )
 from toggle.cli.args import path
+from toggle.json_text import json_text
 from toggle.params import load_preset
 
 
@@ -69,13 +69,12 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         try:
             args.out.mkdir(parents=True, exist_ok=True)
-            (args.out / "rsm.json").write_text(json.dumps(payload, indent=2) + "\n",
-                                               encoding="utf-8")
+            (args.out / "rsm.json").write_text(json_text(payload) + "\n", encoding="utf-8")
             payload["figures"] = [str(p) for p in plot_rsm(fit, args.out, cos_theta8=cos8)]
         except OSError as exc:
             raise RsmError(f"--out {args.out}: cannot write there ({exc.strerror})") from exc
     if args.json:
-        print(json.dumps(payload, indent=2))
+        print(json_text(payload))
         return 0
     print(f"modified cubic model fitted to {len(fit.speed)} points "
           "(v in mm/s, delta_r8 = D in mm; coefficients in mm or N)")

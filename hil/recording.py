@@ -44,6 +44,7 @@ import numpy as np
 
 from hil.experiment import DEFAULT_END_TOL, Cycle, segment_cycles
 from hil.samples import Sample
+from toggle.json_text import json_text
 from toggle.kinematics import stroke, stroke_limits
 from toggle.params import Mechanism
 from toggle.rig_tables import F_TP_LATENCY, TOGGLE_BAND
@@ -148,7 +149,7 @@ def _now() -> str:
 def _write_json(path: Path, payload: Any) -> None:
     """Write JSON through a temporary file, so a crash never leaves half a file."""
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
+    tmp.write_text(json_text(payload) + "\n", encoding="utf-8")
     tmp.replace(path)
 
 

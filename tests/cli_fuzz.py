@@ -12,9 +12,12 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import json
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import pytest
 from hypothesis import strategies as st
 
 NUMBERS = ["0", "-1", "1", "3", "nan", "inf", "-inf", "1e308", "-0.5e-3", "0.5e-3", "25e-3",
@@ -101,17 +104,25 @@ def check_answer(main: Callable[[Sequence[str]], int], argv: list[str],
 
     The contract: no traceback; exit 0, 1 (runtime failure) or 2 (usage); a failure says
     so on exactly one ``error:`` line (the last); a refused command leaves ``outputs`` as
-    they were and adds no file under ``watch``; no temporary file is ever left behind.
+    they were and adds no file under ``watch``; no temporary file is ever left behind; no
+    numerical warning (a division by zero, an invalid value: the trace of a silent NaN);
+    JSON output is JSON (no NaN or Infinity).
     """
     before = {p: p.exists() for p in outputs}
     files = _files(watch)
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out), \
+            warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
         try:
             code = main(argv)
         except SystemExit as exc:  # argparse's usage errors
             code = exc.code if isinstance(exc.code, int) else 1
     text = err.getvalue()
+    numeric = [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+    assert not numeric, (argv, numeric)
+    if code == 0 and "--json" in argv:
+        json.loads(out.getvalue(), parse_constant=lambda c: pytest.fail(f"{argv}: JSON {c}"))
     assert "Traceback" not in text, (argv, text)
     assert code in (0, 1, 2), (argv, code, text)
     after = _files(watch)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 
 from toggle.cli import main
@@ -62,3 +63,13 @@ def test_bad_input_gives_a_clear_message(capsys):
     assert "IT grade" in capsys.readouterr().err
     assert main(["tolerance", "--x", "0.2"]) == 2
     assert "cannot assemble at x = 0.2" in capsys.readouterr().err
+
+
+def test_json_text_writes_null_for_non_finite_numbers():
+    """JSON has no NaN or Infinity: `toggle calibrate --json` wrote "hersey_transition":
+    Infinity (the film law off), which strict readers (jq, a browser) refuse."""
+    from toggle.json_text import json_text
+
+    text = json_text({"h_s": math.inf, "e": [math.nan, 1.5], "n": np.float64(-np.inf), "k": 2})
+    assert json.loads(text, parse_constant=lambda c: pytest.fail(c)) == {
+        "h_s": None, "e": [None, 1.5], "n": None, "k": 2}

@@ -306,8 +306,9 @@ def test_calibration_refuses_bad_requests(tables):
 
 def test_tables_cli_json_and_figures(tmp_path, capsys):
     assert main(["tables", "--json", "--plot", str(tmp_path)]) == 0
-    out = json.loads(capsys.readouterr().out.split("\n", 6)[-1])
+    out = json.loads(capsys.readouterr().out)  # stdout is the JSON alone
     assert len(out["rows"]) == 72
+    assert sorted(out["figures"]) == sorted(str(p) for p in tmp_path.glob("*.png"))
     pngs = sorted(p.name for p in tmp_path.glob("*.png"))
     assert pngs == sorted(f"tables_{s}.png" for s in (
         "force_forward_max", "force_forward_rms", "force_backward_min",

@@ -15,6 +15,7 @@ from toggle.kinematics import AssemblyError
 from toggle.params import HalfDims, ParameterError, load_preset, preset_groups
 from toggle.study import (
     CRITERIA,
+    MIN_ANGLE,
     ToggleRangeError,
     angle_grid,
     angle_measures,
@@ -199,3 +200,15 @@ def test_cli_study_json_and_sweep(capsys, tmp_path):
     assert sw["criteria"]["stroke_ratio"][0] == [None, None] and len(sw["failures"]) == 2
     assert main(["plot", "study", "--points", "20", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "study.png").stat().st_size > 10_000
+
+
+def test_an_angle_whose_crosshead_stroke_rounds_to_zero_is_refused(li_micro, capsys):
+    """At 1e-300 deg the crosshead's distance from lock-up (~ angle squared) rounds to 0 and
+    the stroke ratio was NaN, with a RuntimeWarning on stderr and NaN in --json; 1e-6 rad
+    still resolves it."""
+    with pytest.raises(ValueError, match="too close to lock-up"):
+        angle_measures(li_micro["1"], [math.radians(1e-300), 0.5])
+    measures = angle_measures(li_micro["1"], [MIN_ANGLE, 0.5])
+    assert np.all(np.isfinite(measures.stroke_ratio)) and np.all(measures.crosshead_stroke > 0)
+    assert main(["study", "--alpha-lock", "1e-300", "--points", "3"]) == 2
+    assert "--alpha-lock" in capsys.readouterr().err

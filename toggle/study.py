@@ -169,6 +169,11 @@ class AngleMeasures(NamedTuple):
     coping_angle: np.ndarray
 
 
+#: Smallest toggle angle the measures take, rad: the crosshead's distance from lock-up,
+#: about r alpha^2, is then ~1e-13 m against positions of ~0.1 m (rounding 1e-17 m).
+MIN_ANGLE = 1e-6
+
+
 def angle_grid(alpha_lock: float, alpha_max: float, points: int) -> np.ndarray:
     """Toggle angles (rad) from ``alpha_lock`` (near lock-up, > 0) to ``alpha_max``."""
     if not (0 < alpha_lock < alpha_max < math.pi) or points < 2:
@@ -188,6 +193,11 @@ def angle_measures(dims: HalfDims, alphas: Any, *, label: str = "half") -> Angle
     alphas = np.asarray(alphas, dtype=float)
     if alphas.size == 0 or not np.all(alphas > 0):
         raise ValueError("toggle angles must be > 0 rad (the measures are singular at lock-up)")
+    if np.any(alphas < MIN_ANGLE):
+        raise ValueError(
+            f"toggle angle {float(alphas.min()):.3g} rad is too close to lock-up: the "
+            f"crosshead's distance from it (which grows as the angle squared) is lost in "
+            f"rounding below {MIN_ANGLE:g} rad, and the stroke ratio with it")
     x_lock = toggle_position(dims)
     x = crosshead_positions(dims, alphas, x_lock=x_lock, label=label)
     motion = half_motion(x, dims, label=label)

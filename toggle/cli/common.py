@@ -6,13 +6,13 @@ The argument types are :mod:`toggle.cli.args`'s, so ``toggle`` and ``hil`` judge
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 from toggle.cli.args import integer, number, path, positive
+from toggle.json_text import json_text
 from toggle.params import Mechanism, load_preset
 
 MM = 1e3  # metres to millimetres, for tables only
@@ -60,7 +60,8 @@ def mechanism(args: argparse.Namespace) -> Mechanism:
 
 
 def print_json(payload: Any) -> None:
-    print(json.dumps(payload, indent=2, sort_keys=False))
+    """Strict JSON on stdout: a non-finite number is null (:mod:`toggle.json_text`)."""
+    print(json_text(payload))
 
 
 def deg(rad: float) -> float:

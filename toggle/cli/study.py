@@ -29,6 +29,7 @@ from toggle.cli.common import (
 from toggle.params import DIMENSIONS, HALVES, ParameterError, load_preset
 from toggle.study import (
     CRITERIA,
+    MIN_ANGLE,
     GroupResult,
     SweepResult,
     angle_grid,
@@ -52,7 +53,8 @@ def _add_range_arguments(p: argparse.ArgumentParser, preset: str) -> None:
                         "family/group makes that group the baseline")
     p.add_argument("--half", choices=HALVES, default="lower", help="half to study (default lower)")
     p.add_argument("--alpha-lock", type=ANGLE, default=1.0,
-                   help="smallest toggle angle, deg: where Mp counts as near lock-up (default 1)")
+                   help="smallest toggle angle, deg: where Mp counts as near lock-up "
+                        f"(default 1; at least {math.degrees(MIN_ANGLE):.2g})")
     p.add_argument("--alpha-max", type=ANGLE, default=90.0,
                    help="largest toggle angle (open clamp), deg (default 90; seed 004 gives none)")
     p.add_argument("--points", type=POINTS, default=90,
@@ -60,9 +62,11 @@ def _add_range_arguments(p: argparse.ArgumentParser, preset: str) -> None:
 
 
 def _alphas(args: argparse.Namespace) -> np.ndarray:
-    if not 0 < args.alpha_lock < args.alpha_max < 180:
-        raise ParameterError(f"need 0 < --alpha-lock < --alpha-max < 180 deg, got "
-                             f"{args.alpha_lock:g} and {args.alpha_max:g} deg")
+    least = math.degrees(MIN_ANGLE)
+    if not least <= args.alpha_lock < args.alpha_max < 180:
+        raise ParameterError(f"need {least:.2g} <= --alpha-lock < --alpha-max < 180 deg, got "
+                             f"{args.alpha_lock:g} and {args.alpha_max:g} deg (closer to "
+                             f"lock-up the stroke ratio is lost in rounding)")
     return angle_grid(math.radians(args.alpha_lock), math.radians(args.alpha_max), args.points)
 
 

@@ -12,7 +12,6 @@ writes one figure per statistic (measured mean +- 3 sigma against the simulated 
 from __future__ import annotations
 
 import argparse
-import math
 
 from toggle.cli.args import check_writable_dir, path
 from toggle.cli.common import (
@@ -68,16 +67,15 @@ def run(args: argparse.Namespace) -> int:
                                                           and reading_refit)
         return "fitted" if shipped else "predicted"
 
-    if args.plot is not None:
-        fitted_rows = {(r.statistic, r.speed) for r in rows if role(r) == "fitted"}
-        for path in plot_tables(tables, nominal, model, args.plot, fitted_rows):
-            print(f"wrote {path}")
-    if args.json:
+    figures = [] if args.plot is None else plot_tables(
+        tables, nominal, model, args.plot,
+        {(r.statistic, r.speed) for r in rows if role(r) == "fitted"})
+    if args.json:  # stdout is the JSON alone: the figures are listed in it
         print_json({
+            "figures": [str(p) for p in figures],
             "fitted": fit.values if fit else {},
-            # JSON has no NaN or inf: a parameter at a limit, or not identified, has None
-            "std_error": {n: e if math.isfinite(e) else None
-                          for n, e in (fit.std_error if fit else {}).items()},
+            # null: at a limit, or not identified (print_json writes no NaN or inf)
+            "std_error": fit.std_error if fit else {},
             "at_limit": list(fit.at_limit) if fit else [],
             "reading": model.reading.__dict__, "as_built": model.as_built,
             "dynamics": model.dynamics,
@@ -88,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
                       "role": role(r)}
                      for r in rows]})
         return 0
+    for figure in figures:
+        print(f"wrote {figure}")
     if fit:
         print(f"{nominal.name}: fitted on {', '.join(f'{s * MM:g}' for s in fit.speeds)} mm/s, "
               f"statistics {', '.join(LABELS[s] for s in fit.statistics)}")
