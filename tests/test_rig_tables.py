@@ -202,8 +202,8 @@ def test_the_zero_error_series_are_unlike_every_other_series(tables):
     """The premise of why the delta_r8 = 0 rows at 25 mm/s are not predicted (docs section
     9.9), checked on the data: (1) at 15 and 25 mm/s their forward stroke has a short spike,
     F_F(max) / F_F(rms) 5.6 and 4.6, more than 1.5 times the largest of the ten other series
-    (2.9); (2) the direction asymmetry F_F(max) + F_B(min), which only a conservative force
-    (speed-independent) can make, flips from -81 N at 5 mm/s to +68 N at 15 mm/s, beyond
+    (2.9); (2) the direction asymmetry F_F(max) + F_B(min), which in the model comes from
+    the conservative (speed-independent) force, flips from -81 N at 5 mm/s to +68 N at 15 mm/s, beyond
     the combined printed 3 sigma, where no other series moves by more than 25 N."""
     mean, band = tables.mean, tables.three_sigma
     crest = mean["force_forward_max"] / mean["force_forward_rms"]
