@@ -13,6 +13,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from hil import cli_rig, cli_rsm, experiment
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
@@ -37,6 +38,7 @@ from toggle.cli.args import (
 from toggle.json_text import json_text
 from toggle.kinematics import stroke_limits
 from toggle.params import DYNAMICS_PARAMETERS, ParameterError, load_preset
+from toggle.rig_calibration import load_paper_tables
 
 #: Printed rows of a run summary: (key, label, scale to the printed unit, unit).
 SUMMARY_ROWS = (
@@ -113,7 +115,26 @@ def _duration_text(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
-def _print_summary(summary: dict, run_dir: Path, count: int, cycles: int, backend: str) -> None:
+def paper_statistics(s: RunSettings) -> dict[str, Any] | None:
+    """Seed 000's measured statistics (Tables 3-8, SI: mean and printed 3 sigma) of the
+    condition this run repeats (a --speed run of the preset they were measured on at one of
+    their speeds and link-8 errors), with the table's number; None for any other run."""
+    if s.speed is None:
+        return None
+    tables = load_paper_tables()
+    cell = tables.cell(s.preset, s.speed, s.delta_r8)
+    if cell is None:
+        return None
+    i, j = cell
+    return {"speed": float(tables.speeds[i]), "delta_r8": float(tables.errors[j]),
+            **{key: {"table": (3 if key == "stroke" else 6) + i,
+                     "mean": float(tables.mean[key][i, j]),
+                     "three_sigma": float(tables.three_sigma[key][i, j])}
+               for key in tables.mean}}
+
+
+def _print_summary(summary: dict, run_dir: Path, count: int, cycles: int, backend: str,
+                   paper: dict[str, Any] | None = None) -> None:
     done = summary["cycles_complete"]
     print(f"{count} samples, {done} of {cycles} cycles complete, in {run_dir} "
           f"(samples.csv, summary.json, meta.json, plots)")
@@ -123,7 +144,18 @@ def _print_summary(summary: dict, run_dir: Path, count: int, cycles: int, backen
             continue
         spread = (f"3 sigma {stat['three_sigma'] * scale:.4f} {unit}"
                   if stat["three_sigma"] is not None else "one cycle: no spread")
-        print(f"  {label:16s} {stat['mean'] * scale:10.4f} {unit:2s}  ({spread})")
+        line = f"  {label:16s} {stat['mean'] * scale:10.4f} {unit:2s}  ({spread})"
+        if paper is not None and key in paper:
+            m = paper[key]
+            off = stat["mean"] - m["mean"]
+            line += (f"  Table {m['table']}: {m['mean'] * scale:.3f} +- "
+                     f"{m['three_sigma'] * scale:.3f} {unit}, " + (
+                         f"{off * scale:+.3f} {unit}" if key == "stroke"
+                         else f"{100 * off / abs(m['mean']):+.1f} %"))
+        print(line)
+    if paper is not None and backend == "fmu":
+        print("  (the simulated rig's stroke is the platen's travel; the prototype's encoder "
+              "read 0.38-0.56 mm more, docs/unequal-halves.md section 9.3)")
     if backend == "fmu" and done > 1:
         print("  (the simulated rig is deterministic: its spread is only the first cycle's "
               "start with the friction at rest; the real rig's is not)")
@@ -214,9 +246,10 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
     if reason is not None:
         print(f"hil run: stopped: {reason}", file=sys.stderr)
     if s.json:
-        print(json_text({"run_dir": str(rec.dir), "samples": rec.count, **summary}))
+        print(json_text({"run_dir": str(rec.dir), "samples": rec.count, **summary,
+                         "paper": paper_statistics(s)}))
     else:
-        _print_summary(summary, rec.dir, rec.count, s.cycles, plant.name)
+        _print_summary(summary, rec.dir, rec.count, s.cycles, plant.name, paper_statistics(s))
     if interrupted is None and guard.received is not None:  # while summarising: after the run
         interrupted = Interrupted(guard.received)
         print(f"hil run: {interrupted} after the run completed; its record is whole",

@@ -203,8 +203,9 @@ def test_the_zero_error_series_are_unlike_every_other_series(tables):
     9.9), checked on the data: (1) at 15 and 25 mm/s their forward stroke has a short spike,
     F_F(max) / F_F(rms) 5.6 and 4.6, more than 1.5 times the largest of the ten other series
     (2.9); (2) the direction asymmetry F_F(max) + F_B(min), which in the model comes from
-    the conservative (speed-independent) force, flips from -81 N at 5 mm/s to +68 N at 15 mm/s, beyond
-    the combined printed 3 sigma, where no other series moves by more than 25 N."""
+    the conservative (speed-independent) force, flips from -81 N at 5 mm/s to +68 N at
+    15 mm/s, beyond the combined printed 3 sigma, where no other series moves by more than
+    25 N."""
     mean, band = tables.mean, tables.three_sigma
     crest = mean["force_forward_max"] / mean["force_forward_rms"]
     others = np.delete(crest, 0, axis=1).ravel().tolist() + [crest[0, 0]]
@@ -215,6 +216,30 @@ def test_the_zero_error_series_are_unlike_every_other_series(tables):
     assert asym[0, 0] + spread[0, 0] < 0 < asym[1, 0] - spread[1, 0]
     assert asym[1, 0] - asym[0, 0] > 140
     assert np.ptp(asym[:, 1:], axis=0).max() < 25
+
+
+def test_a_run_is_compared_with_the_paper_only_where_it_repeats_a_condition():
+    """The run summary's Tables 3-8 column: a --speed run of chang2021 at one of the tables'
+    speeds and link-8 errors gets that cell (Table 3 + i for the stroke, 6 + i for forces),
+    anything else (the default planned job, another error, another preset) none."""
+    from dataclasses import replace as replace_settings
+
+    from hil.cli import build_parser, paper_statistics
+    from hil.run_settings import resolve_settings
+
+    def settings(*argv: str):
+        return resolve_settings(build_parser().parse_args(["run", *argv]))
+
+    def paper(*argv: str):
+        return paper_statistics(settings(*argv))
+
+    cell = paper("--speed", "15e-3", "--delta-r8", "0.5e-3")
+    assert cell["force_toggle"] == {"table": 7, "mean": 122.541, "three_sigma": 11.237}
+    assert cell["stroke"]["table"] == 4 and cell["stroke"]["mean"] == pytest.approx(45.564e-3)
+    assert paper("--speed", "15e-3", "--delta-r8", "0.3e-3") is None
+    assert paper("--delta-r8", "0.5e-3") is None  # the planned job: no table repeats it
+    other = replace_settings(settings("--speed", "15e-3"), preset="lin2003_sm55")
+    assert paper_statistics(other) is None
 
 
 def test_measured_stroke_from_the_reading_model(shipped):
@@ -315,15 +340,18 @@ def test_tables_cli_json_and_figures(tmp_path, capsys):
         "force_backward_rms", "force_toggle", "stroke"))
 
 
-def test_hil_run_at_0_75_mm_stays_under_the_force_limit_and_matches_table8(tmp_path, tables):
+def test_hil_run_at_0_75_mm_stays_under_the_force_limit_and_matches_table8(tmp_path, tables,
+                                                                           capsys):
     """``hil run --delta-r8 0.75e-3 --speed 25e-3 --cycles 2`` with the default 400 N limit
     completes with the rig's as-built error recorded; its F_TP (read as the rig read it) and
-    F_F(max) are within 25 % of Table 8."""
+    F_F(max) are within 25 % of Table 8, and its summary prints them beside Table 8's."""
     from hil.cli import main as hil_main
 
     out = tmp_path / "run"
     assert hil_main(["run", "--delta-r8", "0.75e-3", "--speed", "25e-3", "--cycles", "2",
                      "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "Table 8: 300.124 +- 23.999 N" in printed and "Table 5: 45.557" in printed
     summary = json.loads((out / "summary.json").read_text())
     assert summary["cycles_complete"] == 2 and not summary["aborted"]
     meta = json.loads((out / "meta.json").read_text())  # the rig's errors: as built + dr8

@@ -87,6 +87,16 @@ class PaperTables:
     errors: np.ndarray  # delta_r8, m
     mean: dict[str, np.ndarray]
     three_sigma: dict[str, np.ndarray]
+    mechanism: str = "chang2021"  # the preset of the rig they were measured on
+
+    def cell(self, preset: str, speed: float, delta_r8: float) -> tuple[int, int] | None:
+        """(speed index, error index) of the condition a run of ``preset`` at ``speed``
+        (m/s) with link 8 off by ``delta_r8`` (m) repeats, or None."""
+        i = np.flatnonzero(np.isclose(self.speeds, speed, rtol=1e-6, atol=0))
+        j = np.flatnonzero(np.isclose(self.errors, delta_r8, rtol=0, atol=1e-9))
+        if preset != self.mechanism or not (len(i) and len(j)):
+            return None
+        return int(i[0]), int(j[0])
 
     def speed_index(self, speed: float) -> int:
         hits = np.flatnonzero(np.isclose(self.speeds, speed, rtol=1e-6))
@@ -105,7 +115,8 @@ def load_paper_tables(path: str | Path = PAPER_TABLES) -> PaperTables:
         return PaperTables(
             np.asarray(data["speed"], float) * 1e-3, np.asarray(data["delta_r8"], float) * 1e-3,
             {k: np.asarray(tables[k]["mean"], float) * scale[k] for k in STATISTICS},
-            {k: np.asarray(tables[k]["three_sigma"], float) * scale[k] for k in STATISTICS})
+            {k: np.asarray(tables[k]["three_sigma"], float) * scale[k] for k in STATISTICS},
+            str(data["mechanism"]))
     except (OSError, KeyError, tomllib.TOMLDecodeError) as exc:
         raise RigCalibrationError(f"cannot read the paper's tables from {path}: {exc}") from exc
 
