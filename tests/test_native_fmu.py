@@ -147,10 +147,19 @@ def _stroke() -> np.ndarray:
     return np.array(list(zip(t, x)), dtype=[("time", float), ("x_cmd", float)])
 
 
-def _both(unzipped: Path, python_fmu: Path, **start: float) -> list:
+def _both(unzipped: Path, python_fmu: Path, stroke: np.ndarray | None = None,
+          **start: float) -> list:
     start = {"x_cmd": X_OPEN, "x_contact": X_CONTACT, **start}
-    return [simulate_fmu(str(d), stop_time=STOP_TIME, step_size=1e-3, input=_stroke(),
+    stroke = _stroke() if stroke is None else stroke
+    return [simulate_fmu(str(d), stop_time=STOP_TIME, step_size=1e-3, input=stroke,
                          start_values=start, output=OUTPUTS) for d in (unzipped, python_fmu)]
+
+
+def _assert_same(native: dict, python: dict) -> None:
+    for name in OUTPUTS:
+        want = python[name]
+        np.testing.assert_allclose(native[name], want, rtol=REL,
+                                   atol=REL * 1e-3 * float(np.max(np.abs(want))), err_msg=name)
 
 
 @pytest.mark.parametrize("delta_r8, frictions", [
@@ -160,13 +169,34 @@ def test_native_and_pythonfmu_agree_over_the_stroke(unzipped: Path, python_fmu: 
                                                     delta_r8: float, frictions: dict):
     """Also with the guides' Coulomb frictions set (parameters of both, from one table)."""
     native, python = _both(unzipped, python_fmu, delta_r8=delta_r8, **frictions)
-    for name in OUTPUTS:
-        want = python[name]
-        np.testing.assert_allclose(native[name], want, rtol=REL,
-                                   atol=REL * 1e-3 * float(np.max(np.abs(want))), err_msg=name)
+    _assert_same(native, python)
     assert native["clamp_force"].max() > 100.0  # N: the mold was reached
     assert native["x"][-1] == pytest.approx(X_OPEN, abs=1e-6)  # and left again
     assert (abs(native["asymmetry"]).max() > 1e-4) == (delta_r8 != 0)
+
+
+@pytest.mark.parametrize("delta_r8", [0.0, 0.5e-3])
+def test_without_a_mold_both_fmus_run_over_the_toggle_and_back(unzipped: Path,
+                                                               python_fmu: Path,
+                                                               delta_r8: float):
+    """x_contact left at its start value (the toggle): no mold in either build, so past the
+    toggle the platen retreats in both. The two builds once found the toggle with different
+    root finders, 1e-13 m apart: the native one saw a mold at its start value, held the
+    platen and reported the mold's mechanical advantage (49,954 against 362)."""
+    t = np.linspace(0.0, STOP_TIME, 1001)
+    beyond = X_TOGGLE + 8e-3  # m of crosshead travel past the toggle, inside the range
+    x = X_OPEN + (beyond - X_OPEN) * np.sin(np.pi * t / STOP_TIME) ** 2
+    stroke = np.array(list(zip(t, x)), dtype=[("time", float), ("x_cmd", float)])
+    native, python = _both(unzipped, python_fmu, stroke, x_contact=X_TOGGLE,
+                           delta_r8=delta_r8)
+    _assert_same(native, python)
+    for run in (native, python):
+        assert not run["clamp_force"].any()
+        past = run["x"] > X_TOGGLE + 1e-3
+        closing = run["velocity"] > 0
+        assert (run["platen_velocity"][past & closing] < 0).all()  # over the toggle: back
+        retreat = run["platen_position"].max() - run["platen_position"][np.argmax(run["x"])]
+        assert 1e-5 < retreat < 1e-4  # m: 38 um at 8 mm past the toggle
 
 
 def test_native_fmu_takes_the_rotor_inertia_as_a_parameter(unzipped: Path, python_fmu: Path):
@@ -174,10 +204,7 @@ def test_native_fmu_takes_the_rotor_inertia_as_a_parameter(unzipped: Path, pytho
     motor_torque the library's (toggle.drive.motor_torque, the one equation)."""
     inertias = {"rotor_inertia": 3e-4, "screw_inertia": 4e-5}
     native, python = _both(unzipped, python_fmu, **inertias)
-    for name in OUTPUTS:
-        want = python[name]
-        np.testing.assert_allclose(native[name], want, rtol=REL,
-                                   atol=REL * 1e-3 * float(np.max(np.abs(want))), err_msg=name)
+    _assert_same(native, python)
     drive = configure("chang2021", drive=inertias).mechanism.drive
     torque = motor_torque(native["input_force"], drive, native["acceleration"])
     np.testing.assert_allclose(native["motor_torque"], torque, rtol=1e-12, atol=1e-15)

@@ -49,7 +49,13 @@ from toggle.params import (
     load_preset,
     symbolic_copy,
 )
-from toggle.plant import PlantConfig, PlantOutputs, configure, plant_outputs
+from toggle.plant import (
+    NO_MOLD_TOLERANCE,
+    PlantConfig,
+    PlantOutputs,
+    configure,
+    plant_outputs,
+)
 
 MODEL = "ToggleClampNative"
 C_DIR = Path(__file__).resolve().parent.parent / "fmu_src" / "native"
@@ -189,6 +195,7 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         f"#define CLAMP_N_DIMS {len(DIMENSIONS)}",
         f"#define CLAMP_N_MASSES {N_MASSES}",
         f"#define CLAMP_SLIP_DISTANCE {cfg.asymmetry.slip_distance!r}",
+        f"#define CLAMP_NO_MOLD_TOLERANCE {NO_MOLD_TOLERANCE!r}",
         *(f"#define {k} {v}" for k, v in roles.items()),
         *(f"#define CLAMP_{k.upper()} {v}" for k, v in sizes.items()),
         f"static const double CLAMP_NOMINAL[2 * CLAMP_N_DIMS] = "

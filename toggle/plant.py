@@ -63,6 +63,10 @@ from toggle.statics import force_ratios
 MA_CAP = 1e12
 #: Platen speed scale of the platen friction's rate strengthening, m/s.
 PLATEN_RATE_SPEED = 1e-3
+#: A mold-contact position this close to the toggle (or beyond it) means no mold, m. The
+#: toggle is a root found to about 1e-12 m, by Brent's method here and by bisection in the
+#: native FMU: an FMU's x_contact start value (the toggle) must mean no mold in both.
+NO_MOLD_TOLERANCE = 1e-9
 
 
 class PlantError(ValueError):
@@ -313,7 +317,8 @@ def configure(
     links and platen at least); ``drive`` overrides fields of its [drive]
     (rotor_inertia, screw_inertia, ...); ``errors`` adds dimensional errors by seed 000's
     names (for example ``{"r8": 0.5e-3}`` lengthens link 8 of the upper half).
-    A contact position at or beyond the toggle means no mold. Every bad value
+    A contact position at or beyond the toggle (within :data:`NO_MOLD_TOLERANCE`) means
+    no mold. Every bad value
     raises :class:`ParameterError` naming it.
     """
     mech, changed = with_errors(
@@ -335,7 +340,7 @@ def configure(
             raise ParameterError(
                 f"the {h} half with {', '.join(changed) or 'its nominal dimensions'}: {exc}"
             ) from exc
-    if x_contact is not None and x_contact >= toggle_position(mech.lower):
+    if x_contact is not None and x_contact >= toggle_position(mech.lower) - NO_MOLD_TOLERANCE:
         x_contact = None
     return PlantConfig(mech, mu=mu, x_contact=x_contact)
 

@@ -204,7 +204,7 @@ static fmi2Status initialise(Instance *c) {
     s->x_lo = fmax(lo[0], lo[1]);
     s->x_hi = fmin(hi[0], hi[1]);
     double xc = s->r[VR_X_CONTACT];
-    s->mold = !(xc >= tp[0]);
+    s->mold = !(xc >= tp[0] - CLAMP_NO_MOLD_TOLERANCE);  /* toggle.plant.configure's rule */
     if (s->mold && !(isfinite(xc) && s->x_lo <= xc && xc <= s->x_hi)) {
         logf_(c, fmi2Error, "initialisation failed: mold-contact position x_contact = %g m is "
               "outside the assemblable range [%g, %g] m", xc, s->x_lo, s->x_hi);
