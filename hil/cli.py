@@ -17,7 +17,7 @@ from typing import Any
 
 from hil import cli_rig, cli_rsm, experiment
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
-from hil.experiment import CycleCounter, profile_cycles, reciprocating_trajectory
+from hil.experiment import CycleCounter, default_mold, profile_cycles, reciprocating_trajectory
 from hil.interrupts import Interrupted, SignalGuard
 from hil.recording import RecordingError, RunMeta, RunRecorder
 from hil.run_settings import (
@@ -25,6 +25,7 @@ from hil.run_settings import (
     RUN_DEFAULTS,
     RunSettings,
     add_number_options,
+    check_mold,
     resolve_settings,
 )
 from hil.samples import Trajectory, TrajectoryError
@@ -268,8 +269,13 @@ def emulate(args: argparse.Namespace) -> int:
     from hil.rig_emulator import FaultPlan, RigEmulator
     from hil.rig_physics import ClampPhysics
 
+    x_contact = args.x_contact
+    if x_contact == "planned":
+        x_contact = default_mold(args.preset, args.delta_r8, args.mu)
+    elif x_contact is not None:
+        check_mold(args.preset, x_contact)
     setup = RigSetup(preset=args.preset, delta_r8=args.delta_r8, mu=args.mu,
-                     x_contact=args.x_contact)
+                     x_contact=x_contact)
     faults = FaultPlan(drop_byte=args.drop_byte, flip_bit=args.flip_bit, junk=args.junk,
                        stall_at=args.stall_at, reset_at=args.reset_at, estop_at=args.estop_at,
                        disconnect_at=args.disconnect_at, seed=args.seed,

@@ -17,6 +17,16 @@ from hil.serial_link import CommandError, RigError, SerialLink
 from toggle.cli.args import PROBABILITY, TIME, number
 
 
+def mold_position(text: str) -> float | str:
+    """argparse type of ``hil emulate --x-contact``: a position in m, or ``planned``."""
+    if text == "planned":
+        return text
+    try:
+        return number(-1.0, 1.0, "must be a position in m")(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (or 'planned')") from None
+
+
 def add_emulator_options(e: argparse.ArgumentParser) -> None:
     """Options of ``hil emulate``: the simulated clamp and the injected faults."""
     e.add_argument("--preset", default="chang2021", help="mechanism preset")
@@ -24,10 +34,10 @@ def add_emulator_options(e: argparse.ArgumentParser) -> None:
                    default=0.0, dest="delta_r8", help="length error of link 8, m (e.g. 0.5e-3)")
     e.add_argument("--mu", type=number(0.0, 1.0, "must be between 0 and 1"), default=None,
                    help="pin friction (default: the preset's)")
-    e.add_argument("--x-contact", type=number(-1.0, 1.0, "must be a position in m"),
-                   default=None, dest="x_contact",
-                   help="crosshead position at mold contact, m (default: no mold; hil run's "
-                        "default job plans one, so give it the same --x-contact)")
+    e.add_argument("--x-contact", type=mold_position, default=None, dest="x_contact",
+                   help="crosshead position at mold contact, m, or 'planned': the mold hil "
+                        "run's default job plans for this preset and --delta-r8 (default: no "
+                        "mold, as in the paper's experiments and hil run --speed)")
     e.add_argument("--drop-byte", type=PROBABILITY, default=0.0,
                    help="fault: P(drop a byte) per frame")
     e.add_argument("--flip-bit", type=PROBABILITY, default=0.0,

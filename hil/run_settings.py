@@ -18,10 +18,10 @@ from typing import Any
 
 from controllers.profiles import read_profile_settings
 from hil.backends import MAX_SPEED
+from hil.experiment import default_mold
 from toggle.cli.args import check_writable_dir
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_preset, tomllib
-from toggle.rig_tables import rig_errors
 
 #: Built-in defaults of every setting a --config file may hold.
 RUN_DEFAULTS: dict[str, Any] = {
@@ -158,9 +158,16 @@ def check(v: dict[str, Any]) -> None:
     if not (math.isfinite(v["delta_r8"]) and abs(v["delta_r8"]) < 5e-3):
         raise bad("delta_r8", "must be a finite error below 5 mm (in m)")
     if v["x_contact"] is not None:
-        x_open, x_tp = stroke_limits(load_preset(v["preset"]).lower)
-        if not (math.isfinite(v["x_contact"]) and x_open < v["x_contact"] < x_tp):
-            raise bad("x_contact", f"must lie inside the stroke ({x_open:.6g}, {x_tp:.6g}) m")
+        check_mold(v["preset"], v["x_contact"])
+
+
+def check_mold(preset: str, x_contact: float) -> None:
+    """Refuse a mold position (m) outside the preset's stroke, where no mold is clamped
+    (``hil run`` and ``hil emulate``)."""
+    x_open, x_tp = stroke_limits(load_preset(preset).lower)
+    if not (math.isfinite(x_contact) and x_open < x_contact < x_tp):
+        raise ParameterError(f"--x-contact (x_contact) must lie inside the stroke "
+                             f"({x_open:.6g}, {x_tp:.6g}) m, got {x_contact!r}")
 
 
 def _apply_profile(values: dict[str, Any], explicit: set[str]) -> str:
@@ -200,14 +207,9 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
                              "with [dynamics] masses (chang2021, or a TOML file that has them)")
     check(values)
     if values["profile"] is None and values["speed"] is None and values["x_contact"] is None:
-        # the default job clamps a mold: the plan's contact position (the preset's final
-        # tie-bar force held by the rig as built) is the simulated mold height too
-        from controllers.planner import plan_config
-
-        errors = rig_errors(values["preset"], values["delta_r8"],
-                            None if values["as_built"] else {})
-        values["x_contact"] = plan_config(values["preset"], mu=values["mu"],
-                                          errors=errors).x_contact
+        # the default job clamps a mold, which the simulated rig has too
+        values["x_contact"] = default_mold(values["preset"], values["delta_r8"], values["mu"],
+                                           values["as_built"])
     for key in ("profile", "out", "fmu"):
         if values[key] is not None:
             values[key] = Path(values[key])

@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 
 from hil.backends import FmuPlant, RigPlant, RigSetup, RunStoppedError
-from hil.cli import main
-from hil.experiment import reciprocating_trajectory
+from hil.cli import build_parser, main
+from hil.experiment import default_mold, reciprocating_trajectory
 from hil.mcu_model import RigHardware
 from hil.recording import read_samples
 from hil.rig_emulator import FaultPlan, spawn_emulator
 from hil.rig_physics import ClampPhysics
+from hil.run_settings import resolve_settings
 from hil.samples import TrajectoryError
 from toggle.params import load_preset
 
@@ -127,3 +128,16 @@ def test_bad_options_get_clear_errors(capsys):
     assert main(["run", "--cycles", "0"]) == 2
     assert main(["run", "--delta-r8", "1.0"]) == 2
     assert "delta_r8" in capsys.readouterr().err
+
+
+def test_emulator_mold_is_checked_or_planned(capsys):
+    # a mold past the toggle was silently no mold: the emulator served a clamp without one
+    assert main(["emulate", "--x-contact", "0.9"]) == 2
+    assert "inside the stroke" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["emulate", "--x-contact", "nope"])
+    assert exc.value.code == 2 and "'planned'" in capsys.readouterr().err
+    # 'planned' is the mold hil run's default job plans and the simulated rig clamps
+    settings = resolve_settings(build_parser().parse_args(["run", "--delta-r8", "0.5e-3"]))
+    assert settings.x_contact == default_mold("chang2021", 0.5e-3)
+    assert default_mold("chang2021", 0.5e-3) != default_mold("chang2021", 0.0)
