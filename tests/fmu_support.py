@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -72,6 +73,49 @@ LIBCOSIM = textwrap.dedent(
     print(json.dumps({"ok": ok, "last": last}), flush=True)
     """
 )
+
+
+#: Ecos (NTNU's C++ co-simulation engine, ecospy): instances of FMUs in one execution, the
+#: master setting x_cmd before every step; its native library needs oneTBB's libtbb.so.12,
+#: which the tbb wheel installs under sys.prefix/lib (:func:`run_ecos`).
+ECOS = textwrap.dedent(
+    """
+    import json, sys
+    from ecospy import EcosSimulation, EcosSimulationStructure
+    spec = json.loads(sys.argv[1])
+    structure = EcosSimulationStructure()
+    for name, fmu in spec["slaves"].items():
+        structure.add_model(name, fmu)
+    structure.add_parameter_set("start", {f"{name}::{var}": value
+                                          for name, var, value in spec["initial"]})
+    out = {name: [] for name in spec["slaves"]}
+    with EcosSimulation(structure=structure, step_size=spec["step"]) as sim:
+        for name in spec["slaves"]:
+            sim.set_real(f"{name}::x_cmd", spec["x_cmd"][0])
+        sim.init(parameter_set="start")
+        for x_cmd in spec["x_cmd"][1:]:
+            for name in spec["slaves"]:
+                sim.set_real(f"{name}::x_cmd", x_cmd)
+            sim.step()
+            for name in spec["slaves"]:
+                out[name].append([sim.get_real(f"{name}::{v}") for v in spec["observe"]])
+        sim.terminate()
+    print(json.dumps(out), flush=True)
+    """
+)
+
+
+def run_ecos(cwd: Path, slaves: Mapping[str, Path], x_cmd: Sequence[float],
+             observe: Sequence[str], initial: Sequence[tuple[str, str, float]] = (),
+             step_size: float = 1e-3) -> dict[str, list[list[float]]]:
+    """Run instances (name → FMU path) in one Ecos simulation: x_cmd[0] before initialisation,
+    then x_cmd[k] set before step k. Returns {instance: [[observed values] after each step]}."""
+    spec = {"slaves": {k: str(v) for k, v in slaves.items()}, "x_cmd": list(x_cmd),
+            "observe": list(observe), "initial": [list(row) for row in initial],
+            "step": step_size}
+    env = {**os.environ, "LD_LIBRARY_PATH": os.pathsep.join(
+        filter(None, [str(Path(sys.prefix) / "lib"), os.environ.get("LD_LIBRARY_PATH")]))}
+    return _run_script(ECOS, spec, cwd, env)
 
 
 def run_steps(slave, refs: Mapping[str, int], commands_and_steps, read, t: float = 0.0
@@ -145,13 +189,15 @@ def load_module(path: Path, name: str) -> ModuleType:
     return module
 
 
-def _run_script(script: str, spec: dict, cwd: Path) -> dict:
+def _run_script(script: str, spec: dict, cwd: Path, env: Mapping[str, str] | None = None
+                ) -> dict:
     run = subprocess.run(
         [sys.executable, "-c", script, json.dumps(spec)],
         capture_output=True,
         text=True,
         timeout=120,
         cwd=cwd,
+        env=env,
     )
     assert run.returncode == 0, run.stderr
     return json.loads(run.stdout.strip().splitlines()[-1])

@@ -3,8 +3,9 @@
 Checked against the pythonfmu ToggleClamp (same variables; every output to 1e-9
 relative over a closing and opening stroke with mold contact), against
 :func:`toggle.plant.follow` (variable steps), for its state, reset and error
-handling, and in three masters: fmpy, libcosim (two instances) and a C host
-compiled here that loads the binary with dlopen and no Python environment.
+handling, and in four masters: fmpy, libcosim (two instances), Ecos (with the Python FMU
+twice in its process) and a C host compiled here that loads the binary with dlopen and no
+Python environment.
 """
 
 from __future__ import annotations
@@ -21,7 +22,14 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error
 from fmpy.model_description import read_build_description
-from fmu_support import close_slave, run_libcosim, run_steps, slip_along, validator_problems
+from fmu_support import (
+    close_slave,
+    run_ecos,
+    run_libcosim,
+    run_steps,
+    slip_along,
+    validator_problems,
+)
 
 from toggle.drive import motor_torque
 from toggle.fmu_build import build_fmu
@@ -345,6 +353,37 @@ def test_two_instances_run_in_libcosim(native: Path, tmp_path: Path):
         got = result["last"][name]
         assert [got[n] for n in OUTPUTS] == pytest.approx(list(want), rel=REL, abs=1e-12)
     assert result["last"]["long_r8"]["input_force"] != result["last"]["nominal"]["input_force"]
+
+
+def test_ecos_drives_both_builds_and_the_python_one_twice(native: Path, unzipped: Path,
+                                                         tmp_path: Path):
+    """Ecos, a C++ master we did not write, sets x_cmd before every step over a closing and
+    opening stroke with a mold: the native FMU gives what fmpy gets from it, bit for bit; the
+    Python FMU, loaded twice in the one process (with and without the link-8 error), gives
+    the native one's outputs to REL and the symmetric clamp's."""
+    python = build_fmu(tmp_path / "pythonfmu")
+    t = np.arange(0.0, 2.0 + 5e-4, 1e-3)
+    x = X_OPEN + (X_TOGGLE - X_OPEN) * np.sin(np.pi * t / t[-1]) ** 2
+    long_r8 = [(name, var, value) for name in ("native", "python")
+               for var, value in (("delta_r8", 0.5e-3), ("x_contact", X_CONTACT))]
+    got = run_ecos(tmp_path, {"native": native, "python": python, "symmetric": python}, x,
+                   OUTPUTS, [*long_r8, ("symmetric", "x_contact", X_CONTACT)])
+    slave, refs = start_slave(unzipped, "fmpy", {"x_cmd": x[0], "x_contact": X_CONTACT,
+                                                 "delta_r8": 0.5e-3})
+    want = _run(slave, refs, [(xk, 1e-3) for xk in x[1:]])
+    close_slave(slave)
+    assert got["native"] == want
+    for name, errors in (("python", 0.5e-3), ("symmetric", 0.0)):
+        slave, refs = start_slave(unzipped, name, {"x_cmd": x[0], "x_contact": X_CONTACT,
+                                                   "delta_r8": errors})
+        reference = np.array(_run(slave, refs, [(xk, 1e-3) for xk in x[1:]]))
+        close_slave(slave)
+        np.testing.assert_allclose(got[name], reference, rtol=REL, atol=1e-9, err_msg=name)
+    clamp = OUTPUTS.index("clamp_force")
+    assert max(row[clamp] for row in got["python"]) > 100.0  # N: the mold was clamped
+    force = OUTPUTS.index("input_force")
+    assert max(abs(row[force] - sym[force]) for row, sym in zip(got["python"], got["symmetric"])
+               ) > 10.0  # N: the link-8 error of one instance did not leak into the other
 
 
 def test_a_c_host_runs_the_binary_without_python(native: Path, unzipped: Path, tmp_path: Path):
