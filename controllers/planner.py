@@ -72,6 +72,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+from collections.abc import Callable
 from dataclasses import astuple, dataclass, field, fields, replace
 from typing import Any, NamedTuple
 
@@ -1122,17 +1123,21 @@ class ClampPlanner:
         self.problem.last = plan
         return plan
 
-    def trade_off(self, points: int = 6) -> list[Plan]:
+    def trade_off(self, points: int = 6, progress: Callable[[], object] | None = None
+                  ) -> list[Plan]:
         """The trade-off between stroke time and peak input force: the fastest stroke under
         ``points`` force limits from the unconstrained fastest stroke's peak down to just
         above :meth:`lower_bound` (geometrically spaced; without a bound, as for a mold at
         the toggle, down to a quarter of that peak), each continued from the last; limits
-        no stroke meets are left out."""
+        no stroke meets are left out. ``progress`` is called after each of the ``points``
+        limits (each is several seconds of IPOPT)."""
         if not (isinstance(points, int) and points >= 2):
             raise ParameterError(f"points must be an integer >= 2, got {points!r}")
+        tick = progress or (lambda: None)
         fastest = self._fastest(self.force_limit, None, False)
         if fastest is None:
             raise PlanningError(self._unreachable(self.force_limit, None))
+        tick()
         top = min(self.worst_peak(fastest), self.force_limit)
         plans, start = [fastest], fastest
         bound = self.lower_bound()
@@ -1142,6 +1147,8 @@ class ClampPlanner:
                 plan = self.minimum_time(float(limit), start=start)
             except PlanningError:
                 break
+            finally:
+                tick()
             plans.append(plan)
             start = plan
         return plans

@@ -555,15 +555,16 @@ def test_trade_off_with_the_mold_and_in_a_dry_cycle(tmp_path, capsys, monkeypatc
     toggle) needs far less force; ``toggle plot trade-off`` draws the same curves."""
     from controllers.planner import ClampPlanner
 
-    computed, real = {}, ClampPlanner.trade_off
+    computed, real, ticks = {}, ClampPlanner.trade_off, []
 
-    def keep(self: ClampPlanner, points: int = 6) -> list:
-        computed[self.config.x_contact] = real(self, points)
+    def keep(self: ClampPlanner, points: int = 6, progress=None) -> list:
+        computed[self.config.x_contact] = real(self, points, lambda: ticks.append(progress()))
         return computed[self.config.x_contact]
 
     monkeypatch.setattr(ClampPlanner, "trade_off", keep)
     assert main(["plan", "--trade-off", "2", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
+    assert len(ticks) == 4  # the progress bar moved once per force limit of both curves
     for name in ("trade_off", "trade_off_dry_cycle"):
         (fast, slow) = report[name]
         assert slow["duration"] > fast["duration"] and slow["peak_force"] < fast["peak_force"]
@@ -576,7 +577,7 @@ def test_trade_off_with_the_mold_and_in_a_dry_cycle(tmp_path, capsys, monkeypatc
     assert refused.value.code == 2
     # the figure from the same plans (each curve costs tens of seconds to plan again)
     monkeypatch.setattr(ClampPlanner, "trade_off",
-                        lambda self, points=6: computed[self.config.x_contact])
+                        lambda self, points=6, progress=None: computed[self.config.x_contact])
     out = tmp_path / "t.png"
     assert main(["plot", "trade-off", "--points", "2", "--out", str(out)]) == 0
     assert out.stat().st_size > 10_000

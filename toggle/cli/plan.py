@@ -122,12 +122,17 @@ def _trade_off_curves(args: argparse.Namespace, cfg: PlantConfig, limits: DriveL
                       ) -> dict[str, tuple[ClampPlanner, list[Plan]]]:
     """``--trade-off N``: the fastest stroke under N force limits, with the mold and in a
     dry cycle (the mold at the toggle: no clamp force), each with its planner."""
+    from tqdm import tqdm
+
     dry = cfg.with_(x_contact=clamp_stroke(cfg.mechanism)[1] - DRY_CONTACT)
     curves = {}
-    for name, plant in (("mold", cfg), ("dry_cycle", dry)):
-        planner = planner_for(plant, limits, args.contact_speed, args.intervals,
-                              protection=_protection(args))
-        curves[name] = planner, planner.trade_off(args.trade_off)
+    # a minute or more of IPOPT on two cores: a bar on stderr, as for the Monte Carlo
+    with tqdm(total=2 * args.trade_off, desc="trade-off", unit="limit",
+              disable=getattr(args, "json", False)) as bar:
+        for name, plant in (("mold", cfg), ("dry_cycle", dry)):
+            planner = planner_for(plant, limits, args.contact_speed, args.intervals,
+                                  protection=_protection(args))
+            curves[name] = planner, planner.trade_off(args.trade_off, bar.update)
     return curves
 
 
