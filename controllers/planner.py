@@ -82,6 +82,7 @@ from scipy.optimize import brentq
 
 from controllers.bounds import peak_lower_bound
 from controllers.compiled import Unit, code_digest, compiled
+from controllers.interrupts import signals_survive
 from controllers.limits import DriveLimits
 from controllers.profiles import (
     Profile,
@@ -984,8 +985,9 @@ class ClampPlanner:
         args["x0"] = np.clip(args["x0"], lbx, ubx)
         solver = problem.solver(warm, energy=weights[1] > 0)
         tic = time.perf_counter()
-        sol = solver(p=self._parameters(weights, torque_factor, caps), lbx=lbx, ubx=ubx,
-                     lbg=lbg, ubg=ubg, **args)
+        with signals_survive():  # IPOPT would turn a Ctrl-C into a failed solve
+            sol = solver(p=self._parameters(weights, torque_factor, caps), lbx=lbx, ubx=ubx,
+                         lbg=lbg, ubg=ubg, **args)
         elapsed = time.perf_counter() - tic
         stats = solver.stats()
         solution = {k: np.asarray(sol[k]).ravel() for k in ("x", "lam_x", "lam_g")}

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import signal
+import time
 from dataclasses import replace
 
 import casadi as ca
@@ -14,6 +17,7 @@ from hypothesis import strategies as st
 
 from controllers.compiled import code_digest, code_modules, compiled
 from controllers.compiled import compiled as _real_compiled
+from controllers.interrupts import signals_survive
 from controllers.limits import drive_limits
 from controllers.planner import (
     CREEP_FACTOR,
@@ -692,3 +696,61 @@ def test_cli_refuses_bad_protection_values_in_one_line(argv, message, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and message in err[-1] and "error:" in err[-1]
     assert not any("Traceback" in line for line in err)
+
+
+@pytest.fixture
+def terminal_sigint():
+    """Python's own Ctrl-C handler, as in a terminal (a shell's background job ignores
+    SIGINT, and Python then installs none)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+def _swallow_sigint() -> None:
+    """What CasADi does with a Ctrl-C during IPOPT: the handler's exception is caught and
+    the solve returns as failed."""
+    try:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.1)  # the handler runs here
+    except KeyboardInterrupt:
+        pass
+
+
+def test_a_signal_swallowed_in_a_block_reaches_the_handler_after_it(terminal_sigint):
+    with pytest.raises(KeyboardInterrupt), signals_survive():
+        _swallow_sigint()
+    noted = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, _frame: noted.append(signum))
+    try:
+        with signals_survive():
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.1)
+        assert noted == [signal.SIGTERM, signal.SIGTERM]  # once in the block, once after
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def test_ctrl_c_during_a_solve_stops_toggle_plan(monkeypatch, capsys, terminal_sigint):
+    """A Ctrl-C that IPOPT swallowed was a failed solve: toggle plan --trade-off went on
+    with its next force limit for 25 s and exited 0. Now it stops with 130."""
+    from controllers.planner import StrokeProblem
+
+    real = StrokeProblem.solver
+    solves = []
+
+    def interrupted(self, *args, **kwargs):
+        solver = real(self, *args, **kwargs)
+
+        def solve(**kw):
+            solves.append(1)
+            _swallow_sigint()
+            return solver(**kw)
+        solve.stats = solver.stats
+        return solve
+
+    monkeypatch.setattr(StrokeProblem, "solver", interrupted)
+    assert main(["plan", "--duration", str(DURATION)]) == 130
+    out = capsys.readouterr()
+    assert len(solves) == 1 and out.out == ""
+    assert out.err.strip().splitlines()[-1] == "toggle plan: interrupted"

@@ -42,7 +42,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``toggle`` script; returns the exit status.
 
     Exit codes: 0 done, 2 a usage error (a bad option, preset or value), 1 a runtime
-    failure (a file that cannot be read or written, a solver that fails).
+    failure (a file that cannot be read or written, a solver that fails), 130 Ctrl-C.
     """
     args = build_parser().parse_args(join_negative_numbers(
         sys.argv[1:] if argv is None else list(argv)))
@@ -51,6 +51,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.handler(args) or 0)
     except BrokenPipeError:
         return quiet_broken_pipe()
+    except KeyboardInterrupt:
+        print(f"toggle {command}: interrupted", file=sys.stderr)
+        return 130
     except (ParameterError, AssemblyError, ValueError) as exc:
         print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
