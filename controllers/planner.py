@@ -82,7 +82,6 @@ from scipy.optimize import brentq
 
 from controllers.bounds import peak_lower_bound
 from controllers.compiled import Unit, code_digest, compiled
-from controllers.interrupts import signals_survive
 from controllers.limits import DriveLimits
 from controllers.profiles import (
     Profile,
@@ -95,6 +94,7 @@ from controllers.profiles import (
 )
 from toggle.drive import drive_torque, reflected_mass, torque_speed_limit, travel_per_radian
 from toggle.elastics import ClampingError, clamp_stroke, contact_for_clamp_force
+from toggle.interrupts import signals_survive
 from toggle.params import (
     MAX_CURVE_POINTS,
     Drive,

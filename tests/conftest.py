@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import math
+import os
+import signal
+import time
+from collections.abc import Callable, Iterator
 
 import pytest
 from hypothesis import strategies as st
@@ -13,6 +17,24 @@ from toggle.params import HalfDims, Mechanism, load_preset
 @pytest.fixture(scope="session")
 def chang() -> Mechanism:
     return load_preset("chang2021")
+
+
+@pytest.fixture
+def swallowed_sigint() -> Iterator[Callable[[], None]]:
+    """A Ctrl-C as CasADi meets it during IPOPT: call the function this yields, and the
+    handler's KeyboardInterrupt is raised and caught (the solve returns as failed). Python's
+    own SIGINT handler is installed meanwhile, as in a terminal (a shell's background job
+    ignores SIGINT, and Python then installs none)."""
+    def swallow() -> None:
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.1)  # the handler runs here
+        except KeyboardInterrupt:
+            pass
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield swallow
+    signal.signal(signal.SIGINT, previous)
 
 
 @st.composite

@@ -17,7 +17,6 @@ from hypothesis import strategies as st
 
 from controllers.compiled import code_digest, code_modules, compiled
 from controllers.compiled import compiled as _real_compiled
-from controllers.interrupts import signals_survive
 from controllers.limits import drive_limits
 from controllers.planner import (
     CREEP_FACTOR,
@@ -42,6 +41,7 @@ from controllers.profiles import (
 from toggle.cli import main
 from toggle.elastics import ClampingError, clamp_stroke
 from toggle.fmu_build import build_fmu
+from toggle.interrupts import signals_survive
 from toggle.params import Dynamics, load_preset
 from toggle.plant import plant_outputs
 
@@ -698,28 +698,9 @@ def test_cli_refuses_bad_protection_values_in_one_line(argv, message, capsys):
     assert not any("Traceback" in line for line in err)
 
 
-@pytest.fixture
-def terminal_sigint():
-    """Python's own Ctrl-C handler, as in a terminal (a shell's background job ignores
-    SIGINT, and Python then installs none)."""
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    yield
-    signal.signal(signal.SIGINT, previous)
-
-
-def _swallow_sigint() -> None:
-    """What CasADi does with a Ctrl-C during IPOPT: the handler's exception is caught and
-    the solve returns as failed."""
-    try:
-        os.kill(os.getpid(), signal.SIGINT)
-        time.sleep(0.1)  # the handler runs here
-    except KeyboardInterrupt:
-        pass
-
-
-def test_a_signal_swallowed_in_a_block_reaches_the_handler_after_it(terminal_sigint):
+def test_a_signal_swallowed_in_a_block_reaches_the_handler_after_it(swallowed_sigint):
     with pytest.raises(KeyboardInterrupt), signals_survive():
-        _swallow_sigint()
+        swallowed_sigint()
     noted = []
     previous = signal.signal(signal.SIGTERM, lambda signum, _frame: noted.append(signum))
     try:
@@ -731,7 +712,7 @@ def test_a_signal_swallowed_in_a_block_reaches_the_handler_after_it(terminal_sig
         signal.signal(signal.SIGTERM, previous)
 
 
-def test_ctrl_c_during_a_solve_stops_toggle_plan(monkeypatch, capsys, terminal_sigint):
+def test_ctrl_c_during_a_solve_stops_toggle_plan(monkeypatch, capsys, swallowed_sigint):
     """A Ctrl-C that IPOPT swallowed was a failed solve: toggle plan --trade-off went on
     with its next force limit for 25 s and exited 0. Now it stops with 130."""
     from controllers.planner import StrokeProblem
@@ -744,7 +725,7 @@ def test_ctrl_c_during_a_solve_stops_toggle_plan(monkeypatch, capsys, terminal_s
 
         def solve(**kw):
             solves.append(1)
-            _swallow_sigint()
+            swallowed_sigint()
             return solver(**kw)
         solve.stats = solver.stats
         return solve

@@ -125,3 +125,25 @@ def test_cli_json(capsys):
 def test_cli_plot(tmp_path, capsys):
     assert main(["plot", "synthesize", "--preset", "chang2021", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "significance_chang2021.png").stat().st_size > 0
+
+
+def test_ctrl_c_during_the_allocation_is_not_a_failed_allocation(press_model, monkeypatch,
+                                                                   swallowed_sigint):
+    """IPOPT swallowed the Ctrl-C and the allocation failed with NonIpopt_Exception_Thrown
+    (toggle synthesize: exit 2, "tolerance allocation failed"); now it is a Ctrl-C."""
+    import casadi as ca
+
+    real = ca.nlpsol
+
+    def interrupted(*args, **kwargs):
+        solver = real(*args, **kwargs)
+
+        def solve(**kw):
+            swallowed_sigint()
+            return solver(**kw)
+        solve.stats = solver.stats
+        return solve
+
+    monkeypatch.setattr(ca, "nlpsol", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        synthesis.allocate(press_model, samples=SAMPLES)

@@ -29,6 +29,7 @@ import casadi as ca
 import numpy as np
 from scipy.special import erf
 
+from toggle.interrupts import signals_survive
 from toggle.kinematics import half_pose, sensitivities, toggle_position
 from toggle.params import DIMENSIONS, PAPER_NAMES, Mechanism, ParameterError
 
@@ -345,8 +346,9 @@ def allocate(model: ErrorModel, *, samples: int | None = None) -> Allocation:
     solver = ca.nlpsol("allocation", "ipopt", {"x": u, "f": objective, "g": g},
                        {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
                         "ipopt.tol": 1e-10})
-    sol = solver(x0=np.full(n, math.sqrt(lo * hi)), lbx=lo, ubx=hi,
-                 lbg=[p_pos, p_tilt], ubg=[1.0, 1.0])
+    with signals_survive():  # IPOPT would turn a Ctrl-C into a failed allocation
+        sol = solver(x0=np.full(n, math.sqrt(lo * hi)), lbx=lo, ubx=hi,
+                     lbg=[p_pos, p_tilt], ubg=[1.0, 1.0])
     if not solver.stats()["success"]:
         raise ValueError(f"tolerance allocation failed: {solver.stats()['return_status']}")
     t = np.clip(np.asarray(sol["x"]).ravel(), lo, hi) * unit

@@ -4,7 +4,8 @@ CasADi checks for signals during IPOPT's iterations: the Python handler runs and
 (KeyboardInterrupt, or hil's Interrupted), CasADi catches the exception, stops the solve
 and returns it as failed (return status NonIpopt_Exception_Thrown). A planner that then
 tries another start, or the next force limit, has forgotten the signal: ``toggle plan
---trade-off`` went on for 25 s and exited 0 after a Ctrl-C. :func:`signals_survive`
+--trade-off`` went on for 25 s and exited 0 after a Ctrl-C, and ``toggle synthesize``
+reported a failed allocation. Both solve inside :func:`signals_survive`, which
 remembers a signal that arrives during the solve and hands it to the program's own
 handler again once the solver has returned.
 """
