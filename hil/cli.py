@@ -76,9 +76,12 @@ def _trajectory(s: RunSettings, guard: SignalGuard, setup: RigSetup
                          for name, value in setup.dynamics.items())])
     print(f"hil run: planning the default profile for {s.preset}"
           f"{f' as the rig is built ({built})' if built else ''}", file=sys.stderr)
-    forward = experiment.planned_trajectory(s.preset, period, mu=s.mu, x_contact=s.x_contact,
-                                            errors=errors, masses=setup.dynamics)
-    guard.check()  # IPOPT swallows Ctrl-C: act on it before anything moves
+    try:
+        forward = experiment.planned_trajectory(s.preset, period, mu=s.mu,
+                                                x_contact=s.x_contact, errors=errors,
+                                                masses=setup.dynamics)
+    finally:  # IPOPT swallows Ctrl-C: act on it before anything moves, and before the
+        guard.check()  # failed solve it made is reported as a planning error
     return _guarded(profile_cycles(forward, s.cycles), s), (
         f"planned (minimum peak input force){f' for {built}' if built else ''}")
 

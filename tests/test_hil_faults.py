@@ -132,21 +132,33 @@ def test_ctrl_c_while_planning_moves_nothing(tmp_path) -> None:
 
 
 def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_path) -> None:
-    """IPOPT catches KeyboardInterrupt and returns its iterate: the guard remembers it."""
+    """IPOPT catches KeyboardInterrupt and returns as failed: the guard remembers it, also
+    when the failed solve failed the plan (which was reported as 'duration 3.1 s is too
+    short', exit 1)."""
+    from controllers.planner import PlanningError
     from hil import experiment
     from hil.cli import main
     from hil.interrupts import Interrupted
 
     real = experiment.planned_trajectory
 
-    def swallowing(*args, **kw):
+    def swallow() -> None:
         try:
             os.kill(os.getpid(), signal.SIGINT)
             time.sleep(0.1)
         except Interrupted:
             pass  # what CasADi does with the exception
+
+    def planned(*args, **kw):
+        swallow()
         return real(*args, **kw)
 
-    monkeypatch.setattr(experiment, "planned_trajectory", swallowing)
-    assert main(["run", "--out", str(tmp_path / "r"), "--quiet"]) == 130
-    assert not (tmp_path / "r").exists()
+    def failed(*_args, **_kw):
+        swallow()
+        raise PlanningError("duration 3.1 s is too short: the shortest feasible stroke takes "
+                            "1.547 s")
+
+    for name, plan in (("planned", planned), ("failed", failed)):
+        monkeypatch.setattr(experiment, "planned_trajectory", plan)
+        assert main(["run", "--out", str(tmp_path / name), "--quiet"]) == 130, name
+        assert not (tmp_path / name).exists()
