@@ -15,6 +15,7 @@ open position (where the encoder is zeroed).
 
 from __future__ import annotations
 
+import hashlib
 import math
 import shutil
 import tempfile
@@ -34,7 +35,7 @@ from hil.experiment import stroke_positions
 from hil.homing import APPROACH_SPEED, START_TOLERANCE
 from hil.samples import Sample, Status, Trajectory, TrajectoryError
 from toggle.kinematics import output_position, stroke_limits
-from toggle.params import dynamics_parameters, load_preset
+from toggle.params import dynamics_parameters, load_preset, preset_file
 from toggle.rig_tables import rig_dynamics, rig_errors
 
 if TYPE_CHECKING:
@@ -208,11 +209,17 @@ class Plant(ABC):
 
 def default_fmu_path(preset: str = "chang2021") -> Path:
     """build/ToggleClamp.fmu of the project checkout (or the current folder) for chang2021;
-    build/<preset>/ToggleClamp.fmu for another preset (one FMU per preset)."""
+    build/<preset>/ToggleClamp.fmu for another shipped preset; for a preset file,
+    build/presets/<its stem>-<hash of its bytes>/ToggleClamp.fmu: one FMU per preset, and a
+    new one when the file is edited (its FMU bundles the file as it was)."""
     from toggle.fmu_build import PACKAGE_DIR
 
     root = PACKAGE_DIR.parent
     base = (root if (root / "pyproject.toml").is_file() else Path.cwd()) / "build"
+    path = preset_file(preset)
+    if path is not None:
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+        return base / "presets" / f"{path.stem}-{digest}" / "ToggleClamp.fmu"
     return (base if preset == "chang2021" else base / preset) / "ToggleClamp.fmu"
 
 
@@ -256,7 +263,7 @@ class FmuPlant(Plant):
         if not path.is_file():
             raise RunStoppedError(f"no FMU at {path}")
         self._dir = extract(str(path), tempfile.mkdtemp(prefix="toggle_hil_"))
-        start = {"preset": s.preset, "x_cmd": x_open,
+        start = {"preset": load_preset(s.preset).name, "x_cmd": x_open,
                  **{f"delta_{name}": delta for name, delta in s.errors.items()},
                  **dynamics_parameters(s.dynamics)}
         if s.mu is not None:

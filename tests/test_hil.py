@@ -141,3 +141,27 @@ def test_emulator_mold_is_checked_or_planned(capsys):
     settings = resolve_settings(build_parser().parse_args(["run", "--delta-r8", "0.5e-3"]))
     assert settings.x_contact == default_mold("chang2021", 0.5e-3)
     assert default_mold("chang2021", 0.5e-3) != default_mold("chang2021", 0.0)
+
+
+def test_a_preset_file_runs_on_the_simulated_rig_and_an_edit_builds_a_new_fmu(tmp_path):
+    """hil run --preset FILE: its FMU was built under build/<FILE>/ (an absolute path made
+    that the file itself: 'File exists'), refused as 'a family/group' for the '/' in the
+    path, and checked against the path instead of the preset's name; and an edited file
+    would have reused the FMU of the old text. A copy of chang2021 under another name runs
+    as chang2021 without its as-built error; a longer link 5 runs as itself."""
+    text = (Path(__file__).parents[1] / "toggle" / "presets" / "chang2021.toml").read_text()
+    mine = tmp_path / "my clamp.toml"
+    mine.write_text(text.replace('name = "chang2021"', 'name = "my_clamp"'))
+
+    def run(*preset: str) -> dict:
+        out = tmp_path / f"run{len(list(tmp_path.glob('run*')))}"
+        assert main(["run", *preset, "--speed", "25e-3", "--cycles", "1", "--no-as-built",
+                     "--out", str(out), "--quiet"]) == 0
+        return summary(out)
+
+    shipped, copied = run(), run("--preset", str(mine))
+    keys = ("stroke", "force_forward_max", "force_forward_rms", "force_toggle")
+    assert [copied[k]["mean"] for k in keys] == [shipped[k]["mean"] for k in keys]
+    mine.write_text(mine.read_text().replace("r5 = 110.000e-3", "r5 = 111.000e-3"))
+    edited = run("--preset", str(mine))
+    assert edited["stroke"]["mean"] != pytest.approx(copied["stroke"]["mean"], abs=1e-5)

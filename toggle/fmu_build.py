@@ -239,15 +239,16 @@ def python_paths() -> list[str]:
 
 def preset_table_text(preset: str) -> str:
     """The TOML text of a preset that the FMU can run (it needs [dynamics] and [drive])."""
-    from toggle.params import load_preset, preset_table
+    from toggle.params import load_preset, preset_file, preset_table, split_group
     from toggle.plant import PlantConfig
 
     PlantConfig(load_preset(preset))  # names what the preset lacks
-    table, _ = preset_table(preset)
-    if "groups" in table or "/" in preset:
+    name, group = split_group(preset)  # a file's path may hold "/"; a family's group does
+    table, _ = preset_table(name)
+    if "groups" in table or group is not None:
         raise ValueError(f"preset {preset!r}: build the FMU from a single mechanism")
-    path = PACKAGE_DIR / "presets" / f"{preset}.toml"
-    return (path if path.is_file() else Path(preset)).read_text(encoding="utf-8")
+    path = preset_file(name) or PACKAGE_DIR / "presets" / f"{name}.toml"
+    return path.read_text(encoding="utf-8")
 
 
 def build_fmu(

@@ -563,12 +563,18 @@ def split_group(name: str) -> tuple[str, str | None]:
     return base, None if group is None else str(group)
 
 
+def preset_file(name: str) -> Path | None:
+    """The file of a preset given as a path (a name ending in .toml, or an existing file);
+    None for a shipped preset's name."""
+    return Path(name) if name.endswith(".toml") or Path(name).is_file() else None
+
+
 def preset_table(name: str) -> tuple[dict[str, Any], str]:
     """Parsed TOML of a shipped preset or of a file, and the origin used in messages."""
     if Path(name).is_dir():
         raise ParameterError(f"{name} is a directory, not a preset TOML file")
-    if name.endswith(".toml") or Path(name).is_file():
-        return _read_toml(Path(name)), name
+    if (path := preset_file(name)) is not None:
+        return _read_toml(path), name
     resource = resources.files(__package__) / "presets" / f"{name}.toml"
     if not resource.is_file():
         raise UnknownPresetError(f"unknown preset {name!r}; shipped: {', '.join(preset_names())}")
