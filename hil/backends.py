@@ -59,7 +59,7 @@ class RigSetup:
     delta_r8: length error of link 8 (upper half), m (simulated back-end and
     emulator only: on the real rig it is set with the adjustable link; they add it to
     the rig's as-built errors, :attr:`errors`, unless as_built is False);
-    force_limit: host-side stop on |input force|, N (below the +-500 N cell).
+    force_limit: host-side stop on |input force|, N (on the real rig within its +-500 N cell).
     """
 
     preset: str = "chang2021"

@@ -29,7 +29,7 @@ RUN_DEFAULTS: dict[str, Any] = {
     "speed": None, "delta_r8": 0.0, "mu": None, "x_contact": None, "force_limit": 400.0,
     "out": None, "watchdog_ms": None, "max_duration": 3600.0, "fmu": None, "as_built": True,
 }
-#: The load cell's range, N: a force limit above it could never trip.
+#: The real rig's load cell's range, N: a force limit above it could never trip there.
 LOAD_CELL_RANGE = 500.0
 #: Bytes of one samples.csv row (for the file-size estimate).
 BYTES_PER_SAMPLE = 52
@@ -90,7 +90,9 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
                         "(default: the planned minimum-force profile)")
     p.add_argument("--force-limit", type=float, default=None, dest="force_limit",
                    help=f"stop when |input force| exceeds this, N (default "
-                        f"{RUN_DEFAULTS['force_limit']:g}; at most {LOAD_CELL_RANGE:g})")
+                        f"{RUN_DEFAULTS['force_limit']:g}, for the rig's load cell; with --real "
+                        f"at most its {LOAD_CELL_RANGE:g}; the simulated rig of a larger "
+                        f"clamp, such as lin2003_sm55, needs more)")
     p.add_argument("--watchdog-ms", type=float, default=None, dest="watchdog_ms",
                    help="host watchdog on telemetry silence, ms (default 100; the MCU's own "
                         "limits and heartbeat watchdog are the hard stops)")
@@ -145,8 +147,9 @@ def check(v: dict[str, Any]) -> None:
         raise bad("cycles", "must be at least 1")
     for key, lo, hi, why in (
         ("speed", 0.0, MAX_SPEED, f"must be > 0 and at most {MAX_SPEED:g} m/s"),
-        ("force_limit", 0.0, LOAD_CELL_RANGE,
-         f"must be > 0 and at most the load cell's {LOAD_CELL_RANGE:g} N"),
+        ("force_limit", 0.0, LOAD_CELL_RANGE if v["backend"] == "real" else math.inf,
+         f"must be > 0 and at most the rig's load cell's {LOAD_CELL_RANGE:g} N"
+         if v["backend"] == "real" else "must be > 0 (N)"),
         ("watchdog_ms", 0.0, 10_000.0, "must be > 0 and at most 10000 ms"),
         ("max_duration", 0.0, math.inf, "must be > 0 s"),
     ):

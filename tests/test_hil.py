@@ -165,3 +165,16 @@ def test_a_preset_file_runs_on_the_simulated_rig_and_an_edit_builds_a_new_fmu(tm
     mine.write_text(mine.read_text().replace("r5 = 110.000e-3", "r5 = 111.000e-3"))
     edited = run("--preset", str(mine))
     assert edited["stroke"]["mean"] != pytest.approx(copied["stroke"]["mean"], abs=1e-5)
+
+
+def test_a_large_clamp_runs_on_the_simulated_rig_above_the_load_cells_range(tmp_path, capsys):
+    """lin2003_sm55's stroke needs 2.1 kN: its simulated rig stopped after 4 ms at the default
+    400 N, and a higher --force-limit was refused for the desktop rig's 500 N load cell,
+    which only the real rig has."""
+    out = tmp_path / "sm55"
+    assert main(["run", "--preset", "lin2003_sm55", "--speed", "25e-3", "--cycles", "1",
+                 "--force-limit", "1e4", "--out", str(out), "--quiet"]) == 0
+    assert 2000.0 < summary(out)["force_forward_max"]["mean"] < 1e4
+    capsys.readouterr()
+    assert main(["run", "--real", "--port", "loop://", "--force-limit", "600"]) == 2
+    assert "load cell's 500 N" in capsys.readouterr().err

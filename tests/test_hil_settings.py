@@ -41,7 +41,7 @@ def test_command_line_wins_over_config(tmp_path) -> None:
     ("force_limit = true\n", "wrong type"),
     ("as_built = 1\n", "as_built = 1 has the wrong type"),
     ('backend = "moon"\n', "backend"),
-    ("force_limit = 900.0\n", "load cell"),
+    ('backend = "real"\nport = "loop://"\nforce_limit = 900.0\n', "load cell"),
     ("force_limit = nan\n", "--force-limit"),
 ])
 def test_bad_config_is_refused_by_name(tmp_path, capsys, text: str, message: str) -> None:
