@@ -34,7 +34,8 @@ from controllers.limits import DriveLimits, drive_limits
 from hil.experiment import stroke_positions
 from hil.homing import APPROACH_SPEED, START_TOLERANCE
 from hil.samples import Sample, Status, Trajectory, TrajectoryError
-from toggle.kinematics import output_position, stroke_limits
+from toggle.elastics import clamp_stroke
+from toggle.kinematics import output_position
 from toggle.params import dynamics_parameters, load_preset, preset_file
 from toggle.rig_tables import rig_dynamics, rig_errors
 
@@ -44,8 +45,16 @@ if TYPE_CHECKING:
 
 #: Margin of the soft travel limits beyond the stroke, m.
 TRAVEL_MARGIN = 1e-3
-#: Fastest input speed a trajectory may command, m/s (the rig's max_step_delta per period).
+#: Fastest input speed a trajectory may command on the rig, m/s (its max_step_delta per
+#: period).
 MAX_SPEED = 50e-3
+
+
+def simulated_speed_limit(preset: str) -> float:
+    """Fastest input speed (m/s) on the simulated rig of ``preset``: the rig's
+    :data:`MAX_SPEED`, or the preset's drive limit where that is faster (a larger clamp,
+    such as lin2003_sm55, whose planned stroke runs at 400 mm/s)."""
+    return max(MAX_SPEED, drive_limits(load_preset(preset)).velocity)
 
 
 class RunStoppedError(RuntimeError):
@@ -93,8 +102,9 @@ class RigSetup:
 
     @property
     def stroke(self) -> tuple[float, float]:
-        """(x_open, x_toggle) of the nominal mechanism, m."""
-        return stroke_limits(load_preset(self.preset).lower)
+        """(x_open, x_toggle) of the nominal mechanism, m: the open position the preset gives
+        (the machine's, as the planner's) or the kinematic one."""
+        return clamp_stroke(load_preset(self.preset))
 
     @property
     def limits(self) -> DriveLimits:
@@ -129,8 +139,12 @@ class Plant(ABC):
         self._activate()
         self.active = True
 
+    def speed_limit(self) -> float:
+        """Fastest input speed this plant takes, m/s: the rig's :data:`MAX_SPEED`."""
+        return MAX_SPEED
+
     def check(self, trajectory: Trajectory) -> None:
-        """Refuse a trajectory outside the travel limits or faster than MAX_SPEED."""
+        """Refuse a trajectory outside the travel limits or faster than :meth:`speed_limit`."""
         lo, hi = self.setup.travel_limits
         if trajectory.x_cmd.min() < lo or trajectory.x_cmd.max() > hi:
             raise TrajectoryError(
@@ -138,12 +152,13 @@ class Plant(ABC):
                 f"(it spans [{trajectory.x_cmd.min():.6g}, {trajectory.x_cmd.max():.6g}] m)"
             )
         speed = np.abs(np.diff(trajectory.x_cmd)) / trajectory.period
-        if speed.size and speed.max() > MAX_SPEED:
+        limit = self.speed_limit()
+        if speed.size and speed.max() > limit:
             i = int(np.argmax(speed))
             raise TrajectoryError(
                 f"trajectory commands {speed[i] * 1e3:.4g} mm/s at t = {trajectory.time[i]:.3f} s "
                 f"(x {trajectory.x_cmd[i]:.6g} -> {trajectory.x_cmd[i + 1]:.6g} m in one "
-                f"period); the rig's limit is {MAX_SPEED * 1e3:g} mm/s"
+                f"period); the {self.name} plant's limit is {limit * 1e3:g} mm/s"
             )
 
     def run(self, trajectory: Trajectory,
@@ -244,6 +259,10 @@ class FmuPlant(Plant):
     """The simulated rig: ToggleClamp.fmu stepped through fmpy at the trajectory's period."""
 
     name = "fmu"
+
+    def speed_limit(self) -> float:
+        """The rig's :data:`MAX_SPEED`, or the simulated clamp's drive limit if faster."""
+        return simulated_speed_limit(self.setup.preset)
 
     def __init__(self, fmu_path: Path | None = None) -> None:
         super().__init__()

@@ -36,8 +36,8 @@ from toggle.cli.args import (
     quiet_broken_pipe,
     use_help_formatter,
 )
+from toggle.elastics import clamp_stroke
 from toggle.json_text import json_text
-from toggle.kinematics import stroke_limits
 from toggle.params import DYNAMICS_PARAMETERS, ParameterError, load_preset
 from toggle.rig_calibration import load_paper_tables
 
@@ -66,7 +66,7 @@ def _trajectory(s: RunSettings, guard: SignalGuard, setup: RigSetup
         return _guarded(profile_cycles(forward, s.cycles), s), f"profile {s.profile}"
     if s.speed is not None:
         nominal = load_preset(s.preset)
-        x_open, x_tp = stroke_limits(nominal.lower)
+        x_open, x_tp = clamp_stroke(nominal)
         _guard_duration(2 * s.cycles * (x_tp - x_open) / s.speed, s)  # before building it
         return reciprocating_trajectory(nominal, s.speed, s.cycles, period), (
             f"reciprocating at {s.speed * 1e3:g} mm/s")

@@ -21,7 +21,7 @@ import numpy as np
 from controllers.limits import DriveLimits, drive_limits
 from controllers.profiles import ProfileError, stroke_at_speed
 from hil.samples import Trajectory, TrajectoryError
-from toggle.kinematics import stroke_limits
+from toggle.elastics import clamp_stroke
 from toggle.params import Mechanism
 from toggle.rig_tables import rig_errors
 
@@ -69,10 +69,11 @@ def reciprocating_trajectory(
     """Seed 000's experiment: x_open -> x_TP -> x_open, ``cycles`` times, at ``speed`` m/s,
     under ``limits`` (default: the preset's drive, :func:`controllers.limits.drive_limits`).
 
-    The end positions come from ``mech``'s lower half, so pass the nominal mechanism
-    (the paper drives every Delta r8 between the nominal -3.439 and 51.566 mm).
+    The end positions come from ``mech``'s lower half (and the preset's open position,
+    :func:`toggle.elastics.clamp_stroke`), so pass the nominal mechanism (the paper drives
+    every Delta r8 between the nominal -3.439 and 51.566 mm).
     """
-    x_open, x_tp = stroke_limits(mech.lower)
+    x_open, x_tp = clamp_stroke(mech)
     forward = stroke_positions(x_open, x_tp, speed, period,
                                drive_limits(mech) if limits is None else limits, jerk)
     return _repeat_cycles(forward, forward[::-1], cycles, period)

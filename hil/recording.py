@@ -44,8 +44,9 @@ import numpy as np
 
 from hil.experiment import DEFAULT_END_TOL, Cycle, segment_cycles
 from hil.samples import Sample
+from toggle.elastics import clamp_stroke
 from toggle.json_text import json_text
-from toggle.kinematics import stroke, stroke_limits
+from toggle.kinematics import output_position
 from toggle.params import Mechanism
 from toggle.rig_tables import F_TP_LATENCY, TOGGLE_BAND
 
@@ -98,10 +99,13 @@ class RunMeta:
 
     @classmethod
     def for_experiment(cls, nominal: Mechanism, **kw: Any) -> RunMeta:
-        """Meta with x_open, x_toggle and the theoretical stroke of the nominal mechanism."""
-        x_open, x_toggle = stroke_limits(nominal.lower)
+        """Meta with x_open (the machine's open position where the preset gives one,
+        :func:`toggle.elastics.clamp_stroke`), x_toggle and the theoretical stroke between
+        them of the nominal mechanism."""
+        x_open, x_toggle = clamp_stroke(nominal)
         kw.setdefault("preset", nominal.name)
-        return cls(x_open=x_open, x_toggle=x_toggle, stroke_theory=stroke(nominal.lower), **kw)
+        travel = output_position(x_toggle, nominal.lower) - output_position(x_open, nominal.lower)
+        return cls(x_open=x_open, x_toggle=x_toggle, stroke_theory=float(travel), **kw)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> RunMeta:

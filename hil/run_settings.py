@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from controllers.profiles import read_profile_settings
-from hil.backends import MAX_SPEED
+from hil.backends import MAX_SPEED, simulated_speed_limit
 from hil.experiment import default_mold
 from toggle.cli.args import check_writable_dir
-from toggle.kinematics import stroke_limits
+from toggle.elastics import clamp_stroke
 from toggle.params import ParameterError, load_preset, tomllib
 
 #: Built-in defaults of every setting a --config file may hold.
@@ -145,8 +145,9 @@ def check(v: dict[str, Any]) -> None:
         raise ParameterError("--fmu selects the simulated rig's FMU; it cannot go with --real")
     if v["cycles"] < 1:
         raise bad("cycles", "must be at least 1")
+    top_speed = MAX_SPEED if v["backend"] == "real" else simulated_speed_limit(v["preset"])
     for key, lo, hi, why in (
-        ("speed", 0.0, MAX_SPEED, f"must be > 0 and at most {MAX_SPEED:g} m/s"),
+        ("speed", 0.0, top_speed, f"must be > 0 and at most {top_speed:g} m/s"),
         ("force_limit", 0.0, LOAD_CELL_RANGE if v["backend"] == "real" else math.inf,
          f"must be > 0 and at most the rig's load cell's {LOAD_CELL_RANGE:g} N"
          if v["backend"] == "real" else "must be > 0 (N)"),
@@ -167,7 +168,7 @@ def check(v: dict[str, Any]) -> None:
 def check_mold(preset: str, x_contact: float) -> None:
     """Refuse a mold position (m) outside the preset's stroke, where no mold is clamped
     (``hil run`` and ``hil emulate``)."""
-    x_open, x_tp = stroke_limits(load_preset(preset).lower)
+    x_open, x_tp = clamp_stroke(load_preset(preset))
     if not (math.isfinite(x_contact) and x_open < x_contact < x_tp):
         raise ParameterError(f"--x-contact (x_contact) must lie inside the stroke "
                              f"({x_open:.6g}, {x_tp:.6g}) m, got {x_contact!r}")

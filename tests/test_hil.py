@@ -167,14 +167,23 @@ def test_a_preset_file_runs_on_the_simulated_rig_and_an_edit_builds_a_new_fmu(tm
     assert edited["stroke"]["mean"] != pytest.approx(copied["stroke"]["mean"], abs=1e-5)
 
 
-def test_a_large_clamp_runs_on_the_simulated_rig_above_the_load_cells_range(tmp_path, capsys):
-    """lin2003_sm55's stroke needs 2.1 kN: its simulated rig stopped after 4 ms at the default
-    400 N, and a higher --force-limit was refused for the desktop rig's 500 N load cell,
-    which only the real rig has."""
+def test_a_large_clamp_runs_on_the_simulated_rig_above_the_rigs_limits(tmp_path, capsys):
+    """lin2003_sm55 on the simulated rig: its stroke needs 2.1 kN at 25 mm/s, and it stopped
+    after 4 ms at the default 400 N (a higher --force-limit was refused for the desktop
+    rig's 500 N load cell, which only the real rig has); its planned stroke runs at 400 mm/s
+    (refused for the desktop rig's 50 mm/s) from the machine's open position -70 mm (the
+    run looked for the kinematic -70.25 mm and found 0 of 3 cycles)."""
     out = tmp_path / "sm55"
     assert main(["run", "--preset", "lin2003_sm55", "--speed", "25e-3", "--cycles", "1",
                  "--force-limit", "1e4", "--out", str(out), "--quiet"]) == 0
     assert 2000.0 < summary(out)["force_forward_max"]["mean"] < 1e4
+    out = tmp_path / "sm55_job"
+    assert main(["run", "--preset", "lin2003_sm55", "--cycles", "1", "--force-limit", "1e5",
+                 "--out", str(out), "--quiet"]) == 0
+    job = summary(out)
+    assert job["cycles_complete"] == 1 and job["force_forward_max"]["mean"] > 1e4
+    samples = read_samples(out / "samples.csv")
+    assert np.abs(np.diff(samples.x_cmd)).max() / 1e-3 > 0.3  # m/s: beyond the rig's 0.05
     capsys.readouterr()
     assert main(["run", "--real", "--port", "loop://", "--force-limit", "600"]) == 2
     assert "load cell's 500 N" in capsys.readouterr().err
