@@ -17,7 +17,13 @@ from typing import Any
 
 from hil import cli_rig, cli_rsm, experiment
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
-from hil.experiment import CycleCounter, default_mold, profile_cycles, reciprocating_trajectory
+from hil.experiment import (
+    DEFAULT_END_TOL,
+    CycleCounter,
+    default_mold,
+    profile_cycles,
+    reciprocating_trajectory,
+)
 from hil.interrupts import Interrupted, SignalGuard
 from hil.recording import RecordingError, RunMeta, RunRecorder
 from hil.run_settings import (
@@ -254,6 +260,12 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
                          "paper": paper_statistics(s)}))
     else:
         _print_summary(summary, rec.dir, rec.count, s.cycles, plant.name, paper_statistics(s))
+    if reason is None and summary["cycles_complete"] < s.cycles:
+        print(f"hil run: {summary['cycles_complete']} of {s.cycles} cycles went from the open "
+              f"position {meta.x_open * 1e3:.4g} mm to the toggle {meta.x_toggle * 1e3:.4g} mm "
+              f"and back (within {DEFAULT_END_TOL * 1e6:g} um); the trajectory spans "
+              f"{trajectory.x_cmd.min() * 1e3:.4g} to {trajectory.x_cmd.max() * 1e3:.4g} mm, "
+              f"and the statistics cover only whole cycles", file=sys.stderr)
     if interrupted is None and guard.received is not None:  # while summarising: after the run
         interrupted = Interrupted(guard.received)
         print(f"hil run: {interrupted} after the run completed; its record is whole",

@@ -187,3 +187,18 @@ def test_a_large_clamp_runs_on_the_simulated_rig_above_the_rigs_limits(tmp_path,
     capsys.readouterr()
     assert main(["run", "--real", "--port", "loop://", "--force-limit", "600"]) == 2
     assert "load cell's 500 N" in capsys.readouterr().err
+
+
+def test_a_run_that_misses_the_stroke_ends_says_so(tmp_path, capsys):
+    """A profile that never reaches the open or the toggle position gave '0 of 3 cycles
+    complete' and no statistics, with nothing to say why."""
+    t = np.arange(0.0, 2.0 + 5e-4, 1e-3)
+    x = 0.02 * (1 - np.cos(np.pi * t / t[-1])) / 2
+    profile = tmp_path / "partial.csv"
+    profile.write_text("time [s],position [m]\n"
+                       + "".join(f"{a:.6f},{b:.9f}\n" for a, b in zip(t, x)))
+    assert main(["run", "--profile", str(profile), "--out", str(tmp_path / "r"),
+                 "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "0 of 3 cycles went from the open position -3.439 mm" in err
+    assert "spans 0 to 20 mm" in err
