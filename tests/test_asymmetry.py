@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import casadi as ca
 import numpy as np
@@ -218,3 +219,18 @@ def test_calibrate_cli(capsys):
     assert all(math.isfinite(v) and v >= 0 for v in out["fitted"].values())
     assert len(out["rows"]) == 12 and out["calibration_speeds"] == [5e-3, 15e-3]
     assert main(["calibrate", "--speeds", "7e-3"]) == 2  # no such row: a clear error
+
+
+@pytest.mark.parametrize("text, missing", [
+    ('name = "a preset, not a table"\n', "[tables.force_toggle]"),
+    ("speed = [5.0]\ndelta_r8 = [0.0]\n[tables.other]\nmean = [[1.0]]\n",
+     "[tables.force_toggle]"),
+    ("delta_r8 = [0.0]\n[tables.force_toggle]\nmean = [[1.0]]\nthree_sigma = [[1.0]]\n",
+     "'speed'"),
+])
+def test_a_file_that_is_not_a_force_table_is_named_with_what_it_lacks(tmp_path, text, missing):
+    """A preset given to toggle calibrate --table was refused with "...: 'tables'"."""
+    path = tmp_path / "t.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=f"it has no {re.escape(missing)}"):
+        load_force_table(path)

@@ -64,7 +64,11 @@ def load_force_table(path: str | Path = PAPER_TABLES, key: str = "force_toggle")
         return ForceTable(np.asarray(data["speed"], float) * 1e-3,
                           np.asarray(data["delta_r8"], float) * 1e-3,
                           np.asarray(table["mean"], float), np.asarray(table["three_sigma"], float))
-    except (OSError, KeyError, TypeError, ValueError, UnicodeDecodeError,
+    except KeyError as exc:  # str(KeyError) is the bare key: say what is missing
+        missing = f"[tables.{key}]" if exc.args[0] in (key, "tables") else repr(exc.args[0])
+        raise ValueError(f"cannot read force table {key!r} from {path}: it has no {missing} "
+                         f"(see toggle/data/chang2021_tables.toml)") from exc
+    except (OSError, TypeError, ValueError, UnicodeDecodeError,
             tomllib.TOMLDecodeError) as exc:
         raise ValueError(f"cannot read force table {key!r} from {path}: {exc}") from exc
 
