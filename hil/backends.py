@@ -175,8 +175,9 @@ class Plant(ABC):
                 yield Sample(sample.t, sample.x_cmd, sample.platen, sample.force, Status.FAULT,
                              sample.index)
                 raise RunStoppedError(
-                    f"host force limit: |{sample.force:.1f}| N > {self.setup.force_limit:g} N "
-                    f"at x = {sample.x_cmd:.6g} m, t = {sample.t:.3f} s"
+                    f"host force limit (--force-limit): |{sample.force:.1f}| N > "
+                    f"{self.setup.force_limit:g} N at x = {sample.x_cmd:.6g} m, "
+                    f"t = {sample.t:.3f} s"
                 )
             yield sample
 
@@ -340,8 +341,8 @@ class FmuPlant(Plant):
             check()
             force = self._step(float(xi), h)[1]
             if abs(force) > self.setup.force_limit:
-                raise RunStoppedError(f"host force limit: |{force:.1f}| N during the move to "
-                                      f"the start x = {x:.6g} m")
+                raise RunStoppedError(f"host force limit (--force-limit): |{force:.1f}| N "
+                                      f"during the move to the start x = {x:.6g} m")
         return abs(x - start)
 
     def _deactivate(self) -> None:

@@ -104,7 +104,7 @@ def test_force_limit_stops_the_simulated_rig(tmp_path):
     plant = FmuPlant()
     plant.configure(setup)
     seen = []
-    with pytest.raises(RunStoppedError, match="force limit"), plant:
+    with pytest.raises(RunStoppedError, match=r"force limit \(--force-limit\)"), plant:
         for s in plant.run(traj):
             seen.append(s)
     assert seen and seen[-1].status.value == "fault"
