@@ -101,6 +101,15 @@ class RigSetup:
         return rig_dynamics(self.preset, None if self.as_built else {})
 
     @property
+    def planned_mold(self) -> float | None:
+        """Crosshead position (m) of the mold that ``hil run``'s default job plans for and
+        the simulated rig clamps: the plan's contact position (the preset's final tie-bar
+        force held by this rig, :attr:`errors`); None when the preset has no mold."""
+        from controllers.planner import plan_config
+
+        return plan_config(self.preset, mu=self.mu, errors=self.errors).x_contact
+
+    @property
     def stroke(self) -> tuple[float, float]:
         """(x_open, x_toggle) of the nominal mechanism, m: the open position the preset gives
         (the machine's, as the planner's) or the kinematic one."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,6 @@ from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
 from hil.experiment import (
     DEFAULT_END_TOL,
     CycleCounter,
-    default_mold,
     profile_cycles,
     reciprocating_trajectory,
 )
@@ -284,13 +284,12 @@ def emulate(args: argparse.Namespace) -> int:
     from hil.rig_emulator import FaultPlan, RigEmulator
     from hil.rig_physics import ClampPhysics
 
-    x_contact = args.x_contact
-    if x_contact == "planned":
-        x_contact = default_mold(args.preset, args.delta_r8, args.mu)
-    elif x_contact is not None:
-        check_mold(args.preset, x_contact)
-    setup = RigSetup(preset=args.preset, delta_r8=args.delta_r8, mu=args.mu,
-                     x_contact=x_contact)
+    setup = RigSetup(preset=args.preset, delta_r8=args.delta_r8, mu=args.mu)
+    if args.x_contact == "planned":
+        setup = replace(setup, x_contact=setup.planned_mold)
+    elif args.x_contact is not None:
+        check_mold(args.preset, args.x_contact)
+        setup = replace(setup, x_contact=args.x_contact)
     faults = FaultPlan(drop_byte=args.drop_byte, flip_bit=args.flip_bit, junk=args.junk,
                        stall_at=args.stall_at, reset_at=args.reset_at, estop_at=args.estop_at,
                        disconnect_at=args.disconnect_at, seed=args.seed,

@@ -23,7 +23,6 @@ from controllers.profiles import ProfileError, stroke_at_speed
 from hil.samples import Trajectory, TrajectoryError
 from toggle.elastics import clamp_stroke
 from toggle.params import Mechanism
-from toggle.rig_tables import rig_errors
 
 DEFAULT_PERIOD = 1e-3  # s
 #: Band around x_open / x_TP (m) within which the commanded position counts as "at the end".
@@ -82,18 +81,6 @@ def reciprocating_trajectory(
 def profile_cycles(forward: Trajectory, cycles: int) -> Trajectory:
     """A planned forward stroke, replayed ``cycles`` times with its time-mirror as the return."""
     return _repeat_cycles(forward.x_cmd, forward.x_cmd[::-1], cycles, forward.period)
-
-
-def default_mold(preset: str, delta_r8: float = 0.0, mu: float | None = None,
-                 as_built: bool = True) -> float | None:
-    """Crosshead position (m) of the mold that ``hil run``'s default job plans for and the
-    simulated rig clamps: the plan's contact position (the preset's final tie-bar force held
-    by the rig as built, :func:`toggle.rig_tables.rig_errors`, with this link-8 error); None
-    when the preset has no mold."""
-    from controllers.planner import plan_config
-
-    errors = rig_errors(preset, delta_r8, None if as_built else {})
-    return plan_config(preset, mu=mu, errors=errors).x_contact
 
 
 def planned_trajectory(preset: str, period: float = DEFAULT_PERIOD, *,

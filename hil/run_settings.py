@@ -17,8 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from controllers.profiles import read_profile_settings
-from hil.backends import MAX_SPEED, simulated_speed_limit
-from hil.experiment import default_mold
+from hil.backends import MAX_SPEED, RigSetup, simulated_speed_limit
 from toggle.cli.args import check_writable_dir
 from toggle.elastics import clamp_stroke
 from toggle.params import ParameterError, load_preset, tomllib
@@ -212,8 +211,8 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     check(values)
     if values["profile"] is None and values["speed"] is None and values["x_contact"] is None:
         # the default job clamps a mold, which the simulated rig has too
-        values["x_contact"] = default_mold(values["preset"], values["delta_r8"], values["mu"],
-                                           values["as_built"])
+        values["x_contact"] = RigSetup(preset=values["preset"], delta_r8=values["delta_r8"],
+                                       mu=values["mu"], as_built=values["as_built"]).planned_mold
     for key in ("profile", "out", "fmu"):
         if values[key] is not None:
             values[key] = Path(values[key])

@@ -7,6 +7,7 @@ import os
 import signal
 import time
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 from hypothesis import strategies as st
@@ -19,21 +20,37 @@ def chang() -> Mechanism:
     return load_preset("chang2021")
 
 
-@pytest.fixture
-def swallowed_sigint() -> Iterator[Callable[[], None]]:
-    """A Ctrl-C as CasADi meets it during IPOPT: call the function this yields, and the
-    handler's KeyboardInterrupt is raised and caught (the solve returns as failed). Python's
-    own SIGINT handler is installed meanwhile, as in a terminal (a shell's background job
-    ignores SIGINT, and Python then installs none)."""
-    def swallow() -> None:
+class SwallowedSigint:
+    """A Ctrl-C as CasADi meets it during IPOPT: the handler's exception is raised and
+    caught, and the solve returns as failed."""
+
+    def __init__(self) -> None:
+        self.solves = 0
+
+    def __call__(self, caught: type[BaseException] = KeyboardInterrupt) -> None:
+        """Send SIGINT and swallow what the handler raises (``caught``)."""
         try:
             os.kill(os.getpid(), signal.SIGINT)
             time.sleep(0.1)  # the handler runs here
-        except KeyboardInterrupt:
+        except caught:
             pass
 
+    def before(self, solver: Callable[..., Any]) -> Callable[..., Any]:
+        """``solver`` (a CasADi nlpsol) with a swallowed Ctrl-C before each solve, counted."""
+        def solve(**kw: Any) -> Any:
+            self.solves += 1
+            self()
+            return solver(**kw)
+        solve.stats = solver.stats  # type: ignore[attr-defined]
+        return solve
+
+
+@pytest.fixture
+def swallowed_sigint() -> Iterator[SwallowedSigint]:
+    """:class:`SwallowedSigint`, with Python's own SIGINT handler installed meanwhile, as in
+    a terminal (a shell's background job ignores SIGINT, and Python then installs none)."""
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    yield swallow
+    yield SwallowedSigint()
     signal.signal(signal.SIGINT, previous)
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from hil.backends import FmuPlant, RigPlant, RigSetup, RunStoppedError
 from hil.cli import build_parser, main
-from hil.experiment import default_mold, reciprocating_trajectory
+from hil.experiment import reciprocating_trajectory
 from hil.mcu_model import RigHardware
 from hil.recording import read_samples
 from hil.rig_emulator import FaultPlan, spawn_emulator
@@ -139,8 +139,8 @@ def test_emulator_mold_is_checked_or_planned(capsys):
     assert exc.value.code == 2 and "'planned'" in capsys.readouterr().err
     # 'planned' is the mold hil run's default job plans and the simulated rig clamps
     settings = resolve_settings(build_parser().parse_args(["run", "--delta-r8", "0.5e-3"]))
-    assert settings.x_contact == default_mold("chang2021", 0.5e-3)
-    assert default_mold("chang2021", 0.5e-3) != default_mold("chang2021", 0.0)
+    assert settings.x_contact == RigSetup(delta_r8=0.5e-3).planned_mold
+    assert RigSetup(delta_r8=0.5e-3).planned_mold != RigSetup().planned_mold
 
 
 def test_a_preset_file_runs_on_the_simulated_rig_and_an_edit_builds_a_new_fmu(tmp_path):

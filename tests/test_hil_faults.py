@@ -9,7 +9,6 @@ succeeds (after the operator's ``hil rig clear`` where the fault demands one: ES
 from __future__ import annotations
 
 import json
-import os
 import re
 import signal
 import time
@@ -131,7 +130,8 @@ def test_ctrl_c_while_planning_moves_nothing(tmp_path) -> None:
     assert emu.log.run_starts == []  # the rig never moved
 
 
-def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_path) -> None:
+def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_path,
+                                                             swallowed_sigint) -> None:
     """IPOPT catches KeyboardInterrupt and returns as failed: the guard remembers it, also
     when the failed solve failed the plan (which was reported as 'duration 3.1 s is too
     short', exit 1)."""
@@ -142,19 +142,12 @@ def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_p
 
     real = experiment.planned_trajectory
 
-    def swallow() -> None:
-        try:
-            os.kill(os.getpid(), signal.SIGINT)
-            time.sleep(0.1)
-        except Interrupted:
-            pass  # what CasADi does with the exception
-
     def planned(*args, **kw):
-        swallow()
+        swallowed_sigint(Interrupted)  # hil's guard raises Interrupted
         return real(*args, **kw)
 
     def failed(*_args, **_kw):
-        swallow()
+        swallowed_sigint(Interrupted)
         raise PlanningError("duration 3.1 s is too short: the shortest feasible stroke takes "
                             "1.547 s")
 

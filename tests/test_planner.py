@@ -718,20 +718,9 @@ def test_ctrl_c_during_a_solve_stops_toggle_plan(monkeypatch, capsys, swallowed_
     from controllers.planner import StrokeProblem
 
     real = StrokeProblem.solver
-    solves = []
-
-    def interrupted(self, *args, **kwargs):
-        solver = real(self, *args, **kwargs)
-
-        def solve(**kw):
-            solves.append(1)
-            swallowed_sigint()
-            return solver(**kw)
-        solve.stats = solver.stats
-        return solve
-
-    monkeypatch.setattr(StrokeProblem, "solver", interrupted)
+    monkeypatch.setattr(StrokeProblem, "solver",
+                        lambda self, *a, **k: swallowed_sigint.before(real(self, *a, **k)))
     assert main(["plan", "--duration", str(DURATION)]) == 130
     out = capsys.readouterr()
-    assert len(solves) == 1 and out.out == ""
+    assert swallowed_sigint.solves == 1 and out.out == ""
     assert out.err.strip().splitlines()[-1] == "toggle plan: interrupted"

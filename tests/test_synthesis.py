@@ -134,16 +134,6 @@ def test_ctrl_c_during_the_allocation_is_not_a_failed_allocation(press_model, mo
     import casadi as ca
 
     real = ca.nlpsol
-
-    def interrupted(*args, **kwargs):
-        solver = real(*args, **kwargs)
-
-        def solve(**kw):
-            swallowed_sigint()
-            return solver(**kw)
-        solve.stats = solver.stats
-        return solve
-
-    monkeypatch.setattr(ca, "nlpsol", interrupted)
+    monkeypatch.setattr(ca, "nlpsol", lambda *a, **k: swallowed_sigint.before(real(*a, **k)))
     with pytest.raises(KeyboardInterrupt):
         synthesis.allocate(press_model, samples=SAMPLES)

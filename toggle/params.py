@@ -550,7 +550,7 @@ def preset_names() -> list[str]:
 
 def _split_group(name: str, group: str | int | None) -> tuple[str, str | int | None]:
     """``"family/g"`` -> ``("family", "g")``; an existing file or a ``.toml`` name stays whole."""
-    if group is None and "/" in name and not name.endswith(".toml") and not Path(name).exists():
+    if group is None and "/" in name and preset_file(name) is None and not Path(name).exists():
         base, _, part = name.rpartition("/")
         if base and (base in preset_names() or Path(base).is_file()):
             return base, part
