@@ -1,0 +1,43 @@
+/* The hardware interface of the rig firmware: what the portable core (rig_core.c) needs
+ * from a board, and nothing more. Each board (firmware/board/, the STM32F4 Nucleo) and the
+ * simulated rig (firmware/sim/, the clamp plant) implements these functions; the core
+ * calls them only from rig_boot() and rig_tick(), never from rig_rx().
+ *
+ * Units are the protocol's (docs/rig-protocol.md section 3): steps (0.2 um of table
+ * travel), encoder counts (1 um of platen travel), raw load-cell ADC counts. Counts here
+ * are the hardware's own, since power-on; the core applies SET_POSITION's offsets.
+ */
+#ifndef RIG_HAL_H
+#define RIG_HAL_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+/* Inputs latched together at the start of a period, after that period's step output. */
+typedef struct {
+    int32_t enc;       /* encoder counts since power-on (quadrature timer, 32-bit extended) */
+    int32_t load_raw;  /* load-cell ADC counts, sign-extended 24-bit */
+    bool home_switch;  /* reference switch at the open position active */
+    bool stop_input;   /* operator's stop button pressed (latches ESTOP) */
+    bool driver_alarm; /* stepper driver's alarm output active (latches DRIVER) */
+} rig_inputs;
+
+/* Emit |delta| step pulses (direction by sign) spread evenly over the coming period;
+ * 0 holds the position. Called once per tick while the table moves. */
+void hal_step(int32_t delta);
+
+/* Stop the step pulses of the present period at once (a halting fault). Returns the
+ * pulses of the last hal_step() that were not emitted (0 when it had finished), with the
+ * sign of that step, so the core's step count stays the count actually output. */
+int32_t hal_step_halt(void);
+
+/* Energise (true) or disable (false) the stepper driver. */
+void hal_driver_enable(bool on);
+
+/* Latch every input of the period. */
+void hal_read(rig_inputs *in);
+
+/* Kick the independent hardware watchdog (once per tick, from the main loop's tick). */
+void hal_watchdog_kick(void);
+
+#endif
