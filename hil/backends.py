@@ -404,7 +404,8 @@ class RigPlant(Plant):
         self._L0 = float(output_position(self._x0, nominal.lower))
         self._nominal = nominal
         self._link = link = SerialLink(self.port, realtime=self.realtime,
-                                       telemetry_timeout=self.telemetry_timeout)
+                                       telemetry_timeout=self.telemetry_timeout,
+                                       point_period_us=round(s.period * 1e6))
         try:
             link.open()
             if link.faults_at_open:
@@ -448,6 +449,7 @@ class RigPlant(Plant):
 
     def _sample(self, tel: p.Telemetry, total: int) -> Sample:
         from hil import protocol as p
+        from hil.serial_link import sample_distance
 
         sc, x0 = self._link.scaling, self._x0
         if tel.faults:
@@ -457,7 +459,7 @@ class RigPlant(Plant):
             status = Status.OK
         else:
             status = Status.STOPPING
-        return Sample((tel.sample - self._first) * sc.period, sc.x(tel.steps, x0),
+        return Sample(sample_distance(tel.sample, self._first) * sc.period, sc.x(tel.steps, x0),
                       sc.platen(tel.enc), sc.force(tel.load_raw), status, tel.sample)
 
     def _run(self, trajectory: Trajectory) -> Iterator[Sample]:

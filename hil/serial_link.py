@@ -20,7 +20,7 @@ import random
 import select
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import serial
@@ -29,6 +29,11 @@ from hil import protocol as p
 from hil.realtime import set_realtime
 
 ESTOP_REPEATS = 3  # an emergency stop is sent this many times back to back
+#: Attempts of the STOP that ends a session before the host escalates to ESTOP (section 6).
+STOP_ATTEMPTS = 3
+#: The point period the host plans with, us: an MCU that runs another is refused at the
+#: handshake (it would run the plan slower or faster than planned).
+HOST_POINT_PERIOD_US = 1000
 #: Host watchdog on telemetry arrival, s: a soft bound far above the host's scheduling
 #: jitter (measured on a loaded 2-core PC: p99.9 6 ms, max 14 ms). The hard real-time
 #: stops are the MCU's (docs/rig-protocol.md, section 7).
@@ -45,6 +50,56 @@ LATE_RETRIES = 20
 STANDSTILL_MARGIN = 1.0
 #: States in which the table may still move.
 MOVING_STATES = (p.State.RUNNING, p.State.STOPPING)
+
+
+def sample_distance(sample: int, ref: int) -> int:
+    """Signed distance from telemetry index ``ref`` to ``sample`` in RFC 1982 serial-number
+    arithmetic on 32 bits: positive when ``sample`` is after ``ref``, also across the wrap
+    of the u32 counter (2**32 - 1 -> 0, after 49.7 days of MCU uptime at 1 kHz).
+
+    Exactly 2**31 apart is undefined in RFC 1982; it counts as before (negative).
+    """
+    d = (sample - ref) & 0xFFFFFFFF
+    return d - 0x100000000 if d >= 0x80000000 else d
+
+
+class SilenceWatchdog:
+    """The host's telemetry-silence watchdog (docs/rig-protocol.md, section 7).
+
+    It expires ``timeout`` s after its count started: at the last telemetry arrival
+    (:meth:`restart`), or when the reader woke more than ``late`` s later than it asked
+    (:meth:`woke`). Then the host itself was not running (a loaded or paused machine), so
+    the silence it saw is not the rig's: the count restarts at that moment. ``clock`` is
+    injectable for tests.
+    """
+
+    def __init__(self, timeout: float, clock: Callable[[], float] = time.monotonic,
+                 late: float = HOST_LATE) -> None:
+        self.timeout, self.clock, self.late = timeout, clock, late
+        self.since = clock()  # start of the present count
+        self.restarts = 0  # counts restarted by a late wake-up
+
+    def restart(self, now: float | None = None) -> None:
+        """Telemetry arrived (or a session opened): the count starts again."""
+        self.since = self.clock() if now is None else now
+
+    def woke(self, asked: float, before: float, now: float | None = None) -> bool:
+        """The reader asked at ``before`` to wait ``asked`` s and woke at ``now``; True (and
+        the count restarted at ``now``) if that was more than ``late`` s later than asked."""
+        now = self.clock() if now is None else now
+        if now - before <= asked + self.late:
+            return False
+        self.restarts += 1
+        self.since = max(self.since, now)
+        return True
+
+    @property
+    def deadline(self) -> float:
+        """When the watchdog expires unless telemetry arrives, in ``clock`` time."""
+        return self.since + self.timeout
+
+    def expired(self, now: float | None = None) -> bool:
+        return (self.clock() if now is None else now) >= self.deadline
 
 
 class RigError(Exception):
@@ -123,6 +178,7 @@ class LinkStats:
     duplicates: int = 0  # telemetry frames received twice (dropped)
     queue_dropped: int = 0  # samples dropped because nobody consumed them
     retransmissions: int = 0
+    late_attempts: int = 0  # command attempts repeated, uncounted, because the host ran late
     bad_messages: int = 0  # valid frames with an unknown type or wrong length
     last_telemetry_rx: float = 0.0
     max_arrival_gap: float = 0.0  # longest host-side silence between samples, s
@@ -158,6 +214,18 @@ class _Pending:
         self.reply: p.Ack | p.HelloReply | None = None
 
 
+class _StopSequence:
+    """The stop that ends a session (section 6): STOP, STOP_ATTEMPTS attempts with one
+    seq, then ESTOP if no STOP was acknowledged. Sent once; a new START arms another."""
+
+    def __init__(self, seq: int) -> None:
+        self.seq = seq
+        self.pending = _Pending()
+        self.sent_at: float | None = None  # the first attempt (None: not written yet)
+        self.lock = threading.Lock()  # one thread completes the sequence
+        self.acked: bool | None = None  # the outcome once complete: STOP acknowledged
+
+
 class SerialLink:
     """A session with the rig's MCU; use as a context manager so the port always closes."""
 
@@ -174,6 +242,7 @@ class SerialLink:
         queue_size: int = 100_000,
         realtime: bool = False,
         clear_faults_on_close: bool = True,
+        point_period_us: int = HOST_POINT_PERIOD_US,
     ) -> None:
         """``telemetry_timeout`` (default DEFAULT_TELEMETRY_TIMEOUT) bounds the silence of
         the telemetry at the host; ``clock_slack`` bounds the MCU-clock jump between
@@ -181,14 +250,17 @@ class SerialLink:
         heartbeats (only to test the MCU's watchdog); ``realtime`` asks for SCHED_FIFO
         scheduling of the reader thread (best effort); ``clear_faults_on_close`` clears,
         at the end of the session, faults that latched during it (never ESTOP, never a
-        fault found latched at open)."""
+        fault found latched at open); ``point_period_us`` is the period the host plans
+        with: an MCU that runs another is refused at the handshake."""
         self.url, self.baudrate = url, baudrate
         self.ack_timeout, self.retries = ack_timeout, retries
         self.heartbeat_period = heartbeat_period
         self.realtime = realtime
         self.clock_slack = clock_slack
         self.clear_faults_on_close = clear_faults_on_close
+        self.point_period_us = point_period_us
         self._telemetry_timeout = telemetry_timeout
+        self._silence = SilenceWatchdog(self.telemetry_timeout)
         self.stats = LinkStats()
         self.decoder = p.FrameDecoder()
         self.info: p.HelloReply | None = None
@@ -207,13 +279,18 @@ class SerialLink:
         self._failure: RigError | None = None
         self._last_sample: int | None = None
         self._last_t_us: int | None = None
-        self._faults_from = 0  # fault bits in samples before this index are already handled
+        self._faults_from: int | None = None  # fault bits before this sample are handled
         self.status: p.Telemetry | None = None  # the latest sample (any state)
         self.faults_at_open = p.Fault.NONE  # latched before this session
         self._known_faults = 0  # fault bits already reported (latched at open)
         self.config = p.Config()  # the MCU's limits: its defaults until configure()
         self._run_first: int | None = None  # first sample of the run in progress
-        self._stopped = True  # a STOP was acknowledged since the last START
+        # the session end's stop sequence goes out once: armed by START (and by a command
+        # that was never acknowledged), spent when sent, acknowledged or not
+        self._stop_lock = threading.Lock()
+        self._stop_armed = False
+        self._stop_seq: _StopSequence | None = None  # the last stop sequence
+        self._unresponsive = False  # the stop sequence went unacknowledged: no more waiting
 
     # --- opening and closing --------------------------------------------------------------
 
@@ -277,14 +354,39 @@ class SerialLink:
                 f"{getattr(reply, 'proto_major', '?')}, host {p.PROTO_MAJOR})")
         if reply.host_nonce != nonce:
             raise HandshakeError("HELLO_REPLY echoes another session's nonce")
+        refused = self._refusal(reply)
+        if refused:
+            with contextlib.suppress(RigError):  # end the MCU's session: no watchdog left armed
+                self.command(p.Bye(), check=False, retries=1)
+            raise HandshakeError(f"rig at {self.url} refused: {refused}")
         self.scaling = Scaling(reply.step_nm / 1e9, reply.enc_nm / 1e9, reply.load_offset,
                                reply.load_gain_n, 1.0 / reply.telemetry_hz)
         self._last_sample = self._last_t_us = None
         self.stats.last_telemetry_rx = time.monotonic()
+        self._silence.restart(self.stats.last_telemetry_rx)
         # what arrived before the session (a frame cut in two by opening the port mid-stream)
         # is not a link error of this session
         self.decoder.stats = p.DecoderStats()
         self.info = reply  # last: it arms the reader's watchdog and heartbeats
+
+    def _refusal(self, reply: p.HelloReply) -> str:
+        """Why the host cannot run this MCU's timing or buffer ('' when it can)."""
+        period, hz = reply.point_period_us, reply.telemetry_hz
+        if period != self.point_period_us:
+            return (f"its point period is {period} us (point_period_us), the host plans with "
+                    f"{self.point_period_us} us: the trajectory would run "
+                    f"{period / self.point_period_us:g} times as long as planned")
+        if hz * period != 1_000_000:
+            return (f"its telemetry rate {hz} Hz (telemetry_hz) is not one sample per point "
+                    f"period of {period} us (telemetry_hz x point_period_us = {hz * period}, "
+                    f"not 1000000)")
+        if not 1 <= reply.max_chunk_points <= p.MAX_CHUNK_POINTS:
+            return (f"max_chunk_points {reply.max_chunk_points} is outside 1..."
+                    f"{p.MAX_CHUNK_POINTS}")
+        if reply.buffer_capacity < reply.max_chunk_points:
+            return (f"its buffer of {reply.buffer_capacity} points (buffer_capacity) holds "
+                    f"less than one chunk of {reply.max_chunk_points} points")
+        return ""
 
     @property
     def telemetry_timeout(self) -> float:
@@ -298,8 +400,9 @@ class SerialLink:
 
         STOP, wait for a standstill (the stop ramp plus STANDSTILL_MARGIN), clear the
         faults that latched during this session (when ``clear_faults_on_close``; never
-        ESTOP), BYE, close. A rig that does not answer gets ESTOP and no more waiting, so
-        closing takes at most about the stop ramp plus 0.3 s.
+        ESTOP), BYE, close. The stop sequence goes out once per START (section 6): a rig
+        that does not answer gets STOP_ATTEMPTS STOPs and ESTOP_REPEATS ESTOPs once, then
+        no more waiting, so leaving a dead rig takes about 3 ACK timeouts (60 ms).
         """
         if self._ser is None:
             return
@@ -332,6 +435,7 @@ class SerialLink:
             pending = self._pending[seq] = _Pending()
             try:
                 attempt = late = 0
+                began = time.monotonic()
                 while True:
                     flags = p.FLAG_ACK_REQ | (p.FLAG_RETRY if attempt or late else 0)
                     self._write(p.encode_message(msg, seq, flags))
@@ -344,9 +448,14 @@ class SerialLink:
                     if (time.monotonic() - sent > self.ack_timeout + HOST_LATE
                             and late < LATE_RETRIES):
                         late += 1  # the host itself was not running: not the rig's fault
+                        self.stats.late_attempts += 1
                         continue
                     attempt += 1
                     if attempt > retries:
+                        # the command has failed (section 6): the session ends with the
+                        # stop sequence (an unacknowledged START may have started the rig),
+                        # unless one began meanwhile (the telemetry watchdog's)
+                        self._arm_stop(unless_begun_after=began)
                         raise CommandError(f"{msg.TYPE.name} not acknowledged after "
                                            f"{retries + 1} attempts")
             finally:
@@ -376,10 +485,12 @@ class SerialLink:
         return self.command(p.TrajChunk(first_index, flags, tuple(points)), check=check)
 
     def start(self) -> p.Ack:
-        """Start the buffered trajectory; the ACK's ``sample`` is the first sample of the run."""
-        ack = self.command(p.Start())
-        self._stopped = False
-        return ack
+        """Start the buffered trajectory; the ACK's ``sample`` is the first sample of the run.
+
+        Arms the stop sequence first: a START whose ACK is lost may still have started.
+        """
+        self._arm_stop()
+        return self.command(p.Start())
 
     def stop(self) -> None:
         """Controlled stop (decelerate, discard the buffer)."""
@@ -396,8 +507,9 @@ class SerialLink:
         """Redefine the present step and encoder counts (after homing)."""
         self.command(p.SetPosition(steps, enc))
 
-    def estop(self) -> bool:
-        """Emergency stop, sent at once even while another command waits; True if acked.
+    def estop(self, *, wait: bool = True) -> bool:
+        """Emergency stop, sent at once even while another command waits; True if acked
+        (within 3 ACK timeouts; ``wait`` False returns False at once, for a dead rig).
 
         The repeats reuse the seq and carry RETRY, so the MCU answers each but halts once.
         """
@@ -407,28 +519,86 @@ class SerialLink:
             for attempt in range(ESTOP_REPEATS):
                 flags = p.FLAG_ACK_REQ | (p.FLAG_RETRY if attempt else 0)
                 self._write(p.encode_message(p.EStop(), seq, flags))
-            return pending.event.wait(self.ack_timeout * 3)
+            return wait and pending.event.wait(self.ack_timeout * 3)
         except LinkLostError:
             return False
         finally:
             self._pending.pop(seq, None)
 
     def stop_quietly(self) -> bool:
-        """STOP, or ESTOP if STOP is not acknowledged; never raises (for cleanup paths).
+        """The stop sequence, once per START; never raises (for cleanup paths).
 
-        True when the rig acknowledged the STOP (it answers commands).
+        STOP (STOP_ATTEMPTS attempts with one seq, ``ack_timeout`` each; attempts during
+        which the host ran late are repeated uncounted), then ESTOP if no STOP was
+        acknowledged. It goes out once: later calls, from the run, the back-end and
+        :meth:`close`, return its outcome without sending anything until a new START.
+        True when the rig acknowledged the STOP (it answers commands); also True when
+        nothing was started in this session.
         """
         if isinstance(self._failure, LinkLostError) or self._ser is None:
             return False
-        if self._stopped:
-            return True  # stopped since the last START: no STOP storm on cleanup paths
+        stop = self._begin_stop()
+        if stop is None:
+            return True  # nothing started in this session: nothing to stop
+        with stop.lock:
+            if stop.acked is None:
+                stop.acked = self._complete_stop(stop)
+        return stop.acked
+
+    def _arm_stop(self, unless_begun_after: float | None = None) -> None:
+        """The next stop sends the stop sequence (unless one began after the given time)."""
+        with self._stop_lock:
+            last = self._stop_seq
+            if (unless_begun_after is None or last is None
+                    or last.sent_at < unless_begun_after):
+                self._stop_armed = True
+
+    def _begin_stop(self) -> _StopSequence | None:
+        """The stop sequence: begun now (its first STOP written, without waiting) if armed,
+        else the last one; None if none was ever armed. Any thread (the reader's _fail)."""
+        with self._stop_lock:
+            if not self._stop_armed:
+                return self._stop_seq
+            self._stop_armed = False
+            stop = self._stop_seq = _StopSequence(self._next_seq())
+            self._pending[stop.seq] = stop.pending
+            stop.sent_at = self.stats.stop_sent_at = time.monotonic()
+        with contextlib.suppress(LinkLostError):
+            self._write(p.encode_message(p.Stop(), stop.seq, p.FLAG_ACK_REQ))
+        return stop
+
+    def _complete_stop(self, stop: _StopSequence) -> bool:
+        """Wait for the STOP's ACK, retransmit, escalate to ESTOP; True if STOP was acked."""
+        attempts, late, sent = 1, 0, stop.sent_at
         try:
-            self.command(p.Stop(), check=False, retries=2)
-        except RigError:
-            self.estop()
-            return False
-        self._stopped = True
-        return True
+            while True:
+                asked_at = time.monotonic()
+                asked = max(0.0, sent + self.ack_timeout - asked_at)
+                if stop.pending.event.wait(asked):
+                    return True
+                if isinstance(self._failure, LinkLostError):
+                    return False
+                if time.monotonic() - asked_at > asked + HOST_LATE and late < LATE_RETRIES:
+                    late += 1  # the host was not running: this attempt is repeated, uncounted
+                    self.stats.late_attempts += 1
+                elif attempts >= STOP_ATTEMPTS:
+                    break
+                else:
+                    attempts += 1
+                try:
+                    self._write(p.encode_message(p.Stop(), stop.seq,
+                                                 p.FLAG_ACK_REQ | p.FLAG_RETRY))
+                except LinkLostError:
+                    return False
+                sent = time.monotonic()
+                self.stats.retransmissions += 1
+        finally:
+            self._pending.pop(stop.seq, None)
+        # no STOP answered: ESTOP, and no more waiting for this rig (section 6: its
+        # heartbeat watchdog stops it on its side); samples still arriving are still read
+        self._unresponsive = True
+        self.estop(wait=False)
+        return False
 
     def wait_standstill(self, timeout: float | None = None) -> p.Telemetry | None:
         """Wait until a sample shows the rig outside RUNNING/STOPPING; that sample or None.
@@ -439,12 +609,18 @@ class SerialLink:
         while time.monotonic() < deadline:
             status = self.status
             if status is not None and status.state not in MOVING_STATES and (
-                    self._run_first is None or status.sample >= self._run_first):
+                    self._run_first is None
+                    or sample_distance(status.sample, self._run_first) >= 0):
                 return status
-            if isinstance(self._failure, (LinkLostError, RigResetError)):
+            if self._gone():
                 return None
             time.sleep(0.002)
         return None
+
+    def _gone(self) -> bool:
+        """Nothing more to wait for in this session: the port failed, the MCU reset, or the
+        rig acknowledged no STOP of the stop sequence."""
+        return self._unresponsive or isinstance(self._failure, (LinkLostError, RigResetError))
 
     def _stop_time(self) -> float:
         """Longest stop ramp at the configured deceleration plus STANDSTILL_MARGIN, s."""
@@ -477,7 +653,7 @@ class SerialLink:
         deadline = time.monotonic() + 0.05
         while time.monotonic() < deadline:
             status = self.status
-            if status is not None and status.sample > ack.sample:
+            if status is not None and sample_distance(status.sample, ack.sample) > 0:
                 return not status.faults
             time.sleep(0.002)
         return False
@@ -567,8 +743,8 @@ class SerialLink:
             first = self._run_first = self.start().sample
             while True:
                 tel = self.next_sample(timeout=max(1.0, 10 * self.telemetry_timeout))
-                if tel.sample < first:
-                    continue
+                if sample_distance(tel.sample, first) < 0:
+                    continue  # the idle rig's, from before START
                 yield tel
                 if tel.state == p.State.IDLE and tel.exec_index >= len(points):
                     self._run_first = None  # complete: nothing left for finish_run
@@ -596,11 +772,10 @@ class SerialLink:
             try:
                 item = self._queue.get(timeout=0.02)
             except queue.Empty:
-                gone = isinstance(self._failure, (LinkLostError, RigResetError))
-                if gone or time.monotonic() > deadline or self._ser is None:
+                if self._gone() or time.monotonic() > deadline or self._ser is None:
                     return out
                 continue
-            if item is None or item.sample < first:
+            if item is None or sample_distance(item.sample, first) < 0:
                 continue
             out.append(item)
             if item.state not in MOVING_STATES:
@@ -622,12 +797,11 @@ class SerialLink:
                 self._fail(LinkLostError(f"{self.url} disconnected: {exc}"))
                 return
             before, now = now, time.monotonic()
-            if now - before > wait + HOST_LATE:
+            if self._silence.woke(wait, before, now):
                 # the reader was not running (a loaded or paused machine): the silence
-                # watchdog counts only time in which the host could have seen telemetry
+                # watchdog counts only time in which the host could have seen telemetry,
+                # so its count restarts now (section 7)
                 self.stats.host_late += 1
-                self.stats.last_telemetry_rx = max(self.stats.last_telemetry_rx,
-                                                   now - (wait + HOST_LATE))
             for frame in self.decoder.feed(data):
                 self._dispatch(frame, now)
             if self.info and self.heartbeat_period and now >= next_heartbeat:
@@ -635,8 +809,11 @@ class SerialLink:
                 self._send_quietly(p.Heartbeat(int(now * 1e3) & 0xFFFFFFFF))
             if now >= self._watchdog_deadline() and not self._pending_input():
                 silence = now - self.stats.last_telemetry_rx
+                counted = now - self._silence.since
+                since_late = (f", {counted * 1e3:.1f} ms of it since the host was late"
+                              if silence - counted > 1e-3 else "")
                 self._fail(LinkTimeoutError(
-                    f"no telemetry for {silence * 1e3:.1f} ms (watchdog "
+                    f"no telemetry for {silence * 1e3:.1f} ms{since_late} (watchdog "
                     f"{self.telemetry_timeout * 1e3:.1f} ms): rig stalled or link broken"))
 
     def _read(self, timeout: float) -> bytes:
@@ -659,7 +836,7 @@ class SerialLink:
     def _watchdog_deadline(self) -> float:
         if self.info is None or self._failure is not None:
             return float("inf")
-        return self.stats.last_telemetry_rx + self.telemetry_timeout
+        return self._silence.deadline
 
     def _dispatch(self, frame: p.Frame, now: float) -> None:
         try:
@@ -677,7 +854,7 @@ class SerialLink:
         elif isinstance(msg, p.FaultReport):
             self.fault_reports.append(msg)
             new = msg.fault & ~self._known_faults
-            if self.info is not None and new and msg.sample >= self._faults_from:
+            if self.info is not None and new and self._fault_is_new(msg.sample):
                 self._fail(RigFaultError(
                     f"rig fault {p.Fault(msg.fault).name} at sample {msg.sample}: value "
                     f"{msg.value}, limit {msg.limit} (MCU state {p.State(msg.state).name})",
@@ -697,7 +874,7 @@ class SerialLink:
             return
         stats, stalled = self.stats, None
         if self._last_sample is not None:
-            distance = tel.sample - self._last_sample
+            distance = sample_distance(tel.sample, self._last_sample)
             if distance <= 0:
                 stats.duplicates += 1  # a repeated (or reordered) frame: recorded once
                 return
@@ -715,28 +892,36 @@ class SerialLink:
         self._last_sample, self._last_t_us = tel.sample, tel.t_us
         stats.samples += 1
         stats.last_telemetry_rx = now
+        self._silence.restart(now)
         self.status = tel
         try:
             self._queue.put_nowait(tel)
         except queue.Full:
             stats.queue_dropped += 1
         new = tel.faults & ~self._known_faults
-        if new and tel.sample >= self._faults_from:
+        if new and self._fault_is_new(tel.sample):
             faults = p.Fault(tel.faults)
             self._fail(RigFaultError(f"rig fault {faults.name} (state {p.State(tel.state).name}) "
                                      f"at sample {tel.sample}", faults))
         if stalled is not None:
             self._fail(stalled)
 
+    def _fault_is_new(self, sample: int) -> bool:
+        """A fault reported at ``sample`` is not one that clear_fault already handled."""
+        return self._faults_from is None or sample_distance(sample, self._faults_from) >= 0
+
     def _fail(self, error: RigError) -> None:
-        """Record the first failure, stop the rig unless the link is gone, wake consumers."""
+        """Record the first failure, stop the rig unless the link is gone, wake consumers.
+
+        The STOP is the first attempt of the stop sequence (if a START armed it), written at
+        once; :meth:`stop_quietly` completes the sequence.
+        """
         if self._failure is not None:
             return
         self._failure = error
         self.stats.failed_at = time.monotonic()
         if not isinstance(error, LinkLostError) and self.info is not None:
-            self._send_quietly(p.Stop(), ack=True)
-            self.stats.stop_sent_at = time.monotonic()
+            self._begin_stop()
         with contextlib.suppress(queue.Full):
             self._queue.put_nowait(None)
 
