@@ -10,7 +10,9 @@ telemetry period) and returns the messages the MCU sends. The mechanics come fro
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import operator
 import random
 import secrets
 from collections import deque
@@ -139,17 +141,31 @@ class McuModel:
         self.state = p.State.BOOT
         self.session = False
         self.faults = p.Fault.NONE
-        self.cfg = p.Config(load_offset=self.hw.load_offset, load_gain_n=self.hw.load_gain_n)
+        self.cfg = self._stored_calibration(p.Config())
         self.sample = 0
+        self._boot_time: float | None = None  # the first tick's time: t_us = 0
         self.last_seq: int | None = None
         self.last_reply: p.Message | None = None
         self.last_host_rx = 0.0
         self.driver_enabled = False
         self._clear_trajectory()
-        self._velocity = 0.0  # steps per tick, used by a controlled stop
-        self._pos = 0.0
+        self._last_move = 0  # steps of the last period's move: a controlled stop's speed
+        self._speed_q16 = 0  # a controlled stop's speed and position, in 1/65536 step
+        self._pos_q16 = 0
         self._stop_target = p.State.IDLE
-        self._same_load = 0
+        self._same_load = 0  # consecutive samples with a bit-identical load reading
+        self._moved = False  # steps changed in this period (telemetry flag MOVING)
+
+    def _stored_calibration(self, cfg: p.Config) -> p.Config:
+        """``cfg`` with the load-cell calibration kept in the MCU's non-volatile memory."""
+        return dataclasses.replace(cfg, load_offset=self.hw.load_offset,
+                                   load_gain_n=self.hw.load_gain_n)
+
+    def _end_session(self) -> None:
+        """A session ends (BYE, link loss) or a new one opens: a CONFIG calibration
+        override was for that session only; the limits stay until the next CONFIG."""
+        self.session = False
+        self.cfg = self._stored_calibration(self.cfg)
 
     def _clear_trajectory(self) -> None:
         self.points: deque[tuple[int, int]] = deque()
@@ -164,35 +180,36 @@ class McuModel:
     def handle(self, frame: p.Frame, now: float) -> list[p.Message]:
         """Execute one valid host frame received at ``now``; return the replies."""
         self.last_host_rx = now
+        ack_req = bool(frame.flags & p.FLAG_ACK_REQ)  # without it nothing is answered
         if frame.msg_type >= 0x80:  # an MCU -> host type is no command
-            replies = ([self._ack(frame.seq, p.Result.UNKNOWN_TYPE)]
-                       if frame.flags & p.FLAG_ACK_REQ else [])
+            replies = [self._ack(frame.seq, p.Result.UNKNOWN_TYPE)] if ack_req else []
             return replies + self._drain()
         try:
             msg = p.parse_message(frame)
         except p.MessageError:
             known = frame.msg_type in p.MESSAGES
-            return [self._ack(frame.seq, p.Result.BAD_LENGTH if known else p.Result.UNKNOWN_TYPE)]
+            result = p.Result.BAD_LENGTH if known else p.Result.UNKNOWN_TYPE
+            return ([self._ack(frame.seq, result)] if ack_req else []) + self._drain()
         if isinstance(msg, p.Heartbeat):
             return self._drain()
         last = self.last_seq
         if isinstance(msg, p.Hello):
             reply = self._execute(msg, frame.seq)
             store = True  # a new host starts at a random seq, whatever the answer
-        elif last is not None and frame.seq == last:
-            reply, store = self.last_reply, False  # a retransmission: answer, do not redo
         elif isinstance(msg, (p.EStop, p.Stop)):
-            # always executed (a stop must never be lost to the seq order); an older seq
-            # does not re-base the order
+            # always executed, a retransmission too (a stop must never be lost to the seq
+            # order); an older seq does not re-base the order
             reply = self._execute(msg, frame.seq)
             store = last is None or p.seq_newer(frame.seq, last)
+        elif last is not None and frame.seq == last:
+            reply, store = self.last_reply, False  # a retransmission: answer, do not redo
         elif last is not None and p.seq_stale(frame.seq, last):
             reply, store = self._ack(frame.seq, p.Result.STALE), False
         else:
             reply, store = self._execute(msg, frame.seq), True
         if store:
             self.last_seq, self.last_reply = frame.seq, reply
-        replies = [reply] if reply is not None and frame.flags & p.FLAG_ACK_REQ else []
+        replies = [reply] if reply is not None and ack_req else []
         return replies + self._drain()
 
     def _execute(self, msg: p.Message, seq: int) -> p.Message:
@@ -213,6 +230,7 @@ class McuModel:
             result = p.Result.VERSION_MISMATCH
         else:
             result = p.Result.OK
+            self._end_session()  # a new session starts from the stored calibration
             self.session = True
             if self.state == p.State.BOOT:
                 self._set_state(p.State.IDLE, p.Reason.COMMAND)
@@ -279,7 +297,7 @@ class McuModel:
         if not self.points:
             return p.Result.EMPTY
         self.driver_enabled = True
-        self._same_load = 0
+        self._same_load = 0  # the run's first sample counts 1
         self._set_state(p.State.RUNNING, p.Reason.COMMAND)
         return p.Result.OK
 
@@ -313,7 +331,7 @@ class McuModel:
     def _bye(self, _msg: p.Bye) -> p.Result:
         if self.state in MOTION_STATES:
             return p.Result.BAD_STATE
-        self.session = False
+        self._end_session()
         if self.state == p.State.IDLE:
             self._set_state(p.State.BOOT, p.Reason.COMMAND)
         return p.Result.OK
@@ -325,7 +343,7 @@ class McuModel:
 
     def estop(self) -> None:
         """Halt stepping now and disable the driver."""
-        self._velocity = 0.0
+        self._speed_q16 = 0
         self.driver_enabled = False
         self._discard_buffer()
         self._latch(p.Fault.ESTOP, 0, 0)
@@ -334,26 +352,32 @@ class McuModel:
 
     def link_lost(self) -> None:
         """The host vanished (USB detach, or DTR dropped): controlled stop, end the session."""
-        self.session = False
+        self._end_session()
         if self.state == p.State.RUNNING:
             self._begin_stop(p.State.IDLE, p.Reason.LINK_LOST)
 
     # --- one telemetry period -------------------------------------------------------------
 
-    def tick(self, now: float, t_us: int) -> list[p.Message]:
-        """Advance one period: watchdog, motion, sensors, checks; return events and telemetry."""
+    def tick(self, now: float) -> list[p.Message]:
+        """Advance one period at ``now`` (s): watchdog, motion, sensors, checks; return the
+        period's events and its telemetry, stamped in us since the MCU's boot."""
+        if self._boot_time is None:
+            self._boot_time = now
         if self.session and now - self.last_host_rx > self.cfg.heartbeat_timeout_ms * 1e-3:
-            self._fault(p.Fault.HEARTBEAT_LOST, round(1e3 * (now - self.last_host_rx)),
+            self._fault(p.Fault.HEARTBEAT_LOST, math.floor(1e3 * (now - self.last_host_rx)),
                         self.cfg.heartbeat_timeout_ms)
+        before = self.steps
         if self.state == p.State.RUNNING:
             self._run_step()
-        elif self.state in (p.State.STOPPING, p.State.FAULT) and self._velocity:
+        elif self.state == p.State.STOPPING:
             self._decelerate()
+        self._moved = self.steps != before
         prev_raw = self.load_raw
         self.enc, self.load_raw = self.sensors.read(self.steps, now)
-        self._same_load = self._same_load + 1 if self.load_raw == prev_raw else 0
+        self._same_load = self._same_load + 1 if self.load_raw == prev_raw else 1
         if self.state in (p.State.IDLE, *MOTION_STATES):
             self._check_sensors(apply=True)
+        t_us = round((now - self._boot_time) * 1e6) & 0xFFFFFFFF
         self._out.append(self._telemetry(t_us))
         self.sample = (self.sample + 1) & 0xFFFFFFFF
         return self._drain()
@@ -361,73 +385,88 @@ class McuModel:
     def _run_step(self) -> None:
         if self.points:
             steps, self.expected_enc = self.points.popleft()
-            self._velocity = float(steps - self.steps)
+            self._last_move = steps - self.steps
             self.steps = steps
-            self._pos = float(steps)
             self.exec_index += 1
         elif self.final_received:
-            self._velocity = 0.0
+            self._last_move = 0
             self.expected_enc = p.NO_CHECK
             self._set_state(p.State.IDLE, p.Reason.RUN_COMPLETE)
         else:
             self._fault(p.Fault.BUFFER_UNDERRUN, self.exec_index, self.next_index)
 
     def _decelerate(self) -> None:
-        dv = self.cfg.decel_steps_s2 * self.hw.period**2
-        v = self._velocity
-        self._velocity = math.copysign(max(abs(v) - dv, 0.0), v)
-        self._pos += self._velocity
-        target = round(self._pos)
+        """One period of a controlled stop, in Q16 fixed point (1/65536 step), so that every
+        implementation of the protocol rounds alike; the first period at zero speed is the
+        standstill, also for a stop begun at rest."""
+        dv = round(self.cfg.decel_steps_s2 * self.hw.period**2 * 65536)
+        speed = max(abs(self._speed_q16) - dv, 0)
+        self._speed_q16 = speed if self._speed_q16 >= 0 else -speed
+        pos = self._pos_q16 + self._speed_q16
+        target = (pos + 32768) >> 16  # round half up
         if not self.cfg.steps_min <= target <= self.cfg.steps_max:
-            self._velocity = 0.0
-            self._fault(p.Fault.TRAVEL_LIMIT, target, self.cfg.steps_max)
+            self._speed_q16 = 0
+            bound = self.cfg.steps_min if target < self.cfg.steps_min else self.cfg.steps_max
+            self._fault(p.Fault.TRAVEL_LIMIT, target, bound)
             return
-        self.steps = target
-        if self._velocity == 0.0 and self.state == p.State.STOPPING:
+        self._pos_q16, self.steps = pos, target
+        if self._speed_q16 == 0:
             self._set_state(self._stop_target, p.Reason.STOP_COMPLETE)
 
     def _check_sensors(self, *, apply: bool) -> p.Fault:
-        """Evaluate the limits on the present readings; latch them when ``apply``."""
+        """Evaluate the limits on the present readings; latch every failing one when
+        ``apply`` (in bit order, each new bit with its FAULT frame)."""
         cfg = self.cfg
         force = (self.load_raw - cfg.load_offset) * cfg.load_gain_n
+        steps_bound = cfg.steps_min if self.steps < cfg.steps_min else cfg.steps_max
+        enc_bound = cfg.enc_min if self.enc < cfg.enc_min else cfg.enc_max
         checks = [
-            (p.Fault.LOAD_SATURATED,
-             self.load_raw <= self.hw.adc_min or self.load_raw >= self.hw.adc_max,
-             self.load_raw, self.hw.adc_max),
             (p.Fault.FORCE_LIMIT, abs(force) > cfg.force_limit_n,
              round(force), round(cfg.force_limit_n)),
             (p.Fault.TRAVEL_LIMIT, not cfg.steps_min <= self.steps <= cfg.steps_max,
-             self.steps, cfg.steps_max),
+             self.steps, steps_bound),
             (p.Fault.TRAVEL_LIMIT, not cfg.enc_min <= self.enc <= cfg.enc_max,
-             self.enc, cfg.enc_max),
+             self.enc, enc_bound),
         ]
         if self.state == p.State.RUNNING:
             error = self.enc - self.expected_enc
-            checks += [
-                (p.Fault.FOLLOWING_ERROR,
-                 self.expected_enc != p.NO_CHECK and abs(error) > cfg.following_error_counts,
-                 error, cfg.following_error_counts),
-                (p.Fault.LOAD_STUCK, self._same_load >= cfg.stuck_samples,
-                 self._same_load, cfg.stuck_samples),
-            ]
-        found = p.Fault.NONE
+            checks.append((p.Fault.FOLLOWING_ERROR,
+                           self.expected_enc != p.NO_CHECK
+                           and abs(error) > cfg.following_error_counts,
+                           error, cfg.following_error_counts))
+        checks.append((p.Fault.LOAD_SATURATED,
+                       self.load_raw <= self.hw.adc_min or self.load_raw >= self.hw.adc_max,
+                       self.load_raw, self.hw.adc_max))
+        if self.state == p.State.RUNNING:
+            checks.append((p.Fault.LOAD_STUCK, self._same_load >= cfg.stuck_samples,
+                           self._same_load, cfg.stuck_samples))
+        failing: list[tuple[p.Fault, int, int]] = []
         for fault, active, value, limit in checks:
-            if active and not found:
-                found = fault
-                if apply:
-                    self._fault(fault, value, limit)
-        return found
+            if active and not any(f == fault for f, _, _ in failing):
+                failing.append((fault, value, limit))
+        if apply:
+            self._faults(failing)
+        return functools.reduce(operator.or_, (f for f, _, _ in failing), p.Fault.NONE)
 
     # --- faults and state -----------------------------------------------------------------
 
     def _fault(self, fault: p.Fault, value: int, limit: int) -> None:
-        if fault & self.faults:
+        self._faults([(fault, value, limit)])
+
+    def _faults(self, found: list[tuple[p.Fault, int, int]]) -> None:
+        """Latch the new bits of a period (one FAULT frame each, in the order found), then
+        react once to all of them: a halt if any halts, else a controlled stop."""
+        fault = p.Fault.NONE
+        for bit, value, limit in found:
+            if not bit & self.faults:
+                self._latch(bit, value, limit)
+                fault |= bit
+        if not fault:
             return
-        self._latch(fault, value, limit)
-        if fault == p.Fault.FOLLOWING_ERROR:
+        if fault & p.Fault.FOLLOWING_ERROR:
             self.referenced = False  # the encoder may have missed counts: re-home
         if fault & HALTING_FAULTS:
-            self._velocity = 0.0
+            self._speed_q16 = 0
             self._discard_buffer()
             if self.state != p.State.FAULT:
                 self._set_state(p.State.FAULT, p.Reason.FAULT)
@@ -446,12 +485,13 @@ class McuModel:
     def _begin_stop(self, target: p.State, reason: p.Reason) -> None:
         self._discard_buffer()
         self._stop_target = target
-        self._pos = float(self.steps)
+        self._pos_q16, self._speed_q16 = self.steps << 16, self._last_move << 16
         self._set_state(p.State.STOPPING, reason)
 
     def _discard_buffer(self) -> None:
         self.points.clear()
         self.accepting = False
+        self.final_received = False
         self.expected_enc = p.NO_CHECK
 
     def _set_state(self, new: p.State, reason: p.Reason) -> None:
@@ -475,7 +515,7 @@ class McuModel:
 
     def _telemetry(self, t_us: int) -> p.Telemetry:
         flags = p.TelemetryFlag.NONE
-        if self._velocity and self.state in MOTION_STATES:
+        if self._moved:
             flags |= p.TelemetryFlag.MOVING
         if self.final_received:
             flags |= p.TelemetryFlag.FINAL_RECEIVED
@@ -493,3 +533,63 @@ class McuModel:
             self.boot_id, self.sample, t_us & 0xFFFFFFFF, self.steps, self.enc, self.load_raw,
             self.exec_index, len(self.points), int(self.faults), self.state, int(flags),
         )
+
+
+class ModelMcu:
+    """:class:`McuModel` behind the byte-level MCU interface of the rig emulator.
+
+    The interface :class:`hil.firmware.FirmwareMcu` (the C firmware) also has:
+    :meth:`receive` host bytes and :meth:`tick` once per period return the wire frames the
+    MCU sent (each ending in ``b"\\x00"``, its header seq counting every frame), plus the
+    rig's fault inputs. Attributes not defined here are the model's (``mcu.steps``).
+    """
+
+    def __init__(self, physics: RigPhysics, hw: RigHardware, seed: int) -> None:
+        self.model = McuModel(physics, hw, random.Random(seed))
+        self._decoder = p.FrameDecoder()
+        self._seq = 0
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self.model, name)
+
+    def _wire(self, messages: list[p.Message]) -> list[bytes]:
+        out = []
+        for msg in messages:
+            out.append(p.encode_message(msg, self._seq))
+            self._seq = (self._seq + 1) & 0xFFFF
+        return out
+
+    def receive(self, data: bytes, now: float) -> list[bytes]:
+        """Feed bytes from the host received at ``now`` (s); the frames the MCU sent."""
+        out: list[bytes] = []
+        for frame in self._decoder.feed(data):
+            out += self._wire(self.model.handle(frame, now))
+        return out
+
+    def tick(self, now: float) -> list[bytes]:
+        """One period at ``now`` (s): its FAULT/STATE frames, then its TELEMETRY."""
+        return self._wire(self.model.tick(now))
+
+    def reset(self) -> None:
+        """MCU reset: new boot id, no session, counts at 0."""
+        self.model.boot()
+
+    def link_lost(self) -> None:
+        """The host vanished (USB detach, DTR dropped): controlled stop, session ended."""
+        self.model.link_lost()
+
+    def press_stop(self) -> None:
+        """The operator's stop button: ESTOP."""
+        self.model.estop()
+
+    def force_spike(self, newtons: float, samples: int) -> None:
+        """Add ``newtons`` to the next ``samples`` load-cell readings."""
+        self.model.sensors.spike_n, self.model.sensors.spike_samples = newtons, samples
+
+    def stick_load(self, on: bool) -> None:
+        """Freeze (True) or free the load-cell reading."""
+        self.model.sensors.load_stuck = on
+
+    def stick_encoder(self, on: bool) -> None:
+        """Freeze (True) or free the encoder reading."""
+        self.model.sensors.enc_stuck = on

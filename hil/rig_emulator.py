@@ -1,9 +1,13 @@
 """Rig emulator: the MCU's side of the rig protocol on a pseudo-terminal, with fault injection.
 
-:class:`RigEmulator` opens a pty (``os.openpty``), runs :class:`~hil.mcu_model.McuModel`
-at the telemetry rate and speaks the protocol of docs/rig-protocol.md to whoever opens
-the pty's device path (``SerialLink(emulator.port)``). The mechanics are a pluggable
-:class:`~hil.mcu_model.RigPhysics`; :class:`FaultPlan` injects link and rig faults.
+:class:`RigEmulator` opens a pty (``os.openpty``), runs an MCU at the telemetry rate and
+speaks the protocol of docs/rig-protocol.md to whoever opens the pty's device path
+(``SerialLink(emulator.port)``). The MCU is the Python model
+(:class:`~hil.mcu_model.ModelMcu`, the default) or the C firmware's host build
+(:class:`~hil.firmware.FirmwareMcu`, ``firmware=True``): both take bytes and return wire
+frames, so the emulator's link faults and its log are the same for both. The mechanics
+are a pluggable :class:`~hil.mcu_model.RigPhysics` (the firmware's is the native FMU of a
+:class:`~hil.rig_physics.ClampPhysics`); :class:`FaultPlan` injects link and rig faults.
 Run it in a thread (:meth:`RigEmulator.start`) or in a process of its own
 (:func:`spawn_emulator`).
 """
@@ -23,7 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from hil import protocol as p
-from hil.mcu_model import McuModel, RigHardware, RigPhysics
+from hil.mcu_model import ModelMcu, RigHardware, RigPhysics
 from hil.realtime import set_realtime
 
 #: s behind schedule after which missed ticks are skipped, not caught up. Shorter lags (a
@@ -31,6 +35,9 @@ from hil.realtime import set_realtime
 #: count, so its timestamps and watchdogs do not see the emulator's own scheduling.
 RESYNC_AFTER = 1.0
 TX_BACKLOG_MAX = 16_384  # bytes queued for a host that does not read; further frames drop
+#: Periods a controlled stop may take after a disconnect before the emulator gives up on it
+#: (a stop from 50 mm/s at 1 m/s^2 takes 50).
+STOP_PERIODS_MAX = 10_000
 
 
 @dataclass(frozen=True)
@@ -96,25 +103,29 @@ class RigEmulator:
         faults: FaultPlan | None = None,
         *,
         record_telemetry: bool = False,
-        time_origin: float | None = None,
         realtime: bool = False,
+        firmware: bool = False,
     ) -> None:
-        """``time_origin``: monotonic time of t_us = 0 (default: the emulator's start).
-
-        With ``time_origin=0`` telemetry timestamps are CLOCK_MONOTONIC in µs, so a host
-        on the same machine can measure its latency exactly. ``realtime`` asks for
-        SCHED_FIFO scheduling of the serving thread, as a firmware's timer interrupt would
-        have (best effort: ignored without the permission).
+        """``realtime`` asks for SCHED_FIFO scheduling of the serving thread, as a
+        firmware's timer interrupt would have (best effort: ignored without the
+        permission). ``firmware``: the MCU is the C firmware's host build on the
+        simulated rig (``physics`` a :class:`~hil.rig_physics.ClampPhysics`), not the
+        Python model.
         """
         self.hw = hardware or RigHardware()
         self.faults = faults or FaultPlan()
         self._rng = random.Random(self.faults.seed)
-        self.mcu = McuModel(physics, self.hw, random.Random(self.faults.seed + 1))
+        if firmware:
+            from hil.firmware import FirmwareMcu
+
+            self.mcu: ModelMcu | FirmwareMcu = FirmwareMcu(physics, self.hw,
+                                                           self.faults.seed + 1)
+        else:
+            self.mcu = ModelMcu(physics, self.hw, self.faults.seed + 1)
         self.log = EmulatorLog()
         self._record = record_telemetry
         self._realtime = realtime
-        self._decoder = p.FrameDecoder()
-        self._tx_seq = 0
+        self._decoder = p.FrameDecoder()  # the host's frames, for the log
         # (release time, bytes, telemetry (boot_id, sample, state, intact) or None), in order
         self._backlog: list[tuple[float, bytes, tuple[int, int, int, bool] | None]] = []
         self._master = self._slave = -1
@@ -123,10 +134,10 @@ class RigEmulator:
         self._reconnect_at: float | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._t0 = time.monotonic()
-        self._origin = self._t0 if time_origin is None else time_origin
         self._run_tick: int | None = None  # tick of the first START
         self._tick = 0
+        self._start_seq: int | None = None  # seq of the last START received
+        self._recoveries: list[tuple[int, Callable[[bool], None]]] = []  # (tick, un-stick)
         self._pending = {
             name: at for name in ("stall", "disconnect", "reset", "force_spike", "stuck_load",
                                   "stuck_encoder", "estop")
@@ -212,21 +223,19 @@ class RigEmulator:
     def _on_tick(self, now: float, nominal: float) -> float:
         """One MCU period at its nominal time; returns the time the MCU hung (a stall).
 
-        t_us is the period's scheduled time, as a firmware's timer interrupt stamps it:
-        the emulator's own scheduling jitter is not the MCU's. A stall skips the periods
-        it hangs through, so it shows as a jump of t_us between consecutive samples.
+        The MCU stamps the period with its nominal time (since its boot), as a firmware's
+        timer interrupt does: the emulator's own scheduling jitter is not the MCU's. A
+        stall skips the periods it hangs through, so it shows as a jump of t_us between
+        consecutive samples.
         """
         hung = self._inject_scheduled(now)
         if self._master < 0:
             return hung
-        if hung:
-            nominal += hung
-            now = time.monotonic()
-        t_us = round((nominal - self._origin) * 1e6)
-        for msg in self.mcu.tick(nominal, t_us):
-            if isinstance(msg, p.Telemetry) and self._record:
-                self.log.sent_telemetry[(msg.boot_id, msg.sample)] = msg
-            self._send(msg)
+        for due, unstick in [r for r in self._recoveries if r[0] <= self._tick]:
+            self._recoveries.remove((due, unstick))
+            unstick(False)
+        for wire in self.mcu.tick(nominal + hung):
+            self._send(wire)
         self._tick += 1
         return hung
 
@@ -242,14 +251,12 @@ class RigEmulator:
         now = time.monotonic()
         for frame in self._decoder.feed(data):
             self.log.commands.append((now, _msg_type(frame.msg_type)))
-            if frame.msg_type == p.MsgType.START and self._run_tick is None:
-                self._run_tick = self._tick
-            replies = self.mcu.handle(frame, now)
             if frame.msg_type == p.MsgType.START:
-                self.log.run_starts += [(self.mcu.boot_id, r.sample) for r in replies
-                                        if isinstance(r, p.Ack) and r.result == p.Result.OK]
-            for reply in replies:
-                self._send(reply)
+                self._start_seq = frame.seq
+                if self._run_tick is None:
+                    self._run_tick = self._tick
+        for wire in self.mcu.receive(data, now):
+            self._send(wire)
 
     # --- fault injection ------------------------------------------------------------------
 
@@ -271,39 +278,44 @@ class RigEmulator:
         return self.faults.stall_for
 
     def _inject_estop(self) -> None:
-        self.mcu.estop()
+        self.mcu.press_stop()
 
     def _inject_disconnect(self) -> None:
         self._close_fds()
         self._backlog.clear()
         self.mcu.link_lost()
-        while self.mcu.state == p.State.STOPPING:  # the firmware completes its stop alone
-            self.mcu.tick(time.monotonic(), 0)
+        t = time.monotonic()
+        for _ in range(STOP_PERIODS_MAX):  # the firmware completes its stop alone
+            if self.mcu.state != p.State.STOPPING:
+                break
+            t += self.hw.period
+            self.mcu.tick(t)
+        else:
+            raise RuntimeError(f"the MCU did not come to a standstill in {STOP_PERIODS_MAX} "
+                               "periods after the link was lost")
         if self.faults.reconnect_after is not None:
             self._reconnect_at = time.monotonic() + self.faults.reconnect_after
 
     def _inject_reset(self) -> None:
-        self.mcu.boot()
+        self.mcu.reset()
         self._backlog.clear()
 
     def _inject_force_spike(self) -> None:
-        self.mcu.sensors.spike_n = self.faults.force_spike_n
-        self.mcu.sensors.spike_samples = self.faults.force_spike_samples
+        self.mcu.force_spike(self.faults.force_spike_n, self.faults.force_spike_samples)
 
     def _inject_stuck_load(self) -> None:
-        self.mcu.sensors.load_stuck = True
-        self._schedule_recovery("load_stuck")
+        self.mcu.stick_load(True)
+        self._schedule_recovery(self.mcu.stick_load)
 
     def _inject_stuck_encoder(self) -> None:
-        self.mcu.sensors.enc_stuck = True
-        self._schedule_recovery("enc_stuck")
+        self.mcu.stick_encoder(True)
+        self._schedule_recovery(self.mcu.stick_encoder)
 
-    def _schedule_recovery(self, attribute: str) -> None:
+    def _schedule_recovery(self, stick: Callable[[bool], None]) -> None:
+        """Free a stuck reading after FaultPlan.stuck_for, in the serving loop's time."""
         if self.faults.stuck_for is not None:
-            timer = threading.Timer(self.faults.stuck_for, setattr,
-                                    (self.mcu.sensors, attribute, False))
-            timer.daemon = True
-            timer.start()
+            self._recoveries.append((self._tick + round(self.faults.stuck_for
+                                                        / self.hw.period), stick))
 
     def _noisy(self) -> bool:
         """Whether the per-frame link faults still apply (FaultPlan.noise_until)."""
@@ -324,13 +336,17 @@ class RigEmulator:
 
     # --- transmit -------------------------------------------------------------------------
 
-    def _send(self, msg: p.Message) -> None:
-        original = p.encode_message(msg, self._tx_seq)
-        self._tx_seq = (self._tx_seq + 1) & 0xFFFF
+    def _send(self, original: bytes) -> None:
+        """Queue one wire frame of the MCU's, through the fault plan's link faults."""
         self.log.tx_frames += 1
         if sum(len(b) for _, b, _ in self._backlog) > TX_BACKLOG_MAX:
             self.log.tx_dropped += 1
             return
+        msg = _mcu_message(original)
+        if isinstance(msg, p.Telemetry) and self._record:
+            self.log.sent_telemetry[(msg.boot_id, msg.sample)] = msg
+        if isinstance(msg, p.Ack) and msg.result == p.Result.OK and self._acks_start(msg):
+            self.log.run_starts.append((self.mcu.boot_id, msg.sample))
         f, rng, now = self.faults, self._rng, time.monotonic()
         if not self._noisy():
             f = CLEAN_LINK
@@ -352,6 +368,10 @@ class RigEmulator:
         if rng.random() < f.duplicate:
             self._backlog.append((now, wire, None))
 
+    def _acks_start(self, ack: p.Ack) -> bool:
+        """Whether ``ack`` answers the last START the host sent."""
+        return ack.acked_seq == self._start_seq and ack.state == p.State.RUNNING
+
     def _next_release(self) -> float:
         return self._backlog[0][0] if self._backlog else float("inf")
 
@@ -372,6 +392,14 @@ class RigEmulator:
             self._backlog.pop(0)
             if tel is not None:
                 self.log.written.append(tel)
+
+
+def _mcu_message(wire: bytes) -> p.Message | None:
+    """The message of one of the MCU's wire frames (None if it is not one we know)."""
+    try:
+        return p.parse_message(p.decode_frame(wire[:-1]))
+    except p.ProtocolError:
+        return None
 
 
 def _msg_type(code: int) -> p.MsgType | int:
@@ -425,10 +453,9 @@ class EmulatorProcess:
 
 
 def _child(physics: RigPhysics, hardware: RigHardware | None, faults: FaultPlan | None,
-           time_origin: float | None, realtime: bool, ports: mp.connection.Connection,
+           firmware: bool, realtime: bool, ports: mp.connection.Connection,
            stop: mp.synchronize.Event) -> None:
-    emulator = RigEmulator(physics, hardware, faults, time_origin=time_origin,
-                           realtime=realtime)
+    emulator = RigEmulator(physics, hardware, faults, firmware=firmware, realtime=realtime)
     emulator.on_port = ports.send
     ports.send(emulator.start())
     stop.wait()
@@ -441,15 +468,16 @@ def spawn_emulator(
     hardware: RigHardware | None = None,
     faults: FaultPlan | None = None,
     *,
-    time_origin: float | None = None,
+    firmware: bool = False,
     realtime: bool = False,
     timeout: float = 30.0,
 ) -> EmulatorProcess:
-    """Start an emulator in a new (spawned) process; ``physics`` must be picklable."""
+    """Start an emulator in a new (spawned) process; ``physics`` must be picklable.
+    ``firmware``: the C firmware's host build is the MCU (:class:`RigEmulator`)."""
     ctx = mp.get_context("spawn")
     here, there = ctx.Pipe()
     stop = ctx.Event()
-    args = (physics, hardware, faults, time_origin, realtime, there, stop)
+    args = (physics, hardware, faults, firmware, realtime, there, stop)
     proc = ctx.Process(target=_child, args=args, name="rig-emulator", daemon=True)
     proc.start()
     if not here.poll(timeout):
