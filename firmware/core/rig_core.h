@@ -16,6 +16,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "rig_frame.h"
 #include "rig_hal.h"
 
 #define RIG_PROTO_MAJOR 1u
@@ -33,6 +34,7 @@
 #define RIG_MAX_ENCODED 258u      /* COBS of the largest body, without the delimiter */
 #define RIG_TX_FIFO_BYTES 4096u   /* power of two */
 #define RIG_NO_CHECK INT32_MIN    /* enc_expected: do not check the following error */
+#define RIG_MAX_REPLY 55u         /* HELLO_REPLY, the longest reply */
 
 /* The load-cell calibration stored in non-volatile memory (protocol section 3). */
 typedef struct {
@@ -57,38 +59,91 @@ typedef struct {
 
 /* Counters a board or a test may read; the core never resets them except at boot. */
 typedef struct {
-    uint32_t frames_ok, frames_bad, rx_overflows, tx_dropped;
+    uint32_t frames_ok;   /* frames with a good CRC */
+    uint32_t frames_bad;  /* invalid COBS, body < 6 or > 256 bytes, bad CRC: dropped */
+    uint32_t rx_overflows; /* runs of more than 258 bytes without a delimiter: discarded */
+    uint32_t tx_dropped;  /* frames that did not fit whole in the tx FIFO: dropped whole */
 } rig_stats;
 
+/* States (section 9), results (section 5, ACK), fault bits (section 8), STATE reasons,
+ * telemetry flags, message types (section 4). */
+enum {
+    RIG_STATE_BOOT = 0, RIG_STATE_IDLE = 1, RIG_STATE_RUNNING = 2, RIG_STATE_STOPPING = 3,
+    RIG_STATE_FAULT = 4, RIG_STATE_ESTOP = 5
+};
+enum {
+    RIG_OK = 0, RIG_BAD_STATE = 1, RIG_BAD_LENGTH = 2, RIG_BAD_VALUE = 3, RIG_NO_SPACE = 4,
+    RIG_SEQUENCE_GAP = 5, RIG_OUT_OF_LIMITS = 6, RIG_NO_SESSION = 7, RIG_UNKNOWN_TYPE = 8,
+    RIG_VERSION_MISMATCH = 9, RIG_FAULT_ACTIVE = 10, RIG_EMPTY = 11, RIG_STALE = 12
+};
+enum {
+    RIG_F_FORCE_LIMIT = 0x0001, RIG_F_TRAVEL_LIMIT = 0x0002, RIG_F_FOLLOWING_ERROR = 0x0004,
+    RIG_F_BUFFER_UNDERRUN = 0x0008, RIG_F_LOAD_SATURATED = 0x0010, RIG_F_LOAD_STUCK = 0x0020,
+    RIG_F_HEARTBEAT_LOST = 0x0040, RIG_F_ESTOP = 0x0080, RIG_F_DRIVER = 0x0100,
+    RIG_F_INTERNAL = 0x0200
+};
+enum {
+    RIG_REASON_COMMAND = 0, RIG_REASON_RUN_COMPLETE = 1, RIG_REASON_FAULT = 2,
+    RIG_REASON_STOP_COMPLETE = 3, RIG_REASON_LINK_LOST = 4
+};
+enum {
+    RIG_TF_MOVING = 0x01, RIG_TF_FINAL_RECEIVED = 0x02, RIG_TF_LOAD_SATURATED = 0x04,
+    RIG_TF_SESSION = 0x08, RIG_TF_DRIVER_ENABLED = 0x10, RIG_TF_HOME_SWITCH = 0x20,
+    RIG_TF_REFERENCED = 0x40
+};
+enum {
+    RIG_MSG_HELLO = 0x01, RIG_MSG_HEARTBEAT = 0x02, RIG_MSG_CONFIG = 0x03,
+    RIG_MSG_TRAJ_CHUNK = 0x04, RIG_MSG_START = 0x05, RIG_MSG_STOP = 0x06,
+    RIG_MSG_ESTOP = 0x07, RIG_MSG_CLEAR_FAULT = 0x08, RIG_MSG_SET_POSITION = 0x09,
+    RIG_MSG_BYE = 0x0A, RIG_MSG_ACK = 0x80, RIG_MSG_HELLO_REPLY = 0x81,
+    RIG_MSG_TELEMETRY = 0x82, RIG_MSG_FAULT = 0x83, RIG_MSG_STATE = 0x84
+};
+#define RIG_CHUNK_FINAL 0x01u
+
+#define RIG_EVENT_SLOTS 8u   /* FAULT/STATE frames a command may cause, sent after its reply */
+#define RIG_EVENT_MAX 15u    /* largest event payload (FAULT) */
+
+/* A FAULT or STATE frame held back until the reply of the command that caused it is sent
+ * (the reply comes first, as in hil/mcu_model.py). */
+typedef struct {
+    uint8_t type, len;
+    uint8_t payload[RIG_EVENT_MAX];
+} rig_event;
+
 /* The whole MCU. Fields are the core's; boards read them only through the functions below
- * (tests may read them). */
+ * (tests may read them; firmware/host reads boot_id, state, steps, enc, load_raw). */
 typedef struct {
     /* receiver */
-    uint8_t rx_buf[RIG_MAX_ENCODED];
-    uint16_t rx_len;
-    uint8_t rx_overflow;
-    /* transmitter: a FIFO of whole frames */
+    rig_frame_rx rx;
+    rig_frame frame; /* the frame being executed (kept here, not on a small MCU stack) */
+    /* transmitter: a FIFO of whole frames, free-running indices */
     uint8_t tx_fifo[RIG_TX_FIFO_BYTES];
     uint32_t tx_head, tx_tail;
     uint16_t tx_seq;
+    rig_event events[RIG_EVENT_SLOTS];
+    uint8_t event_count, events_deferred;
     /* session, state, faults */
     uint32_t boot_id;
-    uint8_t state, session, referenced, driver_enabled;
+    uint8_t state, session, referenced;
+    uint8_t driver_enabled, driver_applied; /* applied: what hal_driver_enable last got */
     uint16_t faults;
     rig_calibration stored;
     rig_config cfg;
-    int32_t last_seq; /* -1: none */
-    uint8_t last_reply[12 + 43];
+    int64_t stop_dv_q16; /* stop deceleration per period, Q16 steps/period (from cfg) */
+    uint8_t have_last_seq;
+    uint16_t last_seq;
+    uint8_t last_reply[RIG_MAX_REPLY];
     uint8_t last_reply_len, last_reply_type;
     /* time */
     uint32_t sample, t_us, last_rx_us;
-    uint8_t rx_since_tick;
-    /* counts: core = hardware + offset */
-    int32_t steps, enc, load_raw, prev_load_raw;
+    /* counts: steps = hw_steps + steps_offset, enc = hw_enc + enc_offset (mod 2^32) */
+    int32_t steps, enc, load_raw;
+    int32_t hw_steps, hw_enc;
     int32_t steps_offset, enc_offset;
-    int32_t hw_steps;
-    uint8_t home_switch, moving;
-    uint16_t same_load;
+    int32_t prev_sample_steps; /* steps of the previous sample: MOVING */
+    uint8_t have_reading, home_switch, stop_input, driver_alarm;
+    uint8_t halt_pending; /* ESTOP from rig_rx: hal_step_halt at the next tick */
+    uint32_t same_load;   /* consecutive samples with a bit-identical load_raw */
     /* trajectory ring */
     rig_point points[RIG_BUFFER_CAPACITY];
     uint32_t pt_head, pt_count;
@@ -97,8 +152,7 @@ typedef struct {
     int32_t expected_enc;
     /* controlled stop, Q16 fixed point (1/65536 step) */
     int64_t stop_pos_q16;
-    int32_t stop_speed_q16; /* signed steps per period << 16 */
-    int32_t last_delta;
+    int64_t vel_q16; /* signed steps per period << 16: the last period's move */
     uint8_t stop_target;
     rig_stats stats;
 } rig_mcu;
@@ -124,5 +178,9 @@ size_t rig_tx_take(rig_mcu *m, uint8_t *out, size_t max);
 
 /* Bytes waiting in the transmit FIFO. */
 size_t rig_tx_pending(const rig_mcu *m);
+
+/* Q16 stop deceleration per period for a CONFIG's decel_steps_s2 (SPEC-CHANGES 11):
+ * round(decel * 1e-6 * 65536), half to even as Python's round(), clamped to [0, 2^62]. */
+int64_t rig_stop_dv_q16(float decel_steps_s2);
 
 #endif
