@@ -17,6 +17,7 @@ import re
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 
 from hil.mcu_model import RigHardware
@@ -28,8 +29,8 @@ CORE_DIR, SIM_DIR, HOST_DIR = FIRMWARE / "core", FIRMWARE / "sim", FIRMWARE / "h
 BUILD_DIR = ROOT / "build" / "firmware"
 LIBRARY = "librigfw.so"
 #: Flags of the firmware's own C (core, sim, host glue); the FMU's C gets toggle.native_fmu's.
-FIRMWARE_CFLAGS = ("-std=c11", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror",
-                   "-fvisibility=hidden")
+FIRMWARE_CFLAGS = ("-std=c11", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror", "-Wconversion",
+                   "-Wshadow", "-fvisibility=hidden")  # core.mk's CORE_CFLAGS and more
 #: The library exports the rigfw_* API only (not the core's, the HAL's or the FMU's names).
 VERSION_SCRIPT = "{ global: rigfw_*; local: *; };\n"
 #: The firmware's compile-time constants (rig_core.h) that a RigHardware must match.
@@ -96,17 +97,18 @@ def build_host_firmware(preset: str = "chang2021") -> Path:
         gen.mkdir()
         fmu_sources, _ = generate_sources(gen, preset)
         digest = hashlib.sha256()
+        headers = fmi2_headers()
         inputs = [*ours, *sorted(p for d in (CORE_DIR, SIM_DIR, HOST_DIR)
                                  for p in d.iterdir() if p.suffix in (".h", ".mk")),
-                  *sorted(gen.iterdir())]
+                  *sorted(gen.iterdir()), *sorted(headers.glob("fmi2*.h"))]
         for path in inputs:
-            digest.update(f"{path.name}\0".encode() + path.read_bytes() + b"\0")
+            name = path.name if path.parent in (gen, headers) else path.relative_to(ROOT)
+            digest.update(f"{name}\0".encode() + path.read_bytes() + b"\0")
         digest.update(repr((FIRMWARE_CFLAGS, CFLAGS, GENERATED_CFLAGS)).encode())
         out = BUILD_DIR / f"host-{_safe_name(preset)}-{digest.hexdigest()[:12]}"
         if (out / LIBRARY).is_file():
             return out / LIBRARY
-        headers = str(fmi2_headers())
-        includes = ["-I", str(CORE_DIR), "-I", str(SIM_DIR), "-I", str(gen), "-I", headers]
+        includes = ["-I", str(CORE_DIR), "-I", str(SIM_DIR), "-I", str(gen), "-I", str(headers)]
         objects = []
         for i, src in enumerate([*ours, *(gen / name for name in fmu_sources)]):
             if src.parent == gen:
@@ -119,6 +121,7 @@ def build_host_firmware(preset: str = "chang2021") -> Path:
         (work / "exports.map").write_text(VERSION_SCRIPT)
         _run(["gcc", "-shared", "-Wl,-z,defs", "-Wl,--version-script=exports.map", *objects,
               "-o", LIBRARY, "-lm"], work)
+        work.chmod(0o755)
         try:
             work.rename(out)  # atomic: a concurrent build of the same tree keeps its own
         except OSError:
@@ -187,7 +190,11 @@ class FirmwareMcu:
     """
 
     def __init__(self, physics: ClampPhysics, hw: RigHardware, seed: int,
-                 library: Path | None = None) -> None:
+                 library: Path | None = None,
+                 parameters: Mapping[str, float] | None = None) -> None:
+        """``library``: a built librigfw.so (default: :func:`build_host_firmware` of the
+        physics' preset); ``parameters``: FMU start values beyond or replacing those of
+        ``physics``. ValueError naming a parameter the FMU refuses."""
         for name, value in CORE_CONSTANTS.items():
             if getattr(hw, name) != value:
                 raise ValueError(f"RigHardware.{name} = {getattr(hw, name)!r}: the firmware "
@@ -199,7 +206,7 @@ class FirmwareMcu:
         built = Path(library) if library is not None else build_host_firmware(physics.preset)
         self._lib = self._load_private(built)
         self._declare()
-        self.parameters = fmu_start_values(physics, hw.x_origin)
+        self.parameters = {**fmu_start_values(physics, hw.x_origin), **(parameters or {})}
         self._hw = SimRigHw(
             x_origin=hw.x_origin, home_x=hw.x_origin if hw.home_x is None else hw.home_x,
             load_gain_n=hw.load_gain_n, load_noise_n=hw.load_noise_n, period_s=physics.period,
