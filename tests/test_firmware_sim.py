@@ -236,7 +236,8 @@ def test_a_failed_build_names_gcc_and_its_complaint(monkeypatch: pytest.MonkeyPa
     import hil.firmware as firmware
 
     before = set(firmware.BUILD_DIR.iterdir())
-    monkeypatch.setattr(firmware, "FIRMWARE_CFLAGS", (*firmware.FIRMWARE_CFLAGS, "-fno-such-option"))
+    bad = (*firmware.FIRMWARE_CFLAGS, "-fno-such-option")
+    monkeypatch.setattr(firmware, "FIRMWARE_CFLAGS", bad)
     with pytest.raises(RuntimeError, match=r"(?s)building the rig firmware failed:\n.*gcc"
                                            r".*-fno-such-option"):
         build_host_firmware("chang2021")
