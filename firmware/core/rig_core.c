@@ -192,12 +192,10 @@ static void begin_stop(rig_mcu *m, uint8_t target, uint8_t reason) {
     set_state(m, RIG_STATE_STOPPING, reason);
 }
 
-/* Latch a fault bit (once) and react: halt, or a controlled stop (section 8). */
-static void fault(rig_mcu *m, uint16_t bit, int32_t value, int32_t limit) {
-    if (m->faults & bit) return;
-    latch(m, bit, value, limit);
-    if (bit == RIG_F_FOLLOWING_ERROR) m->referenced = 0; /* the encoder may have slipped */
-    if (bit & HALTING_FAULTS) {
+/* The reaction to newly latched bits (section 8): halt, or a controlled stop. */
+static void react(rig_mcu *m, uint16_t bits) {
+    if (bits & RIG_F_FOLLOWING_ERROR) m->referenced = 0; /* the encoder may have slipped */
+    if (bits & HALTING_FAULTS) {
         m->vel_q16 = 0;
         m->halt_pending = 1;
         discard_buffer(m);
@@ -213,6 +211,13 @@ static void fault(rig_mcu *m, uint16_t bit, int32_t value, int32_t limit) {
         /* as the model: at rest the buffer is kept (CLEAR_FAULT clears it) */
         set_state(m, RIG_STATE_FAULT, RIG_REASON_FAULT);
     }
+}
+
+/* Latch one fault bit (once: a latched bit sends nothing) and react. */
+static void fault(rig_mcu *m, uint16_t bit, int32_t value, int32_t limit) {
+    if (m->faults & bit) return;
+    latch(m, bit, value, limit);
+    react(m, bit);
 }
 
 /* ESTOP command or stop input: halt, driver off, ESTOP. The FAULT frame is sent when the
@@ -231,57 +236,64 @@ static void restore_calibration(rig_mcu *m) {
     m->cfg.load_gain_n = m->stored.load_gain_n;
 }
 
-/* The checks of section 8 on the present reading, in bit order (SPEC-CHANGES 5). Returns
- * the bits whose condition holds; latches them when apply. FOLLOWING_ERROR and LOAD_STUCK
- * only in RUNNING (decided before any latch changes the state). */
+/* The checks of section 8 on the present reading, in bit order (SPEC-CHANGES 5): every
+ * failing check latches; each new bit sends its FAULT frame (all with the period's state),
+ * and only then the reaction runs, so the period's STATE frame follows every FAULT frame.
+ * FOLLOWING_ERROR and LOAD_STUCK only in RUNNING. Returns the bits whose condition holds;
+ * latches and reacts only when apply (CLEAR_FAULT asks with apply false). */
 static uint16_t check_sensors(rig_mcu *m, bool apply) {
     const rig_config *c = &m->cfg;
     bool running = m->state == RIG_STATE_RUNNING;
-    uint16_t found = 0;
+    uint16_t found = 0, fresh = 0;
+    int32_t value[5] = {0, 0, 0, 0, 0}, limit[5] = {0, 0, 0, 0, 0};
+    static const uint16_t bits[5] = {RIG_F_FORCE_LIMIT, RIG_F_TRAVEL_LIMIT,
+                                     RIG_F_FOLLOWING_ERROR, RIG_F_LOAD_SATURATED,
+                                     RIG_F_LOAD_STUCK};
+    /* force in single precision: (load_raw - load_offset) * load_gain_n */
     float force = (float)((int64_t)m->load_raw - (int64_t)c->load_offset) * c->load_gain_n;
     float mag = force < 0.0f ? -force : force;
     if (mag > c->force_limit_n) {
         found |= RIG_F_FORCE_LIMIT;
-        if (apply) {
-            fault(m, RIG_F_FORCE_LIMIT, round_half_even_f(force),
-                  round_half_even_f(c->force_limit_n));
-        }
+        value[0] = round_half_even_f(force);
+        limit[0] = round_half_even_f(c->force_limit_n);
     }
-    {
-        bool hit = true;
-        int32_t value = 0, limit = 0;
-        if (m->steps < c->steps_min) {
-            value = m->steps, limit = c->steps_min;
-        } else if (m->steps > c->steps_max) {
-            value = m->steps, limit = c->steps_max;
-        } else if (m->enc < c->enc_min) {
-            value = m->enc, limit = c->enc_min;
-        } else if (m->enc > c->enc_max) {
-            value = m->enc, limit = c->enc_max;
-        } else {
-            hit = false;
-        }
-        if (hit) {
-            found |= RIG_F_TRAVEL_LIMIT;
-            if (apply) fault(m, RIG_F_TRAVEL_LIMIT, value, limit);
-        }
+    /* travel: steps before enc; the bound crossed is the limit (SPEC-CHANGES 4) */
+    if (m->steps < c->steps_min || m->steps > c->steps_max) {
+        found |= RIG_F_TRAVEL_LIMIT;
+        value[1] = m->steps;
+        limit[1] = m->steps < c->steps_min ? c->steps_min : c->steps_max;
+    } else if (m->enc < c->enc_min || m->enc > c->enc_max) {
+        found |= RIG_F_TRAVEL_LIMIT;
+        value[1] = m->enc;
+        limit[1] = m->enc < c->enc_min ? c->enc_min : c->enc_max;
     }
     if (running && m->expected_enc != RIG_NO_CHECK) {
         int64_t err = (int64_t)m->enc - (int64_t)m->expected_enc;
         int64_t mag_err = err < 0 ? -err : err;
         if (mag_err > (int64_t)c->following_error_counts) {
             found |= RIG_F_FOLLOWING_ERROR;
-            if (apply) fault(m, RIG_F_FOLLOWING_ERROR, clip_i64(err), c->following_error_counts);
+            value[2] = clip_i64(err);
+            limit[2] = c->following_error_counts;
         }
     }
     if (m->load_raw <= RIG_ADC_MIN || m->load_raw >= RIG_ADC_MAX) {
         found |= RIG_F_LOAD_SATURATED;
-        if (apply) fault(m, RIG_F_LOAD_SATURATED, m->load_raw, (int32_t)RIG_ADC_MAX);
+        value[3] = m->load_raw;
+        limit[3] = (int32_t)RIG_ADC_MAX; /* adc_max for either rail (section 5) */
     }
     if (running && m->same_load >= (uint32_t)c->stuck_samples) {
         found |= RIG_F_LOAD_STUCK;
-        if (apply) fault(m, RIG_F_LOAD_STUCK, clip_u32(m->same_load), (int32_t)c->stuck_samples);
+        value[4] = clip_u32(m->same_load);
+        limit[4] = (int32_t)c->stuck_samples;
     }
+    if (!apply) return found;
+    for (unsigned i = 0; i < 5u; i++) {
+        if ((found & bits[i]) && !(m->faults & bits[i])) {
+            latch(m, bits[i], value[i], limit[i]);
+            fresh = (uint16_t)(fresh | bits[i]);
+        }
+    }
+    if (fresh) react(m, fresh);
     return found;
 }
 
