@@ -295,9 +295,11 @@ def emulate(args: argparse.Namespace) -> int:
                        disconnect_at=args.disconnect_at, seed=args.seed,
                        reconnect_after=None if args.disconnect_at is None else 0.5)
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
+    hardware = RigHardware(x_origin=setup.stroke[0])
+    if args.qemu:
+        return _emulate_qemu(args, setup, hardware)
     # an MCU's timer interrupt is hard real time: SCHED_FIFO when the OS permits it
-    emulator = RigEmulator(physics, RigHardware(x_origin=setup.stroke[0]), faults,
-                           realtime=True)
+    emulator = RigEmulator(physics, hardware, faults, realtime=True, firmware=args.firmware)
     print(emulator.open(), flush=True)
     emulator.on_port = lambda port: print(port, flush=True)  # after a re-plugged disconnect
     guard = SignalGuard()
@@ -308,6 +310,31 @@ def emulate(args: argparse.Namespace) -> int:
         pass
     finally:
         emulator.close()
+    return 0
+
+
+def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
+    """The firmware's Cortex-M build in QEMU: print its pty, serve until a signal."""
+    from hil.firmware_qemu import QemuRig, build_qemu_image, qemu_available
+
+    if not args.firmware:
+        raise ValueError("--qemu runs the firmware: give --firmware too")
+    injected = [n for n in ("drop_byte", "flip_bit", "junk", "stall_at", "reset_at",
+                            "estop_at", "disconnect_at") if getattr(args, n)]
+    if injected:
+        raise ValueError(f"--qemu injects no faults: drop {', '.join(injected)}")
+    missing = qemu_available()
+    if missing:
+        raise OSError(f"--qemu needs the Debian packages {' '.join(missing)} "
+                      f"(apt-get install {' '.join(missing)})")
+    image = build_qemu_image(setup, hardware, args.seed)
+    guard = SignalGuard()
+    try:
+        with guard, QemuRig(image) as rig:
+            print(rig.port, flush=True)
+            rig.wait()
+    except Interrupted:
+        pass
     return 0
 
 

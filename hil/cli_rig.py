@@ -50,6 +50,15 @@ def add_emulator_options(e: argparse.ArgumentParser) -> None:
         e.add_argument(f"--{name}-at", type=TIME, default=None, dest=f"{name}_at",
                        help=f"fault: {what}, s after the first START (default: never)")
     e.add_argument("--seed", type=int, default=1, help="seed of the injected faults")
+    e.add_argument("--firmware", action="store_true",
+                   help="the MCU is the C firmware (firmware/), built for this machine, on "
+                        "the simulated rig whose physics is the native FMU (default: the "
+                        "Python MCU model, hil/mcu_model.py)")
+    e.add_argument("--qemu", action="store_true",
+                   help="with --firmware: the Cortex-M build of the firmware in "
+                        "qemu-system-arm (netduinoplus2), its UART on a pty; no fault "
+                        "injection (needs gcc-arm-none-eabi, libnewlib-arm-none-eabi, "
+                        "qemu-system-arm)")
 
 
 def add_parser(subparsers: Any) -> None:

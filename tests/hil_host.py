@@ -27,10 +27,12 @@ X_OPEN = RigSetup().stroke[0]
 SHORT_RUN = ("--speed", "40e-3", "--cycles", "1", "--quiet")
 
 
-def spawn(faults: FaultPlan | None = None, delta_r8: float = 0.0) -> EmulatorProcess:
-    """The emulated rig of chang2021 in its own SCHED_FIFO process."""
+def spawn(faults: FaultPlan | None = None, delta_r8: float = 0.0,
+          firmware: bool = False) -> EmulatorProcess:
+    """The emulated rig of chang2021 in its own SCHED_FIFO process; ``firmware``: its MCU
+    is the C firmware's host build instead of the Python model."""
     return spawn_emulator(ClampPhysics("chang2021", delta_r8), RigHardware(x_origin=X_OPEN),
-                          faults, realtime=True)
+                          faults, realtime=True, firmware=firmware)
 
 
 class Host:
