@@ -19,11 +19,17 @@ void hal_step(int32_t delta) {
     fake.hw_steps = (int32_t)((uint32_t)fake.hw_steps + (uint32_t)delta);
 }
 
+/* Reports min(halt_return, |last delta|) pulses of the last hal_step as not emitted, with
+ * that step's sign (a real step generator cannot have more left than it was given). */
 int32_t hal_step_halt(void) {
     fake.halts++;
-    int32_t r = fake.halt_return;
+    int32_t left = fake.halt_return < 0 ? 0 : fake.halt_return;
+    int32_t mag = fake.last_delta < 0 ? -fake.last_delta : fake.last_delta;
+    if (left > mag) left = mag;
+    int32_t r = fake.last_delta < 0 ? -left : left;
     fake.hw_steps = (int32_t)((uint32_t)fake.hw_steps - (uint32_t)r);
     fake.halt_return = 0;
+    fake.last_delta = 0; /* what is left of that period's output is gone */
     return r;
 }
 
