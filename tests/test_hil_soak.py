@@ -7,6 +7,8 @@ which prints the telemetry arrival jitter over all runs. Every run must complete
 abort, no link error, every cycle; and the emulated rig's run is the simulated rig's
 (``hil run``, the README's first command) to the encoder's resolution and the load cell's
 noise: the recipe's emulator clamps the mold the default job plans.
+``HIL_SOAK_FIRMWARE=1`` runs the recipe with ``hil emulate --firmware`` (the C firmware's
+host build as the MCU).
 """
 
 from __future__ import annotations
@@ -21,13 +23,14 @@ import pytest
 from hil_host import hil
 
 RUNS = int(os.environ.get("HIL_SOAK_RUNS", "1"))
+FIRMWARE = ["--firmware"] if os.environ.get("HIL_SOAK_FIRMWARE") == "1" else []
 
 
 def test_readme_hil_recipe_on_a_loaded_machine(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)  # `hil run` writes runs/<time> here, as for a user
     hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     emulate = subprocess.Popen([sys.executable, "-m", "hil.cli", "emulate",
-                                "--x-contact", "planned"],
+                                "--x-contact", "planned", *FIRMWARE],
                                stdout=subprocess.PIPE, text=True)
     try:
         port = emulate.stdout.readline().strip()
