@@ -249,8 +249,12 @@ static uint16_t check_sensors(rig_mcu *m, bool apply) {
     static const uint16_t bits[5] = {RIG_F_FORCE_LIMIT, RIG_F_TRAVEL_LIMIT,
                                      RIG_F_FOLLOWING_ERROR, RIG_F_LOAD_SATURATED,
                                      RIG_F_LOAD_STUCK};
-    /* force in single precision: (load_raw - load_offset) * load_gain_n */
-    float force = (float)((int64_t)m->load_raw - (int64_t)c->load_offset) * c->load_gain_n;
+    /* force in single precision: (load_raw - load_offset) * load_gain_n. The difference is
+     * exact in int64; converted from int32 when it fits (one VCVT on the M4F; the same
+     * rounding as the int64 conversion, which libgcc does in software). */
+    int64_t diff = (int64_t)m->load_raw - (int64_t)c->load_offset;
+    float fdiff = (diff >= INT32_MIN && diff <= INT32_MAX) ? (float)(int32_t)diff : (float)diff;
+    float force = fdiff * c->load_gain_n;
     float mag = force < 0.0f ? -force : force;
     if (mag > c->force_limit_n) {
         found |= RIG_F_FORCE_LIMIT;
