@@ -11,6 +11,23 @@
  * int64 so nothing overflows; wrapping u32 sums (offsets, time) are done in uint32_t. The
  * force check is single precision (the target's FPU). No heap, no libc but memcpy/memset,
  * no function pointers: dispatch is a switch on the (checked) type byte.
+ *
+ * Choices where the spec and the model are silent or disagree without a SPEC-CHANGES entry
+ * (each is also commented where it is made):
+ *  - ESTOP (command or stop input) sends a FAULT frame only when its bit is new (section 8);
+ *    the model's estop() sends one for every ESTOP.
+ *  - The stop input acts in every state, BOOT included (as the model's injected estop());
+ *    the driver alarm latches DRIVER in every state but BOOT and keeps ESTOP as the state.
+ *    CLEAR_FAULT's "present condition" list is section 8's (not the stop input or alarm).
+ *  - All FAULT frames of a period's checks carry the period's state and precede its STATE
+ *    frame (SPEC-CHANGES 5: "before the period's STATE").
+ *  - A halting fault found after the period's hal_step calls hal_step_halt() and the count
+ *    not emitted is taken off `steps` before the telemetry (the count actually output).
+ *  - A dropped frame (tx FIFO full) still uses its MCU seq, so the host sees the gap.
+ *  - Every accepted HELLO restores the stored calibration (SPEC-CHANGES 7).
+ *  - `steps` count from the boot position (the core's own output); `enc` from the first
+ *    reading after boot. hal_driver_enable(false) is called at the first tick (the flag
+ *    DRIVER_ENABLED is clear from boot).
  */
 #include "rig_core.h"
 
