@@ -24,7 +24,7 @@ from hil.experiment import (
     profile_cycles,
     reciprocating_trajectory,
 )
-from hil.interrupts import Interrupted, SignalGuard
+from hil.interrupts import Interrupted, SignalGuard, exit_cleanly_on_signals
 from hil.recording import RecordingError, RunMeta, RunRecorder
 from hil.run_settings import (
     BYTES_PER_SAMPLE,
@@ -384,6 +384,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``hil`` script."""
+    exit_cleanly_on_signals()  # from here a signal unwinds (hil/__init__.py: at once before)
     parser = build_parser()
     args = parser.parse_args(join_negative_numbers(
         sys.argv[1:] if argv is None else list(argv)))

@@ -6,13 +6,32 @@ planning would be forgotten and the rig would then move. :class:`SignalGuard` ra
 :meth:`SignalGuard.check` raises it again at the next safe point even when a library
 swallowed the first. Later signals while the run is being stopped and recorded do not
 interrupt that cleanup; they only print that it is under way.
+
+An exception raised by a signal handler in the middle of an import can be lost or turned
+into another: numpy's C extension imports datetime from C, which turns it into "ImportError:
+PyCapsule_Import could not import module 'datetime'", and some imports clear it and carry
+on. So no handler here raises inside an import (casadi, fmpy, matplotlib are imported
+lazily, during a run): the signal is noted and delivered again, every REDELIVER s, until the
+import is over.
+
+The ``hil`` process gets its handlers from its first line (hil/__init__.py, before
+hil.cli's heavy imports): :func:`install_exit_handlers` ends it at once with one line and
+130/143 while it starts (nothing is open yet); from :func:`hil.cli.main` on,
+:func:`exit_cleanly_on_signals` raises SystemExit instead, so ``with`` blocks close what
+they opened (a rig's session); ``hil run`` then replaces both with a :class:`SignalGuard`.
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
+import threading
 from types import FrameType, TracebackType
+
+#: Interval at which a signal that arrived inside an import is delivered again, s.
+REDELIVER = 0.005
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class Interrupted(BaseException):  # noqa: N818 - a signal, like KeyboardInterrupt
@@ -28,20 +47,54 @@ class Interrupted(BaseException):  # noqa: N818 - a signal, like KeyboardInterru
         return 128 + self.signum
 
 
+def in_import(frame: FrameType | None) -> bool:
+    """The main thread, interrupted at ``frame``, is importing a module (an exception raised
+    there may be swallowed or turned into an ImportError by the C code that imports)."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def redeliver(signum: int, still_pending: object) -> None:
+    """Send ``signum`` to the main thread again after REDELIVER s if ``still_pending()``."""
+    def again() -> None:
+        if still_pending():
+            signal.pthread_kill(threading.main_thread().ident, signum)
+    timer = threading.Timer(REDELIVER, again)
+    timer.daemon = True
+    timer.start()
+
+
 class SignalGuard:
     """Context manager: SIGINT/SIGTERM -> :class:`Interrupted`; restores the handlers."""
 
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    SIGNALS = SIGNALS
 
     def __init__(self) -> None:
         self.received: int | None = None
         self.shield = False  # set once the run records: signals only get noted, check() acts
+        self._deferred = False  # the first signal arrived inside an import: raise after it
         self._previous: dict[int, object] = {}
 
-    def _handle(self, signum: int, _frame: FrameType | None) -> None:
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        if self._deferred:  # delivered again (or another signal) after one inside an import
+            if self.shield:
+                self._deferred = False  # check() acts on it
+            elif in_import(frame):
+                redeliver(signum, lambda: self._deferred)
+            else:
+                self._deferred = False
+                raise Interrupted(self.received)
+            return
         if self.received is None:
             self.received = signum
             if not self.shield:
+                if in_import(frame):
+                    self._deferred = True
+                    redeliver(signum, lambda: self._deferred)
+                    return
                 raise Interrupted(signum)
         print(f"{signal.Signals(signum).name}: stopping the run, please wait",
               file=sys.stderr)
@@ -49,6 +102,7 @@ class SignalGuard:
     def check(self) -> None:
         """Raise :class:`Interrupted` if a signal arrived (even one a library swallowed)."""
         if self.received is not None:
+            self._deferred = False
             raise Interrupted(self.received)
 
     def __enter__(self) -> SignalGuard:
@@ -58,5 +112,71 @@ class SignalGuard:
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
+        self._deferred = False
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
+
+
+def _say(signum: int) -> None:
+    # os.write, not print: the signal may interrupt a print to stderr (a reentrant call)
+    os.write(2, f"hil: interrupted by {signal.Signals(signum).name}\n".encode())
+
+
+def _exit_at_once(signum: int, _frame: FrameType | None) -> None:
+    _say(signum)
+    os._exit(128 + signum)  # starting up: nothing is open, nothing to flush
+
+
+class _ExitCleanly:
+    """SIGINT/SIGTERM -> one line and SystemExit(130/143), never inside an import."""
+
+    def __init__(self) -> None:
+        self.pending: int | None = None
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        if self.pending is None:
+            self.pending = signum
+            _say(signum)
+        if in_import(frame):
+            redeliver(signum, lambda: self.pending is not None)
+            return
+        code, self.pending = 128 + self.pending, None
+        raise SystemExit(code)  # unwinds: ports close, sessions end; no traceback
+
+
+def install_exit_handlers() -> None:
+    """SIGINT and SIGTERM end the process at once with one line and 130/143 (the ``hil``
+    process while it starts: imports, before :func:`exit_cleanly_on_signals`)."""
+    for sig in SIGNALS:
+        signal.signal(sig, _exit_at_once)
+
+
+def exit_cleanly_on_signals() -> None:
+    """In the ``hil`` process (start-up handlers installed), once main() runs: SIGINT and
+    SIGTERM print one line and raise SystemExit(130/143), so ``with`` blocks close what they
+    opened. Elsewhere (main() called in a test's process) nothing changes."""
+    if all(signal.getsignal(sig) is _exit_at_once for sig in SIGNALS):
+        handler = _ExitCleanly()
+        for sig in SIGNALS:
+            signal.signal(sig, handler)
+
+
+def started_as_hil(argv: list[str] | None = None, orig_argv: list[str] | None = None) -> bool:
+    """True in the process of the ``hil`` command: its console script (``sys.argv[0]`` is
+    .../hil) or ``python -m hil.cli`` (``sys.orig_argv``: while a ``-m`` package is being
+    imported, ``sys.argv[0]`` is only '-m')."""
+    argv = sys.argv if argv is None else argv
+    orig = getattr(sys, "orig_argv", []) if orig_argv is None else orig_argv
+    if argv and os.path.basename(argv[0]) in ("hil", "hil.exe", "hil-script.py"):
+        return True
+    args = iter(orig[1:])
+    for arg in args:
+        if arg == "-m":
+            return next(args, None) == "hil.cli"
+        if arg.startswith("-m"):
+            return arg == "-mhil.cli"
+        if arg in ("-X", "-W"):
+            next(args, None)  # the option's value
+        elif arg.startswith("-c") or not arg.startswith("-"):
+            return False  # -c or a script: not the command
+    return False

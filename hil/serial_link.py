@@ -358,7 +358,7 @@ class SerialLink:
         if refused:
             with contextlib.suppress(RigError):  # end the MCU's session: no watchdog left armed
                 self.command(p.Bye(), check=False, retries=1)
-            raise HandshakeError(f"rig at {self.url} refused: {refused}")
+            raise HandshakeError(f"the host refuses the MCU on {self.url}: {refused}")
         self.scaling = Scaling(reply.step_nm / 1e9, reply.enc_nm / 1e9, reply.load_offset,
                                reply.load_gain_n, 1.0 / reply.telemetry_hz)
         self._last_sample = self._last_t_us = None
@@ -381,7 +381,7 @@ class SerialLink:
                     f"period of {period} us (telemetry_hz x point_period_us = {hz * period}, "
                     f"not 1000000)")
         if not 1 <= reply.max_chunk_points <= p.MAX_CHUNK_POINTS:
-            return (f"max_chunk_points {reply.max_chunk_points} is outside 1..."
+            return (f"its max_chunk_points {reply.max_chunk_points} is outside 1.."
                     f"{p.MAX_CHUNK_POINTS}")
         if reply.buffer_capacity < reply.max_chunk_points:
             return (f"its buffer of {reply.buffer_capacity} points (buffer_capacity) holds "
@@ -490,6 +490,7 @@ class SerialLink:
         Arms the stop sequence first: a START whose ACK is lost may still have started.
         """
         self._arm_stop()
+        self._unresponsive = False  # a new run: wait for this rig again
         return self.command(p.Start())
 
     def stop(self) -> None:
