@@ -315,14 +315,14 @@ def emulate(args: argparse.Namespace) -> int:
 
 def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
     """The firmware's Cortex-M build in QEMU: print its pty, serve until a signal."""
-    from hil.firmware_qemu import QemuRig, build_qemu_image, qemu_available
-
     if not args.firmware:
         raise ValueError("--qemu runs the firmware: give --firmware too")
     injected = [n for n in ("drop_byte", "flip_bit", "junk", "stall_at", "reset_at",
                             "estop_at", "disconnect_at") if getattr(args, n)]
     if injected:
         raise ValueError(f"--qemu injects no faults: drop {', '.join(injected)}")
+    from hil.firmware_qemu import QemuRig, build_qemu_image, qemu_available
+
     missing = qemu_available()
     if missing:
         raise OSError(f"--qemu needs the Debian packages {' '.join(missing)} "
