@@ -23,6 +23,10 @@
  *    frame (SPEC-CHANGES 5: "before the period's STATE").
  *  - A halting fault found after the period's hal_step calls hal_step_halt() and the count
  *    not emitted is taken off `steps` before the telemetry (the count actually output).
+ *  - A controlled stop starts from the present step rate: vel_q16 is the last period's
+ *    move while running and is zeroed by a halt, ESTOP, the end of a run or of a ramp (the
+ *    model keeps its _last_move through those, so a STOP or underrun before the first
+ *    period of a later run would ramp from the old run's speed).
  *  - A dropped frame (tx FIFO full) still uses its MCU seq, so the host sees the gap.
  *  - Every accepted HELLO restores the stored calibration (SPEC-CHANGES 7).
  *  - `steps` count from the boot position (the core's own output); `enc` from the first
@@ -767,7 +771,7 @@ static void apply_halt(rig_mcu *m) {
 
 static void send_telemetry(rig_mcu *m) {
     uint8_t flags = 0;
-    if (m->steps != m->prev_sample_steps) flags |= RIG_TF_MOVING; /* SPEC-CHANGES 6 */
+    if (m->steps != m->period_start_steps) flags |= RIG_TF_MOVING; /* moved this period */
     if (m->final_received) flags |= RIG_TF_FINAL_RECEIVED;
     if (!(RIG_ADC_MIN < m->load_raw && m->load_raw < RIG_ADC_MAX)) flags |= RIG_TF_LOAD_SATURATED;
     if (m->session) flags |= RIG_TF_SESSION;
@@ -779,7 +783,6 @@ static void send_telemetry(rig_mcu *m) {
     uint8_t p[RIG_LEN_TELEMETRY];
     rig_wire_put_telemetry(p, &t);
     tx_frame(m, RIG_MSG_TELEMETRY, p, sizeof p);
-    m->prev_sample_steps = m->steps;
 }
 
 void rig_tick(rig_mcu *m, uint32_t t_us) {
@@ -798,7 +801,9 @@ void rig_tick(rig_mcu *m, uint32_t t_us) {
                   (int32_t)m->cfg.heartbeat_timeout_ms);
         }
     }
-    /* motion: exactly one hal_step per tick, before the reading */
+    /* motion: exactly one hal_step per tick, before the reading. MOVING compares the count
+     * with the one before this period's motion (a SET_POSITION is no move), as the model. */
+    m->period_start_steps = m->steps;
     int32_t delta = 0;
     if (m->state == RIG_STATE_RUNNING) {
         delta = run_step(m);

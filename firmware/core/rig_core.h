@@ -140,7 +140,7 @@ typedef struct {
     int32_t steps, enc, load_raw;
     int32_t hw_steps, hw_enc;
     int32_t steps_offset, enc_offset;
-    int32_t prev_sample_steps; /* steps of the previous sample: MOVING */
+    int32_t period_start_steps; /* steps before this period's motion: MOVING */
     uint8_t have_reading, home_switch, stop_input, driver_alarm;
     uint8_t halt_pending; /* ESTOP from rig_rx: hal_step_halt at the next tick */
     uint32_t same_load;   /* consecutive samples with a bit-identical load_raw */

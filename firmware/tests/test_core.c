@@ -1055,6 +1055,7 @@ static void test_set_position_and_bye(void) {
     CHECK_EQ(t.steps, 5000);
     CHECK_EQ(t.enc, 700);
     CHECK(t.flags & RIG_TF_REFERENCED);
+    CHECK(!(t.flags & RIG_TF_MOVING)); /* a new reference is no move */
     CHECK_EQ(simple(RIG_MSG_BYE), RIG_OK);
     CHECK_EQ(M.state, RIG_STATE_BOOT);
     CHECK_EQ(state_of(0).reason, RIG_REASON_COMMAND);
