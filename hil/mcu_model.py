@@ -144,6 +144,7 @@ class McuModel:
         self.cfg = self._stored_calibration(p.Config())
         self.sample = 0
         self._boot_time: float | None = None  # the first tick's time: t_us = 0
+        self._last_tick: float | None = None  # the MCU's clock: the last period's time
         self.last_seq: int | None = None
         self.last_reply: p.Message | None = None
         self.last_host_rx = 0.0
@@ -178,8 +179,9 @@ class McuModel:
     # --- host frames ----------------------------------------------------------------------
 
     def handle(self, frame: p.Frame, now: float) -> list[p.Message]:
-        """Execute one valid host frame received at ``now``; return the replies."""
-        self.last_host_rx = now
+        """Execute one valid host frame received at ``now``; return the replies. The
+        heartbeat watchdog times it by the MCU's clock: the last period's time."""
+        self.last_host_rx = now if self._last_tick is None else self._last_tick
         ack_req = bool(frame.flags & p.FLAG_ACK_REQ)  # without it nothing is answered
         if frame.msg_type >= 0x80:  # an MCU -> host type is no command
             replies = [self._ack(frame.seq, p.Result.UNKNOWN_TYPE)] if ack_req else []
@@ -253,6 +255,8 @@ class McuModel:
             and all(math.isfinite(v) for v in (msg.force_limit_n, msg.load_gain_n,
                                                 msg.decel_steps_s2))
         )
+        # a deceleration below half a Q16 step per period^2 (~7.6 steps/s^2) never stops
+        valid = valid and self._stop_dv(msg) > 0
         if not valid:
             return p.Result.BAD_VALUE
         if not (msg.steps_min <= self.steps <= msg.steps_max
@@ -346,7 +350,8 @@ class McuModel:
         self._speed_q16 = 0
         self.driver_enabled = False
         self._discard_buffer()
-        self._latch(p.Fault.ESTOP, 0, 0)
+        if not self.faults & p.Fault.ESTOP:  # one FAULT frame per latching, not per repeat
+            self._latch(p.Fault.ESTOP, 0, 0)
         if self.state != p.State.ESTOP:
             self._set_state(p.State.ESTOP, p.Reason.FAULT)
 
@@ -363,10 +368,13 @@ class McuModel:
         period's events and its telemetry, stamped in us since the MCU's boot."""
         if self._boot_time is None:
             self._boot_time = now
-        if self.session and now - self.last_host_rx > self.cfg.heartbeat_timeout_ms * 1e-3:
-            self._fault(p.Fault.HEARTBEAT_LOST, math.floor(1e3 * (now - self.last_host_rx)),
-                        self.cfg.heartbeat_timeout_ms)
+        self._last_tick = now
+        silence_ms = round(1e3 * (now - self.last_host_rx))  # whole periods since the frame
+        if self.session and silence_ms > self.cfg.heartbeat_timeout_ms:
+            self._fault(p.Fault.HEARTBEAT_LOST, silence_ms, self.cfg.heartbeat_timeout_ms)
         before = self.steps
+        if self.state != p.State.RUNNING:
+            self._last_move = 0  # a stop from rest starts at rest, not at an old run's speed
         if self.state == p.State.RUNNING:
             self._run_step()
         elif self.state == p.State.STOPPING:
@@ -399,7 +407,7 @@ class McuModel:
         """One period of a controlled stop, in Q16 fixed point (1/65536 step), so that every
         implementation of the protocol rounds alike; the first period at zero speed is the
         standstill, also for a stop begun at rest."""
-        dv = round(self.cfg.decel_steps_s2 * self.hw.period**2 * 65536)
+        dv = self._stop_dv(self.cfg)
         speed = max(abs(self._speed_q16) - dv, 0)
         self._speed_q16 = speed if self._speed_q16 >= 0 else -speed
         pos = self._pos_q16 + self._speed_q16
@@ -412,6 +420,10 @@ class McuModel:
         self._pos_q16, self.steps = pos, target
         if self._speed_q16 == 0:
             self._set_state(self._stop_target, p.Reason.STOP_COMPLETE)
+
+    def _stop_dv(self, cfg: p.Config) -> int:
+        """A controlled stop's speed decrement per period, in 1/65536 step per period."""
+        return round(cfg.decel_steps_s2 * self.hw.period**2 * 65536)
 
     def _check_sensors(self, *, apply: bool) -> p.Fault:
         """Evaluate the limits on the present readings; latch every failing one when

@@ -8,6 +8,7 @@ succeeds (after the operator's ``hil rig clear`` where the fault demands one: ES
 
 from __future__ import annotations
 
+import csv
 import json
 import re
 import shutil
@@ -15,10 +16,21 @@ import signal
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
+import numpy as np
 import pytest
-from hil_host import SHORT_RUN, Host, hil, recorded_samples, sent_samples, spawn
+from hil_host import (
+    SHORT_RUN,
+    X_OPEN,
+    Host,
+    hil,
+    recorded_samples,
+    sent_samples,
+    spawn,
+)
 
+from controllers.profiles import ProfileSamples, s_curve, write_profile_csv
 from hil.rig_emulator import FaultPlan
 
 AT = 0.6  # s after the first START (the homing move) when a scheduled fault strikes
@@ -164,3 +176,40 @@ def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_p
         monkeypatch.setattr(experiment, "planned_trajectory", plan)
         assert main(["run", "--out", str(tmp_path / name), "--quiet"]) == 130, name
         assert not (tmp_path / name).exists()
+
+
+def _profile_with_hold(path: Path) -> Path:
+    """A 10 mm S-curve in 1 s, then 3 s at rest: most of the run is zero-step periods."""
+    move = s_curve(X_OPEN, X_OPEN + 10e-3, 1.0, 40e-3, 0.5)
+    t = np.arange(0.0, 4.0, 1e-3)
+    x, v, a = move.sample(np.minimum(t, move.duration))
+    v, a = np.where(t < move.duration, v, 0.0), np.where(t < move.duration, a, 0.0)
+    zero = np.zeros_like(t)
+    return write_profile_csv(path, ProfileSamples(t, x, v, a, zero, zero))
+
+
+@pytest.mark.parametrize("mcu", ["model", pytest.param("firmware", marks=pytest.mark.skipif(
+    shutil.which("gcc") is None, reason="the firmware's host build needs gcc (Debian gcc)"))])
+def test_ctrl_c_in_a_hold_leaves_the_rig_reusable(mcu: str, tmp_path: Path) -> None:
+    """A STOP in a period without steps: the model never ended such a stop (STOPPING for
+    good; every later command BAD_STATE until the emulator restarted)."""
+    profile = _profile_with_hold(tmp_path / "hold.csv")
+    out = tmp_path / "run"
+    with spawn(firmware=mcu == "firmware") as emu:
+        host = Host("run", "--real", "--port", emu.port, "--profile", str(profile),
+                    "--cycles", "1", "--quiet", "--out", str(out))
+        host.wait_for("run directory")
+        time.sleep(2.5)  # in the hold: the move took 1 s
+        host.proc.send_signal(signal.SIGINT)
+        code, _, stderr = host.finish()
+        assert code == 130 and "Traceback" not in stderr, stderr
+        again = tmp_path / "again"
+        code, _, stderr = hil("run", "--real", "--port", emu.port, "--out", str(again),
+                              *SHORT_RUN)
+        assert code == 0, stderr
+    with (out / "samples.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    held = {float(row["x_cmd [m]"]) for row in rows[-200:]}
+    assert len(held) == 1 and held.pop() == pytest.approx(X_OPEN + 10e-3, abs=1e-6)
+    assert len(rows) < 3500  # interrupted in the hold, and stopped there
+    assert recorded_samples(out) == sent_samples(emu.log, recorded_samples(out)[0])

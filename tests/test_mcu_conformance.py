@@ -433,3 +433,28 @@ def _same(a: p.Telemetry, b: p.Telemetry) -> None:
     assert abs(int(va.pop("load_raw")) - int(vb.pop("load_raw"))) <= 1, (a, b)
     va.pop("boot_id"), vb.pop("boot_id")
     assert va == vb, (a, b)
+
+
+def test_repeated_estops_latch_once_and_a_stop_from_rest_stays_put(kind: str) -> None:
+    """The host repeats ESTOP back to back: one FAULT frame. A STOP right after a new
+    START (before its first period) starts from rest, not from the halted run's speed."""
+    b = Bench(kind).session()
+    b.load(ramp(100, rate=50))
+    b.ack(p.Start())
+    b.tick(50)
+    for _ in range(3):
+        b.ack(p.EStop(), seq=b.seq)
+    assert [f for f, _, _ in b.faults()] == [p.Fault.ESTOP]
+    b.tick()
+    assert b.ack(p.ClearFault()).result == p.Result.OK
+    at = b.tick().steps
+    b.load([(at + 10, p.NO_CHECK)] * 20)
+    b.ack(p.Start())
+    b.ack(p.Stop())
+    b.tick(5)
+    assert {t.steps for t in b.tel[-5:]} == {at} and b.tel[-1].state == p.State.IDLE
+
+
+def test_a_deceleration_that_never_stops_is_refused(bench: Bench) -> None:
+    assert bench.ack(p.Config(decel_steps_s2=7.0)).result == p.Result.BAD_VALUE
+    assert bench.ack(p.Config(decel_steps_s2=8.0)).result == p.Result.OK

@@ -417,7 +417,8 @@ static uint8_t cmd_config(rig_mcu *m, const rig_msg_config *c) {
                  c->max_step_delta > 0 && c->heartbeat_timeout_ms > 0 &&
                  c->stuck_samples > 0 && finite_f(c->force_limit_n) &&
                  finite_f(c->load_gain_n) && finite_f(c->decel_steps_s2);
-    if (!valid) return RIG_BAD_VALUE;
+    /* a deceleration below half a Q16 step per period^2 (~7.6 steps/s^2) would never stop */
+    if (!valid || rig_stop_dv_q16(c->decel_steps_s2) == 0) return RIG_BAD_VALUE;
     if (!(c->steps_min <= m->steps && m->steps <= c->steps_max && c->enc_min <= m->enc &&
           m->enc <= c->enc_max)) {
         return RIG_OUT_OF_LIMITS; /* limits that exclude the present position */
