@@ -34,9 +34,10 @@ STOP_ATTEMPTS = 3
 #: The point period the host plans with, us: an MCU that runs another is refused at the
 #: handshake (it would run the plan slower or faster than planned).
 HOST_POINT_PERIOD_US = 1000
-#: Host watchdog on telemetry arrival, s: a soft bound far above the host's scheduling
-#: jitter (measured on a loaded 2-core PC: p99.9 6 ms, max 14 ms). The hard real-time
-#: stops are the MCU's (docs/rig-protocol.md, section 7).
+#: Host watchdog on telemetry arrival, s: a soft bound above the host's scheduling jitter
+#: (measured on a loaded 2-core PC shared with other work, 20 soak runs: p99 3-6 ms, p99.9
+#: 7-11 ms, longest gap 28-68 ms). The hard real-time stops are the MCU's
+#: (docs/rig-protocol.md, section 7).
 DEFAULT_TELEMETRY_TIMEOUT = 0.1
 #: Largest allowed excess of the MCU's own clock between two received samples over their
 #: sample distance, s: a larger jump means the MCU missed periods (a stalled firmware).
