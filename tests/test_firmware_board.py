@@ -93,15 +93,20 @@ def test_qemu_image_hello_and_telemetry(qemu_elf: Path) -> None:
         assert re.fullmatch(r"/dev/pts/\d+", rig.port)
         port = _Port(rig.port)
         try:
-            port.ser.write(b"\x00")
+            # Bytes that arrive before the firmware enables its USART are lost (QEMU drops
+            # them, as the real UART would): HELLO is sent again every 100 ms, as a host
+            # retransmits an unanswered command.
             nonce = 0x5EED1234
-            seq = port.send(p.Hello(host_nonce=nonce))
             reply: p.HelloReply | None = None
             deadline = time.monotonic() + 5.0
             while reply is None and time.monotonic() < deadline:
-                for msg in port.read():
-                    if isinstance(msg, p.HelloReply):
-                        reply = msg
+                port.ser.write(b"\x00")
+                seq = port.send(p.Hello(host_nonce=nonce))
+                resend = time.monotonic() + 0.1
+                while reply is None and time.monotonic() < resend:
+                    for msg in port.read():
+                        if isinstance(msg, p.HelloReply) and msg.acked_seq == seq:
+                            reply = msg
             assert reply is not None, "no HELLO_REPLY within 5 s"
             assert reply.result == p.Result.OK
             assert (reply.acked_seq, reply.host_nonce) == (seq, nonce)

@@ -34,6 +34,13 @@ static inline void nvic_enable(unsigned irq, uint8_t prio) {
     NVIC_ISER(irq >> 5) = 1u << (irq & 31u);
 }
 
+/* DWT cycle counter (real silicon only: QEMU 7.2 reads 0) */
+#define DEMCR REG32(0xE000EDFCu)
+#define DEMCR_TRCENA (1u << 24)
+#define DWT_CTRL REG32(0xE0001000u)
+#define DWT_CTRL_CYCCNTENA 1u
+#define DWT_CYCCNT REG32(0xE0001004u)
+
 #define SCB_CPACR REG32(0xE000ED88u) /* coprocessor access: CP10/CP11 = FPU */
 #define SCB_VTOR REG32(0xE000ED08u)
 #define SCB_AIRCR REG32(0xE000ED0Cu)
@@ -71,6 +78,11 @@ typedef struct {
 #define RCC_CR_PLLON (1u << 24)
 #define RCC_CR_PLLRDY (1u << 25)
 #define RCC_PLLCFGR_SRC_HSE (1u << 22)
+#define RCC_CR_HSION (1u << 0)
+#define RCC_CR_HSIRDY (1u << 1)
+#define RCC_PLLCFGR(m, n, p, q, r) ((uint32_t)(m) | ((uint32_t)(n) << 6) | \
+                                    ((((uint32_t)(p) / 2u) - 1u) << 16) | ((uint32_t)(q) << 24) | \
+                                    ((uint32_t)(r) << 28))
 #define RCC_CFGR_SW_PLL 2u
 #define RCC_CFGR_SWS_MASK (3u << 2)
 #define RCC_CFGR_SWS_PLL (2u << 2)
@@ -200,6 +212,7 @@ typedef struct {
 #define TIM_CR1_URS (1u << 2)
 #define TIM_CR1_OPM (1u << 3)
 #define TIM_CR1_ARPE (1u << 7)
+#define TIM_CR1_DIR (1u << 4)
 #define TIM_CR2_MMS_UPDATE (2u << 4)
 #define TIM_CR2_MMS_OC1REF (4u << 4)
 #define TIM_SMCR_SMS_ENCODER3 3u
@@ -214,7 +227,14 @@ typedef struct {
 #define TIM_CCMR_OC1M_FORCE_LOW (4u << 4)
 #define TIM_CCMR_OC1M_PWM2 (7u << 4)
 #define TIM_CCMR_OC1PE (1u << 3)
+#define TIM_CCMR_OC2M_PWM1 (6u << 12)
+#define TIM_CCMR_OC2PE (1u << 11)
+#define TIM_CCMR_CC1S_TI1 (1u << 0)
+#define TIM_CCMR_CC2S_TI2 (1u << 8)
+#define TIM_CCMR_IC1F(f) ((uint32_t)(f) << 4)
+#define TIM_CCMR_IC2F(f) ((uint32_t)(f) << 12)
 #define TIM_CCER_CC1E (1u << 0)
+#define TIM_CCER_CC2E (1u << 4)
 #define TIM_BDTR_MOE (1u << 15)
 
 /* ---- SPI -------------------------------------------------------------------------------- */
