@@ -247,6 +247,9 @@ static void uart_pump(void) {
 
 void TIM5_IRQHandler(void) {
     TIM5->SR = ~TIM_SR_UIF;
+    /* disarm: the burst armed for the last period has started; only this period's
+     * hal_step may arm the next (a late or missing one must not repeat the last burst) */
+    TIM1->SMCR = TIM_SMCR_TS_ITR0;
     tick_count = tick_count + 1u;
 }
 
@@ -310,14 +313,25 @@ void hal_step(int32_t delta) {
     }
     uint32_t period = (STEP_TICKS_PER_PERIOD - STEP_GUARD_TICKS) / n; /* timer ticks */
     uint32_t high = period / 2u < STEP_PULSE_TICKS ? period / 2u : STEP_PULSE_TICKS;
+    /* no interrupt between the deadline check above and the last write: the running burst
+     * (the last period's) ends >= 4.8 us after the deadline and takes these at its end */
+    irq_disable();
+    if (TIM5->CNT >= STEP_ARM_DEADLINE_US) { /* an interrupt came between: too late now */
+        irq_enable();
+        burst_b.n = (uint16_t)n;
+        burst_b.sign = delta < 0 ? -1 : 1;
+        step_error = true;
+        board_tick_stats.step_errors++;
+        return;
+    }
     bool running = (TIM1->CR1 & TIM_CR1_CEN) != 0;
-    /* preloaded: a running burst (the last period's) takes these at its end */
     TIM1->ARR = period - 1u;
     TIM1->CCR1 = period - high; /* PWM mode 2: low, then high for `high` ticks */
     TIM1->CCR2 = delta < 0 ? 0u : 0xFFFFu; /* DIR: always low / always high */
     TIM1->RCR = n - 1u;
     if (!running) TIM1->EGR = TIM_EGR_UG; /* stopped: load them now */
     TIM1->SMCR = TIM_SMCR_TS_ITR0 | TIM_SMCR_SMS_TRIGGER;
+    irq_enable();
     burst_b.n = (uint16_t)n;
     burst_b.sign = delta < 0 ? -1 : 1;
 }

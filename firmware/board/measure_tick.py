@@ -119,7 +119,10 @@ def run(elf: Path) -> dict[str, int]:
         while time.monotonic() < end:
             host.poll()
         words = rig.read_words(symbol_address(elf, "board_tick_stats"), len(FIELDS))
-    return dict(zip(FIELDS, words))
+        brk = rig.read_words(symbol_address(elf, "brk.0"), 1)[0]
+    stats = dict(zip(FIELDS, words))
+    stats["heap_used_bytes"] = brk - symbol_address(elf, "__heap_start")
+    return stats
 
 
 def main() -> None:
