@@ -30,10 +30,12 @@ from hil import protocol as p
 from hil.mcu_model import ModelMcu, RigHardware, RigPhysics
 from hil.realtime import set_realtime
 
-#: s behind schedule after which missed ticks are skipped, not caught up. Shorter lags (a
-#: loaded or paused virtual machine) are caught up: the emulated MCU's clock is its tick
-#: count, so its timestamps and watchdogs do not see the emulator's own scheduling.
-RESYNC_AFTER = 1.0
+#: s behind schedule up to which missed ticks are caught up (a late wake-up of this
+#: process). A longer lag (a loaded or paused machine that descheduled the emulator) is
+#: not caught up: the MCU's clock, its tick count, pauses with the emulator, as a real
+#: MCU's never would; catching up would run its watchdogs over host frames that were
+#: already waiting, all read before the first of the caught-up ticks (HEARTBEAT_LOST).
+CATCH_UP_MAX = 0.02
 TX_BACKLOG_MAX = 16_384  # bytes queued for a host that does not read; further frames drop
 #: Periods a controlled stop may take after a disconnect before the emulator gives up on it
 #: (a stop from 50 mm/s at 1 m/s^2 takes 50).
@@ -86,7 +88,7 @@ class EmulatorLog:
     run_starts: list[tuple[int, int]] = field(default_factory=list)  # (boot_id, first sample)
     tx_frames: int = 0
     tx_dropped: int = 0  # frames dropped because the host did not read
-    ticks_skipped: int = 0
+    paused: float = 0.0  # s the emulator was descheduled beyond CATCH_UP_MAX (MCU time paused)
 
     def first_command(self, kind: p.MsgType, after: float = 0.0) -> float | None:
         """Time the first command of ``kind`` arrived at or after ``after``."""
@@ -213,10 +215,9 @@ class RigEmulator:
                 self._receive()
             now = time.monotonic()
             if now >= next_tick:
-                if now - next_tick > RESYNC_AFTER:
-                    skipped = int((now - next_tick) / period)
-                    self.log.ticks_skipped += skipped
-                    next_tick += skipped * period
+                if now - next_tick > CATCH_UP_MAX:
+                    self.log.paused += now - next_tick
+                    next_tick = now
                 next_tick += self._on_tick(now, next_tick) + period
             self._flush()
 
@@ -234,7 +235,7 @@ class RigEmulator:
         for due, unstick in [r for r in self._recoveries if r[0] <= self._tick]:
             self._recoveries.remove((due, unstick))
             unstick(False)
-        for wire in self.mcu.tick(nominal + hung):
+        for wire in self.mcu.tick(nominal + hung - self.log.paused):  # the MCU's clock
             self._send(wire)
         self._tick += 1
         return hung
@@ -255,7 +256,7 @@ class RigEmulator:
                 self._start_seq = frame.seq
                 if self._run_tick is None:
                     self._run_tick = self._tick
-        for wire in self.mcu.receive(data, now):
+        for wire in self.mcu.receive(data, now - self.log.paused):
             self._send(wire)
 
     # --- fault injection ------------------------------------------------------------------
