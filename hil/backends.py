@@ -379,9 +379,11 @@ class RigPlant(Plant):
 
     def __init__(self, port: str, *, realtime: bool = True,
                  telemetry_timeout: float | None = None,
+                 ack_timeout: float | None = None,
                  notify: Callable[[str], None] | None = None) -> None:
         super().__init__()
         self.port = port
+        self.ack_timeout = ack_timeout  # None: the protocol's 20 ms
         self.realtime = realtime
         self.telemetry_timeout = telemetry_timeout
         self.notify = notify or (lambda _msg: None)
@@ -405,7 +407,9 @@ class RigPlant(Plant):
         self._nominal = nominal
         self._link = link = SerialLink(self.port, realtime=self.realtime,
                                        telemetry_timeout=self.telemetry_timeout,
-                                       point_period_us=round(s.period * 1e6))
+                                       point_period_us=round(s.period * 1e6),
+                                       **({} if self.ack_timeout is None
+                                          else {"ack_timeout": self.ack_timeout}))
         try:
             link.open()
             if link.faults_at_open:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -101,6 +102,7 @@ def _backend(s: RunSettings) -> Plant:
     if s.backend == "real":
         timeout = s.watchdog_ms * 1e-3 if s.watchdog_ms is not None else None
         return RigPlant(s.port, telemetry_timeout=timeout,
+                        ack_timeout=None if s.ack_ms is None else s.ack_ms * 1e-3,
                         notify=lambda msg: print(f"hil run: {msg}", file=sys.stderr))
     return FmuPlant(s.fmu)
 
@@ -332,7 +334,10 @@ def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> i
     try:
         with guard, QemuRig(image) as rig:
             print(rig.port, flush=True)
-            rig.wait()
+            while rig.running:
+                time.sleep(0.2)
+            print(f"hil emulate: QEMU ended: {' '.join(rig.output[-3:])}", file=sys.stderr)
+            return 1
     except Interrupted:
         pass
     return 0

@@ -3,9 +3,12 @@
 :func:`build_qemu_image` compiles the firmware's portable core (firmware/core/) with the
 simulated rig (firmware/sim/, the clamp's native FMU) for the Cortex-M4, through
 ``make -C firmware/board qemu``; the simulation's parameters are baked into the image
-(``rig_setup.h``). :class:`QemuRig` boots that image in ``qemu-system-arm`` with its USART
-on a pseudo-terminal: ``QemuRig(...).port`` is a serial port that speaks the rig protocol,
-for :class:`hil.serial_link.SerialLink` or ``hil run --real``. See docs/firmware.md.
+(``rig_setup.h``). :class:`QemuRig` boots that image in ``qemu-system-arm`` and relays its
+USART to a pseudo-terminal of ours: ``QemuRig(...).port`` is a serial port that speaks the
+rig protocol, for :class:`hil.serial_link.SerialLink` or ``hil run --real``. (QEMU's own
+``-serial pty`` notices a host opening the pty only by polling once a second and ignores
+its bytes until then: every HELLO of a host's 120 ms handshake was lost.) See
+docs/firmware.md.
 """
 
 from __future__ import annotations
@@ -13,14 +16,17 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import math
+import os
 import re
 import secrets
+import select
 import shutil
 import socket
 import subprocess
 import tempfile
 import threading
 import time
+import tty
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
@@ -233,7 +239,10 @@ class QemuRig:
         self._monitor_path = self._dir / "monitor.sock" if monitor else None
         self._monitor: socket.socket | None = None
         self._output: list[str] = []
-        cmd = [QEMU, "-M", MACHINE, "-nographic", "-serial", "pty",
+        self._serial_path = self._dir / "serial.sock"
+        cmd = [QEMU, "-M", MACHINE, "-nographic",
+               "-chardev", f"socket,id=rig,path={self._serial_path},server=on,wait=off",
+               "-serial", "chardev:rig",
                "-monitor", f"unix:{self._monitor_path},server=on,wait=off" if monitor else "none",
                "-device", f"loader,addr={SEED_ADDR:#x},data={self.boot_seed:#x},data-len=4",
                "-kernel", str(self.elf)]
@@ -242,29 +251,63 @@ class QemuRig:
         self.command = cmd
         self._proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                       stderr=subprocess.STDOUT, text=True)
+        self._reader = threading.Thread(target=self._drain, daemon=True)
+        self._reader.start()
+        self._master = self._slave = -1
+        self._stop = threading.Event()
         try:
-            self.port = self._wait_for_pty(timeout)
+            self._serial = self._connect(timeout)
+            self._master, self._slave = os.openpty()
+            tty.setraw(self._slave)  # no echo, no line editing, no CR/LF translation
+            os.set_blocking(self._master, False)
+            self.port = os.ttyname(self._slave)
         except BaseException:
             self.close()
             raise
-        self._reader = threading.Thread(target=self._drain, daemon=True)
-        self._reader.start()
+        self.dropped = 0  # bytes of the MCU's that no host read (a full pty, as a UART)
+        self._relay = threading.Thread(target=self._pump, name="qemu-serial", daemon=True)
+        self._relay.start()
 
-    def _wait_for_pty(self, timeout: float) -> str:
-        """QEMU prints "char device redirected to /dev/pts/N (label serial0)"."""
-        assert self._proc.stdout is not None
+    def _connect(self, timeout: float) -> socket.socket:
+        """Connect to QEMU's serial socket once it listens."""
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            line = self._proc.stdout.readline()
-            if not line:
-                break
-            self._output.append(line.rstrip())
-            match = re.search(r"redirected to (\S+) \(label serial0\)", line)
-            if match:
-                return match.group(1)
-        self._proc.poll()
-        raise RuntimeError(f"QEMU gave no serial pty (exit {self._proc.returncode}): "
-                           + " | ".join(self._output[-5:]))
+        while True:
+            sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            try:
+                sock.connect(str(self._serial_path))
+                return sock
+            except OSError:
+                sock.close()
+                if self._proc.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError(f"QEMU opened no serial socket (exit "
+                                       f"{self._proc.poll()}): "
+                                       + " | ".join(self._output[-5:])) from None
+                time.sleep(0.02)
+
+    def _pump(self) -> None:
+        """Relay bytes between QEMU's USART and the pty until close() or QEMU ends."""
+        sock, master = self._serial, self._master
+        while not self._stop.is_set():
+            readable, _, _ = select.select([sock, master], [], [], 0.1)
+            if sock in readable:
+                try:
+                    data = sock.recv(65536)
+                except OSError:
+                    data = b""
+                if not data:
+                    return  # QEMU ended
+                try:
+                    written = os.write(master, data)
+                except (BlockingIOError, OSError):
+                    written = 0
+                self.dropped += len(data) - written
+            if master in readable:
+                try:
+                    data = os.read(master, 65536)
+                except OSError:
+                    continue
+                with contextlib.suppress(OSError):
+                    sock.sendall(data)
 
     def _drain(self) -> None:
         """Keep QEMU's stdout read (its warnings), so it never blocks on a full pipe."""
@@ -316,6 +359,17 @@ class QemuRig:
 
     def close(self) -> None:
         """End QEMU (quit, then SIGTERM, then SIGKILL) and remove its private files."""
+        stop = getattr(self, "_stop", None)
+        if stop is not None:
+            stop.set()
+            relay = getattr(self, "_relay", None)
+            if relay is not None:
+                relay.join(timeout=2.0)
+            self._serial.close()
+            for fd in (self._master, self._slave):
+                if fd >= 0:
+                    os.close(fd)
+            self._master = self._slave = -1
         if self._monitor is not None:
             with contextlib.suppress(OSError):
                 self._monitor.sendall(b"quit\n")

@@ -27,6 +27,7 @@ RUN_DEFAULTS: dict[str, Any] = {
     "backend": "fmu", "port": None, "preset": "chang2021", "profile": None, "cycles": 3,
     "speed": None, "delta_r8": 0.0, "mu": None, "x_contact": None, "force_limit": 400.0,
     "out": None, "watchdog_ms": None, "max_duration": 3600.0, "fmu": None, "as_built": True,
+    "ack_ms": None,
 }
 #: The real rig's load cell's range, N: a force limit above it could never trip there.
 LOAD_CELL_RANGE = 500.0
@@ -60,6 +61,7 @@ class RunSettings:
     fmu: Path | None
     #: the simulated rig carries the prototype's as-built errors (toggle.rig_tables)
     as_built: bool
+    ack_ms: float | None = None  # the host's wait for an ACK (docs/rig-protocol.md §6)
     json: bool = False
     quiet: bool = False
     profile_sha256: str | None = None
@@ -95,6 +97,10 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--watchdog-ms", type=float, default=None, dest="watchdog_ms",
                    help="host watchdog on telemetry silence, ms (default 100; the MCU's own "
                         "limits and heartbeat watchdog are the hard stops)")
+    p.add_argument("--ack-ms", type=float, default=None, dest="ack_ms",
+                   help="with --real: the host's wait for each ACK before it retransmits, ms "
+                        "(default 20, for a 921 600-baud UART or USB; the firmware in QEMU "
+                        "takes a byte about every 50 us, a full chunk in ~15 ms: give 100)")
     p.add_argument("--max-duration", type=float, default=None, dest="max_duration",
                    help=f"refuse runs longer than this, s (default "
                         f"{RUN_DEFAULTS['max_duration']:g})")
@@ -151,6 +157,7 @@ def check(v: dict[str, Any]) -> None:
          f"must be > 0 and at most the rig's load cell's {LOAD_CELL_RANGE:g} N"
          if v["backend"] == "real" else "must be > 0 (N)"),
         ("watchdog_ms", 0.0, 10_000.0, "must be > 0 and at most 10000 ms"),
+        ("ack_ms", 0.0, 1000.0, "must be > 0 and at most 1000 ms"),
         ("max_duration", 0.0, math.inf, "must be > 0 s"),
     ):
         value = v[key]
