@@ -173,6 +173,18 @@ def fmu_start_values(physics: ClampPhysics, x_cmd: float) -> dict[str, float]:
     return start
 
 
+def check_hardware(hw: RigHardware, period: float) -> None:
+    """ValueError unless ``hw`` is the rig the firmware is built for (CORE_CONSTANTS) and
+    the plant's step ``period`` (s) is its telemetry period."""
+    for name, value in CORE_CONSTANTS.items():
+        if getattr(hw, name) != value:
+            raise ValueError(f"RigHardware.{name} = {getattr(hw, name)!r}: the firmware "
+                             f"is built for {value!r}")
+    if not math.isclose(period, hw.period, rel_tol=1e-12):
+        raise ValueError(f"the plant's period {period!r} s is not the rig's telemetry "
+                         f"period {hw.period!r} s")
+
+
 def split_frames(data: bytes) -> tuple[list[bytes], bytes]:
     """Wire bytes -> (whole frames, each with its 0x00 delimiter; the unfinished rest)."""
     *frames, rest = data.split(b"\x00")
@@ -195,13 +207,7 @@ class FirmwareMcu:
         """``library``: a built librigfw.so (default: :func:`build_host_firmware` of the
         physics' preset); ``parameters``: FMU start values beyond or replacing those of
         ``physics``. ValueError naming a parameter the FMU refuses."""
-        for name, value in CORE_CONSTANTS.items():
-            if getattr(hw, name) != value:
-                raise ValueError(f"RigHardware.{name} = {getattr(hw, name)!r}: the firmware "
-                                 f"is built for {value!r}")
-        if not math.isclose(physics.period, hw.period, rel_tol=1e-12):
-            raise ValueError(f"the physics' period {physics.period!r} s is not the rig's "
-                             f"telemetry period {hw.period!r} s")
+        check_hardware(hw, physics.period)
         self.physics, self.hw, self.seed = physics, hw, seed
         built = Path(library) if library is not None else build_host_firmware(physics.preset)
         self._lib = self._load_private(built)

@@ -32,7 +32,13 @@ from pathlib import Path
 from types import TracebackType
 
 from hil.backends import RigSetup
-from hil.firmware import CORE_CONSTANTS, CORE_DIR, SIM_DIR, core_sources, fmu_start_values
+from hil.firmware import (
+    CORE_DIR,
+    SIM_DIR,
+    check_hardware,
+    core_sources,
+    fmu_start_values,
+)
 from hil.mcu_model import RigHardware
 from hil.rig_physics import ClampPhysics
 
@@ -136,16 +142,6 @@ def _safe_name(preset: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]", "_", Path(preset).stem if "/" in preset else preset)
 
 
-def _check_hardware(setup: RigSetup, hw: RigHardware) -> None:
-    for name, value in CORE_CONSTANTS.items():
-        if getattr(hw, name) != value:
-            raise ValueError(f"RigHardware.{name} = {getattr(hw, name)!r}: the firmware is "
-                             f"built for {value!r}")
-    if not math.isclose(setup.period, hw.period, rel_tol=1e-12):
-        raise ValueError(f"the setup's period {setup.period!r} s is not the rig's telemetry "
-                         f"period {hw.period!r} s")
-
-
 def build_qemu_image(setup: RigSetup, hw: RigHardware, seed: int) -> Path:
     """Build (or reuse) the QEMU image of the firmware on the simulated rig of ``setup``;
     return its ELF file.
@@ -162,7 +158,7 @@ def build_qemu_image(setup: RigSetup, hw: RigHardware, seed: int) -> Path:
     if missing:
         raise RuntimeError(f"building the QEMU image needs the Debian packages: "
                            f"{' '.join(missing)}")
-    _check_hardware(setup, hw)
+    check_hardware(hw, setup.period)
     header = rig_setup_header(setup, hw, seed, setup_parameters(setup, hw))
     ours = [*core_sources(), *sorted(p for d in (CORE_DIR, SIM_DIR, BOARD_DIR)
                                      for p in d.iterdir()
