@@ -124,7 +124,7 @@ def _duration_text(seconds: float) -> str:
         return f"{seconds:.1f} s"
     if seconds < 7200:
         return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 3600:.4g} h"  # --speed 1e-300 printed a 300-digit number
 
 
 def paper_statistics(s: RunSettings) -> dict[str, Any] | None:
