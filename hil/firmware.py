@@ -13,6 +13,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import math
+import os
 import re
 import shutil
 import subprocess
@@ -31,6 +32,11 @@ LIBRARY = "librigfw.so"
 #: Flags of the firmware's own C (core, sim, host glue); the FMU's C gets toggle.native_fmu's.
 FIRMWARE_CFLAGS = ("-std=c11", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror", "-Wconversion",
                    "-Wshadow", "-fvisibility=hidden")  # core.mk's CORE_CFLAGS and more
+#: With RIGFW_SANITIZE=1 in the environment the host build is instrumented with
+#: AddressSanitizer and UBSan (a process loading it preloads their runtimes:
+#: tests/test_firmware_sanitized.py).
+SANITIZE_FLAGS = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all",
+                  "-fno-omit-frame-pointer", "-g")
 #: The library exports the rigfw_* API only (not the core's, the HAL's or the FMU's names).
 VERSION_SCRIPT = "{ global: rigfw_*; local: *; };\n"
 #: The firmware's compile-time constants (rig_core.h) that a RigHardware must match.
@@ -104,7 +110,8 @@ def build_host_firmware(preset: str = "chang2021") -> Path:
         for path in inputs:
             name = path.name if path.parent in (gen, headers) else path.relative_to(ROOT)
             digest.update(f"{name}\0".encode() + path.read_bytes() + b"\0")
-        digest.update(repr((FIRMWARE_CFLAGS, CFLAGS, GENERATED_CFLAGS)).encode())
+        sanitize = SANITIZE_FLAGS if os.environ.get("RIGFW_SANITIZE") == "1" else ()
+        digest.update(repr((FIRMWARE_CFLAGS, CFLAGS, GENERATED_CFLAGS, sanitize)).encode())
         out = BUILD_DIR / f"host-{_safe_name(preset)}-{digest.hexdigest()[:12]}"
         if (out / LIBRARY).is_file():
             return out / LIBRARY
@@ -116,11 +123,11 @@ def build_host_firmware(preset: str = "chang2021") -> Path:
             else:
                 flags = list(FIRMWARE_CFLAGS)
             obj = work / f"{i:02d}-{src.stem}.o"
-            _run(["gcc", *flags, *includes, "-c", str(src), "-o", str(obj)], work)
+            _run(["gcc", *flags, *sanitize, *includes, "-c", str(src), "-o", str(obj)], work)
             objects.append(str(obj))
         (work / "exports.map").write_text(VERSION_SCRIPT)
-        _run(["gcc", "-shared", "-Wl,-z,defs", "-Wl,--version-script=exports.map", *objects,
-              "-o", LIBRARY, "-lm"], work)
+        _run(["gcc", "-shared", *sanitize, "-Wl,-z,defs", "-Wl,--version-script=exports.map",
+              *objects, "-o", LIBRARY, "-lm"], work)
         work.chmod(0o755)
         try:
             work.rename(out)  # atomic: a concurrent build of the same tree keeps its own
@@ -209,7 +216,8 @@ class FirmwareMcu:
         ``physics``. ValueError naming a parameter the FMU refuses."""
         check_hardware(hw, physics.period)
         self.physics, self.hw, self.seed = physics, hw, seed
-        built = Path(library) if library is not None else build_host_firmware(physics.preset)
+        library = library or os.environ.get("RIGFW_LIBRARY")  # a prebuilt one (sanitized)
+        built = Path(library) if library else build_host_firmware(physics.preset)
         self._lib = self._load_private(built)
         self._declare()
         self.parameters = {**fmu_start_values(physics, hw.x_origin), **(parameters or {})}
