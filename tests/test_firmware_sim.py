@@ -4,8 +4,8 @@ The simulated rig (firmware/sim/) is an FMI 2.0 master of the native FMU's C cod
 sensor model of hil.mcu_model.Sensors. Its physics is checked against the Python model:
 the same protocol session (HELLO, CONFIG, streamed chunks, START, heartbeats) drives
 FirmwareMcu and McuModel over a stroke of the default RigSetup and back, and every
-telemetry sample's steps, enc and load_raw are compared. Only those physics fields: until
-the model's fixes land the two MCUs differ in protocol details (firmware/SPEC-CHANGES.md).
+telemetry sample's steps, enc and load_raw are compared (the protocol fields are
+tests/test_mcu_conformance.py's).
 
 Tolerances. enc must be equal. load_raw may differ by LOAD_RAW_TOLERANCE counts: the native
 FMU's outputs equal the Python plant's to 1e-9 relative (tests/test_native_fmu.py), which

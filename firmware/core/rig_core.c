@@ -1,5 +1,5 @@
 /* The rig MCU's portable core (rig_core.h): docs/rig-protocol.md v1.1 with the decisions of
- * firmware/SPEC-CHANGES.md, behaving on the wire as hil/mcu_model.py (corrected) does.
+ * docs/rig-protocol.md, behaving on the wire as hil/mcu_model.py (corrected) does.
  *
  * Structure: rig_rx() -> framing (rig_frame.c) -> handle_frame(): type and length checks,
  * the seq rules of section 6, then one command; its reply is queued first and the FAULT and
@@ -12,7 +12,7 @@
  * force check is single precision (the target's FPU). No heap, no libc but memcpy/memset,
  * no function pointers: dispatch is a switch on the (checked) type byte.
  *
- * Choices where the spec and the model are silent or disagree without a SPEC-CHANGES entry
+ * Choices where the spec and the model are silent or disagree without a rule of docs/rig-protocol.md
  * (each is also commented where it is made):
  *  - ESTOP (command or stop input) sends a FAULT frame only when its bit is new (section 8);
  *    the model's estop() sends one for every ESTOP.
@@ -20,7 +20,7 @@
  *    the driver alarm latches DRIVER in every state but BOOT and keeps ESTOP as the state.
  *    CLEAR_FAULT's "present condition" list is section 8's (not the stop input or alarm).
  *  - All FAULT frames of a period's checks carry the period's state and precede its STATE
- *    frame (SPEC-CHANGES 5: "before the period's STATE").
+ *    frame (docs/rig-protocol.md: "before the period's STATE").
  *  - A halting fault found after the period's hal_step calls hal_step_halt() and the count
  *    not emitted is taken off `steps` before the telemetry (the count actually output).
  *  - A controlled stop starts from the present step rate: vel_q16 is the last period's
@@ -28,7 +28,7 @@
  *    model keeps its _last_move through those, so a STOP or underrun before the first
  *    period of a later run would ramp from the old run's speed).
  *  - A dropped frame (tx FIFO full) still uses its MCU seq, so the host sees the gap.
- *  - Every accepted HELLO restores the stored calibration (SPEC-CHANGES 7).
+ *  - Every accepted HELLO restores the stored calibration (docs/rig-protocol.md).
  *  - `steps` count from the boot position (the core's own output); `enc` from the first
  *    reading after boot. hal_driver_enable(false) is called at the first tick (the flag
  *    DRIVER_ENABLED is clear from boot).
@@ -99,7 +99,7 @@ static bool finite_f(float x) {
     return (u & 0x7F800000u) != 0x7F800000u;
 }
 
-/* SPEC-CHANGES 11: dv = round(decel * 1e-6 * 65536), from the f32 value in double, once at
+/* docs/rig-protocol.md: dv = round(decel * 1e-6 * 65536), from the f32 value in double, once at
  * CONFIG. The double operations are the model's, in its order: (double)decel is exact, the
  * product with the double nearest 1e-6 is correctly rounded (IEEE-754, as in Python), and
  * * 65536 is exact (a power of two), so the result is bit-identical to the model's before
@@ -190,7 +190,7 @@ static void latch(rig_mcu *m, uint16_t bit, int32_t value, int32_t limit) {
 }
 
 /* The buffer is thrown away (a stop, a fault, ESTOP): no more chunks until a new
- * trajectory (rule 2); FINAL_RECEIVED cleared (SPEC-CHANGES 8). */
+ * trajectory (rule 2); FINAL_RECEIVED cleared (docs/rig-protocol.md). */
 static void discard_buffer(rig_mcu *m) {
     m->pt_head = 0;
     m->pt_count = 0;
@@ -257,7 +257,7 @@ static void restore_calibration(rig_mcu *m) {
     m->cfg.load_gain_n = m->stored.load_gain_n;
 }
 
-/* The checks of section 8 on the present reading, in bit order (SPEC-CHANGES 5): every
+/* The checks of section 8 on the present reading, in bit order (docs/rig-protocol.md): every
  * failing check latches; each new bit sends its FAULT frame (all with the period's state),
  * and only then the reaction runs, so the period's STATE frame follows every FAULT frame.
  * FOLLOWING_ERROR and LOAD_STUCK only in RUNNING. Returns the bits whose condition holds;
@@ -282,7 +282,7 @@ static uint16_t check_sensors(rig_mcu *m, bool apply) {
         value[0] = round_half_even_f(force);
         limit[0] = round_half_even_f(c->force_limit_n);
     }
-    /* travel: steps before enc; the bound crossed is the limit (SPEC-CHANGES 4) */
+    /* travel: steps before enc; the bound crossed is the limit (docs/rig-protocol.md) */
     if (m->steps < c->steps_min || m->steps > c->steps_max) {
         found |= RIG_F_TRAVEL_LIMIT;
         value[1] = m->steps;
@@ -383,7 +383,7 @@ static void cmd_hello(rig_mcu *m, const rig_msg_hello *h, uint16_t seq, reply_bu
     } else {
         result = RIG_OK;
         m->session = 1;
-        /* SPEC-CHANGES 7: "a HELLO that opens a session" restores the stored calibration;
+        /* docs/rig-protocol.md: "a HELLO that opens a session" restores the stored calibration;
          * every accepted HELLO opens (or takes over) a session, so every one restores it. */
         restore_calibration(m);
         if (m->state == RIG_STATE_BOOT) set_state(m, RIG_STATE_IDLE, RIG_REASON_COMMAND);
@@ -489,7 +489,7 @@ static uint8_t cmd_start(rig_mcu *m) {
     if (m->state != RIG_STATE_IDLE) return RIG_BAD_STATE;
     if (m->pt_count == 0) return RIG_EMPTY;
     m->driver_enabled = 1;
-    m->same_load = 0; /* the run's first sample counts 1 (SPEC-CHANGES 3) */
+    m->same_load = 0; /* the run's first sample counts 1 (docs/rig-protocol.md) */
     set_state(m, RIG_STATE_RUNNING, RIG_REASON_COMMAND);
     return RIG_OK;
 }
@@ -523,7 +523,7 @@ static uint8_t cmd_set_position(rig_mcu *m, const rig_msg_set_position *sp) {
 static uint8_t cmd_bye(rig_mcu *m) {
     if (m->state == RIG_STATE_RUNNING || m->state == RIG_STATE_STOPPING) return RIG_BAD_STATE;
     m->session = 0;
-    restore_calibration(m); /* SPEC-CHANGES 7 */
+    restore_calibration(m); /* docs/rig-protocol.md */
     if (m->state == RIG_STATE_IDLE) set_state(m, RIG_STATE_BOOT, RIG_REASON_COMMAND);
     return RIG_OK;
 }
@@ -621,11 +621,11 @@ static bool seq_stale(uint16_t seq, uint16_t last) { return seq_newer(last, seq)
 static void send_reply(rig_mcu *m, const reply_buf *r) { tx_frame(m, r->type, r->payload, r->len); }
 
 /* One valid host frame (good CRC): section 2's type/length rules, section 6's seq rules
- * with SPEC-CHANGES 1-2, then the command. */
+ * with docs/rig-protocol.md, then the command. */
 static void handle_frame(rig_mcu *m, const rig_frame *f) {
     bool ack_req = (f->flags & RIG_FLAG_ACK_REQ) != 0;
     reply_buf r;
-    m->last_rx_us = m->t_us; /* any valid host frame feeds the watchdog (SPEC-CHANGES 12) */
+    m->last_rx_us = m->t_us; /* any valid host frame feeds the watchdog (docs/rig-protocol.md) */
     int need = f->type >= 0x80u ? -1 : min_payload(f->type);
     if (need < 0) { /* unknown, or an MCU->host type: an unknown command */
         if (ack_req) {
@@ -653,7 +653,7 @@ static void handle_frame(rig_mcu *m, const rig_frame *f) {
         execute(m, f, &r);
         store = true; /* a new host starts at a random seq, whatever the answer */
     } else if (is_stop) {
-        /* always executed, also with the stored seq (SPEC-CHANGES 1); stored only when
+        /* always executed, also with the stored seq (docs/rig-protocol.md); stored only when
          * newer, so an old seq does not re-base the order */
         execute(m, f, &r);
         store = !m->have_last_seq || seq_newer(f->seq, m->last_seq);
@@ -704,7 +704,7 @@ void rig_rx(rig_mcu *m, const uint8_t *data, size_t n) {
 
 void rig_link_lost(rig_mcu *m) {
     m->session = 0;
-    restore_calibration(m); /* SPEC-CHANGES 7 */
+    restore_calibration(m); /* docs/rig-protocol.md */
     if (m->state == RIG_STATE_RUNNING) begin_stop(m, RIG_STATE_IDLE, RIG_REASON_LINK_LOST);
 }
 
@@ -732,7 +732,7 @@ static int32_t run_step(rig_mcu *m) {
     return 0;
 }
 
-/* STOPPING: one period of the Q16 stop law (SPEC-CHANGES 10-11). Returns the step delta. */
+/* STOPPING: one period of the Q16 stop law (docs/rig-protocol.md). Returns the step delta. */
 static int32_t decelerate(rig_mcu *m) {
     int64_t v = m->vel_q16;
     int64_t mag = v < 0 ? -v : v;
@@ -793,7 +793,7 @@ void rig_tick(rig_mcu *m, uint32_t t_us) {
     /* an ESTOP received since the last tick: cancel what is left of that period's pulses */
     apply_halt(m);
     sync_driver(m);
-    /* heartbeat watchdog (SPEC-CHANGES 12) */
+    /* heartbeat watchdog (docs/rig-protocol.md) */
     if (m->session) {
         uint32_t silence = t_us - m->last_rx_us;
         uint32_t timeout = (uint32_t)m->cfg.heartbeat_timeout_ms * 1000u;

@@ -1,6 +1,6 @@
 /* Unit tests of the firmware core (firmware/core/) on the fake HAL: the worked examples of
  * docs/rig-protocol.md section 12 byte for byte, the framing rules of section 2, the seq
- * rules of section 6, and the behaviours of sections 5, 8 and 9 with SPEC-CHANGES.md that
+ * rules of section 6, and the behaviours of sections 5, 8 and 9 with docs/rig-protocol.md that
  * the conformance suite compares with hil/mcu_model.py. Ends with the line
  * "core tests: N passed, 0 failed" (exit status 1 if any failed).
  */
@@ -440,7 +440,7 @@ static void test_unknown_and_short(void) {
     CHECK_EQ(nout, 0);
 }
 
-/* ---- seq rules (section 6, SPEC-CHANGES 1-2) -------------------------------------------- */
+/* ---- seq rules (section 6, docs/rig-protocol.md) -------------------------------------------- */
 
 static void test_seq_rules(void) {
     session();
