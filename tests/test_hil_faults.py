@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
 import shutil
 import signal
 import time
+import tty
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +33,7 @@ from hil_host import (
 )
 
 from controllers.profiles import ProfileSamples, s_curve, write_profile_csv
+from hil import protocol as p
 from hil.rig_emulator import FaultPlan
 
 AT = 0.6  # s after the first START (the homing move) when a scheduled fault strikes
@@ -220,3 +223,27 @@ def test_ctrl_c_in_a_hold_leaves_the_rig_reusable(mcu: str, tmp_path: Path) -> N
     assert len(held) == 1 and held.pop() == pytest.approx(X_OPEN + 10e-3, abs=1e-6)
     assert len(rows) < 3500  # interrupted in the hold, and stopped there
     assert recorded_samples(out) == sent_samples(emu.log, recorded_samples(out)[0])
+
+
+@pytest.mark.parametrize("mcu", ["model", pytest.param("firmware", marks=NEEDS_GCC)])
+def test_a_fault_left_by_a_dead_host_needs_rig_clear(mcu: str, tmp_path: Path) -> None:
+    """The clean-room rig's case (tests/test_rig_cleanroom.py) on both MCUs: a host that
+    opened a session and vanished leaves HEARTBEAT_LOST, which `hil run` refuses to clear."""
+    with spawn(firmware=mcu == "firmware") as emu:
+        fd = os.open(emu.port, os.O_RDWR | os.O_NOCTTY)
+        try:
+            tty.setraw(fd)
+            os.write(fd, p.encode_frame(p.Hello(1, 1, 42).frame(100, p.FLAG_ACK_REQ)))
+            time.sleep(0.45)  # no heartbeats: the MCU's 250 ms watchdog trips
+        finally:
+            os.close(fd)
+        code, stdout, stderr = hil("rig", "status", "--port", emu.port)
+        assert code == 1 and "latched faults: HEARTBEAT_LOST" in stdout + stderr  # exit 1: a fault
+        code, _, stderr = hil("run", "--real", "--port", emu.port, "--out",
+                              str(tmp_path / "refused"), *SHORT_RUN)
+        assert code == 1 and "HEARTBEAT_LOST" in stderr and "hil rig clear" in stderr, stderr
+        assert not (tmp_path / "refused").exists()
+        assert hil("rig", "clear", "--port", emu.port)[0] == 0
+        code, _, stderr = hil("run", "--real", "--port", emu.port, "--out",
+                              str(tmp_path / "again"), *SHORT_RUN)
+        assert code == 0, stderr
