@@ -30,8 +30,8 @@ COMMANDS = {
 }
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 #: s after the process started: the interpreter, hil.cli's imports (0.5 s), planning's
-#: (casadi; the default job plans from 0.7 s to 4 s here)
-DELAYS = (0.05, 0.2, 0.5, 1.0, 2.0)
+#: imports (casadi, from 0.7 s). A signal during the planning itself: tests/test_hil_faults.py
+DELAYS = (0.05, 0.2, 0.5, 1.0)
 EARLIEST_HIL_CODE = 0.1  # s: hil's handlers are installed by then (25-45 ms measured)
 
 
