@@ -28,6 +28,7 @@
 #include <string.h>
 
 #include "rig_core.h"
+#include "rx_ring.h"
 #include "stm32f4_regs.h"
 
 /* ---- constants ----------------------------------------------------------------------------- */
@@ -43,8 +44,6 @@
 #define STEP_MAX_PER_PERIOD 256u /* TIM1's 8-bit repetition counter: one burst */
 #define STEP_PHASE_US 300u       /* a burst starts this long after its tick */
 #define STEP_ARM_DEADLINE_US (STEP_PHASE_US - 10u) /* hal_step later than this: an error */
-#define RX_RING_BYTES 1024u      /* power of two */
-#define RX_SLICE 64u
 #define TX_DMA_BYTES 128u
 #define IWDG_PRESCALER_DIV8 1u /* LSI 32 kHz / 8 = 4 kHz */
 #define IWDG_RELOAD 200u       /* 200 / 4 kHz = 50 ms */
@@ -93,9 +92,8 @@ typedef struct {
 static rig_mcu mcu;
 static volatile uint32_t tick_count;      /* TIM5 updates */
 static uint32_t tick_now;                 /* tick_count at which the running rig_tick is due */
-static volatile uint8_t rx_ring[RX_RING_BYTES];
-static volatile uint32_t rx_head, rx_overruns;
-static uint32_t rx_tail;
+static rx_ring rx;
+static volatile uint32_t rx_overruns;
 static uint8_t tx_dma_buf[TX_DMA_BYTES];
 
 /* the step generator's bookkeeping: the burst before the last armed one (a), the last one
@@ -209,12 +207,7 @@ void USART2_IRQHandler(void) {
     if (sr & (USART_SR_RXNE | USART_SR_ORE)) {
         uint8_t byte = (uint8_t)(USART2->DR & 0xFFu); /* also clears ORE */
         if (sr & USART_SR_ORE) rx_overruns = rx_overruns + 1u;
-        if (rx_head - rx_tail < RX_RING_BYTES) {
-            rx_ring[rx_head & (RX_RING_BYTES - 1u)] = byte;
-            rx_head = rx_head + 1u;
-        } else {
-            rx_overruns = rx_overruns + 1u;
-        }
+        if (!rx_ring_push(&rx, byte)) rx_overruns = rx_overruns + 1u;
     }
 }
 
@@ -557,14 +550,9 @@ int main(void) {
 
     uint32_t ticks_done = 0;
     for (;;) {
-        uint32_t head = rx_head;
-        if (head != rx_tail) {
-            uint8_t buf[RX_SLICE];
-            size_t n = 0;
-            while (rx_tail != head && n < sizeof buf) {
-                buf[n++] = rx_ring[rx_tail & (RX_RING_BYTES - 1u)];
-                rx_tail++;
-            }
+        uint8_t buf[RX_SLICE];
+        size_t n = rx_ring_take(&rx, buf);
+        if (n != 0) {
             uint32_t c0 = DWT_CYCCNT;
             rig_rx(&mcu, buf, n);
             uint32_t dc = DWT_CYCCNT - c0;
@@ -584,7 +572,7 @@ int main(void) {
         }
         uart_pump();
         irq_disable();
-        if (rx_head == rx_tail && tick_count == ticks_done) wait_for_interrupt();
+        if (rx_ring_empty(&rx) && tick_count == ticks_done) wait_for_interrupt();
         irq_enable();
     }
 }

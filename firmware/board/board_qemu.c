@@ -27,14 +27,13 @@
 #include <string.h>
 
 #include "rig_core.h"
+#include "rx_ring.h"
 #include "rig_setup.h"
 #include "sim_rig.h"
 #include "stm32f4_regs.h"
 
 #define SYSCLK_HZ 168000000u /* QEMU netduinoplus2's fixed processor clock */
 #define SYSTICK_RELOAD (SYSCLK_HZ / RIG_TELEMETRY_HZ)
-#define RX_RING_BYTES 1024u /* power of two */
-#define RX_SLICE 64u        /* bytes handed to rig_rx per loop pass: a tick waits <= this */
 #define TX_SLICE 64u
 #define QEMU_SEED_ADDR 0x2001FFF0u /* above the stack (qemu_f405.ld): the launcher's seed */
 #define NOINIT_MAGIC 0x51E3B007u
@@ -62,9 +61,7 @@ volatile board_stats board_tick_stats;
 
 static rig_mcu mcu;
 static volatile uint32_t systick_count;
-static volatile uint8_t rx_ring[RX_RING_BYTES];
-static volatile uint32_t rx_head; /* written by the ISR */
-static uint32_t rx_tail;          /* written by the main loop */
+static rx_ring rx;
 
 /* Kept across a reset (the loader writes the same seed again at every reset). */
 static struct {
@@ -114,10 +111,7 @@ void USART1_IRQHandler(void) {
     uint32_t sr = USART1->SR;
     if (sr & (USART_SR_RXNE | USART_SR_ORE)) {
         uint8_t byte = (uint8_t)(USART1->DR & 0xFFu); /* reading DR also clears ORE */
-        if (rx_head - rx_tail < RX_RING_BYTES) {
-            rx_ring[rx_head & (RX_RING_BYTES - 1u)] = byte;
-            rx_head = rx_head + 1u;
-        }
+        (void)rx_ring_push(&rx, byte); /* a full ring loses the byte */
     }
 }
 
@@ -213,14 +207,9 @@ int main(void) {
     uint32_t ticks_done = 0;
     for (;;) {
         /* received bytes, a slice at a time so that a pending tick waits little */
-        uint32_t head = rx_head;
-        if (head != rx_tail) {
-            uint8_t buf[RX_SLICE];
-            size_t n = 0;
-            while (rx_tail != head && n < sizeof buf) {
-                buf[n++] = rx_ring[rx_tail & (RX_RING_BYTES - 1u)];
-                rx_tail++;
-            }
+        uint8_t buf[RX_SLICE];
+        size_t n = rx_ring_take(&rx, buf);
+        if (n != 0) {
             uint64_t t0 = now_counts();
             rig_rx(&mcu, buf, n);
             uint64_t dt = now_counts() - t0;
@@ -236,7 +225,7 @@ int main(void) {
         }
         uart_drain();
         irq_disable();
-        if (rx_head == rx_tail && systick_count == ticks_done) wait_for_interrupt();
+        if (rx_ring_empty(&rx) && systick_count == ticks_done) wait_for_interrupt();
         irq_enable();
     }
 }
