@@ -32,6 +32,7 @@ POOL = 8  # distinct chunks of draws the kernels evaluate in turn
 
 
 def median_time(fn: Callable[[], object], runs: int) -> float:
+    fn()  # warm-up
     times = []
     for _ in range(runs):
         t = time.perf_counter()
