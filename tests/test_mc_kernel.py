@@ -66,8 +66,18 @@ def assert_same(a: MonteCarloResult, b: MonteCarloResult) -> None:
             assert sa.percentiles[q] == pytest.approx(value, rel=REL, abs=floor), (part, q)
 
 
-def test_the_kernel_is_compiled_and_equals_the_kinematics_per_sample(chang):
-    kernel = mc_kernel.load()
+@pytest.fixture(params=["vectorised", "scalar"])
+def kernel(request, monkeypatch, tmp_path):
+    """The kernel as built here (vectorised with libmvec), and its scalar fallback build."""
+    if request.param == "scalar":
+        monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
+        monkeypatch.setattr(mc_kernel, "_VARIANTS", mc_kernel._VARIANTS[1:])
+    mc_kernel.load.cache_clear()
+    yield mc_kernel.load()
+    mc_kernel.load.cache_clear()
+
+
+def test_the_kernel_is_compiled_and_equals_the_kinematics_per_sample(chang, kernel):
     assert kernel is not None  # gcc is on this machine: the comparisons below are real
     x = stroke_limits(chang.lower)[1]
     nominal = np.array(chang.lower.as_tuple())

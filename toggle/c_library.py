@@ -117,12 +117,18 @@ def _intact(library: Path) -> bool:
     return False
 
 
-def casadi_source(path: Path, functions: Sequence[ca.Function]) -> Path:
-    """Write the C that CasADi generates for ``functions`` to ``path``; return the path."""
-    generator = ca.CodeGenerator(path.name)
+def casadi_c(filename: str, functions: Sequence[ca.Function]) -> str:
+    """The C that CasADi generates for ``functions`` in a file named ``filename`` (the
+    name prefixes its internal symbols)."""
+    generator = ca.CodeGenerator(filename)
     for fn in functions:
         generator.add(fn)
-    path.write_text(generator.dump(), encoding="utf-8")
+    return generator.dump()
+
+
+def casadi_source(path: Path, functions: Sequence[ca.Function]) -> Path:
+    """Write the C that CasADi generates for ``functions`` to ``path``; return the path."""
+    path.write_text(casadi_c(path.name, functions), encoding="utf-8")
     return path
 
 
