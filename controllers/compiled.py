@@ -19,7 +19,7 @@ moved into the cache complete, named with the checksum of its content; one whose
 content does not match (truncated, damaged: loading it could crash the process) is
 deleted and rebuilt, as is one that does not load. Where no compiler works or the
 cache is not writable, the functions as built are used, interpreted: same results,
-slower. The newest :data:`KEEP` libraries of a name are kept.
+slower. The generic part (compile, cache, load) is :mod:`toggle.c_library`.
 """
 
 from __future__ import annotations
@@ -27,31 +27,16 @@ from __future__ import annotations
 import ast
 import hashlib
 import importlib.util
-import os
-import platform
-import subprocess
-import tempfile
-import zlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import ModuleType
 
 import casadi as ca
 
+from toggle.c_library import Sources, casadi_source, shared_library
+
 #: One translation unit: its optimisation flags and the functions it holds.
 Unit = tuple[tuple[str, ...], list[ca.Function]]
-_COMPILE = ("-fPIC", "-c")
-_LINK = ("-shared", "-s")
-_TIMEOUT = 300  # s, per compiler run
-#: Libraries of one name kept (0.7 to 2 MB each); older ones (of changed code or plants,
-#: other N, robust variants) are deleted.
-KEEP = 48
-
-
-def cache_dir() -> Path:
-    """Directory of the compiled libraries."""
-    default = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "toggle-clamp"
-    return Path(os.environ.get("TOGGLE_CACHE_DIR", default))
 
 
 def source_digest(*packages: ModuleType) -> str:
@@ -112,83 +97,6 @@ def code_digest(*modules: str, roots: tuple[str, ...] = PROJECT_PACKAGES) -> str
     return digest.hexdigest()
 
 
-def _compiler() -> str:
-    return os.environ.get("CC", "gcc")
-
-
-def _stem(name: str, key: str) -> str:
-    """File-name stem of the library for ``key``, also keyed by the toolchain and platform."""
-    salt = (key, _compiler(), *_COMPILE, *_LINK, ca.__version__, platform.machine(),
-            platform.system())
-    digest = hashlib.sha256("\0".join(salt).encode()).hexdigest()[:24]
-    return f"{name}_{digest}"
-
-
-def _checksum(data: bytes) -> str:
-    """CRC-32 of a library's content (it catches truncation and damage), 8 hex digits."""
-    return f"{zlib.crc32(data):08x}"
-
-
-def _run_all(commands: list[list[str]]) -> None:
-    """Run the commands in parallel; raise if any fails."""
-    jobs = [subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            for cmd in commands]
-    try:
-        codes = [job.wait(timeout=_TIMEOUT) for job in jobs]
-    finally:
-        for job in jobs:
-            if job.poll() is None:
-                job.kill()
-                job.wait()
-    if any(codes):
-        raise subprocess.CalledProcessError(max(codes), commands[codes.index(max(codes))])
-
-
-def _compile(units: list[Unit], stem: str) -> Path | None:
-    """Generate, compile and link the units into a library named by ``stem`` and its
-    checksum, moved into the cache in one step; None on failure."""
-    try:
-        cache_dir().mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=cache_dir()) as tmp:
-            objects = [Path(tmp) / f"unit{k}.o" for k in range(len(units))]
-            for (_, functions), obj in zip(units, objects):
-                generator = ca.CodeGenerator(obj.with_suffix(".c").name)
-                for fn in functions:
-                    generator.add(fn)
-                obj.with_suffix(".c").write_text(generator.dump(), encoding="utf-8")
-            _run_all([[_compiler(), *flags, *_COMPILE, "-o", str(obj), str(obj.with_suffix(".c"))]
-                      for (flags, _), obj in zip(units, objects)])
-            shared = Path(tmp) / "library.so"
-            _run_all([[_compiler(), *_LINK, "-o", str(shared), *map(str, objects)]])
-            library = cache_dir() / f"{stem}_{_checksum(shared.read_bytes())}.so"
-            os.replace(shared, library)
-        return library
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
-def _prune(name: str) -> None:
-    """Delete all but the :data:`KEEP` newest libraries of ``name``."""
-    try:
-        libraries = sorted(cache_dir().glob(f"{name}_*.so"), key=lambda p: p.stat().st_mtime)
-        for old in libraries[:-KEEP]:
-            old.unlink(missing_ok=True)
-    except OSError:  # another process pruning at the same time
-        pass
-
-
-def _intact(library: Path) -> bool:
-    """Whether the library's content matches the checksum in its name; a damaged one (a
-    truncated file can crash the process that loads it) is deleted."""
-    try:
-        if library.stem.rsplit("_", 1)[1] == _checksum(library.read_bytes()):
-            return True
-        library.unlink()
-    except OSError:
-        pass
-    return False
-
-
 def _load(library: Path, names: Sequence[str]) -> list[ca.Function] | None:
     """The functions from ``library``, or None if it does not load."""
     try:
@@ -202,14 +110,15 @@ def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list
     """The functions ``names`` as machine code: from the library cached under ``key``, or
     else built by ``build``, compiled, cached and loaded; as built (interpreted) where
     compiling or loading fails."""
-    stem = _stem(name, key)
-    for library in cache_dir().glob(f"{stem}_*.so"):
-        loaded = _load(library, names) if _intact(library) else None
-        if loaded is not None:
-            return loaded
-    units = build()
-    built = {fn.name(): fn for _, functions in units for fn in functions}
-    library = _compile(units, stem)
-    loaded = _load(library, names) if library else None
-    _prune(name)
-    return loaded if loaded is not None else [built[n] for n in names]
+    units: list[Unit] = []
+
+    def sources(tmp: Path) -> Sources:
+        units.extend(build())
+        return [(flags, casadi_source(tmp / f"unit{k}.c", functions))
+                for k, (flags, functions) in enumerate(units)]
+
+    loaded = shared_library(name, key, sources, lambda library: _load(library, names))
+    if loaded is not None:
+        return loaded
+    built = {fn.name(): fn for _, functions in units or build() for fn in functions}
+    return [built[n] for n in names]

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
+from toggle import mc_kernel
 from toggle.iso286 import it_tolerance
 from toggle.kinematics import output_position, sensitivities, toggle_position
 from toggle.params import DIMENSIONS, HALVES, HalfDims, Mechanism, ParameterError
@@ -117,13 +118,29 @@ class MonteCarloResult:
     asymmetry: Statistics  # L_upper - L_lower
 
 
-def _sample(rng: np.random.Generator, dims: HalfDims, tol: Mapping[str, float], n: int,
-            distribution: str) -> list[np.ndarray]:
-    nominal = np.array(dims.as_tuple())[:, None]
-    band = np.array([tol.get(k, 0.0) for k in DIMENSIONS])[:, None]
+def _draw(rng: np.random.Generator, tol: Mapping[str, float], n: int, distribution: str
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """Scale of every dimension and the standard draws (dimensions x n): a sampled
+    dimension is nominal + scale * draw."""
+    band = np.array([tol.get(k, 0.0) for k in DIMENSIONS])
     if distribution == "normal":
-        return list(nominal + band / 3.0 * rng.standard_normal((len(DIMENSIONS), n)))
-    return list(nominal + band * rng.uniform(-1.0, 1.0, (len(DIMENSIONS), n)))
+        return band / 3.0, rng.standard_normal((len(DIMENSIONS), n))
+    return band, rng.uniform(-1.0, 1.0, (len(DIMENSIONS), n))
+
+
+def _outputs(x: float, dims: HalfDims, scale: np.ndarray, draws: np.ndarray, label: str
+             ) -> np.ndarray:
+    """Output positions of the sampled halves: by the compiled kernel, or by numpy where no
+    C compiler works or where a sample's output is not finite (numpy then raises the
+    :class:`~toggle.kinematics.AssemblyError` naming it, or clips a rounding-level
+    excursion past an acos/asin limit, as it always has)."""
+    nominal = np.array(dims.as_tuple())
+    kernel = mc_kernel.load()
+    if kernel is not None:
+        out, bad = kernel.outputs(x, nominal, scale, draws)
+        if not bad:
+            return out
+    return output_position(x, list(nominal[:, None] + scale[:, None] * draws), label=label)
 
 
 def monte_carlo(
@@ -139,9 +156,11 @@ def monte_carlo(
 ) -> MonteCarloResult:
     """Exact nonlinear Monte Carlo of both halves' outputs at x.
 
-    Every dimension of both halves is drawn independently: normal with
+    Every dimension of both halves is drawn independently (numpy): normal with
     sigma = tolerance / 3, or uniform over +-tolerance. The kinematics are
-    evaluated vectorised in chunks; a sample that cannot assemble raises
+    evaluated in chunks by the compiled kernel (:mod:`toggle.mc_kernel`, C
+    generated from the same closed form; numpy where no C compiler works, same
+    results); a sample that cannot assemble raises
     :class:`~toggle.kinematics.AssemblyError` (the tolerances are too wide).
     """
     if distribution not in ("normal", "uniform"):
@@ -156,8 +175,9 @@ def monte_carlo(
     for start in tqdm(starts, desc="Monte Carlo", unit="chunk", disable=not progress):
         n = min(chunk, samples - start)
         for h in HALVES:
-            dims = _sample(rng, mech.half(h), tolerances[h], n, distribution)
-            out[h][start:start + n] = output_position(x, dims, label=f"{h} half (sampled)")
+            scale, draws = _draw(rng, tolerances[h], n, distribution)
+            out[h][start:start + n] = _outputs(x, mech.half(h), scale, draws,
+                                               f"{h} half (sampled)")
     return MonteCarloResult(
         x=x,
         samples=samples,
