@@ -112,7 +112,8 @@ def test_archive_has_the_sources_to_rebuild_and_no_fmi_headers(native: Path):
             "sources/clamp_model_data.h"} <= names
     assert not any("fmi2Functions" in n or "win64" in n for n in names)
     build = read_build_description(str(native), validate=True)  # against the FMI 3.0 schema
-    assert build[0].sourceFileSets[0].sourceFiles == ["fmi2_clamp.c", "clamp_model.c"]
+    assert build[0].sourceFileSets[0].sourceFiles == ["fmi2_clamp.c", "clamp_core.c",
+                                                      "drive_lag.c", "clamp_model.c"]
     undefined = subprocess.run(["nm", "-D", "--undefined-only", str(_library(native))],
                                capture_output=True, text=True, check=True).stdout
     assert "Py" not in undefined and "python" not in undefined.lower()
@@ -293,13 +294,13 @@ def test_state_get_set_serialize_and_reset_reproduce_outputs(unzipped: Path):
 @pytest.mark.parametrize(
     ("start", "named"),
     [
-        ({"delta_r4b": 1.0}, "delta_r4b = 1 is outside [-0.005, 0.005]"),
+        ({"delta_r4b": 1.0}, "parameter delta_r4b = 1 m is outside [-0.005, 0.005] m"),
         ({"x_contact": -1.0}, "x_contact"),
         ({"m_platen": math.inf}, "m_platen"),
         ({"mu": math.inf}, "mu"),
         ({"mu": -0.2}, "mu"),
         ({"delta_r8": math.nan}, "delta_r8"),
-        ({"x_cmd": 0.5}, "x_cmd = 0.5 is outside"),
+        ({"x_cmd": 0.5}, "input x_cmd = 0.5 m is outside"),
         ({"delta_r7b": 1.0}, "delta_r7b"),
         ({"drive_bandwidth": 10.0, "drive_damping": -1.0}, "drive_damping"),
         ({"rotor_inertia": -1e-5}, "rotor_inertia"),
