@@ -160,12 +160,14 @@ static void errors_text(const double *r, char *out, size_t size) {
 static int derive(Core *c, const double *r, CoreState *d) {
     static const char *const half_names[] = {"lower", "upper"};
     size_t key = VR_X_CMD * sizeof(double);  /* the parameters precede the input */
-    if (c->derived_valid && memcmp(c->derived_key, r, key) == 0) {
-        d->mold = c->derived.mold; d->unequal = c->derived.unequal;
-        memcpy(d->dims, c->derived.dims, sizeof d->dims);
-        d->mu = c->derived.mu;
-        memcpy(d->masses, c->derived.masses, sizeof d->masses);
-        d->x_lo = c->derived.x_lo; d->x_hi = c->derived.x_hi;
+    for (int k = 0; k < CORE_DERIVED_CACHE; k++) {
+        const CoreState *hit = &c->derived[k];
+        if (!c->derived_valid[k] || memcmp(c->derived_key[k], r, key) != 0) continue;
+        d->mold = hit->mold; d->unequal = hit->unequal;
+        memcpy(d->dims, hit->dims, sizeof d->dims);
+        d->mu = hit->mu;
+        memcpy(d->masses, hit->masses, sizeof d->masses);
+        d->x_lo = hit->x_lo; d->x_hi = hit->x_hi;
         return 1;
     }
     double tp[2], lo[2], hi[2];
@@ -198,9 +200,11 @@ static int derive(Core *c, const double *r, CoreState *d) {
                  "outside the assemblable range [%.6g, %.6g] m", xc, d->x_lo, d->x_hi);
         return 0;
     }
-    memcpy(c->derived_key, r, key);
-    c->derived = *d;
-    c->derived_valid = 1;
+    int slot = c->derived_next;
+    c->derived_next = (slot + 1) % CORE_DERIVED_CACHE;
+    memcpy(c->derived_key[slot], r, key);
+    c->derived[slot] = *d;
+    c->derived_valid[slot] = 1;
     return 1;
 }
 
@@ -622,6 +626,13 @@ static const char *state_problem(Core *c, const CoreState *s) {
     if (s->phase != PHASE_STEPPING && s->phase != PHASE_TERMINATED)
         return "initialised data in a state before initialisation";
     if (!in_ranges(c, s->r, 0)) return c->failure;
+    int unequal = 0, cheap = s->mu == s->r[VR_MU];  /* what needs no toggle search, first */
+    for (int i = 0; i < CLAMP_N_MASSES; i++) cheap &= s->masses[i] == s->r[VR_MASS0 + i];
+    for (int i = 0; i < 2 * CLAMP_N_DIMS; i++)
+        cheap &= s->dims[i] == CLAMP_NOMINAL[i] + s->r[VR_DELTA0 + i];
+    for (int i = 0; i < CLAMP_N_DIMS; i++) unequal |= s->dims[i] != s->dims[CLAMP_N_DIMS + i];
+    if (!cheap || unequal != s->unequal)
+        return "derived data (dimensions, masses, friction) not those of its parameters";
     CoreState d = *s;
     if (!derive(c, s->r, &d)) return c->failure;
     if (d.mold != s->mold || d.unequal != s->unequal || d.mu != s->mu || d.x_lo != s->x_lo ||

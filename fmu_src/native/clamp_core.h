@@ -49,6 +49,8 @@ typedef struct {
 
 #define CORE_STATE_VERSION 7u
 
+#define CORE_DERIVED_CACHE 4
+
 typedef void (*CoreLog)(void *env, int error, const char *message);
 
 typedef struct {
@@ -58,15 +60,16 @@ typedef struct {
     int logging;  /* deliver messages below error level */
     int stale;    /* outputs not computed from the values set since */
     double time;  /* Model Exchange: the time set by the master */
-    char failure[400]; /* why the last initialisation failed */
+    char failure[512]; /* why the last initialisation failed */
     casadi_int iw[CLAMP_SZ_IW + 1];
     double w[CLAMP_SZ_W + 1];
     const double *arg[CLAMP_SZ_ARG + 1];
     double *res[CLAMP_SZ_RES + 1];
     double lag_key[3], lag[4]; /* exp(A h) for (bandwidth, damping, h): a cache */
-    int derived_valid;         /* derived data of the parameters in derived_key: a cache */
-    double derived_key[CLAMP_N_REAL];
-    CoreState derived;
+    /* derived data of recent parameter sets (derived_key): a cache, round robin */
+    int derived_valid[CORE_DERIVED_CACHE], derived_next;
+    double derived_key[CORE_DERIVED_CACHE][CLAMP_N_REAL];
+    CoreState derived[CORE_DERIVED_CACHE];
 } Core;
 
 void core_init(Core *c, int me, CoreLog log, void *log_env, int logging);
