@@ -14,13 +14,14 @@ import math
 import os
 import subprocess
 import zipfile
+from ctypes import byref
 from pathlib import Path
 
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import fmi2Error
+from fmpy.fmi2 import FMU2Slave, fmi2Boolean, fmi2Error, fmi2Terminated
 from fmpy.model_description import read_build_description
 from fmu_support import (
     close_slave,
@@ -36,6 +37,7 @@ from toggle.fmu_build import build_fmu
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
 from toggle.native_fmu import build_native_fmu, fmi2_headers, slave_variables
+from toggle.params import ParameterError
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
 VARIABLES = slave_variables()[0]
@@ -442,3 +444,96 @@ def test_command_line_builds_the_native_fmu(tmp_path: Path, capsys: pytest.Captu
 
     assert main(["build-fmu", "--native", "--preset", "chang2021", "--out", str(tmp_path)]) == 0
     assert capsys.readouterr().out.strip() == str(tmp_path / "ToggleClampNative.fmu")
+
+
+# ---- initialisation mode, re-initialisation, logging, status ---------------------------------
+
+
+def _in_initialisation_mode(folder: Path, start: dict):
+    """An fmpy slave of an extracted FMU in Initialization Mode with ``start`` set."""
+    md = read_model_description(str(folder))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=str(folder),
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="init")
+    slave.instantiate(loggingOn=False)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    for name, value in start.items():
+        slave.setReal([refs[name]], [value])
+    return slave, refs
+
+
+def test_outputs_in_initialisation_mode_are_the_pythonfmu_builds(unzipped: Path,
+                                                                 python_fmu: Path):
+    """Declared calculated InitialUnknowns: both builds compute them from the values set
+    so far, in Initialization Mode, and again after a parameter changes there."""
+    start = {"x_cmd": X_CONTACT + 5e-4, "x_contact": X_CONTACT, "delta_r8": 0.5e-3}
+    got = {}
+    for name, folder in (("native", unzipped), ("python", python_fmu)):
+        slave, refs = _in_initialisation_mode(folder, start)
+        first = _outputs(slave, refs)
+        slave.setReal([refs["m_platen"]], [4.0])
+        slave.setReal([refs["x_cmd"]], [X_CONTACT + 2e-4])
+        got[name] = (first, _outputs(slave, refs))
+        slave.exitInitializationMode()
+        close_slave(slave)
+    for native, python in zip(got["native"], got["python"], strict=True):
+        assert native == pytest.approx(python, rel=REL, abs=1e-300)
+    assert got["native"][0][OUTPUTS.index("x")] == X_CONTACT + 5e-4
+    assert got["native"][0][OUTPUTS.index("clamp_force")] > 0  # in the mold, at init
+    assert got["native"][1][OUTPUTS.index("x")] == X_CONTACT + 2e-4
+
+
+def test_parameters_can_be_set_again_after_a_failed_initialisation(unzipped: Path):
+    """As docs/fmu.md says of both builds: no fmi2Reset needed."""
+    log: list[tuple[int, str]] = []
+    slave, refs = _in_initialisation_mode(unzipped, {"m_platen": -3.0})
+    with pytest.raises(FMICallException):
+        slave.exitInitializationMode()
+    with pytest.raises(FMICallException):  # no step after a failed initialisation
+        slave.doStep(0.0, 1e-3)
+    slave.setReal([refs["m_platen"]], [3.0])
+    slave.exitInitializationMode()
+    out = _run(slave, refs, APPROACH[:3])[-1]
+    close_slave(slave)
+    assert out[0] == APPROACH[2][0] and not log
+
+
+def test_the_no_toggle_geometry_names_its_parameters(unzipped: Path):
+    """delta_r1L and delta_r2L within their ranges, together such that the lower half never
+    reaches its toggle: the message is the pythonfmu build's (toggle.plant.configure)."""
+    log: list[tuple[int, str]] = []
+    errors = {"r1L": 5e-3, "r2L": -5e-3}
+    with pytest.raises(FMICallException):
+        start_slave(unzipped, "geometry", {f"delta_{n}": v for n, v in errors.items()},
+                    log=lambda s, text: log.append((s, text)))
+    with pytest.raises(ParameterError) as python:
+        configure("chang2021", errors=errors)
+    text, want = log[0][1], f"initialisation failed: {python.value}"
+    assert text.startswith(want.split(" in the assemblable range")[0]), (text, want)
+
+
+def test_unknown_log_categories_are_refused_and_terminated_is_answered(unzipped: Path):
+    log: list[tuple[int, str]] = []
+    slave, refs = start_slave(unzipped, "categories", {},
+                              log=lambda s, text: log.append((s, text)))
+    slave.setDebugLogging(True, ["logStatusError", "logAll"])
+    with pytest.raises(FMICallException):
+        slave.setDebugLogging(True, ["logEverything"])
+    assert 'unknown log category "logEverything"' in log[-1][1]
+    status = fmi2Boolean()
+    assert slave.fmi2GetBooleanStatus(slave.component, fmi2Terminated, byref(status)) == 0
+    assert status.value == 0
+    close_slave(slave)
+
+
+def test_clamp_a_drives_clamp_b_in_libcosim(native: Path, tmp_path: Path):
+    """A's x wired to B's x_cmd: B reads A's position in Initialization Mode (not 0.0, from
+    which its first step would ask for 20 m/s), then follows A's stroke."""
+    result = run_libcosim(tmp_path, {"a": native, "b": native},
+                          {"a": ["x"], "b": ["x", "velocity", "input_force"]},
+                          initial=[("a", "x_cmd", 0.02)],
+                          connections=[("a", "x", "b", "x_cmd")], stop_time=0.1)
+    assert result["ok"]
+    assert result["last"]["b"]["x"] == result["last"]["a"]["x"] == 0.02
+    assert result["last"]["b"]["velocity"] == 0.0
