@@ -329,7 +329,8 @@ def model_description(variables: Sequence[Var], guid: str, sources: Sequence[str
     rows = _rows(variables, fmi_version, me)
     root = _description_root(fmi_version, name, guid, description)
     _interfaces(root, fmi_version, name, interface, sources)
-    root.append(unit_definitions({r.unit for r in rows if r.unit}))
+    time_unit = {"s"} if fmi_version == 3 else set()  # FMI 3.0's independent variable
+    root.append(unit_definitions({r.unit for r in rows if r.unit} | time_unit))
     cats = SubElement(root, "LogCategories")
     SubElement(cats, "Category", name="logStatusError", description="Errors and rejected input")
     SubElement(cats, "Category", name="logAll", description="Other messages")

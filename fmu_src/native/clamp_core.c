@@ -476,9 +476,9 @@ int core_get_states(Core *c, double x[], size_t n) {
 int core_set_states(Core *c, const double x[], size_t n) {
     CoreState *s = &c->s;
     if (!me_ready(c, "setContinuousStates")) return CORE_ERROR;
-    if (n != CORE_N_STATES || !isfinite(x[0]) || !isfinite(x[1]) || !(fabs(x[2]) <= 1)) {
-        core_say(c, 1, "setContinuousStates: %zu states (x, velocity, slip_state) must be 3, "
-                 "finite, |slip_state| <= 1", n);
+    if (n != CORE_N_STATES || !isfinite(x[0]) || !isfinite(x[1]) || !isfinite(x[2])) {
+        core_say(c, 1, "setContinuousStates: %zu states (x, velocity, slip_state) must be 3 "
+                 "and finite", n);
         return CORE_ERROR;
     }
     if (!(s->x_lo <= x[0] && x[0] <= s->x_hi)) {
@@ -486,7 +486,9 @@ int core_set_states(Core *c, const double x[], size_t n) {
                  "range [%.6g, %.6g] m", x[0], s->x_lo, s->x_hi);
         return CORE_ERROR;
     }
-    s->drive[0] = x[0]; s->drive[1] = x[1]; s->slip[0] = x[0]; s->slip[1] = x[2];
+    /* |z| <= 1 holds for the exact solution; an integrator's trial may overshoot it */
+    s->drive[0] = x[0]; s->drive[1] = x[1]; s->slip[0] = x[0];
+    s->slip[1] = fmax(-1.0, fmin(1.0, x[2]));
     c->stale = 1;
     return CORE_OK;
 }
@@ -511,7 +513,7 @@ int core_get_real(Core *c, const unsigned vr[], size_t n, double value[]) {
     CoreState *s = &c->s;
     int init_mode = s->phase == PHASE_INITIALISING || s->phase == PHASE_FAILED;
     for (size_t i = 0; i < n; i++)
-        if (vr[i] >= CORE_N_REAL || (vr[i] >= CLAMP_N_REAL && !s->me)) {
+        if (vr[i] >= CORE_N_REAL || (vr[i] >= CLAMP_N_REAL && !CLAMP_HAS_ME)) {
             core_say(c, 1, "getReal: unknown value reference %u", vr[i]);
             return CORE_ERROR;
         }
