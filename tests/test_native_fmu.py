@@ -115,7 +115,11 @@ def test_archive_has_the_sources_to_rebuild_and_no_fmi_headers(native: Path):
     assert not any("fmi2Functions" in n or "win64" in n for n in names)
     build = read_build_description(str(native), validate=True)  # against the FMI 3.0 schema
     assert build[0].sourceFileSets[0].sourceFiles == ["fmi2_clamp.c", "clamp_core.c",
-                                                      "drive_lag.c", "clamp_model.c"]
+                                                      "drive_lag.c", "clamp_model.c",
+                                                      "link_libm.o"]
+    needed = subprocess.run(["readelf", "-d", str(_library(native))], capture_output=True,
+                            text=True, check=True).stdout
+    assert "[libm.so.6]" in needed
     undefined = subprocess.run(["nm", "-D", "--undefined-only", str(_library(native))],
                                capture_output=True, text=True, check=True).stdout
     assert "Py" not in undefined and "python" not in undefined.lower()
@@ -136,6 +140,39 @@ def test_sources_rebuild_the_binary_as_an_importing_tool_would(native: Path, tmp
     want = _reference(X_CONTACT + 5e-4, 0.0, 0.0, X_CONTACT)
     assert want.clamp_force > 0
     assert res["clamp_force"][-1] == pytest.approx(want.clamp_force, rel=REL)
+
+
+def test_fmpy_cmake_rebuild_links_libm_and_runs_in_a_c_host(native: Path, tmp_path: Path):
+    """fmpy's build (CMake on the listed sources, as `fmpy compile`) ignores <Library
+    name="m"/>; the listed linker script link_libm.o links libm all the same, so a C host
+    that does not link libm itself loads the rebuilt binary."""
+    from fmpy.build import build_platform_binary
+
+    folder = Path(extract(str(native), str(tmp_path / "fmu")))
+    library = folder / "binaries" / "linux64" / "ToggleClampNative.so"
+    library.unlink()
+    (tmp_path / "build").mkdir()
+    build_platform_binary(folder, build_dir=tmp_path / "build")
+    needed = subprocess.run(["readelf", "-d", str(library)], capture_output=True, text=True,
+                            check=True).stdout
+    assert "[libm.so.6]" in needed
+    run = _run_c_host(tmp_path, library, folder, loads=1)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split()[0] == "0"
+
+
+def _run_c_host(tmp_path: Path, library: Path, folder: Path, loads: int):
+    """tests/fmu_c_host.c (no libm, no Python environment) on an extracted native FMU."""
+    host = tmp_path / "host"
+    subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(fmi2_headers()),
+                    str(Path(__file__).parent / "fmu_c_host.c"), "-o", str(host), "-ldl"],
+                   check=True, capture_output=True)
+    md = read_model_description(str(folder))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    return subprocess.run(
+        [str(host), str(library), md.guid, (folder / "resources").as_uri(),
+         *(str(refs[n]) for n in ("x_cmd", "input_force", "m_platen")), "4.0", str(loads)],
+        capture_output=True, text=True, env={"PATH": "/usr/bin:/bin"}, timeout=30)
 
 
 def _library(native: Path) -> Path:
@@ -391,16 +428,7 @@ def test_ecos_drives_both_builds_and_the_python_one_twice(native: Path, unzipped
 def test_a_c_host_runs_the_binary_without_python(native: Path, unzipped: Path, tmp_path: Path):
     """tests/fmu_c_host.c (the pythonfmu FMU's C master too), with no Python environment:
     two loads in one process, each 500 steps, then a clean exit."""
-    host = tmp_path / "host"
-    subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(fmi2_headers()),
-                    str(Path(__file__).parent / "fmu_c_host.c"), "-o", str(host), "-ldl"],
-                   check=True, capture_output=True)
-    md = read_model_description(str(unzipped))
-    refs = {v.name: v.valueReference for v in md.modelVariables}
-    run = subprocess.run(
-        [str(host), str(_library(native)), md.guid, (unzipped / "resources").as_uri(),
-         *(str(refs[n]) for n in ("x_cmd", "input_force", "m_platen")), "4.0", "2"],
-        capture_output=True, text=True, env={"PATH": "/usr/bin:/bin"}, timeout=30)
+    run = _run_c_host(tmp_path, _library(native), unzipped, loads=2)
     assert run.returncode == 0, run.stderr
     drive = DriveState.at_rest(-3.4386e-3)
     for k in range(1, 501):  # the host's ramp, in the same floating-point operations

@@ -62,6 +62,10 @@ C_DIR = Path(__file__).resolve().parent.parent / "fmu_src" / "native"
 CORE_FILES = ("clamp_core.c", "clamp_core.h", "drive_lag.c", "drive_lag.h")
 API_FILES = {2: "fmi2_clamp.c", 3: "fmi3_clamp.c"}
 GENERATED = "clamp_model"  # clamp_model.c / clamp_model.h
+#: A GNU ld / lld linker script ``INPUT(-lm)`` named as an object file: listed last among
+#: the sources, it makes any build that links the listed files link libm, including fmpy's
+#: CMake route (``fmpy compile``), which compiles the sources but ignores ``<Library>``.
+LINK_LIBM = "link_libm.o"
 FMI_VERSIONS = (2, 3)
 INTERFACES = ("cs", "me", "both")
 #: Value reference of the String ``preset``: FMI 2.0 numbers each type apart, FMI 3.0 needs
@@ -497,9 +501,9 @@ def generate_sources(folder: Path, preset: str, fmi_version: int = 2,
     (folder / "clamp_model_data.h").write_text(
         model_header(cfg, preset, variables, guid, functions, fmi_version, interface))
     api = API_FILES[fmi_version]
-    for file in (*CORE_FILES, api):
+    for file in (*CORE_FILES, api, LINK_LIBM):
         shutil.copy2(C_DIR / file, folder / file)
-    return [api, "clamp_core.c", "drive_lag.c", f"{GENERATED}.c"], guid
+    return [api, "clamp_core.c", "drive_lag.c", f"{GENERATED}.c", LINK_LIBM], guid
 
 
 def _run(cmd: list[str]) -> None:
@@ -509,15 +513,19 @@ def _run(cmd: list[str]) -> None:
 
 
 def compile_library(src: Path, sources: Sequence[str], out: Path, fmi_version: int = 2) -> None:
-    """gcc the sources into a shared library; any warning is an error."""
+    """gcc the sources into a shared library; any warning is an error. The link line is
+    the listed files only, as an importing tool's: libm comes from :data:`LINK_LIBM`."""
     objects = []
     for name in sources:
+        if name.endswith(".o"):  # LINK_LIBM, in its place (last)
+            objects.append(str(src / name))
+            continue
         extra = GENERATED_CFLAGS if name.startswith(GENERATED) else ()
         obj = out.parent / f"{Path(name).stem}.o"
         _run(["gcc", *CFLAGS, *extra, "-I", str(src), "-I", str(fmi_headers(fmi_version)), "-c",
               str(src / name), "-o", str(obj)])
         objects.append(str(obj))
-    _run(["gcc", "-shared", *objects, "-o", str(out), "-lm"])
+    _run(["gcc", "-shared", *objects, "-o", str(out)])  # libm through LINK_LIBM
 
 
 def build_native_fmu(out_dir: Path, preset: str = "chang2021", fmi_version: int = 2,
