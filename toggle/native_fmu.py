@@ -485,7 +485,8 @@ def generate_sources(folder: Path, preset: str, fmi_version: int = 2,
                      interface: str = "cs") -> tuple[list[str], str]:
     """Write the C sources (generated model, data header, core, API) into ``folder``.
 
-    Returns the names of the files to compile and the model's GUID.
+    Returns the names of the C files to compile and the model's GUID (the FMU lists
+    :data:`LINK_LIBM` after them).
     """
     variables, _, _ = slave_variables(preset)
     cfg = configure(preset)
@@ -501,9 +502,9 @@ def generate_sources(folder: Path, preset: str, fmi_version: int = 2,
     (folder / "clamp_model_data.h").write_text(
         model_header(cfg, preset, variables, guid, functions, fmi_version, interface))
     api = API_FILES[fmi_version]
-    for file in (*CORE_FILES, api, LINK_LIBM):
+    for file in (*CORE_FILES, api):
         shutil.copy2(C_DIR / file, folder / file)
-    return [api, "clamp_core.c", "drive_lag.c", f"{GENERATED}.c", LINK_LIBM], guid
+    return [api, "clamp_core.c", "drive_lag.c", f"{GENERATED}.c"], guid
 
 
 def _run(cmd: list[str]) -> None:
@@ -546,6 +547,8 @@ def build_native_fmu(out_dir: Path, preset: str = "chang2021", fmi_version: int 
         src = Path(tmp) / "sources"
         src.mkdir()
         sources, guid = generate_sources(src, preset, fmi_version, interface)
+        shutil.copy2(C_DIR / LINK_LIBM, src / LINK_LIBM)
+        sources.append(LINK_LIBM)
         library = Path(tmp) / f"{name}.so"
         compile_library(src, sources, library, fmi_version)
         stop = experiment.stop_time if math.isfinite(experiment.stop_time) else 10.0
