@@ -277,7 +277,7 @@ def test_an_fmu_under_an_odd_path_passes_the_compliance_checker(tmp_path: Path):
     if not checker:
         pytest.skip("set FMUCHECK to an fmuCheck.linux64 (see docs/fmu-native.md)")
     folder = tmp_path / ODD
-    folder.mkdir()
+    (folder / "unpacked").mkdir(parents=True)  # the checker's -t: where it extracts
     fmu = folder / "ToggleClampNative.fmu"
     fmu.write_bytes(native_build().read_bytes())
     log = tmp_path / "check.log"

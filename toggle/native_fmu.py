@@ -71,6 +71,8 @@ INTERFACES = ("cs", "me", "both")
 #: Value reference of the String ``preset``: FMI 2.0 numbers each type apart, FMI 3.0 needs
 #: references unique across types (the Reals are 0 .. n-1); FMI 3.0's ``time`` is one more.
 PRESET_VR = {2: 0, 3: 1000}
+#: drive_bandwidth's start value in a Model Exchange build when the table's is 0, Hz
+ME_BANDWIDTH = 20.0
 TIME_VR = 1001
 #: Model Exchange's continuous states: (state, derivative name, derivative unit); x and
 #: velocity are outputs, the slip state and the derivatives are locals after the table.
@@ -481,6 +483,17 @@ def slave_variables(preset: str = "chang2021") -> tuple[tuple[Var, ...], str, An
     return module.variables(load_preset(preset)), slave.description, slave.default_experiment
 
 
+def interface_variables(variables: Sequence[Var], interface: str) -> tuple[Var, ...]:
+    """The table as an FMU with this interface declares it: with Model Exchange, whose
+    continuous state is the drive lag, an ideal-drive default (drive_bandwidth start 0)
+    becomes :data:`ME_BANDWIDTH`, so the FMU initialises with its start values (the
+    Compliance Checker sets none)."""
+    if interface == "cs":
+        return tuple(variables)
+    return tuple(dataclasses.replace(v, start=ME_BANDWIDTH)
+                 if v.name == "drive_bandwidth" and v.start == 0 else v for v in variables)
+
+
 def generate_sources(folder: Path, preset: str, fmi_version: int = 2,
                      interface: str = "cs") -> tuple[list[str], str]:
     """Write the C sources (generated model, data header, core, API) into ``folder``.
@@ -488,7 +501,7 @@ def generate_sources(folder: Path, preset: str, fmi_version: int = 2,
     Returns the names of the C files to compile and the model's GUID (the FMU lists
     :data:`LINK_LIBM` after them).
     """
-    variables, _, _ = slave_variables(preset)
+    variables = interface_variables(slave_variables(preset)[0], interface)
     cfg = configure(preset)
     functions = plant_functions(cfg)
     gen = ca.CodeGenerator(f"{GENERATED}.c", {"with_header": True, "with_export": False,
@@ -539,6 +552,7 @@ def build_native_fmu(out_dir: Path, preset: str = "chang2021", fmi_version: int 
 
     name = model_name(fmi_version, interface)
     variables, description, experiment = slave_variables(preset)  # a bad name fails here
+    variables = interface_variables(variables, interface)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     fmu = out_dir / f"{name}.fmu"
