@@ -31,12 +31,13 @@ from fmu_support import (
     slip_along,
     validator_problems,
 )
+from native_support import native_build
 
 from toggle.drive import motor_torque
 from toggle.fmu_build import build_fmu
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
-from toggle.native_fmu import build_native_fmu, fmi2_headers, slave_variables
+from toggle.native_fmu import fmi2_headers, slave_variables
 from toggle.params import ParameterError
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
@@ -48,8 +49,8 @@ REL = 1e-9
 
 
 @pytest.fixture(scope="module")
-def native(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return build_native_fmu(tmp_path_factory.mktemp("native"))
+def native() -> Path:
+    return native_build()  # built once per session (tests/native_support.py)
 
 
 @pytest.fixture(scope="module")
