@@ -49,17 +49,20 @@ static uint64_t fnv(const unsigned char *p) {
 }
 
 #define FAIL(...) do { printf(__VA_ARGS__); printf("\n"); exit(1); } while (0)
-#define MAX_BASES 24
+#define MAX_BASES 32
+#define ME_H 2e-5 /* s: explicit Euler step of the Model Exchange runs (the slip law is stiff) */
 static unsigned char bases[MAX_BASES][sizeof(CoreState)];
-static int n_bases;
+static int base_me[MAX_BASES], n_bases;
 
 static void keep(fmi2Component c) {
     fmi2FMUstate st = NULL;
     size_t size = 0;
     if (fmi2GetFMUstate(c, &st) != fmi2OK || fmi2SerializedFMUstateSize(c, st, &size) != fmi2OK ||
         size != sizeof(CoreState) ||
-        fmi2SerializeFMUstate(c, st, (fmi2Byte *)bases[n_bases++], size) != fmi2OK)
+        fmi2SerializeFMUstate(c, st, (fmi2Byte *)bases[n_bases], size) != fmi2OK)
         FAIL("could not save a base state");
+    base_me[n_bases] = ((CoreState *)bases[n_bases])->me;
+    n_bases++;
     fmi2FreeFMUstate(c, &st);
 }
 
@@ -137,6 +140,45 @@ static void failed_base(const fmi2CallbackFunctions *cb) {
     fmi2FreeInstance(c);
 }
 
+/* One explicit Euler step of a Model Exchange instance with x_cmd set to u. */
+static fmi2Status euler(fmi2Component c, double t, double u) {
+    fmi2ValueReference vr = VR_X_CMD;
+    double x[CORE_N_STATES], dx[CORE_N_STATES];
+    fmi2Status st = fmi2SetTime(c, t);
+    if (st == fmi2OK) st = fmi2SetReal(c, &vr, 1, &u);
+    if (st == fmi2OK) st = fmi2GetContinuousStates(c, x, CORE_N_STATES);
+    if (st == fmi2OK) st = fmi2GetDerivatives(c, dx, CORE_N_STATES);
+    for (int i = 0; st == fmi2OK && i < CORE_N_STATES; i++) x[i] += ME_H * dx[i];
+    if (st == fmi2OK) st = fmi2SetContinuousStates(c, x, CORE_N_STATES);
+    return st;
+}
+
+/* Genuine states of a Model Exchange instance, in every phase. */
+static void collect_me(const fmi2CallbackFunctions *cb, double x_contact) {
+    fmi2Component c = fmi2Instantiate("me", fmi2ModelExchange, CLAMP_GUID, "", cb, 0, 0);
+    double x0 = CLAMP_START[VR_X_CMD], y[CLAMP_N_OUT];
+    if (!c) FAIL("instantiate (Model Exchange) failed");
+    keep(c);
+    fmi2SetupExperiment(c, 0, 0, 0, 0, 0);
+    fmi2EnterInitializationMode(c);
+    set(c, VR_X_CONTACT, x_contact);
+    set(c, VR_DELTA0 + CLAMP_N_DIMS + 6, 0.5e-3);
+    set(c, VR_BANDWIDTH, 20.0);
+    keep(c);
+    outputs(c, y);
+    keep(c);
+    if (fmi2ExitInitializationMode(c) != fmi2OK) FAIL("ME base initialisation failed");
+    keep(c);
+    for (int k = 1; k <= 20000; k++) {
+        double s = k / 20000.0, u = x0 + (x_contact + 5e-4 - x0) * s * s * (3 - 2 * s);
+        if (euler(c, k * ME_H, u) != fmi2OK) FAIL("ME base step %d failed", k);
+        if (k == 8000 || k == 20000) { outputs(c, y); keep(c); }
+    }
+    fmi2Terminate(c);
+    keep(c);
+    fmi2FreeInstance(c);
+}
+
 static const double SPECIAL[] = {NAN, INFINITY, -INFINITY, 1e308, -1e308, -3.0, 0.0, -0.0,
                                  1e-300, 5e-3, -5e-3, 0.09, 1.0, 11.0, 2e4};
 
@@ -167,12 +209,18 @@ int main(int argc, char **argv) {
     collect(&cb, toggle - 1e-3, 0.5e-3, 20.0, 0);   /* mold, unequal halves, 20 Hz lag */
     collect(&cb, toggle, 0.0, 0.0, 1);              /* no mold, equal, ideal, derivatives */
     failed_base(&cb);
+    int first_me = n_bases;
+    collect_me(&cb, toggle - 1e-3);                 /* mold, unequal halves, 20 Hz lag */
     int n_genuine = n_bases;
 
-    fmi2Component c = fmi2Instantiate("fuzz", fmi2CoSimulation, CLAMP_GUID, "", &cb, 0, 0);
-    fmi2FMUstate home = NULL;
-    if (fmi2DeSerializeFMUstate(c, (fmi2Byte *)bases[4], sizeof(CoreState), &home) != fmi2OK)
-        FAIL("a genuine stepping state was refused");
+    fmi2Component inst[2] = {
+        fmi2Instantiate("fuzz", fmi2CoSimulation, CLAMP_GUID, "", &cb, 0, 0),
+        fmi2Instantiate("fuzz-me", fmi2ModelExchange, CLAMP_GUID, "", &cb, 0, 0)};
+    fmi2FMUstate home[2] = {NULL, NULL};
+    for (int me = 0; me < 2; me++)  /* a stepping state of each interface */
+        if (!inst[me] || fmi2DeSerializeFMUstate(inst[me], (fmi2Byte *)bases[me ? first_me + 4 : 4],
+                                                 sizeof(CoreState), &home[me]) != fmi2OK)
+            FAIL("a genuine stepping state was refused");
     long refused = 0, restored = 0, stepped = 0, steps_ok = 0, steps_rejected = 0;
     unsigned char forged[sizeof(CoreState) + 16];
     for (long it = 0; it < iterations; it++) {
@@ -197,8 +245,9 @@ int main(int argc, char **argv) {
             uint64_t sum = fnv(forged);
             memcpy(forged + offsetof(CoreState, checksum), &sum, sizeof sum);
         }
-        int genuine = kind >= 14;
-        if (fmi2SetFMUstate(c, home) != fmi2OK) FAIL("the home state was refused");
+        int genuine = kind >= 14, me = base_me[base];
+        fmi2Component c = inst[me];
+        if (fmi2SetFMUstate(c, home[me]) != fmi2OK) FAIL("the home state was refused");
         double before[CLAMP_N_OUT], after[CLAMP_N_OUT];
         outputs(c, before);
         fmi2FMUstate st = NULL;
@@ -217,26 +266,42 @@ int main(int argc, char **argv) {
         fmi2FreeFMUstate(c, &st);
         CoreState s;
         memcpy(&s, forged, sizeof s);
+        double hold = 0.0;
+        if (me && s.initialised) {  /* a master sets the input before it reads outputs */
+            double x[CORE_N_STATES];
+            fmi2ValueReference vr = VR_X_CMD;
+            if (fmi2GetContinuousStates(c, x, CORE_N_STATES) != fmi2OK) FAIL("getStates");
+            hold = x[0];
+            fmi2SetReal(c, &vr, 1, &hold);
+        }
         if (s.phase == PHASE_STEPPING || s.phase == PHASE_TERMINATED) outputs(c, after);
         if (s.phase == PHASE_INSTANTIATED) fmi2EnterInitializationMode(c);
         if (s.phase <= PHASE_FAILED) {
             fmi2Status init = fmi2ExitInitializationMode(c);
             if (init != fmi2OK && init != fmi2Error) FAIL("iteration %ld: init status %d", it, init);
             if (init == fmi2Error) {
-                if (genuine && base != n_genuine - 1) FAIL("genuine base %d did not initialise", base);
+                if (genuine && base != first_me - 1) FAIL("genuine base %d did not initialise", base);
                 continue;
             }
         }
+        if (me && !s.initialised) {  /* initialised just now: x_cmd where the drive stands */
+            fmi2ValueReference x_vr = VR_OUT0;
+            if (fmi2GetReal(c, &x_vr, 1, &hold) != fmi2OK) FAIL("getReal x");
+        }
         outputs(c, after);
-        double hold = x_cmd_now(c);
+        if (!me) hold = x_cmd_now(c);  /* Co-Simulation: x_cmd where the state left it */
         int all_ok = 1;
         for (int k = 0; k < 100; k++) {
-            fmi2ValueReference vr = VR_X_CMD;
-            fmi2SetReal(c, &vr, 1, &hold);
-            fmi2Status st_step = fmi2DoStep(c, k * 1e-3, 1e-3, 1);
+            fmi2Status st_step;
+            if (me) st_step = euler(c, k * ME_H, hold);
+            else {
+                fmi2ValueReference vr = VR_X_CMD;
+                fmi2SetReal(c, &vr, 1, &hold);
+                st_step = fmi2DoStep(c, k * 1e-3, 1e-3, 1);
+            }
             if (st_step == fmi2OK) steps_ok++;
             else if (st_step == fmi2Error) { steps_rejected++; all_ok = 0; }
-            else FAIL("iteration %ld: doStep status %d", it, st_step);
+            else FAIL("iteration %ld: step status %d", it, st_step);
             outputs(c, after);
         }
         if (genuine && !all_ok && s.phase != PHASE_TERMINATED &&
@@ -244,8 +309,10 @@ int main(int argc, char **argv) {
             FAIL("iteration %ld: genuine base %d rejected a step", it, base);
         stepped += all_ok;
     }
-    fmi2FreeFMUstate(c, &home);
-    fmi2FreeInstance(c);
+    for (int me = 0; me < 2; me++) {
+        fmi2FreeFMUstate(inst[me], &home[me]);
+        fmi2FreeInstance(inst[me]);
+    }
     printf("refused %ld restored %ld stepped %ld steps_ok %ld steps_rejected %ld\n", refused,
            restored, stepped, steps_ok, steps_rejected);
     return 0;

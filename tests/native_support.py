@@ -35,9 +35,10 @@ def native_sources(fmi_version: int = 2, interface: str = "cs") -> Path:
     return folder / "sources"
 
 
-def compile_harness(harness: Path, out: Path, *flags: str, fmi_version: int = 2) -> Path:
+def compile_harness(harness: Path, out: Path, *flags: str, fmi_version: int = 2,
+                    interface: str = "cs") -> Path:
     """gcc a C test harness with the FMU's own sources (C11, every warning an error)."""
-    src = native_sources(fmi_version)
+    src = native_sources(fmi_version, interface)
     sources = [p for p in sorted(src.glob("*.c"))]
     subprocess.run(["gcc", "-std=c11", "-Wall", "-Wextra", "-Werror", "-Wno-unused-parameter",
                     *flags, "-I", str(src), "-I", str(fmi_headers(fmi_version)), str(harness),

@@ -486,6 +486,11 @@ int core_set_states(Core *c, const double x[], size_t n) {
                  "range [%.6g, %.6g] m", x[0], s->x_lo, s->x_hi);
         return CORE_ERROR;
     }
+    if (!(fabs(x[1]) <= MAX_SPEED)) {
+        core_say(c, 1, "setContinuousStates: velocity = %.6g m/s; an input link moves within "
+                 "%g m/s", x[1], MAX_SPEED);
+        return CORE_ERROR;
+    }
     /* |z| <= 1 holds for the exact solution; an integrator's trial may overshoot it */
     s->drive[0] = x[0]; s->drive[1] = x[1]; s->slip[0] = x[0];
     s->slip[1] = fmax(-1.0, fmin(1.0, x[2]));
@@ -550,6 +555,7 @@ int core_set_real(Core *c, const unsigned vr[], size_t n, const double value[]) 
             core_say(c, 1, "setReal: %s (value reference %u) cannot be set %s",
                      vr[i] < CLAMP_N_REAL ? CLAMP_NAMES[vr[i]] : "unknown variable", vr[i],
                      vr[i] >= VR_OUT0 ? "(not a parameter or input)"
+                     : c->s.phase == PHASE_TERMINATED ? "after terminate"
                      : "after initialisation (a fixed parameter)");
             return CORE_ERROR;
         }
@@ -648,9 +654,9 @@ static const char *state_problem(Core *c, const CoreState *s) {
         return "a drive position outside the assemblable range";
     if (!(dr[5] >= 0) || s->slip[0] != dr[0] || !(fabs(s->slip[1]) <= 1))
         return "an invalid step, slip position or slip state (|z| <= 1)";
-    if (s->me) return NULL;  /* outputs follow the states; recomputed when read */
-    if (!(fabs(dr[1]) <= MAX_SPEED && fabs(dr[2]) <= MAX_ACCELERATION))
-        return "a drive motion beyond 10 m/s or 10000 m/s^2";
+    if (!(fabs(dr[1]) <= MAX_SPEED)) return "a drive velocity beyond 10 m/s";
+    if (s->me) return NULL;  /* outputs follow the states and x_cmd; recomputed when read */
+    if (!(fabs(dr[2]) <= MAX_ACCELERATION)) return "a drive acceleration beyond 10000 m/s^2";
     if (s->r[VR_BANDWIDTH] <= 0 && dr[0] != dr[3]) return "an ideal drive away from its command";
     double y[CLAMP_N_OUT], xvaz[4] = {dr[0], dr[1], dr[2], s->slip[1]};
     if (!plant(c, s, xvaz, y) || memcmp(y, &s->r[VR_OUT0], sizeof y) != 0)
