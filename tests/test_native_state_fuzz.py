@@ -1,10 +1,11 @@
 """Saved states of the native FMU are input to validate: a state fuzzer.
 
-tests/native_state_fuzz.c forges 100 000 states with valid checksums from genuine states
-of every phase, of Co-Simulation and Model Exchange instances (the CS+ME build), and asserts, for each, fmi2Error with the instance unchanged, or a restore
-whose next 100 steps return fmi2OK or fmi2Error with finite outputs (its header states
-the criterion). It is compiled from the FMU's own sources with ASan and UBSan, so a read
-out of bounds or an undefined operation on forged data fails the test.
+tests/native_state_fuzz.c forges 100 000 states with valid checksums from genuine states of
+every phase, of Co-Simulation and Model Exchange instances (the CS+ME build), and asserts,
+for each, fmi2Error with the instance unchanged, or a restore whose next 100 steps return
+fmi2OK or fmi2Error with finite outputs (its header states the criterion). It is compiled
+from the FMU's own sources with ASan and UBSan, so a read out of bounds or an undefined
+operation on forged data fails the test.
 """
 
 from __future__ import annotations
