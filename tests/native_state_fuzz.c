@@ -6,16 +6,17 @@
  * It takes genuine serialised states of Co-Simulation instances in every phase
  * (instantiated, initialising, failed initialisation, stepping with and without motion,
  * mold and unequal halves, a 20 Hz lag and the ideal drive, input derivatives pending,
- * terminated), then forges ITERATIONS states from them: random field values (NaN, inf,
+ * terminated) and of a Model Exchange instance (built from the CS+ME sources), then forges ITERATIONS states from them: random field values (NaN, inf,
  * huge, negative, nearby), enums out of range, wrong phases, bit flips, truncated or
  * extended buffers, all with the checksum recomputed (but for a few), and feeds each to
  * fmi2DeSerializeFMUstate and fmi2SetFMUstate. The criterion, checked for each:
  *   - refused: fmi2Error, and the instance is unchanged (its outputs bit for bit);
  *   - restored: every output finite; then, in Step Mode (after exitInitializationMode
- *     for a state before initialisation, which may fail with fmi2Error), 100 steps of
- *     1 ms holding x_cmd where the state left it: each returns fmi2OK or fmi2Error (a
- *     command the restored motion cannot follow is rejected, as for any instance), and
- *     every output stays finite after each;
+ *     for a state before initialisation, which may fail with fmi2Error), 100 steps:
+ *     Co-Simulation steps of 1 ms holding x_cmd where the state left it, Model Exchange
+ *     explicit Euler steps of 20 us with x_cmd where the drive stands; each returns
+ *     fmi2OK or fmi2Error (a command the restored motion cannot follow is rejected, as
+ *     for any instance), and every output stays finite after each;
  *   - the unmodified states restore and step 100 times without an error.
  * Prints "refused R restored S stepped K steps_ok N steps_rejected E" and exits 0, or
  * prints the violation and exits 1. Crashes and sanitizer reports fail the test.
