@@ -1,14 +1,16 @@
 """Cost of a co-simulation step of ToggleClampNative.fmu (generated C) in fmpy and libcosim.
 
-Prints the microseconds per set-inputs + doStep + get-outputs in fmpy of the
-trivial pythonfmu FMU (tests/fmu_fixtures/trivial_slave.py), the pythonfmu
-ToggleClamp and the native ToggleClampNative (all 12 outputs read, the stroke,
-mold contact and link-8 error of bench_fmu.py; ideal and 20 Hz drive), each
-the median of interleaved runs in this process, with ratios to the trivial
-FMU (issue 16's target: native at or below it); then the steps per second
-of the native FMU in libcosim (libcosimpy, fixed 1 ms step, one and two
-instances, median of runs in a fresh process), and the cost of a step called
-from C (a loop compiled here, no fmpy). libcosim steps its instances on worker
+Prints the microseconds per set-inputs + doStep + get-outputs in fmpy of two baselines,
+a plain pythonfmu trivial FMU (benchmarks/trivial_plain_slave.py: pythonfmu alone, no
+FMI guard, no toggle code) and a trivial C FMU (benchmarks/trivial_c_fmu.c), and of the
+guarded trivial FMU (tests/fmu_fixtures/trivial_slave.py, built like ToggleClamp.fmu), the
+pythonfmu ToggleClamp and the native ToggleClampNative (all 12 outputs read, the stroke,
+mold contact at x_toggle - 1 mm and delta_r8 = 0.3 mm of bench_fmu.py; ideal and 20 Hz
+drive), each the median of interleaved runs in this process, with ratios to both
+baselines; then the steps per second of the native FMU in libcosim (libcosimpy, fixed
+1 ms step, one and two instances, median of runs in a fresh process), and the cost of a
+step called from C (a loop compiled here, no fmpy; the same mold and delta_r8) against
+the trivial C FMU called the same way. libcosim steps its instances on worker
 threads: on this 2-core VM its rate is bound by their wake-up latency, not by
 the FMU (one and two instances run at the same rate, about 17 000 steps/s on
 an idle machine), so it is also measured with the master on one CPU.
@@ -34,6 +36,8 @@ from fmpy import extract
 from toggle.fmu_build import build_fmu
 from toggle.native_fmu import build_native_fmu
 from toggle.plant import PlantOutputs
+
+PLAIN_SLAVE = Path(__file__).with_name("trivial_plain_slave.py")
 
 LIBCOSIM_RATE = textwrap.dedent(
     """
@@ -73,21 +77,26 @@ C_LOOP = textwrap.dedent(
     #define LOAD(f) f##TYPE *f = (f##TYPE *)dlsym(lib, #f)
     int main(int argc, char **argv) {
         void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
-        if (!lib || argc != 8) return 2;
+        if (!lib || argc < 6) return 2;
         LOAD(fmi2Instantiate); LOAD(fmi2EnterInitializationMode); LOAD(fmi2SetReal);
         LOAD(fmi2ExitInitializationMode); LOAD(fmi2GetReal); LOAD(fmi2DoStep);
         LOAD(fmi2FreeInstance);
         fmi2CallbackFunctions cb = {NULL, calloc, free, NULL, NULL};
+        /* argv: library guid x_cmd_vr first_output_vr n_outputs then (vr value) pairs */
         fmi2ValueReference x_cmd = atoi(argv[3]), out0 = atoi(argv[4]), outs[12];
-        fmi2ValueReference bw_vr = atoi(argv[6]), xc_vr = atoi(argv[7]);
-        double x0 = -3.4386e-3, bw = atof(argv[5]), xc = 0.0505, y[12];
+        int n_out = atoi(argv[5]);
+        double x0 = -3.4386e-3, y[12];
         long steps = 1000000;
-        for (int i = 0; i < 12; i++) outs[i] = out0 + i;
+        for (int i = 0; i < n_out; i++) outs[i] = out0 + i;
         fmi2Component c = fmi2Instantiate("loop", fmi2CoSimulation, argv[2], "", &cb, 0, 0);
+        if (!c) return 5;
         fmi2EnterInitializationMode(c);
         fmi2SetReal(c, &x_cmd, 1, &x0);
-        fmi2SetReal(c, &bw_vr, 1, &bw);
-        fmi2SetReal(c, &xc_vr, 1, &xc);
+        for (int i = 6; i + 1 < argc; i += 2) {
+            fmi2ValueReference vr = atoi(argv[i]);
+            double v = atof(argv[i + 1]);
+            fmi2SetReal(c, &vr, 1, &v);
+        }
         if (fmi2ExitInitializationMode(c) != fmi2OK) return 3;
         struct timespec t0, t1;
         clock_gettime(CLOCK_MONOTONIC, &t0);
@@ -96,7 +105,7 @@ C_LOOP = textwrap.dedent(
             double x = x0 + 0.0544 * (s > 1.0 ? 2.0 - s : s);
             fmi2SetReal(c, &x_cmd, 1, &x);
             if (fmi2DoStep(c, k * 1e-3, 1e-3, fmi2True) != fmi2OK) return 4;
-            fmi2GetReal(c, outs, 12, y);
+            fmi2GetReal(c, outs, n_out, y);
         }
         clock_gettime(CLOCK_MONOTONIC, &t1);
         printf("%.4f\n", ((t1.tv_sec - t0.tv_sec) * 1e9 + (t1.tv_nsec - t0.tv_nsec)) / steps / 1e3);
@@ -107,25 +116,58 @@ C_LOOP = textwrap.dedent(
 )
 
 
-def c_loop_us(unzip_dir: Path, work: Path, bandwidth: float) -> float:
-    """µs per set-input + doStep + get 12 outputs called from C (no fmpy), one 1e6-step run."""
+def c_loop_us(unzip_dir: Path, work: Path, x_cmd: str, outputs: list[str],
+              start: dict[str, float]) -> float:
+    """µs per set-input + doStep + get outputs called from C (no fmpy), one 1e6-step run."""
     from fmpy import read_model_description
 
-    from toggle.native_fmu import MODEL, fmi2_headers
+    from toggle.native_fmu import fmi2_headers
 
     source, exe = work / "loop.c", work / "loop"
-    source.write_text(C_LOOP)
-    subprocess.run(["gcc", "-O2", "-I", str(fmi2_headers()), str(source), "-o", str(exe),
-                    "-ldl"], check=True)
+    if not exe.exists():
+        source.write_text(C_LOOP)
+        subprocess.run(["gcc", "-O2", "-I", str(fmi2_headers()), str(source), "-o", str(exe),
+                        "-ldl"], check=True)
     md = read_model_description(str(unzip_dir))
     refs = {v.name: v.valueReference for v in md.modelVariables}
-    lib = unzip_dir / "binaries" / "linux64" / f"{MODEL}.so"
-    run = subprocess.run([str(exe), str(lib), md.guid, str(refs["x_cmd"]),
-                          str(refs[PlantOutputs._fields[0]]), repr(bandwidth),
-                          str(refs["drive_bandwidth"]), str(refs["x_contact"])],
-                         capture_output=True, text=True,
+    if [refs[n] - refs[outputs[0]] for n in outputs] != list(range(len(outputs))):
+        raise ValueError("the outputs must have consecutive value references")
+    lib = unzip_dir / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
+    pairs = [str(v) for name, value in start.items() for v in (refs[name], repr(value))]
+    run = subprocess.run([str(exe), str(lib), md.guid, str(refs[x_cmd]), str(refs[outputs[0]]),
+                          str(len(outputs)), *pairs], capture_output=True, text=True,
                          check=True)
     return float(run.stdout)
+
+
+def trivial_c_fmu(work: Path) -> Path:
+    """benchmarks/trivial_c_fmu.c compiled and zipped as an FMI 2.0 Co-Simulation FMU."""
+    import zipfile
+
+    from toggle.native_fmu import fmi2_headers
+
+    lib = work / "TrivialC.so"
+    subprocess.run(["gcc", "-std=c99", "-O2", "-shared", "-fPIC", "-I", str(fmi2_headers()),
+                    str(Path(__file__).with_name("trivial_c_fmu.c")), "-o", str(lib)],
+                   check=True)
+    variables = [("gain", "parameter", "fixed", 'start="2.0"'),
+                 ("u", "input", "continuous", 'start="0.0"'),
+                 ("y", "output", "continuous", ""), ("x", "output", "continuous", "")]
+    rows = "".join(f'<ScalarVariable name="{n}" valueReference="{i}" causality="{c}" '
+                   f'variability="{v}"><Real {s}/></ScalarVariable>'
+                   for i, (n, c, v, s) in enumerate(variables))
+    description = (
+        '<?xml version="1.0" encoding="UTF-8"?><fmiModelDescription fmiVersion="2.0" '
+        'modelName="TrivialC" guid="trivial-c" numberOfEventIndicators="0">'
+        '<CoSimulation modelIdentifier="TrivialC" canHandleVariableCommunicationStepSize='
+        f'"true"/><ModelVariables>{rows}</ModelVariables><ModelStructure><Outputs>'
+        '<Unknown index="3" dependencies=""/><Unknown index="4" dependencies=""/></Outputs>'
+        '</ModelStructure></fmiModelDescription>')
+    fmu = work / "TrivialC.fmu"
+    with zipfile.ZipFile(fmu, "w") as zf:
+        zf.writestr("modelDescription.xml", description)
+        zf.write(lib, "binaries/linux64/TrivialC.so")
+    return fmu
 
 
 def libcosim_rates(fmu: Path, steps: int, runs: int, start: dict[str, float],
@@ -151,17 +193,23 @@ def main() -> None:
     inputs, start = clamp_case()
     outputs = list(PlantOutputs._fields)
     lag = {**start, "drive_bandwidth": 20.0}
+    trivial_in = {"u": [0.1, 0.2, 0.3]}
     cases = {  # name: (FMU, start values, inputs, outputs)
-        "trivial pythonfmu": ("trivial", {}, {"u": [0.1, 0.2, 0.3]}, ["y", "x"]),
+        "plain pythonfmu trivial": ("plain", {}, trivial_in, ["y", "x"]),
+        "C trivial": ("c", {}, trivial_in, ["y", "x"]),
+        "guarded trivial": ("trivial", {}, trivial_in, ["y", "x"]),
         "pythonfmu clamp, ideal": ("python", start, inputs, outputs),
         "pythonfmu clamp, 20 Hz": ("python", lag, inputs, outputs),
         "native clamp, ideal": ("native", start, inputs, outputs),
         "native clamp, 20 Hz": ("native", lag, inputs, outputs),
     }
     with tempfile.TemporaryDirectory(prefix="bench_native_") as tmp:
+        from pythonfmu import FmuBuilder
+
         work = Path(tmp)
         native = build_native_fmu(work / "native")
-        fmus = {"trivial": build_fmu(work / "trivial", TRIVIAL_SLAVE),
+        fmus = {"plain": FmuBuilder.build_FMU(PLAIN_SLAVE, dest=work / "plain"),
+                "c": trivial_c_fmu(work), "trivial": build_fmu(work / "trivial", TRIVIAL_SLAVE),
                 "python": build_fmu(work / "python"), "native": native}
         dirs = {k: Path(extract(str(f), str(work / f"{k}_x"))) for k, f in fmus.items()}
         times: dict[str, list[float]] = {name: [] for name in cases}
@@ -172,17 +220,24 @@ def main() -> None:
         rates = {pinned: libcosim_rates(native, args.cosim_steps, args.runs,
                                         {**start, "x_cmd": 0.0}, pinned)
                  for pinned in (False, True)}
-        c_us = {bw: statistics.median(c_loop_us(dirs["native"], work, bw) for _ in range(3))
-                for bw in (0.0, 20.0)}
-    base = statistics.median(times["trivial pythonfmu"])
-    print(f"us per set-inputs + doStep + get-outputs in fmpy "
-          f"(median of {args.runs} runs x {args.steps} steps):")
+        c_cases = {"native clamp, ideal": ("native", "x_cmd", outputs, start),
+                   "native clamp, 20 Hz": ("native", "x_cmd", outputs, lag),
+                   "C trivial": ("c", "u", ["y", "x"], {})}
+        c_us = {name: statistics.median(c_loop_us(dirs[kind], work, x, outs, values)
+                                        for _ in range(3))
+                for name, (kind, x, outs, values) in c_cases.items()}
+    plain, c_base = (statistics.median(times[k]) for k in ("plain pythonfmu trivial",
+                                                           "C trivial"))
+    print(f"us per set-inputs + doStep + get-outputs in fmpy (median of {args.runs} "
+          f"interleaved runs x {args.steps} steps; clamp: 12 outputs, mold at x_toggle - 1 mm, "
+          "delta_r8 = 0.3 mm; trivial: 2 outputs):")
     for name, values in times.items():
         us = statistics.median(values)
-        print(f"  {name:24s} {us:8.2f} us   ratio to trivial {us / base:5.2f}")
-    for bw, us in c_us.items():
-        print(f"  native clamp from C, {'ideal' if bw == 0 else '20 Hz'}: {us:.3f} us "
-              "(no fmpy; median of 3 runs x 1e6 steps)")
+        print(f"  {name:24s} {us:8.2f} us   ratio to plain pythonfmu trivial "
+              f"{us / plain:5.2f}, to C trivial {us / c_base:5.2f}")
+    print("called from C, no fmpy (median of 3 runs x 1e6 steps, the same parameters):")
+    for name, us in c_us.items():
+        print(f"  {name:24s} {us:8.3f} us   ratio to C trivial {us / c_us['C trivial']:6.1f}")
     for pinned, by_count in rates.items():
         for n, rate in by_count.items():
             print(f"libcosim{' on one CPU' if pinned else ''}, {n} native instance(s), 1 ms "

@@ -14,13 +14,14 @@ import math
 import os
 import subprocess
 import zipfile
+from ctypes import byref
 from pathlib import Path
 
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import fmi2Error
+from fmpy.fmi2 import FMU2Slave, fmi2Boolean, fmi2Error, fmi2Terminated
 from fmpy.model_description import read_build_description
 from fmu_support import (
     close_slave,
@@ -30,12 +31,14 @@ from fmu_support import (
     slip_along,
     validator_problems,
 )
+from native_support import native_build
 
 from toggle.drive import motor_torque
 from toggle.fmu_build import build_fmu
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
-from toggle.native_fmu import build_native_fmu, fmi2_headers, slave_variables
+from toggle.native_fmu import fmi2_headers, slave_variables
+from toggle.params import ParameterError
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
 VARIABLES = slave_variables()[0]
@@ -46,8 +49,8 @@ REL = 1e-9
 
 
 @pytest.fixture(scope="module")
-def native(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return build_native_fmu(tmp_path_factory.mktemp("native"))
+def native() -> Path:
+    return native_build()  # built once per session (tests/native_support.py)
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +115,12 @@ def test_archive_has_the_sources_to_rebuild_and_no_fmi_headers(native: Path):
             "sources/clamp_model_data.h"} <= names
     assert not any("fmi2Functions" in n or "win64" in n for n in names)
     build = read_build_description(str(native), validate=True)  # against the FMI 3.0 schema
-    assert build[0].sourceFileSets[0].sourceFiles == ["fmi2_clamp.c", "clamp_model.c"]
+    assert build[0].sourceFileSets[0].sourceFiles == ["fmi2_clamp.c", "clamp_core.c",
+                                                      "drive_lag.c", "clamp_model.c",
+                                                      "link_libm.o"]
+    needed = subprocess.run(["readelf", "-d", str(_library(native))], capture_output=True,
+                            text=True, check=True).stdout
+    assert "[libm.so.6]" in needed
     undefined = subprocess.run(["nm", "-D", "--undefined-only", str(_library(native))],
                                capture_output=True, text=True, check=True).stdout
     assert "Py" not in undefined and "python" not in undefined.lower()
@@ -133,6 +141,39 @@ def test_sources_rebuild_the_binary_as_an_importing_tool_would(native: Path, tmp
     want = _reference(X_CONTACT + 5e-4, 0.0, 0.0, X_CONTACT)
     assert want.clamp_force > 0
     assert res["clamp_force"][-1] == pytest.approx(want.clamp_force, rel=REL)
+
+
+def test_fmpy_cmake_rebuild_links_libm_and_runs_in_a_c_host(native: Path, tmp_path: Path):
+    """fmpy's build (CMake on the listed sources, as `fmpy compile`) ignores <Library
+    name="m"/>; the listed linker script link_libm.o links libm all the same, so a C host
+    that does not link libm itself loads the rebuilt binary."""
+    from fmpy.build import build_platform_binary
+
+    folder = Path(extract(str(native), str(tmp_path / "fmu")))
+    library = folder / "binaries" / "linux64" / "ToggleClampNative.so"
+    library.unlink()
+    (tmp_path / "build").mkdir()
+    build_platform_binary(folder, build_dir=tmp_path / "build")
+    needed = subprocess.run(["readelf", "-d", str(library)], capture_output=True, text=True,
+                            check=True).stdout
+    assert "[libm.so.6]" in needed
+    run = _run_c_host(tmp_path, library, folder, loads=1)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split()[0] == "0"
+
+
+def _run_c_host(tmp_path: Path, library: Path, folder: Path, loads: int):
+    """tests/fmu_c_host.c (no libm, no Python environment) on an extracted native FMU."""
+    host = tmp_path / "host"
+    subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(fmi2_headers()),
+                    str(Path(__file__).parent / "fmu_c_host.c"), "-o", str(host), "-ldl"],
+                   check=True, capture_output=True)
+    md = read_model_description(str(folder))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    return subprocess.run(
+        [str(host), str(library), md.guid, (folder / "resources").as_uri(),
+         *(str(refs[n]) for n in ("x_cmd", "input_force", "m_platen")), "4.0", str(loads)],
+        capture_output=True, text=True, env={"PATH": "/usr/bin:/bin"}, timeout=30)
 
 
 def _library(native: Path) -> Path:
@@ -293,13 +334,13 @@ def test_state_get_set_serialize_and_reset_reproduce_outputs(unzipped: Path):
 @pytest.mark.parametrize(
     ("start", "named"),
     [
-        ({"delta_r4b": 1.0}, "delta_r4b = 1 is outside [-0.005, 0.005]"),
+        ({"delta_r4b": 1.0}, "parameter delta_r4b = 1 m is outside [-0.005, 0.005] m"),
         ({"x_contact": -1.0}, "x_contact"),
         ({"m_platen": math.inf}, "m_platen"),
         ({"mu": math.inf}, "mu"),
         ({"mu": -0.2}, "mu"),
         ({"delta_r8": math.nan}, "delta_r8"),
-        ({"x_cmd": 0.5}, "x_cmd = 0.5 is outside"),
+        ({"x_cmd": 0.5}, "input x_cmd = 0.5 m is outside"),
         ({"delta_r7b": 1.0}, "delta_r7b"),
         ({"drive_bandwidth": 10.0, "drive_damping": -1.0}, "drive_damping"),
         ({"rotor_inertia": -1e-5}, "rotor_inertia"),
@@ -388,16 +429,7 @@ def test_ecos_drives_both_builds_and_the_python_one_twice(native: Path, unzipped
 def test_a_c_host_runs_the_binary_without_python(native: Path, unzipped: Path, tmp_path: Path):
     """tests/fmu_c_host.c (the pythonfmu FMU's C master too), with no Python environment:
     two loads in one process, each 500 steps, then a clean exit."""
-    host = tmp_path / "host"
-    subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(fmi2_headers()),
-                    str(Path(__file__).parent / "fmu_c_host.c"), "-o", str(host), "-ldl"],
-                   check=True, capture_output=True)
-    md = read_model_description(str(unzipped))
-    refs = {v.name: v.valueReference for v in md.modelVariables}
-    run = subprocess.run(
-        [str(host), str(_library(native)), md.guid, (unzipped / "resources").as_uri(),
-         *(str(refs[n]) for n in ("x_cmd", "input_force", "m_platen")), "4.0", "2"],
-        capture_output=True, text=True, env={"PATH": "/usr/bin:/bin"}, timeout=30)
+    run = _run_c_host(tmp_path, _library(native), unzipped, loads=2)
     assert run.returncode == 0, run.stderr
     drive = DriveState.at_rest(-3.4386e-3)
     for k in range(1, 501):  # the host's ramp, in the same floating-point operations
@@ -441,3 +473,96 @@ def test_command_line_builds_the_native_fmu(tmp_path: Path, capsys: pytest.Captu
 
     assert main(["build-fmu", "--native", "--preset", "chang2021", "--out", str(tmp_path)]) == 0
     assert capsys.readouterr().out.strip() == str(tmp_path / "ToggleClampNative.fmu")
+
+
+# ---- initialisation mode, re-initialisation, logging, status ---------------------------------
+
+
+def _in_initialisation_mode(folder: Path, start: dict):
+    """An fmpy slave of an extracted FMU in Initialization Mode with ``start`` set."""
+    md = read_model_description(str(folder))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=str(folder),
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="init")
+    slave.instantiate(loggingOn=False)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    for name, value in start.items():
+        slave.setReal([refs[name]], [value])
+    return slave, refs
+
+
+def test_outputs_in_initialisation_mode_are_the_pythonfmu_builds(unzipped: Path,
+                                                                 python_fmu: Path):
+    """Declared calculated InitialUnknowns: both builds compute them from the values set
+    so far, in Initialization Mode, and again after a parameter changes there."""
+    start = {"x_cmd": X_CONTACT + 5e-4, "x_contact": X_CONTACT, "delta_r8": 0.5e-3}
+    got = {}
+    for name, folder in (("native", unzipped), ("python", python_fmu)):
+        slave, refs = _in_initialisation_mode(folder, start)
+        first = _outputs(slave, refs)
+        slave.setReal([refs["m_platen"]], [4.0])
+        slave.setReal([refs["x_cmd"]], [X_CONTACT + 2e-4])
+        got[name] = (first, _outputs(slave, refs))
+        slave.exitInitializationMode()
+        close_slave(slave)
+    for native, python in zip(got["native"], got["python"], strict=True):
+        assert native == pytest.approx(python, rel=REL, abs=1e-300)
+    assert got["native"][0][OUTPUTS.index("x")] == X_CONTACT + 5e-4
+    assert got["native"][0][OUTPUTS.index("clamp_force")] > 0  # in the mold, at init
+    assert got["native"][1][OUTPUTS.index("x")] == X_CONTACT + 2e-4
+
+
+def test_parameters_can_be_set_again_after_a_failed_initialisation(unzipped: Path):
+    """As docs/fmu.md says of both builds: no fmi2Reset needed."""
+    log: list[tuple[int, str]] = []
+    slave, refs = _in_initialisation_mode(unzipped, {"m_platen": -3.0})
+    with pytest.raises(FMICallException):
+        slave.exitInitializationMode()
+    with pytest.raises(FMICallException):  # no step after a failed initialisation
+        slave.doStep(0.0, 1e-3)
+    slave.setReal([refs["m_platen"]], [3.0])
+    slave.exitInitializationMode()
+    out = _run(slave, refs, APPROACH[:3])[-1]
+    close_slave(slave)
+    assert out[0] == APPROACH[2][0] and not log
+
+
+def test_the_no_toggle_geometry_names_its_parameters(unzipped: Path):
+    """delta_r1L and delta_r2L within their ranges, together such that the lower half never
+    reaches its toggle: the message is the pythonfmu build's (toggle.plant.configure)."""
+    log: list[tuple[int, str]] = []
+    errors = {"r1L": 5e-3, "r2L": -5e-3}
+    with pytest.raises(FMICallException):
+        start_slave(unzipped, "geometry", {f"delta_{n}": v for n, v in errors.items()},
+                    log=lambda s, text: log.append((s, text)))
+    with pytest.raises(ParameterError) as python:
+        configure("chang2021", errors=errors)
+    text, want = log[0][1], f"initialisation failed: {python.value}"
+    assert text.startswith(want.split(" in the assemblable range")[0]), (text, want)
+
+
+def test_unknown_log_categories_are_refused_and_terminated_is_answered(unzipped: Path):
+    log: list[tuple[int, str]] = []
+    slave, refs = start_slave(unzipped, "categories", {},
+                              log=lambda s, text: log.append((s, text)))
+    slave.setDebugLogging(True, ["logStatusError", "logAll"])
+    with pytest.raises(FMICallException):
+        slave.setDebugLogging(True, ["logEverything"])
+    assert 'unknown log category "logEverything"' in log[-1][1]
+    status = fmi2Boolean()
+    assert slave.fmi2GetBooleanStatus(slave.component, fmi2Terminated, byref(status)) == 0
+    assert status.value == 0
+    close_slave(slave)
+
+
+def test_clamp_a_drives_clamp_b_in_libcosim(native: Path, tmp_path: Path):
+    """A's x wired to B's x_cmd: B reads A's position in Initialization Mode (not 0.0, from
+    which its first step would ask for 20 m/s), then follows A's stroke."""
+    result = run_libcosim(tmp_path, {"a": native, "b": native},
+                          {"a": ["x"], "b": ["x", "velocity", "input_force"]},
+                          initial=[("a", "x_cmd", 0.02)],
+                          connections=[("a", "x", "b", "x_cmd")], stop_time=0.1)
+    assert result["ok"]
+    assert result["last"]["b"]["x"] == result["last"]["a"]["x"] == 0.02
+    assert result["last"]["b"]["velocity"] == 0.0

@@ -35,7 +35,6 @@ import numpy as np
 from toggle.fmu_build import (
     DEFAULT_SLAVE,
     check_variables,
-    model_structure,
     unit_definitions,
 )
 from toggle.fmu_build import number_text as _number
@@ -59,8 +58,26 @@ from toggle.plant import (
 
 MODEL = "ToggleClampNative"
 C_DIR = Path(__file__).resolve().parent.parent / "fmu_src" / "native"
-WRAPPER = C_DIR / "fmi2_clamp.c"
+#: The hand-written C files: the core, the drive lag, and one API file per FMI version.
+CORE_FILES = ("clamp_core.c", "clamp_core.h", "drive_lag.c", "drive_lag.h")
+API_FILES = {2: "fmi2_clamp.c", 3: "fmi3_clamp.c"}
 GENERATED = "clamp_model"  # clamp_model.c / clamp_model.h
+#: A GNU ld / lld linker script ``INPUT(-lm)`` named as an object file: listed last among
+#: the sources, it makes any build that links the listed files link libm, including fmpy's
+#: CMake route (``fmpy compile``), which compiles the sources but ignores ``<Library>``.
+LINK_LIBM = "link_libm.o"
+FMI_VERSIONS = (2, 3)
+INTERFACES = ("cs", "me", "both")
+#: Value reference of the String ``preset``: FMI 2.0 numbers each type apart, FMI 3.0 needs
+#: references unique across types (the Reals are 0 .. n-1); FMI 3.0's ``time`` is one more.
+PRESET_VR = {2: 0, 3: 1000}
+#: drive_bandwidth's start value in a Model Exchange build when the table's is 0, Hz
+ME_BANDWIDTH = 20.0
+TIME_VR = 1001
+#: Model Exchange's continuous states: (state, derivative name, derivative unit); x and
+#: velocity are outputs, the slip state and the derivatives are locals after the table.
+ME_STATES = (("x", "der(x)", "m/s"), ("velocity", "der(velocity)", "m/s2"),
+             ("slip_state", "der(slip_state)", None))
 #: The [dynamics] fields by FMU parameter name, first in the generated functions' ``masses``.
 MASS_FIELDS = {name: field for name, (field, _, _) in DYNAMICS_PARAMETERS.items()}
 #: The drive's inertias, after the masses in the generated functions' ``masses`` input.
@@ -178,7 +195,8 @@ def c_string(text: str) -> str:
 
 
 def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: str,
-                 functions: Sequence[ca.Function]) -> str:
+                 functions: Sequence[ca.Function], fmi_version: int = 2,
+                 interface: str = "cs") -> str:
     """clamp_model_data.h: the preset's constants, the variable table and work sizes."""
     mech = cfg.mechanism
     reals = real_variables(variables)
@@ -190,6 +208,9 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         "#ifndef CLAMP_MODEL_DATA_H", "#define CLAMP_MODEL_DATA_H",
         f"#define CLAMP_GUID {c_string(guid)}",
         f"#define CLAMP_PRESET {c_string(preset)}",
+        f"#define CLAMP_VR_PRESET {PRESET_VR[fmi_version]}",
+        f"#define CLAMP_HAS_CS {int(interface in ('cs', 'both'))}",
+        f"#define CLAMP_HAS_ME {int(interface in ('me', 'both'))}",
         f"#define CLAMP_N_REAL {len(reals)}",
         f"#define CLAMP_N_OUT {len(PlantOutputs._fields)}",
         f"#define CLAMP_N_DIMS {len(DIMENSIONS)}",
@@ -208,83 +229,246 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         f"{_c_array([v.initial_value for v in reals])};",
         "static const char *const CLAMP_NAMES[CLAMP_N_REAL] = {"
         + ", ".join(c_string(v.name) for v in reals) + "};",
+        "static const char *const CLAMP_UNITS[CLAMP_N_REAL] = {"
+        + ", ".join(c_string(v.unit) for v in reals) + "};",
         "#endif", "",
     ]
     return "\n".join(lines)
 
 
+def model_name(fmi_version: int = 2, interface: str = "cs") -> str:
+    """Model identifier and file stem: ToggleClampNative[3][ME|CSME] (FMI 2.0 CS: plain)."""
+    if fmi_version not in FMI_VERSIONS or interface not in INTERFACES:
+        raise ValueError(f"FMI version {fmi_version!r} / interface {interface!r}: choose "
+                         f"{FMI_VERSIONS} and {INTERFACES}")
+    return MODEL + ("3" if fmi_version == 3 else "") + {"cs": "", "me": "ME",
+                                                        "both": "CSME"}[interface]
+
+
+class _Row(NamedTuple):
+    """One Real or String variable of the description: the table's, or a Model Exchange
+    local (the slip state, the derivatives)."""
+
+    var: Var | None
+    name: str
+    vr: int
+    causality: str
+    unit: str | None
+    derivative_of: str | None = None
+    description: str = ""
+
+
+def _rows(variables: Sequence[Var], fmi_version: int, me: bool) -> list[_Row]:
+    rows, vr = [], 0
+    for var in variables:
+        if var.is_string:
+            rows.append(_Row(var, var.name, PRESET_VR[fmi_version], var.causality, None))
+        else:
+            rows.append(_Row(var, var.name, vr, var.causality, var.unit))
+            vr += 1
+    if me:
+        rows.append(_Row(None, "slip_state", vr, "local", "1", None,
+                         "Slip state z of the pin friction (Dahl), in [-1, 1]"))
+        for k, (state, der, unit) in enumerate(ME_STATES):
+            rows.append(_Row(None, der, vr + 1 + k, "local", unit, state,
+                             f"Time derivative of {state}"))
+    return rows
+
+
+def _description_root(fmi_version: int, name: str, guid: str, description: str) -> Element:
+    from toggle.fmu_build import project_version
+
+    attrib = {"fmiVersion": f"{fmi_version}.0", "modelName": name, "description": description,
+              "generationTool": "toggle-clamp native_fmu (CasADi codegen)",
+              "version": project_version(), "copyright": "Copyright (c) the toggle-clamp "
+              "authors", "license": "MIT", "variableNamingConvention": "structured"}
+    if fmi_version == 2:
+        attrib |= {"guid": guid, "numberOfEventIndicators": "0"}
+    else:
+        attrib["instantiationToken"] = guid
+    return Element("fmiModelDescription", attrib)
+
+
+def _interfaces(root: Element, fmi_version: int, name: str, interface: str,
+                sources: Sequence[str]) -> None:
+    state = "FMUstate" if fmi_version == 2 else "FMUState"
+    common = {"modelIdentifier": name, "needsExecutionTool": "false",
+              "canBeInstantiatedOnlyOncePerProcess": "false",
+              f"canGetAndSet{state}": "true", f"canSerialize{state}": "true",
+              "providesDirectionalDerivative": "false"}
+    if fmi_version == 2:
+        common["canNotUseMemoryManagementFunctions"] = "true"
+    else:
+        common["providesDirectionalDerivatives"] = common.pop("providesDirectionalDerivative")
+    if interface in ("me", "both"):  # the FMI 2.0 schema wants ModelExchange first
+        me = SubElement(root, "ModelExchange", common | (
+            {"completedIntegratorStepNotNeeded": "true"} if fmi_version == 2
+            else {"needsCompletedIntegratorStep": "false"}))
+        if fmi_version == 2:
+            _source_files(me, sources)
+    if interface in ("cs", "both"):
+        cs = {"canHandleVariableCommunicationStepSize": "true"}
+        if fmi_version == 2:
+            cs |= {"canInterpolateInputs": "true", "maxOutputDerivativeOrder": "0"}
+        else:
+            cs |= {"hasEventMode": "false", "providesIntermediateUpdate": "false",
+                   "canReturnEarlyAfterIntermediateUpdate": "false"}
+        node = SubElement(root, "CoSimulation", common | cs)
+        if fmi_version == 2:
+            _source_files(node, sources)
+
+
+def _source_files(node: Element, sources: Sequence[str]) -> None:
+    files = SubElement(node, "SourceFiles")
+    for source in sources:
+        SubElement(files, "File", name=source)
+
+
 def model_description(variables: Sequence[Var], guid: str, sources: Sequence[str],
-                      description: str, step_size: float, stop_time: float) -> bytes:
-    """modelDescription.xml of the native FMU (the same variables as the pythonfmu FMU)."""
+                      description: str, step_size: float, stop_time: float,
+                      fmi_version: int = 2, interface: str = "cs") -> bytes:
+    """modelDescription.xml of the native FMU: the pythonfmu FMU's variables; with Model
+    Exchange also the slip state and the derivatives of the three continuous states."""
     check_variables(variables)
-    root = Element("fmiModelDescription", {
-        "fmiVersion": "2.0", "modelName": MODEL, "guid": guid, "description": description,
-        "generationTool": "toggle-clamp native_fmu (CasADi codegen)",
-        "variableNamingConvention": "structured", "numberOfEventIndicators": "0"})
-    cosim = SubElement(root, "CoSimulation", {
-        "modelIdentifier": MODEL, "needsExecutionTool": "false",
-        "canHandleVariableCommunicationStepSize": "true", "canInterpolateInputs": "false",
-        "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions":
-        "true", "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
-        "providesDirectionalDerivative": "false"})
-    files = SubElement(cosim, "SourceFiles")
-    for name in sources:
-        SubElement(files, "File", name=name)
-    root.append(unit_definitions({v.unit for v in variables if not v.is_string}))
+    name = model_name(fmi_version, interface)
+    me = interface in ("me", "both")
+    rows = _rows(variables, fmi_version, me)
+    root = _description_root(fmi_version, name, guid, description)
+    _interfaces(root, fmi_version, name, interface, sources)
+    time_unit = {"s"} if fmi_version == 3 else set()  # FMI 3.0's independent variable
+    root.append(unit_definitions({r.unit for r in rows if r.unit} | time_unit))
     cats = SubElement(root, "LogCategories")
     SubElement(cats, "Category", name="logStatusError", description="Errors and rejected input")
+    SubElement(cats, "Category", name="logAll", description="Other messages")
     SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=_number(stop_time),
                stepSize=_number(step_size))
     scalars = SubElement(root, "ModelVariables")
-    real_vr = 0
-    for var in variables:
-        attrib = {"name": var.name, "causality": var.causality,
-                  "variability": var.variability or ("fixed" if var.causality == "parameter"
-                                                     else "continuous"),
-                  "description": var.description}
-        if var.is_string:
-            attrib["valueReference"] = "0"
-            node = SubElement(scalars, "ScalarVariable", attrib)
-            SubElement(node, "String", start=var.start)
-            continue
-        attrib["valueReference"] = str(real_vr)
-        real_vr += 1
-        if var.causality == "output":
-            attrib["initial"] = "calculated"
-        node = SubElement(scalars, "ScalarVariable", attrib)
-        real = {"unit": var.unit}
-        for attr in ("min", "max"):
-            if getattr(var, attr) is not None:
-                real[attr] = _number(getattr(var, attr))
-        if var.start is not None:
-            real["start"] = _number(var.start)
-        SubElement(node, "Real", real)
-    root.append(model_structure(variables))
+    by_name = {r.name: r for r in rows}
+    if fmi_version == 3:
+        SubElement(scalars, "Float64", name="time", valueReference=str(TIME_VR),
+                   causality="independent", variability="continuous",
+                   description="Simulation time", unit="s")
+    for row in rows:
+        (_fmi2_variable if fmi_version == 2 else _fmi3_variable)(scalars, row, by_name)
+    root.append((_fmi2_structure if fmi_version == 2 else _fmi3_structure)(rows, me))
     indent(root, "  ")
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"
 
 
-def build_description(sources: Sequence[str]) -> bytes:
+def _variability(row: _Row) -> str:
+    if row.var is not None and row.var.variability:
+        return row.var.variability
+    return "fixed" if row.causality == "parameter" else "continuous"
+
+
+def _limits(row: _Row) -> dict[str, str]:
+    out = {"unit": row.unit} if row.unit else {}
+    var = row.var
+    if var is not None:
+        out |= {a: _number(getattr(var, a)) for a in ("min", "max") if getattr(var, a) is not None}
+    return out
+
+
+def _fmi2_variable(scalars: Element, row: _Row, by_name: dict[str, _Row]) -> None:
+    description = row.var.description if row.var else row.description
+    attrib = {"name": row.name, "valueReference": str(row.vr), "causality": row.causality,
+              "variability": _variability(row), "description": description}
+    if row.causality in ("output", "local"):
+        attrib["initial"] = "calculated"
+    node = SubElement(scalars, "ScalarVariable", attrib)
+    if row.var is not None and row.var.is_string:
+        SubElement(node, "String", start=row.var.start)
+        return
+    real = _limits(row)
+    if row.var is not None and row.var.start is not None:
+        real["start"] = _number(row.var.start)
+    if row.derivative_of:
+        real["derivative"] = str(list(by_name).index(row.derivative_of) + 1)
+    SubElement(node, "Real", real)
+
+
+def _fmi3_variable(scalars: Element, row: _Row, by_name: dict[str, _Row]) -> None:
+    description = row.var.description if row.var else row.description
+    attrib = {"name": row.name, "valueReference": str(row.vr), "causality": row.causality,
+              "variability": _variability(row), "description": description}
+    if row.var is not None and row.var.is_string:
+        node = SubElement(scalars, "String", attrib)
+        SubElement(node, "Start", value=row.var.start)
+        return
+    if row.causality in ("output", "local"):
+        attrib["initial"] = "calculated"
+    attrib |= _limits(row)
+    if row.var is not None and row.var.start is not None:
+        attrib["start"] = _number(row.var.start)
+    if row.derivative_of:
+        attrib["derivative"] = str(by_name[row.derivative_of].vr)
+    SubElement(scalars, "Float64", attrib)
+
+
+def _fmi2_structure(rows: Sequence[_Row], me: bool) -> Element:
+    """Outputs (CS only: no direct dependency on x_cmd; with Model Exchange the outputs
+    depend on the states and x_cmd, left undeclared), Derivatives, InitialUnknowns."""
+    index = {r.name: i + 1 for i, r in enumerate(rows)}
+    outputs = [r for r in rows if r.causality == "output"]
+    derivatives = [r for r in rows if r.derivative_of]
+    node = Element("ModelStructure")
+    out_node = SubElement(node, "Outputs")
+    for row in outputs:
+        SubElement(out_node, "Unknown", {"index": str(index[row.name])}
+                   | ({} if me else {"dependencies": ""}))
+    if me:
+        der_node = SubElement(node, "Derivatives")
+        for row in derivatives:
+            SubElement(der_node, "Unknown", index=str(index[row.name]))
+    init_node = SubElement(node, "InitialUnknowns")
+    unknowns = outputs + ([by for by in rows if by.causality == "local"] if me else [])
+    for row in sorted(unknowns, key=lambda r: index[r.name]):
+        SubElement(init_node, "Unknown", index=str(index[row.name]))
+    return node
+
+
+def _fmi3_structure(rows: Sequence[_Row], me: bool) -> Element:
+    node = Element("ModelStructure")
+    for row in rows:
+        if row.causality == "output":
+            SubElement(node, "Output", {"valueReference": str(row.vr)}
+                       | ({} if me else {"dependencies": ""}))
+    for row in rows:
+        if row.derivative_of and me:
+            SubElement(node, "ContinuousStateDerivative", valueReference=str(row.vr))
+    for row in rows:
+        if row.causality == "output" or (me and row.causality == "local"):
+            SubElement(node, "InitialUnknown", valueReference=str(row.vr))
+    return node
+
+
+def build_description(name: str, sources: Sequence[str]) -> bytes:
     """sources/buildDescription.xml: what an importing tool compiles, and how."""
     root = Element("fmiBuildDescription", fmiVersion="3.0")
-    config = SubElement(root, "BuildConfiguration", modelIdentifier=MODEL,
+    config = SubElement(root, "BuildConfiguration", modelIdentifier=name,
                         description="C99; link with libm")
     files = SubElement(config, "SourceFileSet", language="C99")
-    for name in sources:
-        SubElement(files, "SourceFile", name=name)
+    for source in sources:
+        SubElement(files, "SourceFile", name=source)
     SubElement(config, "Library", name="m")
     indent(root, "  ")
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"
 
 
-def fmi2_headers() -> Path:
-    """The folder of the FMI 2.0 headers shipped inside the installed fmpy."""
+def fmi_headers(fmi_version: int = 2) -> Path:
+    """The folder of the FMI headers (fmi2*.h, fmi3*.h) shipped inside the installed fmpy."""
     import fmpy
 
     folder = Path(fmpy.__file__).resolve().parent / "c-code"
-    if not (folder / "fmi2Functions.h").is_file():
-        raise FileNotFoundError(f"no fmi2Functions.h in {folder}: fmpy installation incomplete")
+    header = folder / f"fmi{fmi_version}Functions.h"
+    if not header.is_file():
+        raise FileNotFoundError(f"no {header.name} in {folder}: fmpy installation incomplete")
     return folder
+
+
+def fmi2_headers() -> Path:
+    """The folder of the FMI 2.0 headers shipped inside the installed fmpy."""
+    return fmi_headers(2)
 
 
 def slave_variables(preset: str = "chang2021") -> tuple[tuple[Var, ...], str, Any]:
@@ -299,12 +483,25 @@ def slave_variables(preset: str = "chang2021") -> tuple[tuple[Var, ...], str, An
     return module.variables(load_preset(preset)), slave.description, slave.default_experiment
 
 
-def generate_sources(folder: Path, preset: str) -> tuple[list[str], str]:
-    """Write the C sources (generated model, data header, wrapper) into ``folder``.
+def interface_variables(variables: Sequence[Var], interface: str) -> tuple[Var, ...]:
+    """The table as an FMU with this interface declares it: with Model Exchange, whose
+    continuous state is the drive lag, an ideal-drive default (drive_bandwidth start 0)
+    becomes :data:`ME_BANDWIDTH`, so the FMU initialises with its start values (the
+    Compliance Checker sets none)."""
+    if interface == "cs":
+        return tuple(variables)
+    return tuple(dataclasses.replace(v, start=ME_BANDWIDTH)
+                 if v.name == "drive_bandwidth" and v.start == 0 else v for v in variables)
 
-    Returns the names of the files to compile and the model's GUID.
+
+def generate_sources(folder: Path, preset: str, fmi_version: int = 2,
+                     interface: str = "cs") -> tuple[list[str], str]:
+    """Write the C sources (generated model, data header, core, API) into ``folder``.
+
+    Returns the names of the C files to compile and the model's GUID (the FMU lists
+    :data:`LINK_LIBM` after them).
     """
-    variables, _, _ = slave_variables(preset)
+    variables = interface_variables(slave_variables(preset)[0], interface)
     cfg = configure(preset)
     functions = plant_functions(cfg)
     gen = ca.CodeGenerator(f"{GENERATED}.c", {"with_header": True, "with_export": False,
@@ -312,12 +509,15 @@ def generate_sources(folder: Path, preset: str) -> tuple[list[str], str]:
     for f in (*functions, geometry_function()):
         gen.add(f)
     gen.generate(str(folder) + "/")
-    guid = str(uuid.uuid5(uuid.NAMESPACE_URL, f"toggle-clamp/{MODEL}/{preset}/{variables!r}/"
+    name = model_name(fmi_version, interface)
+    guid = str(uuid.uuid5(uuid.NAMESPACE_URL, f"toggle-clamp/{name}/{preset}/{variables!r}/"
                           + (folder / f"{GENERATED}.c").read_text()))  # same model, same GUID
     (folder / "clamp_model_data.h").write_text(
-        model_header(cfg, preset, variables, guid, functions))
-    shutil.copy2(WRAPPER, folder / WRAPPER.name)
-    return [WRAPPER.name, f"{GENERATED}.c"], guid
+        model_header(cfg, preset, variables, guid, functions, fmi_version, interface))
+    api = API_FILES[fmi_version]
+    for file in (*CORE_FILES, api):
+        shutil.copy2(C_DIR / file, folder / file)
+    return [api, "clamp_core.c", "drive_lag.c", f"{GENERATED}.c"], guid
 
 
 def _run(cmd: list[str]) -> None:
@@ -326,43 +526,54 @@ def _run(cmd: list[str]) -> None:
         raise RuntimeError(f"gcc failed:\n{' '.join(cmd)}\n{result.stderr}")
 
 
-def compile_library(src: Path, sources: Sequence[str], out: Path) -> None:
-    """gcc the sources into a shared library; any warning is an error."""
+def compile_library(src: Path, sources: Sequence[str], out: Path, fmi_version: int = 2) -> None:
+    """gcc the sources into a shared library; any warning is an error. The link line is
+    the listed files only, as an importing tool's: libm comes from :data:`LINK_LIBM`."""
     objects = []
     for name in sources:
+        if name.endswith(".o"):  # LINK_LIBM, in its place (last)
+            objects.append(str(src / name))
+            continue
         extra = GENERATED_CFLAGS if name.startswith(GENERATED) else ()
         obj = out.parent / f"{Path(name).stem}.o"
-        _run(["gcc", *CFLAGS, *extra, "-I", str(src), "-I", str(fmi2_headers()), "-c",
+        _run(["gcc", *CFLAGS, *extra, "-I", str(src), "-I", str(fmi_headers(fmi_version)), "-c",
               str(src / name), "-o", str(obj)])
         objects.append(str(obj))
-    _run(["gcc", "-shared", *objects, "-o", str(out), "-lm"])
+    _run(["gcc", "-shared", *objects, "-o", str(out)])  # libm through LINK_LIBM
 
 
-def build_native_fmu(out_dir: Path, preset: str = "chang2021") -> Path:
-    """Build ``<out_dir>/ToggleClampNative.fmu`` for ``preset``; return its path.
+def build_native_fmu(out_dir: Path, preset: str = "chang2021", fmi_version: int = 2,
+                     interface: str = "cs") -> Path:
+    """Build ``<out_dir>/<model_name(fmi_version, interface)>.fmu`` for ``preset``.
 
     Raises RuntimeError if gcc fails or fmpy's validator finds problems.
     """
     from fmpy.validation import validate_fmu
 
+    name = model_name(fmi_version, interface)
     variables, description, experiment = slave_variables(preset)  # a bad name fails here
+    variables = interface_variables(variables, interface)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    fmu = out_dir / f"{MODEL}.fmu"
+    fmu = out_dir / f"{name}.fmu"
+    platform = "linux64" if fmi_version == 2 else "x86_64-linux"
     with tempfile.TemporaryDirectory(prefix="toggle_native_") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
-        sources, guid = generate_sources(src, preset)
-        library = Path(tmp) / f"{MODEL}.so"
-        compile_library(src, sources, library)
+        sources, guid = generate_sources(src, preset, fmi_version, interface)
+        shutil.copy2(C_DIR / LINK_LIBM, src / LINK_LIBM)
+        sources.append(LINK_LIBM)
+        library = Path(tmp) / f"{name}.so"
+        compile_library(src, sources, library, fmi_version)
         stop = experiment.stop_time if math.isfinite(experiment.stop_time) else 10.0
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
             zf.writestr("modelDescription.xml", model_description(
-                variables, guid, sources, description, experiment.step_size, stop))
-            zf.write(library, f"binaries/linux64/{MODEL}.so")
+                variables, guid, sources, description, experiment.step_size, stop,
+                fmi_version, interface))
+            zf.write(library, f"binaries/{platform}/{name}.so")
             for path in sorted(src.iterdir()):
                 zf.write(path, f"sources/{path.name}")
-            zf.writestr("sources/buildDescription.xml", build_description(sources))
+            zf.writestr("sources/buildDescription.xml", build_description(name, sources))
     problems = validate_fmu(str(fmu))
     if problems:
         raise RuntimeError(f"{fmu} is not a valid FMU:\n" + "\n".join(problems))

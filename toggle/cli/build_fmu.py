@@ -1,7 +1,8 @@
 """``toggle build-fmu``: write build/ToggleClamp.fmu (FMI 2.0 Co-Simulation) of one preset.
 
-``--native`` writes build/ToggleClampNative.fmu instead: the plant generated
-to C, no Python at run time (:mod:`toggle.native_fmu`).
+``--native`` writes the native FMU instead: the plant generated to C, no Python at run
+time (:mod:`toggle.native_fmu`), for FMI 2.0 or 3.0 (``--fmi-version``), Co-Simulation,
+Model Exchange or both (``--interface``); build/ToggleClampNative.fmu by default (2, cs).
 """
 
 from __future__ import annotations
@@ -18,8 +19,11 @@ def run(args: argparse.Namespace) -> int:
     if args.native:
         from toggle.native_fmu import build_native_fmu
 
-        print(build_native_fmu(args.out, args.preset))
+        print(build_native_fmu(args.out, args.preset, args.fmi_version, args.interface))
     else:
+        if (args.fmi_version, args.interface) != (2, "cs"):
+            raise ValueError("--fmi-version 3 and --interface me|both need --native (the "
+                             "pythonfmu FMU is FMI 2.0 Co-Simulation)")
         print(build_fmu(args.out, preset=args.preset))
     return 0
 
@@ -29,6 +33,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=path, default=Path("build"), help="output folder (default build)")
     p.add_argument("--native", action="store_true",
                    help="build ToggleClampNative.fmu: generated C, no Python at run time")
+    p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
+                   help="with --native: FMI 2.0 or 3.0 (default 2)")
+    p.add_argument("--interface", choices=("cs", "me", "both"), default="cs",
+                   help="with --native: Co-Simulation, Model Exchange or both in one FMU "
+                        "(default cs); file ToggleClampNative[3][ME|CSME].fmu")
     p.add_argument("--preset", default="chang2021",
                    help="the preset the FMU is built for: its values are the parameters' start "
                         "values; it needs [dynamics] and [drive] (default chang2021)")
