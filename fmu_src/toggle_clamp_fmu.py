@@ -11,12 +11,13 @@ the parameters' start values, and the declared min/max are physical bounds.
 Outside an FMU (tests, the native builder) the module reads chang2021.
 """
 
-import math
 from pathlib import Path
 
 from pythonfmu import DefaultExperiment
 
+from toggle import fmu_state
 from toggle.fmu_slave import DeclaredSlave, Var
+from toggle.fmu_state import StateError
 from toggle.kinematics import stroke_limits
 from toggle.params import (
     DYNAMICS_PARAMETERS,
@@ -25,7 +26,15 @@ from toggle.params import (
     dynamics_fields,
     load_preset,
 )
-from toggle.plant import DriveState, HystereticPlant, PlantConfig, configure, follow
+from toggle.plant import (
+    MAX_INPUT_ACCELERATION,
+    MAX_INPUT_SPEED,
+    DriveState,
+    HystereticPlant,
+    PlantConfig,
+    configure,
+    follow,
+)
 
 _PRESET_FILE = Path(__file__).with_name("preset.toml")
 #: The preset this FMU is built for, read once at import (no file is read later).
@@ -89,11 +98,6 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
     )
 
 
-def _finite_list(values: object, n: int) -> bool:
-    return (isinstance(values, list) and len(values) == n
-            and all(isinstance(v, float) and math.isfinite(v) for v in values))
-
-
 class ToggleClamp(DeclaredSlave):
     """Nine-link double-toggle clamp driven by position; see the module doc."""
 
@@ -136,23 +140,48 @@ class ToggleClamp(DeclaredSlave):
                        self.drive_damping)
         self._publish(drive)
 
+    def state_identity(self) -> str:
+        return f"ToggleClamp {MECHANISM.name}"
+
     def model_state(self) -> dict:
-        if getattr(self, "_drive", None) is None:
-            return {"drive": None, "slip": None}
         return {"drive": list(self._drive), "slip": list(self._plant.state)}
 
-    def restore_model_state(self, state: dict) -> None:
+    def restore_model_state(self, state: object) -> None:
+        """The drive and slip state, checked as the plant made them: the motion within the
+        input link's bounds, the last command within the clamp's range, the slip state at
+        the drive's position and in [-1, 1], and the outputs in the state those of the
+        plant there (so a forged output or drive field is refused)."""
+        state = fmu_state.keys(state, frozenset({"drive", "slip"}), "the model state")
         drive, slip = state["drive"], state["slip"]
-        if drive is None:
-            return
-        if not (_finite_list(drive, len(DriveState._fields)) and isinstance(slip, list)
-                and len(slip) == 2 and (slip[0] is None or _finite_list(slip[:1], 1))
-                and _finite_list(slip[1:], 1) and abs(slip[1]) <= 1.0):
-            raise ValueError("the drive or slip state is not a list of finite numbers")
-        self._check_ranges()
-        self._build_plant()
-        self._drive = DriveState(*drive)
-        self._plant.state = (slip[0], slip[1])
+        if not (isinstance(drive, list) and len(drive) == len(DriveState._fields)):
+            raise StateError("the model state's drive must be a list of 6 numbers "
+                             f"({', '.join(DriveState._fields)})")
+        drive = DriveState(*(fmu_state.finite(v, f"drive {n}")
+                             for n, v in zip(DriveState._fields, drive)))
+        if not (isinstance(slip, list) and len(slip) == 2):
+            raise StateError("the model state's slip must be a list [x m, z]")
+        x_last, z = (fmu_state.finite(v, f"slip {n}") for n, v in zip(("x", "z"), slip))
+        self._build_plant()  # the parameters' plant, or their error
+        plant = self._plant.plant
+        bounds = (("v", drive.v, MAX_INPUT_SPEED, "m/s"),
+                  ("a", drive.a, MAX_INPUT_ACCELERATION, "m/s^2"))
+        for name, value, bound, unit in bounds:
+            if not abs(value) <= bound:
+                raise StateError(f"drive {name} = {value!r} {unit} is outside "
+                                 f"[{-bound:g}, {bound:g}] {unit}")
+        plant.check_input(drive.u)
+        if not drive.h >= 0 or drive.h == 0 and drive != DriveState.at_rest(drive.u):
+            raise StateError(f"drive h = {drive.h!r} s: the last step must be > 0 s, or 0 "
+                             "with the drive at rest at its command")
+        if x_last != drive.x or not abs(z) <= 1:
+            raise StateError(f"slip state [{x_last!r}, {z!r}]: it must be at the drive's "
+                             f"x = {drive.x!r} m with z in [-1, 1]")
+        outputs = plant(drive.x, drive.v, drive.a, z)  # PlantError outside the range
+        if any(getattr(self, n) != v for n, v in zip(outputs._fields, outputs)):
+            raise StateError("the outputs in the state are not the plant's at its drive "
+                             "and slip state")
+        self._drive = drive
+        self._plant.state = (x_last, z)
 
     def _publish(self, drive: DriveState | None = None) -> None:
         drive = drive or self._drive

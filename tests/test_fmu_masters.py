@@ -38,6 +38,7 @@ X_CONTACT = X_TOGGLE - 1e-3
 OUTPUTS = ["x", "velocity", "acceleration", "platen_position", "input_force", "clamp_force",
            "asymmetry", "motor_torque"]
 HOST_SOURCE = Path(__file__).parent / "fmu_c_host.c"
+HEAD = 20  # bytes before a state's payload: magic, version, phase, length
 
 
 @pytest.fixture(scope="module")
@@ -258,7 +259,7 @@ def _with_crc(body: bytes) -> bytes:
 
 
 def _crafted(good: bytes) -> dict[str, bytes]:
-    payload = json.loads(good[16:-4])
+    payload = json.loads(good[HEAD:-4])
     payload["values"]["m_platen"] = "__import__('os').system('true')"
     text = json.dumps(payload).encode()
     return {
@@ -266,7 +267,7 @@ def _crafted(good: bytes) -> dict[str, bytes]:
         "truncated": good[:-10],
         "flipped": good[:40] + bytes([good[40] ^ 1]) + good[41:],
         "wrong version": _with_crc(good[:8] + struct.pack("<I", 99) + good[12:-4]),
-        "string for a number": _with_crc(good[:12] + struct.pack("<I", len(text)) + text),
+        "string for a number": _with_crc(good[:HEAD - 4] + struct.pack("<I", len(text)) + text),
     }
 
 
