@@ -11,11 +11,13 @@ the parameters' start values, and the declared min/max are physical bounds.
 Outside an FMU (tests, the native builder) the module reads chang2021.
 """
 
+import math
 from pathlib import Path
 
 from pythonfmu import DefaultExperiment
 
 from toggle import fmu_state
+from toggle.drive import reflected_mass, travel_per_radian
 from toggle.fmu_slave import DeclaredSlave, Var
 from toggle.fmu_state import StateError
 from toggle.kinematics import stroke_limits
@@ -62,6 +64,29 @@ OUTPUTS = (
 )
 
 
+def drive_bandwidth(mech: Mechanism) -> float:
+    """The default ``drive_bandwidth`` (Hz) of the FMU of ``mech``: its real drive's.
+
+    A linear lag is true to a drive only while the motor is not saturated, and the
+    largest setpoint jump a clamp takes is its whole stroke S (x_open to the toggle). The
+    lag's response to a jump starts with the acceleration w^2 S; the motor's standstill
+    torque T0 (the [drive] torque-speed curve's first point, else its rated torque) gives
+    at most a = T0 / (p (m_drive + crosshead + links + platen)), p the travel per motor
+    radian and m_drive the rotor's and screw's reflected mass. w = sqrt(a / S), to 3
+    digits: 2.27 Hz for chang2021 (a = 11 m/s^2), 1.36 Hz for lin2003_sm55. Any jump then
+    asks for at most about (x_cmd range / S) a, far within the input link's bounds at any
+    step size (docs/fmu.md). Without torque data: 0, the ideal drive.
+    """
+    drive, dyn = mech.drive, mech.dynamics
+    torque = drive.torque_speed[0][1] if drive.torque_speed else drive.rated_torque
+    if not torque:
+        return 0.0
+    mass = float(reflected_mass(drive)) + dyn.crosshead + dyn.links + dyn.platen
+    x_open, x_toggle = stroke_limits(mech.lower)
+    accel = torque / (travel_per_radian(drive) * mass)
+    return float(f"{math.sqrt(accel / (x_toggle - x_open)) / (2 * math.pi):.3g}")
+
+
 def variables(mech: Mechanism) -> tuple[Var, ...]:
     """The variable table of the FMU built for ``mech``: its values as start values."""
     cfg = PlantConfig(mech)
@@ -87,7 +112,8 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
               min=0.0, max=100 * max(mech.drive.rotor_inertia, mech.drive.screw_inertia, 0.01))
           for name, text in INERTIAS.items()),
         Var("drive_bandwidth", "parameter", "Hz",
-            "Drive tracking bandwidth; 0: ideal position source", start=0.0, min=0.0, max=1e3),
+            "Drive tracking bandwidth (default: the preset's drive, see docs/fmu.md); 0: ideal "
+            "position source", start=drive_bandwidth(mech), min=0.0, max=1e3),
         Var("drive_damping", "parameter", "1", "Drive tracking damping ratio", start=0.7,
             min=0.0, max=10.0),
         *(Var(f"delta_{n}", "parameter", "m", f"Dimensional error of {n}", start=0.0,
@@ -111,7 +137,8 @@ class ToggleClamp(DeclaredSlave):
     def _config(self) -> PlantConfig:
         if self.preset != MECHANISM.name:
             raise ValueError(f"parameter preset: this FMU is built for {MECHANISM.name!r}, "
-                             f"not {self.preset!r}; build one with toggle build-fmu --preset")
+                             f"not {fmu_state.short(self.preset)}; build one with toggle "
+                             "build-fmu --preset")
         return configure(
             MECHANISM,
             mu=self.mu,

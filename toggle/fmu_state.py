@@ -71,7 +71,7 @@ def unpack(data: bytes) -> dict[str, Any]:
     if not isinstance(state, dict):
         raise StateError("state payload is not an object")
     if state.get("phase") != PHASES[phase]:
-        raise StateError(f"the state's phase {state.get('phase')!r} is not the header's "
+        raise StateError(f"the state's phase {short(state.get('phase'))} is not the header's "
                          f"{PHASES[phase]!r}")
     return state
 
@@ -85,17 +85,25 @@ def parse(payload: bytes) -> Any:
         text = payload.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise StateError(f"state payload is not UTF-8: {exc}") from exc
-    bare = _STRING.sub('""', text)  # brackets and digits inside strings do not count
-    containers = bare.count("[") + bare.count("{")
-    if containers > MAX_CONTAINERS:
-        raise StateError(f"state payload nests {containers} lists and objects "
-                         f"(at most {MAX_CONTAINERS})")
-    if _LONG_NUMBER.search(bare):
-        raise StateError(f"state payload has a number of more than {MAX_NUMBER} characters")
+    # counts over the whole text bound those outside strings (where brackets and digits
+    # do not count): strip the strings only when a bound is reached
+    problem = _beyond_bounds(text) and _beyond_bounds(_STRING.sub('""', text))
+    if problem:
+        raise StateError(problem)
     try:
         return json.loads(text, parse_constant=_no_constant)
     except (json.JSONDecodeError, RecursionError) as exc:
         raise StateError(f"state payload is not valid JSON: {exc}") from exc
+
+
+def _beyond_bounds(text: str) -> str | None:
+    """What in ``text`` exceeds the parser's bounds, or None."""
+    containers = text.count("[") + text.count("{")
+    if containers > MAX_CONTAINERS:
+        return f"state payload nests {containers} lists and objects (at most {MAX_CONTAINERS})"
+    if _LONG_NUMBER.search(text):
+        return f"state payload has a number of more than {MAX_NUMBER} characters"
+    return None
 
 
 def _no_constant(name: str) -> float:

@@ -4,7 +4,8 @@
  * pythonfmu-export.so and is loaded on the first fmi2Instantiate. Every call is checked
  * here, then forwarded. What the guard adds (see docs/fmu.md):
  *  - loads the Python the FMU was built with (libpython, RTLD_GLOBAL) when the host has
- *    none, so a C master needs no LD_PRELOAD;
+ *    none, so a C master needs no LD_PRELOAD; in a host that sets no locale it sets
+ *    LC_CTYPE=C.UTF-8 first, as Python's own start-up does, so any path can be imported;
  *  - error and fatal messages reach the host's logger whatever loggingOn says; other
  *    messages follow loggingOn and the categories; every '%' is escaped once;
  *  - a call during which the slave logged an error returns fmi2Error (pythonfmu can only
@@ -131,11 +132,24 @@ static fmi2Status end(Guard *g, fmi2Status status) {
     return logged > status ? logged : status;
 }
 
+/* An interpreter started here sets LC_CTYPE from the environment, and pythonfmu then
+ * encodes the resource path in that locale's character set: ASCII where none is set (an
+ * empty environment), which fails for a non-ASCII path. As Python's own start-up does
+ * (PEP 538), a host that sets no locale gets LC_CTYPE=C.UTF-8. 0 if setenv fails. */
+static int utf8_locale(void) {
+    const char *names[] = {"LC_ALL", "LC_CTYPE", "LANG"};
+    for (size_t i = 0; i < sizeof names / sizeof *names; i++) {
+        const char *value = getenv(names[i]);
+        if (value && *value) return 1;  /* the host's choice */
+    }
+    return setenv("LC_CTYPE", "C.UTF-8", 1) == 0;
+}
+
 static int load(const fmi2CallbackFunctions *cb, fmi2String name, const char *resources) {
     char path[4096];
     if (library) return 1;
     if (!dlsym(RTLD_DEFAULT, "Py_IsInitialized") &&
-        !dlopen(GUARD_LIBPYTHON, RTLD_NOW | RTLD_GLOBAL)) {
+        (!utf8_locale() || !dlopen(GUARD_LIBPYTHON, RTLD_NOW | RTLD_GLOBAL))) {
         cb->logger(cb->componentEnvironment, name, fmi2Error, "logStatusError",
                    "cannot load the Python this FMU was built with (" GUARD_LIBPYTHON ")");
         return 0;
