@@ -283,3 +283,24 @@ def test_a_refused_jump_names_drive_bandwidth(bandwidth, hint):
     assert text.endswith("m/s^2; an input link moves within 10 m/s and 10000 m/s^2" + hint)
     if v is not None:
         assert f"asks for {v:.3g} m/s and {a:.3g} m/s^2;" in text
+
+
+@settings(max_examples=40, deadline=None)
+@given(h=st.floats(1e-6, 1.0), levels=st.lists(st.floats(-1.0, 1.0), min_size=2, max_size=12),
+       hold=st.integers(1, 30))
+def test_the_default_drive_follows_any_staircase_at_any_fixed_step(h, levels, hold):
+    """The FMU's default drive_bandwidth (the preset's drive, docs/fmu.md) follows setpoints
+    that jump anywhere within the x_cmd range, each held ``hold`` steps of ``h``: never
+    refused, and far within the input link's bounds (at most ~40 m/s^2 observed)."""
+    from fmu_support import load_module
+
+    from toggle.fmu_build import DEFAULT_SLAVE
+
+    table = {v.name: v for v in load_module(DEFAULT_SLAVE, "clamp_fmu_drive").ToggleClamp.VARIABLES}
+    bandwidth, damping, x_cmd = (table[n] for n in ("drive_bandwidth", "drive_damping", "x_cmd"))
+    middle, half = (x_cmd.max + x_cmd.min) / 2, (x_cmd.max - x_cmd.min) / 2
+    state = DriveState.at_rest(x_cmd.min)
+    for level in levels:
+        for _ in range(hold):
+            state = follow(state, middle + half * level, h, bandwidth.start, damping.start)
+            assert abs(state.a) <= 100.0 and abs(state.v) <= 2.0

@@ -5,7 +5,7 @@ The staircase climbs chang2021's stroke (x_open to the toggle, 55.0 mm) in 4 jum
 13.75 mm, one every 0.1 s, then holds. With the default drive_bandwidth (the preset's
 drive, 2.27 Hz, docs/fmu.md) both builds follow it at either step; with the ideal drive
 (drive_bandwidth = 0) the 1 ms run stops at the first jump (13.75 mm in 1 ms asks for
-27.5 m/s), and the message names drive_bandwidth.
+20.6 m/s), and the message names drive_bandwidth.
 """
 
 from __future__ import annotations
