@@ -134,6 +134,8 @@ class DeclaredSlave(Fmi2Slave):
         self._ready = False  # exitInitializationMode succeeded (the model state exists)
         self._stale = True  # outputs not computed from the values set since
         self._outputs = tuple(v.name for v in self.VARIABLES if v.causality == "output")
+        self._rows = tuple((v.name, v.is_string, v.causality) for v in self.VARIABLES)
+        self._names = frozenset(v.name for v in self.VARIABLES)
         owner = weakref.ref(self)
         for var in self.VARIABLES:
             setattr(self, var.name, var.initial_value)
@@ -274,13 +276,12 @@ class DeclaredSlave(Fmi2Slave):
                        ready or phase in ("instantiated", "stepping")) else None)
         if problem:
             raise fmu_state.StateError(f"a state taken in phase {phase} cannot have {problem}")
-        values = fmu_state.keys(state["values"], frozenset(v.name for v in self.VARIABLES),
-                                "the state's values")
-        for var in self.VARIABLES:
-            raw = values[var.name]
-            setattr(self, var.name, fmu_state.text(raw, var.name) if var.is_string else
-                    fmu_state.decode_real(raw, var.name, finite_only=var.causality == "output"
-                                          or ready and var.causality == "parameter"))
+        values = fmu_state.keys(state["values"], self._names, "the state's values")
+        for name, is_string, causality in self._rows:
+            raw = values[name]
+            setattr(self, name, fmu_state.text(raw, name) if is_string else
+                    fmu_state.decode_real(raw, name, finite_only=causality == "output"
+                                          or ready and causality == "parameter"))
         self._phase, self.failure, self._ready = phase, failure, ready
         if ready:
             self._check_ranges(("parameter",))  # as exitInitializationMode checked them
