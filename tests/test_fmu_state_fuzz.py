@@ -316,3 +316,61 @@ def _steps_through_the_binary(slave, refs, outputs, u: float, log) -> None:
             assert slave.getReal(outputs) == before
             continue
         assert all(map(math.isfinite, slave.getReal(outputs)))
+
+
+def test_states_of_every_phase_restore_through_the_binary_in_their_phase(
+        tmp_path_factory: pytest.TempPathFactory):
+    """States handed out by the built FMU before, during and after initialisation and after
+    fmi2Terminate restore into a stepping instance, and the guard takes their phase: a
+    parameter can be set again before initialisation ends, a step needs Step Mode."""
+    from fmpy import read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    unzipped = Path(extract(str(built_fmu("clamp")), str(tmp_path_factory.mktemp("phases"))))
+    md = read_model_description(str(unzipped))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    source = FMU2Slave(guid=md.guid, unzipDirectory=str(unzipped),
+                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName="source")
+    source.instantiate(loggingOn=False)
+    saved = {}
+
+    def save(phase: str) -> None:
+        state = source.getFMUstate()
+        saved[phase] = bytes(source.serializeFMUstate(state))
+        source.freeFMUstate(state)
+
+    save("instantiated")
+    source.setupExperiment(startTime=0.0)
+    source.enterInitializationMode()
+    source.setReal([refs["x_cmd"], refs["m_platen"]], [X_OPEN, -3.0])  # refused at exit
+    save("initialising")
+    source.setReal([refs["m_platen"]], [2.5])
+    source.exitInitializationMode()
+    source.setReal([refs["x_cmd"]], [X_OPEN + 1e-4])
+    source.doStep(0.0, 1e-3)
+    save("stepping")
+    source.terminate()
+    save("terminated")
+    source.freeInstance()
+    slave, refs = start_slave(unzipped, "target", {"x_cmd": X_OPEN})
+    try:
+        for phase, data in saved.items():
+            state = slave.deSerializeFMUstate(data)
+            slave.setFMUstate(state)
+            slave.freeFMUstate(state)
+            settable = phase in ("instantiated", "initialising")
+            try:
+                slave.setReal([refs["m_platen"]], [2.5])
+                assert settable, phase
+            except FMICallException:
+                assert not settable, phase
+            if phase == "initialising":
+                slave.exitInitializationMode()  # with m_platen = 2.5 set again
+            try:
+                slave.doStep(0.0, 1e-3)
+                assert phase in ("initialising", "stepping"), phase
+            except FMICallException as refused:
+                assert refused.status == fmi2Error and phase in ("instantiated", "terminated")
+    finally:
+        slave.terminate()
+        slave.freeInstance()
