@@ -132,19 +132,17 @@ def _weird(rng: np.random.Generator, old):
     return pool[rng.integers(len(pool))]
 
 
-def forge(rng: np.random.Generator, bases: list[tuple[str, dict, str, list[tuple]]]) -> bytes:
+def forge(rng: np.random.Generator, bases: list[Base]) -> bytes:
     """One forged state with a valid frame and checksum, from a random genuine one."""
-    _, state, text, paths = bases[rng.integers(len(bases))]
-    phase = fmu_state.PHASES.index(state["phase"])
+    base = bases[rng.integers(len(bases))]
+    text, phase = base.text, fmu_state.PHASES.index(base.state["phase"])
     kind = rng.integers(14)
     if kind == 0:  # a number of the genuine bytes made non-finite or 5000 digits long
-        spans = [m.span() for m in _NUMBER.finditer(text)]
-        a, b = spans[rng.integers(len(spans))]
+        a, b = base.numbers[rng.integers(len(base.numbers))]
         bad = ["NaN", "Infinity", "-Infinity", "1e999", "-1e400", "9" * 5000][rng.integers(6)]
         return _frame((text[:a] + bad + text[b:]).encode(), phase)
     if kind == 1:  # truncated inside a valid frame
-        cut = rng.integers(len(text))
-        return _frame(text.encode()[:cut], phase)
+        return _frame(text.encode()[:rng.integers(len(text))], phase)
     if kind == 2:  # nested 100 000 deep
         return _frame(text.replace('"failure":', '"failure":' + "[" * 100_000 + "]" * 100_000
                                    + ',"x":', 1).encode(), phase)
@@ -152,14 +150,31 @@ def forge(rng: np.random.Generator, bases: list[tuple[str, dict, str, list[tuple
         return _frame(text.encode(), (phase + 1 + rng.integers(3)) % 4)
     if kind == 4:  # garbage
         return _frame(rng.bytes(rng.integers(1, 300)), phase)
-    forged = json.loads(text)
     if kind == 5:  # relabelled phase, header and payload agreeing
-        forged["phase"] = fmu_state.PHASES[rng.integers(4)]
-    elif kind == 6:  # another preset's FMU or preset value
-        key = ("fmu",) if rng.random() < 0.5 else ("values", "preset")
-        _put(forged, key, "ToggleClamp lin2003_sm55" if key == ("fmu",) else "lin2003_sm55")
-    elif kind == 7:  # a key missing, or one too many
-        path = paths[rng.integers(len(paths))]
+        new = int(rng.integers(4))
+        return _frame(base.replace("phase", fmu_state.PHASES[new]).encode(), new)
+    if kind == 6:  # another preset's FMU or preset value
+        key = ("fmu", "preset")[rng.integers(2)]
+        return _frame(base.replace(key, "ToggleClamp lin2003_sm55" if key == "fmu"
+                                   else "lin2003_sm55").encode(), phase)
+    if kind in (7, 8) or kind == 9 and rng.random() < 0.003:
+        return _frame(_reshaped(rng, base, kind).encode(), phase)
+    # any scalar field, any value (a parameter of an initialised state: outside its range or
+    # of a wrong type; within it, kind 9 builds a new plant)
+    key, a, b = base.scalars[rng.integers(len(base.scalars))]
+    value = _weird(rng, json.loads(text[a:b]))
+    if base.state["model"] and key in PARAMETER_RANGES and isinstance(value, float):
+        low, high = PARAMETER_RANGES[key]
+        value = high + 1.0 + abs(value) if low <= value <= high else value
+    return _frame((text[:a] + json.dumps(value) + text[b:]).encode(), phase)
+
+
+def _reshaped(rng: np.random.Generator, base: Base, kind: int) -> str:
+    """Kind 7: a key missing or one too many; 8: "drive": null and friends; 9: a parameter
+    within its range (a new plant)."""
+    forged = json.loads(base.text)
+    if kind == 7:
+        path = base.paths[rng.integers(len(base.paths))]
         parent = _get(forged, path[:-1])
         if isinstance(parent, dict) and rng.random() < 0.5:
             del parent[path[-1]]
@@ -167,27 +182,15 @@ def forge(rng: np.random.Generator, bases: list[tuple[str, dict, str, list[tuple
             parent["extra"] = 1.0
         else:
             parent.append(0.0)
-    elif kind == 8:  # "drive": null and friends
+    elif kind == 8:
         if isinstance(forged["model"], dict):
             forged["model"][("drive", "slip")[rng.integers(2)]] = None
         else:
             forged["model"] = {"drive": None, "slip": None}
-    elif kind == 9 and rng.random() < 0.003:  # a parameter within its range: a new plant
+    else:
         var = REAL_PARAMETERS[rng.integers(len(REAL_PARAMETERS))]
         forged["values"][var.name] = float(rng.uniform(var.min, var.max))
-    else:  # any field, any value (a parameter of an initialised state: outside its range
-        path = paths[rng.integers(len(paths))]  # or of a wrong type; within it, kind 9
-        # builds a new plant)
-        old = _get(forged, path)
-        value = _weird(rng, old)
-        if forged["model"] and path[0] == "values" and path[-1] in PARAMETER_RANGES:
-            low, high = PARAMETER_RANGES[path[-1]]
-            value = value if not isinstance(value, float) or not low <= value <= high \
-                else high + 1.0 + abs(value)
-        _put(forged, path, value)
-    phase_code = fmu_state.PHASES.index(forged["phase"]) \
-        if forged.get("phase") in fmu_state.PHASES else phase
-    return _frame(json.dumps(forged, separators=(",", ":")).encode(), phase_code)
+    return json.dumps(forged, separators=(",", ":"))
 
 
 def _get(node, path):
@@ -196,17 +199,29 @@ def _get(node, path):
     return node
 
 
-def _put(node, path, value) -> None:
-    _get(node, path[:-1])[path[-1]] = value
+_SCALAR = r'(-?\d[\d.eE+-]*|"(?:[^"\\]|\\.)*"|null|true|false)'
+_MEMBER = re.compile(r'"(\w+)":' + _SCALAR)
+_ELEMENT = re.compile(r"(?<=[\[,])" + _SCALAR + r"(?=[,\]])")
 
 
-def _bases() -> list[tuple[str, dict, str, list[tuple]]]:
-    """(name, parsed, payload text, key paths) of each genuine state."""
-    out = []
-    for name, data in genuine_states().items():
-        text = data[20:-4].decode()
-        out.append((name, json.loads(text), text, _paths(json.loads(text))))
-    return out
+class Base:
+    """A genuine state's payload: parsed, as text, and where its scalars and numbers are."""
+
+    def __init__(self, text: str) -> None:
+        self.text, self.state = text, json.loads(text)
+        self.paths = _paths(self.state)
+        self.scalars = [(m.group(1), *m.span(2)) for m in _MEMBER.finditer(text)] + [
+            ("[]", *m.span(1)) for m in _ELEMENT.finditer(text)]
+        self.numbers = [m.span() for m in _NUMBER.finditer(text)]
+
+    def replace(self, key: str, value: str) -> str:
+        """The text with the string member ``key`` set to ``value``."""
+        _, a, b = next(row for row in self.scalars if row[0] == key)
+        return self.text[:a] + json.dumps(value) + self.text[b:]
+
+
+def _bases() -> list[Base]:
+    return [Base(data[20:-4].decode()) for data in genuine_states().values()]
 
 
 def _steps_in_process(slave, count: int) -> None:
