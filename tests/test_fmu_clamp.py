@@ -397,3 +397,19 @@ def test_every_dynamics_field_is_a_parameter_of_the_fmus_by_one_name():
     fields = {f.name: 1.0 + i for i, f in enumerate(dataclass_fields(Dynamics))}
     assert dynamics_fields(dynamics_parameters(fields)) == fields
     assert set(dynamics_parameters(fields)) == set(DYNAMICS_PARAMETERS)
+
+
+@pytest.mark.parametrize("bandwidth", [0.0, 1e3])  # Hz: the declared range's corners
+@pytest.mark.parametrize("damping", [0.0, 10.0])
+def test_the_drive_at_rest_at_the_corners_of_its_range_at_any_step(unzipped: Path, bandwidth,
+                                                                   damping):
+    """1000 Hz with damping 10 at a 1 s step rejected every step before (cosh overflowed):
+    at rest, steps of 1 us to 1 s pass, the input link stays, every output is finite."""
+    slave, refs = start_slave(unzipped, "corner", {"drive_bandwidth": bandwidth,
+                                                   "drive_damping": damping, "x_cmd": X_OPEN})
+    try:
+        rows = _run(slave, refs, [(X_OPEN, h) for h in (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 0.1, 1.0)])
+    finally:
+        close_slave(slave)
+    assert all(row["x"] == X_OPEN and row["velocity"] == 0.0 for row in rows)
+    assert all(math.isfinite(v) for row in rows for v in row.values())
