@@ -35,7 +35,7 @@ def clamp_case() -> tuple[dict[str, list[float]], dict[str, float]]:
     closing = x_open + (x_toggle - x_open) * s**3 * (10 - 15 * s + 6 * s**2)
     x_cmd = np.concatenate([closing, closing[::-1]]).tolist()
     return {"x_cmd": x_cmd}, {"x_contact": x_toggle - 1e-3, "delta_r8": 0.3e-3,
-                              "x_cmd": x_open}
+                              "x_cmd": x_open, "drive_bandwidth": 0.0}
 
 
 def main() -> None:

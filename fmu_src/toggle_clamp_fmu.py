@@ -16,7 +16,10 @@ from pathlib import Path
 
 from pythonfmu import DefaultExperiment
 
+from toggle import fmu_state
+from toggle.drive import reflected_mass, travel_per_radian
 from toggle.fmu_slave import DeclaredSlave, Var
+from toggle.fmu_state import StateError
 from toggle.kinematics import stroke_limits
 from toggle.params import (
     DYNAMICS_PARAMETERS,
@@ -25,7 +28,15 @@ from toggle.params import (
     dynamics_fields,
     load_preset,
 )
-from toggle.plant import DriveState, HystereticPlant, PlantConfig, configure, follow
+from toggle.plant import (
+    MAX_INPUT_ACCELERATION,
+    MAX_INPUT_SPEED,
+    DriveState,
+    HystereticPlant,
+    PlantConfig,
+    configure,
+    follow,
+)
 
 _PRESET_FILE = Path(__file__).with_name("preset.toml")
 #: The preset this FMU is built for, read once at import (no file is read later).
@@ -53,6 +64,29 @@ OUTPUTS = (
 )
 
 
+def drive_bandwidth(mech: Mechanism) -> float:
+    """The default ``drive_bandwidth`` (Hz) of the FMU of ``mech``: its real drive's.
+
+    A linear lag is true to a drive only while the motor is not saturated, and the
+    largest setpoint jump a clamp takes is its whole stroke S (x_open to the toggle). The
+    lag's response to a jump starts with the acceleration w^2 S; the motor's standstill
+    torque T0 (the [drive] torque-speed curve's first point, else its rated torque) gives
+    at most a = T0 / (p (m_drive + crosshead + links + platen)), p the travel per motor
+    radian and m_drive the rotor's and screw's reflected mass. w = sqrt(a / S), to 3
+    digits: 2.27 Hz for chang2021 (a = 11 m/s^2), 1.36 Hz for lin2003_sm55. Any jump then
+    asks for at most about (x_cmd range / S) a, far within the input link's bounds at any
+    step size (docs/fmu.md). Without torque data: 0, the ideal drive.
+    """
+    drive, dyn = mech.drive, mech.dynamics
+    torque = drive.torque_speed[0][1] if drive.torque_speed else drive.rated_torque
+    if not torque:
+        return 0.0
+    mass = float(reflected_mass(drive)) + dyn.crosshead + dyn.links + dyn.platen
+    x_open, x_toggle = stroke_limits(mech.lower)
+    accel = torque / (travel_per_radian(drive) * mass)
+    return float(f"{math.sqrt(accel / (x_toggle - x_open)) / (2 * math.pi):.3g}")
+
+
 def variables(mech: Mechanism) -> tuple[Var, ...]:
     """The variable table of the FMU built for ``mech``: its values as start values."""
     cfg = PlantConfig(mech)
@@ -78,7 +112,8 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
               min=0.0, max=100 * max(mech.drive.rotor_inertia, mech.drive.screw_inertia, 0.01))
           for name, text in INERTIAS.items()),
         Var("drive_bandwidth", "parameter", "Hz",
-            "Drive tracking bandwidth; 0: ideal position source", start=0.0, min=0.0, max=1e3),
+            "Drive tracking bandwidth (default: the preset's drive, see docs/fmu.md); 0: ideal "
+            "position source", start=drive_bandwidth(mech), min=0.0, max=1e3),
         Var("drive_damping", "parameter", "1", "Drive tracking damping ratio", start=0.7,
             min=0.0, max=10.0),
         *(Var(f"delta_{n}", "parameter", "m", f"Dimensional error of {n}", start=0.0,
@@ -87,11 +122,6 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
             max=x_hi),
         *(Var(name, "output", unit, text, depends_on=()) for name, unit, text in OUTPUTS),
     )
-
-
-def _finite_list(values: object, n: int) -> bool:
-    return (isinstance(values, list) and len(values) == n
-            and all(isinstance(v, float) and math.isfinite(v) for v in values))
 
 
 class ToggleClamp(DeclaredSlave):
@@ -107,7 +137,8 @@ class ToggleClamp(DeclaredSlave):
     def _config(self) -> PlantConfig:
         if self.preset != MECHANISM.name:
             raise ValueError(f"parameter preset: this FMU is built for {MECHANISM.name!r}, "
-                             f"not {self.preset!r}; build one with toggle build-fmu --preset")
+                             f"not {fmu_state.short(self.preset)}; build one with toggle "
+                             "build-fmu --preset")
         return configure(
             MECHANISM,
             mu=self.mu,
@@ -136,23 +167,48 @@ class ToggleClamp(DeclaredSlave):
                        self.drive_damping)
         self._publish(drive)
 
+    def state_identity(self) -> str:
+        return f"ToggleClamp {MECHANISM.name}"
+
     def model_state(self) -> dict:
-        if getattr(self, "_drive", None) is None:
-            return {"drive": None, "slip": None}
         return {"drive": list(self._drive), "slip": list(self._plant.state)}
 
-    def restore_model_state(self, state: dict) -> None:
+    def restore_model_state(self, state: object) -> None:
+        """The drive and slip state, checked as the plant made them: the motion within the
+        input link's bounds, the last command within the clamp's range, the slip state at
+        the drive's position and in [-1, 1], and the outputs in the state those of the
+        plant there (so a forged output or drive field is refused)."""
+        state = fmu_state.keys(state, frozenset({"drive", "slip"}), "the model state")
         drive, slip = state["drive"], state["slip"]
-        if drive is None:
-            return
-        if not (_finite_list(drive, len(DriveState._fields)) and isinstance(slip, list)
-                and len(slip) == 2 and (slip[0] is None or _finite_list(slip[:1], 1))
-                and _finite_list(slip[1:], 1) and abs(slip[1]) <= 1.0):
-            raise ValueError("the drive or slip state is not a list of finite numbers")
-        self._check_ranges()
-        self._build_plant()
-        self._drive = DriveState(*drive)
-        self._plant.state = (slip[0], slip[1])
+        if not (isinstance(drive, list) and len(drive) == len(DriveState._fields)):
+            raise StateError("the model state's drive must be a list of 6 numbers "
+                             f"({', '.join(DriveState._fields)})")
+        drive = DriveState(*(fmu_state.finite(v, f"drive {n}")
+                             for n, v in zip(DriveState._fields, drive)))
+        if not (isinstance(slip, list) and len(slip) == 2):
+            raise StateError("the model state's slip must be a list [x m, z]")
+        x_last, z = (fmu_state.finite(v, f"slip {n}") for n, v in zip(("x", "z"), slip))
+        self._build_plant()  # the parameters' plant, or their error
+        plant = self._plant.plant
+        bounds = (("v", drive.v, MAX_INPUT_SPEED, "m/s"),
+                  ("a", drive.a, MAX_INPUT_ACCELERATION, "m/s^2"))
+        for name, value, bound, unit in bounds:
+            if not abs(value) <= bound:
+                raise StateError(f"drive {name} = {value!r} {unit} is outside "
+                                 f"[{-bound:g}, {bound:g}] {unit}")
+        plant.check_input(drive.u)
+        if not drive.h >= 0 or drive.h == 0 and drive != DriveState.at_rest(drive.u):
+            raise StateError(f"drive h = {drive.h!r} s: the last step must be > 0 s, or 0 "
+                             "with the drive at rest at its command")
+        if x_last != drive.x or not abs(z) <= 1:
+            raise StateError(f"slip state [{x_last!r}, {z!r}]: it must be at the drive's "
+                             f"x = {drive.x!r} m with z in [-1, 1]")
+        outputs = plant(drive.x, drive.v, drive.a, z)  # PlantError outside the range
+        if any(getattr(self, n) != v for n, v in zip(outputs._fields, outputs)):
+            raise StateError("the outputs in the state are not the plant's at its drive "
+                             "and slip state")
+        self._drive = drive
+        self._plant.state = (x_last, z)
 
     def _publish(self, drive: DriveState | None = None) -> None:
         drive = drive or self._drive

@@ -292,7 +292,9 @@ class FmuPlant(Plant):
         if not path.is_file():
             raise RunStoppedError(f"no FMU at {path}")
         self._dir = extract(str(path), tempfile.mkdtemp(prefix="toggle_hil_"))
-        start = {"preset": load_preset(s.preset).name, "x_cmd": x_open,
+        # the rig's stepper is a position source, as the emulator's physics (ideal drive);
+        # the FMU's default is the preset's drive lag (docs/fmu.md)
+        start = {"preset": load_preset(s.preset).name, "x_cmd": x_open, "drive_bandwidth": 0.0,
                  **{f"delta_{name}": delta for name, delta in s.errors.items()},
                  **dynamics_parameters(s.dynamics)}
         if s.mu is not None:

@@ -170,7 +170,7 @@ def fmu_start_values(physics: ClampPhysics, x_cmd: float) -> dict[str, float]:
 
     setup = RigSetup(preset=physics.preset, delta_r8=physics.delta_r8, mu=physics.mu,
                      x_contact=physics.x_contact, period=physics.period)
-    start: dict[str, float] = {"x_cmd": x_cmd,
+    start: dict[str, float] = {"x_cmd": x_cmd, "drive_bandwidth": 0.0,  # as FmuPlant's
                                **{f"delta_{name}": d for name, d in setup.errors.items()},
                                **dynamics_parameters(setup.dynamics)}
     if setup.mu is not None:

@@ -10,11 +10,15 @@ any number of FMU instances in one libcosimpy (DNV libcosim) execution.
 
 from __future__ import annotations
 
+import atexit
+import functools
 import importlib.util
 import json
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -116,6 +120,52 @@ def run_ecos(cwd: Path, slaves: Mapping[str, Path], x_cmd: Sequence[float],
     env = {**os.environ, "LD_LIBRARY_PATH": os.pathsep.join(
         filter(None, [str(Path(sys.prefix) / "lib"), os.environ.get("LD_LIBRARY_PATH")]))}
     return _run_script(ECOS, spec, cwd, env)
+
+
+FIXTURES = Path(__file__).parent / "fmu_fixtures"
+
+
+@functools.cache
+def built_fmu(kind: str = "clamp") -> Path:
+    """An FMU built once per test session and shared by the test modules: ``"clamp"`` (the
+    pythonfmu build of chang2021), ``"native"`` (its native build), ``"trivial"`` and
+    ``"staircase"`` (the slaves in fmu_fixtures/). Read-only: extract it to use it."""
+    from toggle.fmu_build import build_fmu
+    from toggle.native_fmu import build_native_fmu
+
+    folder = Path(tempfile.mkdtemp(prefix=f"toggle_{kind}_fmu_"))
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    builders = {"clamp": lambda: build_fmu(folder), "native": lambda: build_native_fmu(folder),
+                "trivial": lambda: build_fmu(folder, FIXTURES / "trivial_slave.py"),
+                "staircase": lambda: build_fmu(folder, FIXTURES / "staircase_slave.py")}
+    return builders[kind]()
+
+
+def compile_c_host(folder: Path) -> Path:
+    """tests/fmu_c_host.c (a C master: dlopen, no Python, no environment) compiled."""
+    from toggle.native_fmu import fmi2_headers
+
+    host = folder / "host"
+    subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(fmi2_headers()),
+                    str(Path(__file__).parent / "fmu_c_host.c"), "-o", str(host), "-ldl"],
+                   check=True, capture_output=True)
+    return host
+
+
+def run_c_host(c_host: Path, unzipped: Path, m_platen: float, loads: int
+               ) -> subprocess.CompletedProcess:
+    """The C host on an extracted FMU (resources given as a file: URI), with an empty
+    environment: ``loads`` times instantiate, set m_platen, 500 steps of a ramp, free."""
+    from fmpy import read_model_description
+
+    md = read_model_description(str(unzipped))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    library = unzipped / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
+    return subprocess.run(
+        [str(c_host), str(library), md.guid, (unzipped / "resources").as_uri(),
+         *(str(refs[n]) for n in ("x_cmd", "input_force", "m_platen")), repr(m_platen),
+         str(loads)],
+        capture_output=True, text=True, timeout=120, env={"PATH": "/usr/bin:/bin"})
 
 
 def run_steps(slave, refs: Mapping[str, int], commands_and_steps, read, t: float = 0.0

@@ -25,7 +25,7 @@ from toggle.drive import (
 from toggle.elastics import ClampingError, analyse_clamping
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_mechanism, load_preset
-from toggle.plant import configure, plant_outputs
+from toggle.plant import DriveState, PlantError, configure, follow, lag_transition, plant_outputs
 
 SM55 = load_preset("lin2003_sm55")
 RPM = 2 * math.pi / 60  # rad/s per rpm
@@ -207,3 +207,100 @@ def test_toggle_plan_refuses_a_bad_curve_with_one_line(tmp_path, capsys):
     err = captured.err.strip()
     assert captured.out == "" and len(err.splitlines()) == 1 and "Traceback" not in err
     assert str(path) in err and "torque_speed" in err and "must not rise" in err
+
+
+# ---- the drive lag over the whole declared range (toggle.plant.lag_transition, follow) ----
+
+BANDWIDTH_MAX, DAMPING_MAX = 1e3, 10.0  # Hz, 1: the FMUs' declared maxima (both minima 0)
+STEPS = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 0.1, 1.0)  # s
+LAG_TOL = 1e-9  # of the dimensionless exp(A h) (x in m, v in m/s w); ~5e-12 observed
+
+
+def _lag_error(bandwidth: float, damping: float, h: float) -> float:
+    """Largest difference of lag_transition from scipy's expm, on diag(1, 1/w) exp(A h)
+    diag(1, w) (dimensionless: every entry of order 1)."""
+    from scipy.linalg import expm
+
+    w = 2 * math.pi * bandwidth
+    want = expm(np.array([[0.0, 1.0], [-w * w, -2 * damping * w]]) * h)
+    got = np.reshape(lag_transition(w, damping, h), (2, 2))
+    scale = np.array([[1.0, w], [1.0 / w, 1.0]])
+    assert np.all(np.isfinite(got))
+    return float(np.max(np.abs(got - want) * scale))
+
+
+@pytest.mark.parametrize("bandwidth", [1e-3, BANDWIDTH_MAX])  # Hz: the lag's lowest, highest
+@pytest.mark.parametrize("damping", [0.0, 1.0, DAMPING_MAX])
+def test_lag_transition_is_expm_at_the_corners_of_the_range(bandwidth, damping):
+    """Overdamped at 1000 Hz with damping 10 and a 1 s step (w h sqrt(zeta^2 - 1) ~ 6e4)
+    overflowed cosh before; now every step from 1 us to 1 s agrees with expm."""
+    assert max(_lag_error(bandwidth, damping, h) for h in STEPS) < LAG_TOL
+
+
+@settings(max_examples=300, deadline=None)
+@given(bandwidth=st.floats(1e-3, BANDWIDTH_MAX), damping=st.floats(0.0, DAMPING_MAX),
+       h=st.floats(1e-6, 1.0))
+def test_lag_transition_is_expm_over_the_range(bandwidth, damping, h):
+    assert _lag_error(bandwidth, damping, h) < LAG_TOL
+
+
+@settings(max_examples=100, deadline=None)
+@given(damping=st.floats(1 - 1e-3, 1 + 1e-3), bandwidth=st.floats(1e-3, BANDWIDTH_MAX),
+       h=st.floats(1e-6, 1.0))
+def test_lag_transition_is_expm_near_critical_damping(bandwidth, damping, h):
+    """Where the series replaces cosh/cos and sinh(q)/q (|q^2| < 1e-2) and beside it."""
+    assert _lag_error(bandwidth, damping, h) < LAG_TOL
+
+
+@pytest.mark.parametrize("bandwidth", [0.0, BANDWIDTH_MAX])
+@pytest.mark.parametrize("damping", [0.0, DAMPING_MAX])
+def test_a_drive_at_rest_stays_at_rest_at_every_step_size(bandwidth, damping):
+    """The four corners of the declared range: no rejection, the input link stays where it
+    is; then a command of constant acceleration (1 m/s^2) is followed without rejection,
+    with finite outputs."""
+    x0 = -3.4386e-3
+    for h in STEPS:
+        state = DriveState.at_rest(x0)
+        for _ in range(3):
+            state = follow(state, x0, h, bandwidth, damping)
+            assert (state.x, state.v, state.a) == (x0, 0.0, 0.0)
+        for k in range(1, 4):
+            state = follow(state, x0 + 0.5 * (h * k) ** 2, h, bandwidth, damping)
+            assert all(map(math.isfinite, state)) and abs(state.a) <= 2.0
+
+
+@pytest.mark.parametrize(("bandwidth", "hint"), [
+    (0.0, " (drive_bandwidth = 0: an ideal drive follows a setpoint jump within one step; a "
+          "drive_bandwidth > 0 Hz follows it through the drive's lag)"),
+    (1000.0, " (drive_bandwidth = 1000 Hz; a lower drive_bandwidth follows larger setpoint "
+             "jumps)")])
+def test_a_refused_jump_names_drive_bandwidth(bandwidth, hint):
+    with pytest.raises(PlantError) as refused:
+        follow(DriveState.at_rest(0.0), 0.05, 1e-3, bandwidth, 0.7)
+    v, a = (100.0, 1e5) if bandwidth == 0 else (None, None)
+    text = str(refused.value)
+    assert text.startswith("the command x_cmd = 0.05 m after 0.001 s asks for ")
+    assert text.endswith("m/s^2; an input link moves within 10 m/s and 10000 m/s^2" + hint)
+    if v is not None:
+        assert f"asks for {v:.3g} m/s and {a:.3g} m/s^2;" in text
+
+
+@settings(max_examples=40, deadline=None)
+@given(h=st.floats(1e-6, 1.0), levels=st.lists(st.floats(-1.0, 1.0), min_size=2, max_size=12),
+       hold=st.integers(1, 30))
+def test_the_default_drive_follows_any_staircase_at_any_fixed_step(h, levels, hold):
+    """The FMU's default drive_bandwidth (the preset's drive, docs/fmu.md) follows setpoints
+    that jump anywhere within the x_cmd range, each held ``hold`` steps of ``h``: never
+    refused, and far within the input link's bounds (at most ~40 m/s^2 observed)."""
+    from fmu_support import load_module
+
+    from toggle.fmu_build import DEFAULT_SLAVE
+
+    table = {v.name: v for v in load_module(DEFAULT_SLAVE, "clamp_fmu_drive").ToggleClamp.VARIABLES}
+    bandwidth, damping, x_cmd = (table[n] for n in ("drive_bandwidth", "drive_damping", "x_cmd"))
+    middle, half = (x_cmd.max + x_cmd.min) / 2, (x_cmd.max - x_cmd.min) / 2
+    state = DriveState.at_rest(x_cmd.min)
+    for level in levels:
+        for _ in range(hold):
+            state = follow(state, middle + half * level, h, bandwidth.start, damping.start)
+            assert abs(state.a) <= 100.0 and abs(state.v) <= 2.0

@@ -10,9 +10,16 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error
-from fmu_support import close_slave, load_module, run_fresh, run_libcosim, validator_problems
+from fmu_support import (
+    built_fmu,
+    close_slave,
+    load_module,
+    run_fresh,
+    run_libcosim,
+    validator_problems,
+)
 
-from toggle.fmu_build import build_fmu, extend_model_description
+from toggle.fmu_build import extend_model_description
 from toggle.fmu_host import start_slave
 from toggle.fmu_slave import Var
 
@@ -21,8 +28,8 @@ TRIVIAL = load_module(SLAVE_FILE, "trivial_slave_inproc")
 
 
 @pytest.fixture(scope="module")
-def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return build_fmu(tmp_path_factory.mktemp("fmu"), SLAVE_FILE)
+def fmu() -> Path:
+    return built_fmu("trivial")
 
 
 @pytest.fixture(scope="module")

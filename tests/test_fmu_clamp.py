@@ -19,6 +19,7 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error
 from fmu_support import (
+    built_fmu,
     close_slave,
     load_module,
     run_fresh,
@@ -32,7 +33,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from toggle.drive import motor_torque
-from toggle.fmu_build import DEFAULT_SLAVE, build_fmu
+from toggle.fmu_build import DEFAULT_SLAVE
 from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
 from toggle.params import DYNAMICS_PARAMETERS, Dynamics, dynamics_fields, dynamics_parameters
@@ -45,12 +46,13 @@ X_OPEN, X_TOGGLE = stroke_limits(configure("chang2021").mechanism.lower)
 X_CONTACT = X_TOGGLE - 1e-3  # mold contact 1 mm of crosshead travel before the toggle
 DELTA_R8 = 0.3e-3  # m, link 8 too long: the halves differ
 MOLD = {"x_contact": X_CONTACT, "delta_r8": DELTA_R8}
+IDEAL = {"drive_bandwidth": 0.0}  # the FMU's default is the preset's drive lag
 REL = 1e-9  # of each output's peak
 
 
 @pytest.fixture(scope="module")
-def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return build_fmu(tmp_path_factory.mktemp("fmu"))
+def fmu() -> Path:
+    return built_fmu("clamp")
 
 
 @pytest.fixture(scope="module")
@@ -153,8 +155,10 @@ def _stroke_command() -> np.ndarray:
 
 
 def _simulate_stroke(unzipped: Path, **start: float):
+    """The stroke with the ideal drive unless ``start`` sets drive_bandwidth."""
     return simulate_fmu(str(unzipped), stop_time=STOP_TIME, step_size=1e-3,
-                        input=_stroke_command(), start_values={"x_cmd": X_OPEN, **start},
+                        input=_stroke_command(),
+                        start_values={"x_cmd": X_OPEN, **IDEAL, **start},
                         output=[*OUTPUTS, "x_cmd"])
 
 
@@ -301,7 +305,8 @@ def test_invalid_parameter_fails_initialisation_with_the_parameter_named(unzippe
 @pytest.mark.parametrize("x_cmd", [0.09, -0.09, math.nan])
 def test_input_outside_the_range_fails_the_step_and_keeps_working(unzipped: Path, x_cmd):
     log: list[tuple[int, str]] = []
-    slave, refs = start_slave(unzipped, "range", {"x_cmd": X_OPEN, **MOLD}, log=_logger(log))
+    slave, refs = start_slave(unzipped, "range", {"x_cmd": X_OPEN, **MOLD, **IDEAL},
+                              log=_logger(log))
     before = _run(slave, refs, APPROACH[:2])[-1]
     slave.setReal([refs["x_cmd"]], [x_cmd])
     with pytest.raises(FMICallException) as refused:
@@ -351,7 +356,7 @@ def test_outputs_are_finite_for_any_command_sequence(unzipped: Path, commands, b
 def test_fmu_runs_in_a_fresh_process_from_its_bundled_files(fmu: Path, tmp_path: Path):
     signal = ("x_cmd", [0.0, 0.04, 1.0], [X_OPEN, X_CONTACT + 2e-4, X_CONTACT + 2e-4])
     result = run_fresh(fmu, tmp_path, signal, OUTPUTS, stop_time=0.05, step_size=1e-3,
-                       start_values={"x_cmd": X_OPEN, **MOLD})
+                       start_values={"x_cmd": X_OPEN, **MOLD, **IDEAL})
     last = result["last"]
     _assert_outputs_match(last, _reference(last["x"], last["velocity"], last["acceleration"], 1.0,
                                            **MOLD))
@@ -362,15 +367,15 @@ def test_fmu_runs_in_a_fresh_process_from_its_bundled_files(fmu: Path, tmp_path:
 def test_two_clamps_and_a_ramp_run_in_libcosim(fmu: Path, tmp_path: Path):
     """Two ToggleClamp instances (nominal and link 8 + 0.5 mm) follow one ramp FMU."""
     pytest.importorskip("libcosimpy")
-    ramp = build_fmu(tmp_path / "ramp", Path(__file__).parent / "fmu_fixtures" /
-                     "trivial_slave.py")  # x = integral of u: the command ramp
+    ramp = built_fmu("trivial")  # x = integral of u: the command ramp
     observed = ["x", "velocity", "acceleration", "input_force", "asymmetry", "platen_position"]
     result = run_libcosim(
         tmp_path,
         slaves={"ramp": ramp, "nominal": fmu, "long_r8": fmu},
         observe={"ramp": ["x"], "nominal": observed, "long_r8": observed},
         initial=[("ramp", "u", 0.1), ("nominal", "x_cmd", 0.0), ("long_r8", "x_cmd", 0.0),
-                 ("long_r8", "delta_r8", 0.5e-3)],
+                 ("long_r8", "delta_r8", 0.5e-3), ("nominal", "drive_bandwidth", 0.0),
+                 ("long_r8", "drive_bandwidth", 0.0)],
         connections=[("ramp", "x", "nominal", "x_cmd"), ("ramp", "x", "long_r8", "x_cmd")],
         stop_time=0.3,
     )
@@ -392,3 +397,19 @@ def test_every_dynamics_field_is_a_parameter_of_the_fmus_by_one_name():
     fields = {f.name: 1.0 + i for i, f in enumerate(dataclass_fields(Dynamics))}
     assert dynamics_fields(dynamics_parameters(fields)) == fields
     assert set(dynamics_parameters(fields)) == set(DYNAMICS_PARAMETERS)
+
+
+@pytest.mark.parametrize("bandwidth", [0.0, 1e3])  # Hz: the declared range's corners
+@pytest.mark.parametrize("damping", [0.0, 10.0])
+def test_the_drive_at_rest_at_the_corners_of_its_range_at_any_step(unzipped: Path, bandwidth,
+                                                                   damping):
+    """1000 Hz with damping 10 at a 1 s step rejected every step before (cosh overflowed):
+    at rest, steps of 1 us to 1 s pass, the input link stays, every output is finite."""
+    slave, refs = start_slave(unzipped, "corner", {"drive_bandwidth": bandwidth,
+                                                   "drive_damping": damping, "x_cmd": X_OPEN})
+    try:
+        rows = _run(slave, refs, [(X_OPEN, h) for h in (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 0.1, 1.0)])
+    finally:
+        close_slave(slave)
+    assert all(row["x"] == X_OPEN and row["velocity"] == 0.0 for row in rows)
+    assert all(math.isfinite(v) for row in rows for v in row.values())

@@ -109,7 +109,8 @@ def _replay(fmu, cfg, plan, h):
     signal = np.array(list(zip(t - h, x)), dtype=[("time", float), ("x_cmd", float)])
     res = simulate_fmu(str(fmu), start_time=0.0, stop_time=t[-1], step_size=h,
                        output_interval=h, input=signal, output=["x", "input_force"],
-                       start_values={"x_contact": cfg.x_contact, "x_cmd": x[0]})
+                       start_values={"x_contact": cfg.x_contact, "x_cmd": x[0],
+                                     "drive_bandwidth": 0.0})  # the ideal drive (docs/fmu.md)
     assert res["time"].size == t.size
     np.testing.assert_allclose(res["x"], x, atol=1e-9)
     return t, x, res

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from fmpy import read_model_description
 
-from toggle.fmu_state import MAGIC, VERSION
+from toggle.fmu_state import MAGIC, MAX_TEXT, PHASES, VERSION
 from toggle.native_fmu import c_string, fmi2_headers
 
 GUARD_SOURCE = Path(__file__).resolve().parent.parent / "fmu_src" / "guard" / "fmi2_guard.c"
@@ -63,6 +63,8 @@ def guard_table(unzipped: Path) -> str:
         f"#define GUARD_PLATFORM {c_string(PLATFORM)}",
         f"#define GUARD_STATE_MAGIC {c_string(MAGIC.decode('ascii'))}",
         f"#define GUARD_STATE_VERSION {VERSION}u",
+        f"#define GUARD_MAX_STRING {MAX_TEXT}u",
+        f"#define GUARD_N_PHASES {len(PHASES)}u",
         f"#define GUARD_N_VARS {len(variables)}u",
         f"#define GUARD_N_CATEGORIES {len(LOG_CATEGORIES)}u",
         f"#define GUARD_LOG_ALL {LOG_CATEGORIES.index('logAll')}u",

@@ -17,7 +17,11 @@ variables. The base class supplies what pythonfmu 0.7 does not:
   finite after every step (never a NaN);
 * outputs read in Initialization Mode are computed from the values set so far;
 * the FMU state is plain data (:mod:`toggle.fmu_state`): every variable plus
-  :meth:`model_state`, serialised as checksummed JSON, never pickle;
+  :meth:`model_state`, serialised as checksummed JSON, never pickle; a state
+  set is input to validate: every field is checked with the rules of the
+  phase it was taken in (before initialisation the values as set so far;
+  after it the parameters as initialisation checks them, and the model state
+  by :meth:`restore_model_state`), anything else is fmi2Error;
 * the variables' getters hold the instance weakly, so freeing the instance
   frees everything it holds at once (no reference cycle left for the
   garbage collector to find at interpreter exit);
@@ -43,6 +47,7 @@ from pythonfmu.enums import Fmi2Status
 from toggle import fmu_state
 
 _DEFAULT_VARIABILITY = {"parameter": "fixed", "input": "continuous", "output": "continuous"}
+_STATE_KEYS = frozenset({"fmu", "values", "phase", "failure", "model"})
 
 
 @dataclass(frozen=True)
@@ -126,8 +131,11 @@ class DeclaredSlave(Fmi2Slave):
         super().__init__(**kwargs)
         self.failure: str | None = None
         self._phase = "instantiated"
+        self._ready = False  # exitInitializationMode succeeded (the model state exists)
         self._stale = True  # outputs not computed from the values set since
         self._outputs = tuple(v.name for v in self.VARIABLES if v.causality == "output")
+        self._rows = tuple((v.name, v.is_string, v.causality) for v in self.VARIABLES)
+        self._names = frozenset(v.name for v in self.VARIABLES)
         owner = weakref.ref(self)
         for var in self.VARIABLES:
             setattr(self, var.name, var.initial_value)
@@ -142,11 +150,14 @@ class DeclaredSlave(Fmi2Slave):
         raise NotImplementedError
 
     def model_state(self) -> dict[str, Any]:
-        """What the slave holds besides its variables, as JSON-able plain data."""
+        """What an initialised slave holds besides its variables, as JSON-able plain data."""
         return {}
 
-    def restore_model_state(self, state: dict[str, Any]) -> None:
-        """Rebuild what :meth:`model_state` saved (the variables are already set)."""
+    def restore_model_state(self, state: Any) -> None:
+        """Check and rebuild what :meth:`model_state` saved (the variables are already set
+        and the parameters checked); raise :class:`~toggle.fmu_state.StateError` naming a
+        field no initialised instance could hold."""
+        fmu_state.keys(state, frozenset(), "the model state")
 
     # ---- pythonfmu entry points (never raise) ----------------------------------
     def _set(self, name: str, value: Any) -> None:
@@ -158,7 +169,7 @@ class DeclaredSlave(Fmi2Slave):
 
     def exit_initialization_mode(self) -> None:
         if self._initialise():
-            self._phase = "stepping"
+            self._phase, self._ready = "stepping", True
 
     def get_real(self, vrs: list[int]) -> list[float]:
         if self._phase == "initialising" and self._stale:
@@ -173,7 +184,7 @@ class DeclaredSlave(Fmi2Slave):
             self._check_outputs_finite()
         except Exception as exc:  # any exception escaping to pythonfmu becomes fmi2Fatal
             self.__dict__.update(snapshot)  # outputs stay at their finite pre-init values
-            self.failure = f"initialisation failed: {exc}"
+            self.failure = f"initialisation failed: {exc}"[:fmu_state.MAX_TEXT]
             self.log(self.failure, Fmi2Status.error)
             return False
         self.failure, self._stale = None, False
@@ -201,10 +212,11 @@ class DeclaredSlave(Fmi2Slave):
     def terminate(self) -> None:
         self._phase = "terminated"
 
-    def _check_ranges(self) -> None:
-        """Every Real parameter and input finite and within its declared min/max."""
+    def _check_ranges(self, causalities: tuple[str, ...] = ("parameter", "input")) -> None:
+        """Every Real parameter and input (of ``causalities``) finite and within its
+        declared min/max."""
         for var in self.VARIABLES:
-            if var.causality == "output" or var.is_string:
+            if var.causality not in causalities or var.is_string:
                 continue
             value = getattr(self, var.name)
             low = -math.inf if var.min is None else var.min
@@ -220,43 +232,72 @@ class DeclaredSlave(Fmi2Slave):
             raise ValueError(f"non-finite output(s): {', '.join(bad)}")
 
     # ---- FMU state: every variable and the model's own data --------------------
-    def _get_fmu_state(self) -> dict[str, Any]:
-        return {"values": {v.name: getattr(self, v.name) for v in self.VARIABLES},
-                "phase": self._phase, "failure": self.failure, "model": self.model_state()}
+    def state_identity(self) -> str:
+        """The FMU a state must come from: the slave class (a subclass adds what else must
+        match, such as the preset it is built for)."""
+        return type(self).__name__
 
-    def _set_fmu_state(self, state: dict[str, Any]) -> None:
+    def _get_fmu_state(self) -> dict[str, Any]:
+        return {"fmu": self.state_identity(),
+                "values": {v.name: getattr(self, v.name) if v.is_string
+                           else fmu_state.encode_real(getattr(self, v.name))
+                           for v in self.VARIABLES},
+                "phase": self._phase, "failure": self.failure,
+                "model": self.model_state() if self._ready else None}
+
+    def _set_fmu_state(self, state: dict[str, Any] | fmu_state.StateError) -> None:
         snapshot = dict(self.__dict__)
         try:
-            if "invalid" in state:
-                raise fmu_state.StateError(state["invalid"])
-            values = state["values"]
-            for var in self.VARIABLES:
-                value = values[var.name]
-                if var.is_string != isinstance(value, str):
-                    raise fmu_state.StateError(f"{var.name} has the wrong type in the state")
-                setattr(self, var.name,
-                        value if var.is_string else fmu_state.finite(value, var.name))
-            if state["phase"] not in ("initialising", "stepping", "terminated"):
-                raise fmu_state.StateError(f"unknown phase {state['phase']!r} in the state")
-            self._phase, self.failure = state["phase"], state["failure"]
-            self.restore_model_state(state["model"])
-        except Exception as exc:  # (KeyError, TypeError, StateError, a plant that fails)
+            if isinstance(state, fmu_state.StateError):  # bytes that did not parse
+                raise state
+            self._restore(state)
+        except Exception as exc:  # (StateError, a plant that fails): never fmi2Fatal
+            self.__dict__.clear()
             self.__dict__.update(snapshot)
-            self.log(f"FMU state refused: {exc!r}" if isinstance(exc, KeyError)
-                     else f"FMU state refused: {exc}", Fmi2Status.error)
-            return
-        self._stale = False
+            self.log(f"FMU state refused: {exc}", Fmi2Status.error)
+
+    def _restore(self, state: Any) -> None:
+        """Check every field of ``state`` with the rules of the phase it was taken in, and
+        set it; raises :class:`~toggle.fmu_state.StateError` (or the plant's error) naming
+        the first field that no instance of this FMU could hold."""
+        state = fmu_state.keys(state, _STATE_KEYS, "the state")
+        if state["fmu"] != self.state_identity():
+            raise fmu_state.StateError(f"the state was saved by {fmu_state.short(state['fmu'])},"
+                                       f" this FMU is {self.state_identity()!r}")
+        phase, failure, model = state["phase"], state["failure"], state["model"]
+        if phase not in fmu_state.PHASES:
+            raise fmu_state.StateError(f"unknown phase {fmu_state.short(phase)} in the state")
+        ready = model is not None  # initialised: exitInitializationMode succeeded
+        if failure is not None:
+            fmu_state.text(failure, "the state's failure message")
+        problem = ("no model state" if phase == "stepping" and not ready
+                   else "a model state" if phase in ("instantiated", "initialising") and ready
+                   else "a failure message" if failure is not None and (
+                       ready or phase in ("instantiated", "stepping")) else None)
+        if problem:
+            raise fmu_state.StateError(f"a state taken in phase {phase} cannot have {problem}")
+        values = fmu_state.keys(state["values"], self._names, "the state's values")
+        for name, is_string, causality in self._rows:
+            raw = values[name]
+            setattr(self, name, fmu_state.text(raw, name) if is_string else
+                    fmu_state.decode_real(raw, name, finite_only=causality == "output"
+                                          or ready and causality == "parameter"))
+        self._phase, self.failure, self._ready = phase, failure, ready
+        if ready:
+            self._check_ranges(("parameter",))  # as exitInitializationMode checked them
+            self.restore_model_state(model)
+        self._stale = not ready  # Initialization Mode recomputes the outputs when read
 
     @staticmethod
     def _fmu_state_to_bytes(state: dict[str, Any]) -> bytes:
         return fmu_state.pack(state)
 
     @staticmethod
-    def _fmu_state_from_bytes(data: bytes) -> dict[str, Any]:
+    def _fmu_state_from_bytes(data: bytes) -> dict[str, Any] | fmu_state.StateError:
         try:  # never raise: pythonfmu would return fmi2Fatal and free the instance
             return fmu_state.unpack(data)
         except fmu_state.StateError as exc:
-            return {"invalid": str(exc)}
+            return exc  # refused, with this message, when the master sets it
 
     # ---- model description -----------------------------------------------------
     def to_xml(self, model_options: dict[str, str] | None = None) -> Element:

@@ -369,29 +369,49 @@ MAX_INPUT_ACCELERATION = 1e4  # m/s^2
 
 
 def lag_transition(w: float, zeta: float, h: float) -> tuple[float, float, float, float]:
-    """exp(A h) of the drive lag A = [0 1; -w^2 -2 zeta w], in closed form.
+    """exp(A h) of the drive lag A = [0 1; -w^2 -2 zeta w] (w > 0, zeta >= 0, h > 0), in a
+    form that cannot overflow for any step.
 
-    exp(A h) = e^m (c I + s (A h - m I)) with m = -zeta w h, q^2 = (w h)^2 (zeta^2 - 1),
-    c = cosh q, s = sinh(q)/q (cos and sin for q^2 < 0; their series near q = 0, where
-    the damping is close to critical). A few floating-point operations per step, for
-    any step size (no matrix exponential, no cache).
+    With the eigenvalues l1, l2 of A, exp(A h) = c0 I + D A, where D is the divided
+    difference (e^{l1 h} - e^{l2 h}) / (l1 - l2) and c0 = e^{l1 h} - l1 D. Overdamped (real
+    l2 < l1 <= 0): D = e^{l1 h} h (-expm1(-d)) / d with d = (l1 - l2) h, every factor in
+    [0, 1] times h. Underdamped (l = -zeta w +- i q / h): D = e^{-zeta w h} h sin(q) / q and
+    c0 = e^{-zeta w h} (cos q + zeta w h sin(q) / q). Near critical damping (|q^2| < 1e-2,
+    q^2 = (w h)^2 (zeta^2 - 1)) the series of cosh/cos and sinh(q)/q in q^2 replaces both.
+    A few floating-point operations per step, for any step size (no matrix exponential,
+    no cache).
     """
     wh = w * h
     q2 = wh * wh * (zeta - 1.0) * (zeta + 1.0)
-    if abs(q2) < 1e-2:
+    if q2 >= 1e-2:  # overdamped: l1 = -w / (zeta + r), l2 = -w (zeta + r), r = sqrt(zeta^2 - 1)
+        r = math.sqrt((zeta - 1.0) * (zeta + 1.0))
+        l1h, l2h = -wh / (zeta + r), -wh * (zeta + r)
+        e1 = math.exp(l1h)
+        d = l1h - l2h
+        big_d = e1 * h * (-math.expm1(-d) / d)
+        c0 = e1 - (l1h / h) * big_d
+        return c0, big_d, -w * w * big_d, e1 + (l2h / h) * big_d
+    e = math.exp(-zeta * wh)
+    if q2 <= -1e-2:  # underdamped
+        q = math.sqrt(-q2)
+        c, s = math.cos(q), math.sin(q) / q
+    else:  # near critical: q2^k / (2k)! and q2^k / (2k+1)!
         c = s = term = 1.0
-        for k in range(1, 9):  # q2^k / (2k)! and q2^k / (2k+1)!
+        for k in range(1, 9):
             term *= q2 / ((2.0 * k - 1.0) * (2.0 * k))
             c += term
             s += term / (2.0 * k + 1.0)
-    elif q2 > 0:
-        q = math.sqrt(q2)
-        c, s = math.cosh(q), math.sinh(q) / q
-    else:
-        q = math.sqrt(-q2)
-        c, s = math.cos(q), math.sin(q) / q
-    e = math.exp(-zeta * wh)
-    return e * (c + s * zeta * wh), e * s * h, -e * s * w * wh, e * (c - s * zeta * wh)
+    es = e * s
+    return e * c + es * zeta * wh, es * h, -(es * wh) * w, e * c - es * zeta * wh
+
+
+def _bandwidth_hint(bandwidth: float) -> str:
+    """What a command the drive refused says about ``drive_bandwidth`` (Hz)."""
+    if bandwidth <= 0:
+        return (" (drive_bandwidth = 0: an ideal drive follows a setpoint jump within one "
+                "step; a drive_bandwidth > 0 Hz follows it through the drive's lag)")
+    return (f" (drive_bandwidth = {bandwidth:.6g} Hz; a lower drive_bandwidth follows larger "
+            "setpoint jumps)")
 
 
 def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
@@ -431,9 +451,9 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
         a = w * w * (x_cmd - x) - 2 * damping * w * v
     if not (abs(v) <= MAX_INPUT_SPEED and abs(a) <= MAX_INPUT_ACCELERATION):
         raise PlantError(
-            f"the command x_cmd = {x_cmd!r} m after {h!r} s asks for {v:.3g} m/s and "
+            f"the command x_cmd = {x_cmd:.6g} m after {h:.6g} s asks for {v:.3g} m/s and "
             f"{a:.3g} m/s^2; an input link moves within {MAX_INPUT_SPEED:g} m/s and "
-            f"{MAX_INPUT_ACCELERATION:g} m/s^2")
+            f"{MAX_INPUT_ACCELERATION:g} m/s^2" + _bandwidth_hint(bandwidth))
     return DriveState(x, v, a, x_cmd, rate, h)
 
 

@@ -6,6 +6,7 @@ rollback is tested on internal state, not only on registered variables.
 
 from pythonfmu import DefaultExperiment
 
+from toggle import fmu_state
 from toggle.fmu_slave import DeclaredSlave, Var
 
 U_MAX = 1.0  # m/s, the input range the trivial model accepts
@@ -40,8 +41,9 @@ class TrivialGain(DeclaredSlave):
     def model_state(self) -> dict:
         return {"position": getattr(self, "_position", 0.0)}
 
-    def restore_model_state(self, state: dict) -> None:
-        self._position = float(state["position"])
+    def restore_model_state(self, state: object) -> None:
+        state = fmu_state.keys(state, frozenset({"position"}), "the model state")
+        self._position = fmu_state.finite(state["position"], "position")
 
     def _publish(self) -> None:
         self.y = self.gain * self.u
