@@ -42,6 +42,7 @@ from toggle.params import ParameterError
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
 VARIABLES = slave_variables()[0]
+DEFAULT_BANDWIDTH = next(v.start for v in VARIABLES if v.name == "drive_bandwidth")  # Hz
 OUTPUTS = list(PlantOutputs._fields)
 X_OPEN, X_TOGGLE = stroke_limits(configure("chang2021").mechanism.lower)
 X_CONTACT = X_TOGGLE - 1e-3  # m: mold contact 1 mm of crosshead travel before the toggle
@@ -217,7 +218,8 @@ def _assert_same(native: dict, python: dict) -> None:
 def test_native_and_pythonfmu_agree_over_the_stroke(unzipped: Path, python_fmu: Path,
                                                     delta_r8: float, frictions: dict):
     """Also with the guides' Coulomb frictions set (parameters of both, from one table)."""
-    native, python = _both(unzipped, python_fmu, delta_r8=delta_r8, **frictions)
+    native, python = _both(unzipped, python_fmu, delta_r8=delta_r8, drive_bandwidth=0.0,
+                           **frictions)  # the ideal drive: x ends at the command
     _assert_same(native, python)
     assert native["clamp_force"].max() > 100.0  # N: the mold was reached
     assert native["x"][-1] == pytest.approx(X_OPEN, abs=1e-6)  # and left again
@@ -364,7 +366,7 @@ def test_a_preset_other_than_the_built_one_is_refused(unzipped: Path):
 @pytest.mark.parametrize("x_cmd", [0.09, -0.09, math.nan])
 def test_input_outside_the_stroke_is_an_error_that_changes_nothing(unzipped: Path, x_cmd):
     log: list[tuple[int, str]] = []
-    slave, refs = start_slave(unzipped, "range", {"x_cmd": X_OPEN},
+    slave, refs = start_slave(unzipped, "range", {"x_cmd": X_OPEN, "drive_bandwidth": 0.0},
                               log=lambda s, text: log.append((s, text)))
     before = _run(slave, refs, APPROACH[:2])[-1]
     slave.setReal([refs["x_cmd"]], [x_cmd])
@@ -433,7 +435,8 @@ def test_a_c_host_runs_the_binary_without_python(native: Path, unzipped: Path, t
     assert run.returncode == 0, run.stderr
     drive = DriveState.at_rest(-3.4386e-3)
     for k in range(1, 501):  # the host's ramp, in the same floating-point operations
-        drive = follow(drive, -3.4386e-3 + (0.04 + 3.4386e-3) * k / 500.0, 1e-3)
+        drive = follow(drive, -3.4386e-3 + (0.04 + 3.4386e-3) * k / 500.0, 1e-3,
+                       DEFAULT_BANDWIDTH, 0.7)  # the default drive lag: the host sets none
     cfg = configure("chang2021", masses={"platen": 4.0})
     want = float(plant_outputs(drive.x, drive.v, drive.a, cfg).input_force)
     rows = [line.split() for line in run.stdout.splitlines()]
@@ -516,7 +519,7 @@ def test_outputs_in_initialisation_mode_are_the_pythonfmu_builds(unzipped: Path,
 def test_parameters_can_be_set_again_after_a_failed_initialisation(unzipped: Path):
     """As docs/fmu.md says of both builds: no fmi2Reset needed."""
     log: list[tuple[int, str]] = []
-    slave, refs = _in_initialisation_mode(unzipped, {"m_platen": -3.0})
+    slave, refs = _in_initialisation_mode(unzipped, {"m_platen": -3.0, "drive_bandwidth": 0.0})
     with pytest.raises(FMICallException):
         slave.exitInitializationMode()
     with pytest.raises(FMICallException):  # no step after a failed initialisation

@@ -254,7 +254,8 @@ def test_an_fmu_unpacked_under_an_odd_path_runs_in_fmpy_and_a_c_host(tmp_path: P
     folder = Path(extract(str(fmu), str(tmp_path / ODD / "ToggleClampNative")))
     t = np.arange(0.0, 0.1 + 5e-4, 1e-3)
     res = simulate_fmu(str(folder), stop_time=0.1, output_interval=1e-3,
-                       input=_signal(t, X_OPEN + 0.1 * t), output=["x"])
+                       input=_signal(t, X_OPEN + 0.1 * t), output=["x"],
+                       start_values={"drive_bandwidth": 0.0})  # ideal drive: x is the command
     assert res["x"][-1] == pytest.approx(X_OPEN + 0.1 * 0.099, rel=1e-12)  # set at 99 ms
     host = tmp_path / "host"
     subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(fmi_headers()),
