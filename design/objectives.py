@@ -203,6 +203,11 @@ class Evaluator:
             limit = getattr(exc, "alpha_limit", 0.0)
             exc.shortfall = max(0.0, 1.0 - limit / values["alpha_open"])
             raise
+        slowest = float(np.min(measures.velocity_ratio))
+        if slowest <= 0:  # the platen would turn back while the clamp opens
+            where = math.degrees(float(alphas[np.argmin(measures.velocity_ratio)]))
+            raise AssemblyError(f"the platen reverses while the clamp opens (velocity ratio "
+                                f"{slowest:.3g} at a toggle angle of {where:.4g} deg)")
         m.update(criteria(measures))
         m["velocity_ratio_peak"] = m.pop("velocity_ratio")
         m["x_open"], m["x_toggle"] = float(measures.x[-1]), x_toggle

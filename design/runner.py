@@ -158,6 +158,6 @@ def _connect(address: str) -> Any:
     try:
         return Client(address, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError) as exc:
+        why = " ".join(str(exc).split()) or type(exc).__name__
         raise ClusterError(f"cannot reach the Dask scheduler at {address} within "
-                           f"{CONNECT_TIMEOUT:g} s: {' '.join(str(exc).split()) or type(exc).__name__}"
-                           ) from None
+                           f"{CONNECT_TIMEOUT:g} s: {why}") from None
