@@ -56,6 +56,10 @@ class Placement:
     dominated_by: Evaluation | None
     margin: float  # least relative improvement of dominated_by over the reference (1)
     improvements: dict[str, float]  # per objective, relative (positive is better)
+    #: for one on the front: the front design nearest to dominating it, and its largest
+    #: relative loss (how much that design would have to gain to dominate it)
+    nearest: Evaluation | None = None
+    shortfall: float = 0.0
 
     @property
     def status(self) -> str:
@@ -83,6 +87,7 @@ def place(targets: Targets, front: Sequence[Evaluation],
     for name, values in (references or reference_designs(targets)).items():
         ref = evaluator(evaluator.vector(values))
         best, margin, gains = None, -math.inf, {}
+        nearest, shortfall = None, math.inf
         if all(math.isfinite(ref.metrics.get(k, math.nan)) for k in keys):
             for design in front:
                 gain = improvements(design, ref, keys)
@@ -90,5 +95,10 @@ def place(targets: Targets, front: Sequence[Evaluation],
                 dominates = least >= 0 and max(gain.values()) > 0
                 if dominates and least > margin:
                     best, margin, gains = design, least, gain
-        out.append(Placement(name, ref, best, margin if best else 0.0, gains))
+                if not dominates and -least < shortfall:
+                    nearest, shortfall = design, -least
+        if best is not None:
+            nearest, shortfall = None, 0.0
+        out.append(Placement(name, ref, best, margin if best else 0.0, gains, nearest,
+                             shortfall if nearest else 0.0))
     return out

@@ -71,8 +71,10 @@ class Runner:
     """
 
     def __init__(self, targets: Targets, store: Store, *, scheduler: str | None = None,
-                 workers: int | None = None, progress: bool = False) -> None:
+                 workers: int | None = None, progress: bool = False,
+                 connect_timeout: float = CONNECT_TIMEOUT) -> None:
         self.targets, self.store, self.progress = targets, store, progress
+        self.connect_timeout = connect_timeout
         self.scheduler, self.workers = scheduler, workers
         self.client: Any = None
         self._cluster: Any = None
@@ -80,7 +82,7 @@ class Runner:
 
     def __enter__(self) -> Runner:
         if self.scheduler is not None:
-            self.client = _connect(check_address(self.scheduler))
+            self.client = _connect(check_address(self.scheduler), self.connect_timeout)
         elif self.workers != 0:
             from dask.distributed import Client, LocalCluster
             n = self.workers or os.cpu_count() or 1
@@ -153,11 +155,11 @@ def _task_key(digest: str, chunk: Sequence[Sequence[float]]) -> str:
     return f"design-{h.hexdigest()[:24]}"
 
 
-def _connect(address: str) -> Any:
+def _connect(address: str, timeout: float) -> Any:
     from dask.distributed import Client
     try:
-        return Client(address, timeout=CONNECT_TIMEOUT)
+        return Client(address, timeout=timeout)
     except (OSError, TimeoutError) as exc:
         why = " ".join(str(exc).split()) or type(exc).__name__
         raise ClusterError(f"cannot reach the Dask scheduler at {address} within "
-                           f"{CONNECT_TIMEOUT:g} s: {why}") from None
+                           f"{timeout:g} s: {why}") from None

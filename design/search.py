@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from design.objectives import OBJECTIVES, Evaluation, objective_matrix
-from design.runner import Runner
+from design.runner import CONNECT_TIMEOUT, Runner
 from design.store import Store
 from design.targets import VARIABLES, Targets
 from toggle.params import ParameterError
@@ -136,26 +136,45 @@ def _algorithm(objectives: int, population: int, seed: int) -> object:
         from pymoo.algorithms.moo.nsga2 import NSGA2
         return NSGA2(pop_size=population)
     from pymoo.algorithms.moo.nsga3 import NSGA3
+    from pymoo.operators.selection.tournament import TournamentSelection
     from pymoo.util.ref_dirs import get_reference_directions
     partitions = 1
     while math.comb(partitions + 1 + objectives - 1, objectives - 1) <= population:
         partitions += 1
     directions = get_reference_directions("das-dennis", objectives, n_partitions=partitions)
-    return NSGA3(ref_dirs=directions, pop_size=max(population, len(directions)))
+    return NSGA3(ref_dirs=directions, pop_size=max(population, len(directions)),
+                 selection=TournamentSelection(func_comp=_by_cv_then_random))
+
+
+def _by_cv_then_random(pop: object, P: np.ndarray, random_state: np.random.Generator,
+                       **kwargs: object) -> np.ndarray:
+    """NSGA-III's tournament (pymoo's ``comp_by_cv_then_random``: the smaller constraint
+    violation wins, else a random one) drawing from the algorithm's seeded generator:
+    pymoo 0.6.2's breaks ties with an unseeded one, so a seed would not replay a search
+    (and a resumed search would not find its evaluations)."""
+    winners = np.empty(P.shape[0], dtype=int)
+    for i, (a, b) in enumerate(P[:, :2]):
+        cv_a, cv_b = (float(np.ravel(pop[j].CV)[0]) for j in (a, b))
+        if (cv_a > 0 or cv_b > 0) and cv_a != cv_b:
+            winners[i] = a if cv_a < cv_b else b
+        else:
+            winners[i] = random_state.choice([a, b])
+    return winners[:, None]
 
 
 def run_search(targets: Targets, folder: str | Path, *, generations: int = 20,
                population: int = 40, doe_method: str | None = None, samples: int = 0,
                seed: int = 0, scheduler: str | None = None, workers: int | None = None,
-               progress: bool = False) -> SearchResult:
+               progress: bool = False, connect_timeout: float = CONNECT_TIMEOUT
+               ) -> SearchResult:
     """Search for ``targets``, recording every evaluation in ``folder`` as it arrives.
 
     With ``doe_method`` ("lhs" or "sobol") evaluate ``samples`` candidates of a design of
     experiments; otherwise run the genetic algorithm for ``generations`` of ``population``.
     """
     store = Store(folder, targets.digest())
-    with Runner(targets, store, scheduler=scheduler, workers=workers,
-                progress=progress) as runner:
+    with Runner(targets, store, scheduler=scheduler, workers=workers, progress=progress,
+                connect_timeout=connect_timeout) as runner:
         if doe_method is not None:
             evaluations = doe(targets, runner, doe_method, samples, seed)
         else:

@@ -29,10 +29,6 @@ class Store:
         self._known: dict[str, Evaluation] = {}
         if self.path.exists():
             self._read()
-        else:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            with self.path.open("w", encoding="utf-8") as f:
-                f.write(json.dumps({"digest": digest}) + "\n")
 
     def _read(self) -> None:
         lines = self.path.read_text(encoding="utf-8").splitlines()
@@ -67,6 +63,9 @@ class Store:
         new = [e for e in evaluations if e.key not in self._known]
         if not new:
             return
+        if not self.path.exists():  # created with the first result: a refused run leaves none
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.path.write_text(json.dumps({"digest": self.digest}) + "\n", encoding="utf-8")
         with self.path.open("a", encoding="utf-8") as f:
             for e in new:
                 f.write(json.dumps(e.as_record(), allow_nan=True) + "\n")

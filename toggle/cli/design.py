@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from toggle.cli.args import check_writable_dir, integer, path
+from toggle.cli.args import check_writable_dir, integer, path, positive
 from toggle.cli.common import SEED, add_json_argument, print_json, table
 
 GENERATIONS = integer(1, 100_000, "must be a number of generations between 1 and 100000")
@@ -55,6 +55,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="an existing Dask scheduler (start one with `dask scheduler` and "
                             "workers with `dask worker tcp://HOST:PORT`); default: a local "
                             "cluster")
+    p.add_argument("--connect-timeout", type=positive("time in s", 3600.0), default=10.0,
+                   help="seconds to wait for the --scheduler before giving up")
     where.add_argument("--workers", type=WORKERS, default=None,
                        help="local worker processes (default: one per core; 0: no Dask, "
                             "evaluate in this process)")
@@ -86,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
         result = run_search(targets, args.out, generations=args.generations,
                             population=args.population, doe_method=method, samples=samples,
                             seed=args.seed, scheduler=args.scheduler, workers=args.workers,
-                            progress=not args.json)
+                            progress=not args.json, connect_timeout=args.connect_timeout)
     except KeyboardInterrupt:
         print(f"toggle design: the evaluations so far are kept in {args.out}; run the same "
               "command again to resume", file=sys.stderr)
@@ -122,7 +124,9 @@ def run(args: argparse.Namespace) -> int:
                 fmt="{:>12.5g}"))
     for p in placements:
         by = (f" by design-{p.dominated_by.key[:12]}, every objective at least "
-              f"{100 * p.margin:.3g} % better" if p.dominated_by else "")
+              f"{100 * p.margin:.3g} % better" if p.dominated_by else
+              f" (design-{p.nearest.key[:12]} is {100 * p.shortfall:.3g} % short of "
+              "dominating it)" if p.nearest else "")
         print(f"{p.name}: {p.status}{by}")
     print(f"written: {files['pareto_csv']}, {files['pareto_parquet']}, {files['presets']}/"
           + ("" if args.no_figures else f", {files['front_png']}, {files['parallel_png']}"))
