@@ -4,7 +4,7 @@ Written by the client as results arrive (flushed and synced per batch), so a sea
 is interrupted, or loses a worker, keeps every evaluation it received, and the next run on
 the same folder evaluates only what is missing. The first line names the problem (the
 targets' digest): a folder of other targets is refused rather than mixed. A last line cut
-short by a crash is ignored.
+short by a crash is removed when the record is opened again.
 """
 
 from __future__ import annotations
@@ -31,7 +31,12 @@ class Store:
             self._read()
 
     def _read(self) -> None:
-        lines = self.path.read_text(encoding="utf-8").splitlines()
+        raw = self.path.read_bytes()
+        if raw and not raw.endswith(b"\n"):  # cut short by a crash: drop the partial line
+            raw = raw[:raw.rfind(b"\n") + 1]
+            with self.path.open("r+b") as f:
+                f.truncate(len(raw))
+        lines = raw.decode("utf-8").splitlines()
         try:
             head = json.loads(lines[0]) if lines else {}
         except json.JSONDecodeError:
@@ -43,7 +48,7 @@ class Store:
         for line in lines[1:]:
             try:
                 record = json.loads(line)
-            except json.JSONDecodeError:  # a line cut short by a crash: evaluated again
+            except json.JSONDecodeError:  # a damaged line: evaluated again
                 continue
             self._known[record["key"]] = Evaluation.from_record(record)
 

@@ -21,6 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES, FIGURES, RECORDS = ROOT / "design" / "examples", ROOT / "docs" / "design", \
     ROOT / "build" / "design"
 SEARCH = {"generations": 40, "population": 60, "seed": 0}
+SEARCH_SM55 = {**SEARCH, "generations": 80}
 
 
 def _cell(key: str, value: float) -> str:
@@ -34,7 +35,9 @@ def seed_004() -> None:
     keys = targets.objectives
     print(f"li_micro: {len(result.evaluations)} designs, {len(result.feasible)} feasible, "
           f"{len(result.front)} in the Pareto set\n")
-    print("| group | " + " | ".join(OBJECTIVES[k].header for k in keys)
+    headers = [f"{k} (deg)" if OBJECTIVES[k].unit == "rad" else OBJECTIVES[k].header
+               for k in keys]
+    print("| group | " + " | ".join(headers)
           + " | place | dominated by | least gain |")
     print("|---" * (len(keys) + 4) + "|")
     for p in placements:
@@ -55,7 +58,7 @@ def seed_004() -> None:
 
 def sm55() -> None:
     targets = load_targets(EXAMPLES / "sm55.toml")
-    result = run_search(targets, RECORDS / "sm55", **SEARCH)
+    result = run_search(targets, RECORDS / "sm55", **SEARCH_SM55)
     (reference,) = place(targets, result.front)
     keys = targets.objectives
 
