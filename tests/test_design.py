@@ -8,7 +8,6 @@ import csv
 import io
 import json
 import math
-import tomllib
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import replace
 from pathlib import Path
@@ -47,7 +46,8 @@ def cli(*argv: str) -> tuple[int, str, str]:
 
 
 def table(path: Path) -> dict:
-    return tomllib.loads(path.read_text())
+    from toggle.params import preset_table  # a TOML file, parsed as every preset is
+    return preset_table(str(path))[0]
 
 
 @pytest.fixture(scope="module")

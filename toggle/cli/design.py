@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from toggle.cli.args import check_writable_dir, integer, path, positive
-from toggle.cli.common import SEED, add_json_argument, print_json, table
+from toggle.cli.common import SEED, add_json_argument, print_json
 
 GENERATIONS = integer(1, 100_000, "must be a number of generations between 1 and 100000")
 POPULATION = integer(4, 100_000, "must be a population between 4 and 100000")
@@ -120,8 +120,12 @@ def run(args: argparse.Namespace) -> int:
           f"{summary['pareto']} in the Pareto set")
     sense = OBJECTIVES[keys[0]].sense
     best = sorted(result.front, key=lambda e: -sense * e.metrics[keys[0]])[:10]  # best first
-    print(table(["design", *keys], [[e.key[:12], *(e.metrics[k] for k in keys)] for e in best],
-                fmt="{:>12.5g}"))
+    headers = ["design", *(OBJECTIVES[k].header for k in keys)]
+    widths = [max(12, len(h)) for h in headers]
+    print("  ".join(f"{h:>{w}}" for h, w in zip(headers, widths)))
+    for e in best:  # SI values, as in pareto.csv
+        cells = [e.key[:12], *(f"{e.metrics[k]:.6g}" for k in keys)]
+        print("  ".join(f"{c:>{w}}" for c, w in zip(cells, widths)))
     for p in placements:
         by = (f" by design-{p.dominated_by.key[:12]}, every objective at least "
               f"{100 * p.margin:.3g} % better" if p.dominated_by else
