@@ -14,6 +14,7 @@ received so far stay in the store.
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 import os
 import re
@@ -86,8 +87,9 @@ class Runner:
         elif self.workers != 0:
             from dask.distributed import Client, LocalCluster
             n = self.workers or os.cpu_count() or 1
+            # the workers' own log lines (a cancelled task at Ctrl-C) are not the user's news
             self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                         dashboard_address=":0")
+                                         dashboard_address=":0", silence_logs=logging.CRITICAL)
             self.client = Client(self._cluster)
         return self
 

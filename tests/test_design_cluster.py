@@ -66,6 +66,19 @@ def cluster() -> Iterator[tuple[str, list[subprocess.Popen]]]:
         assert all(p.poll() is not None for p in procs)  # nothing leaked
 
 
+def group_ends(pgid: int, seconds: float) -> bool:
+    """Whether the process group is gone within ``seconds`` (a worker exits, then is
+    reaped by init: a zombie for a moment)."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.1)
+    return False
+
+
 def rows(path: Path) -> list[dict]:
     return list(csv.DictReader(path.open()))
 
@@ -101,3 +114,28 @@ def test_a_search_on_a_real_cluster_survives_a_killed_worker_and_equals_the_loca
     write_csv(tmp_path / "local.csv", local.targets, local.front)
     assert (out / "pareto.csv").read_text() == (tmp_path / "local.csv").read_text()
     assert len(rows(out / "pareto.csv")) == len(local.front) > 0
+
+
+def test_ctrl_c_stops_the_local_cluster_and_keeps_the_record(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    search = subprocess.Popen(
+        [str(BIN / "toggle"), "design", str(EXAMPLES / "sm55.toml"), "--workers", "1",
+         "--out", str(out), "--no-figures", "--generations", "50", "--population", "40"],
+        stderr=subprocess.PIPE, text=True, start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        record = out / "evaluations.jsonl"
+        deadline = time.monotonic() + 60
+        while not record.exists():
+            assert search.poll() is None, search.communicate()
+            assert time.monotonic() < deadline, "no evaluation arrived"
+            time.sleep(0.05)
+        search.send_signal(signal.SIGINT)
+        _, stderr = search.communicate(timeout=60)
+        kept = len(record.read_text().splitlines()) - 1
+        assert group_ends(search.pid, 10.0)  # the worker processes went with it
+    finally:
+        stop(search)
+    assert search.returncode == 130
+    assert stderr.splitlines()[-1] == "toggle design: interrupted", stderr
+    assert "Traceback" not in stderr and 0 < kept < 2000
