@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from design.targets import VARIABLES, Targets
+from design.targets import TARGETS, VARIABLES, Targets
 from toggle.elastics import ClampingError, analyse_clamping
 from toggle.kinematics import AssemblyError, output_position, sensitivities, stroke_limits
 from toggle.params import HalfDims, Mechanism, ParameterError
@@ -188,7 +188,7 @@ class Evaluator:
             out.reason = f"assembly: {exc}"
         if not out.reason and not out.feasible:
             worst = max(out.constraints, key=out.constraints.__getitem__)
-            out.reason = f"{worst}: over its target by {out.constraints[worst]:.3g} of it"
+            out.reason = f"{worst}: violated by {out.constraints[worst]:.3g} of its limit"
         return out
 
     def _measure(self, values: dict[str, float], out: Evaluation) -> None:
@@ -228,6 +228,10 @@ class Evaluator:
             if key in g:  # a least target: -(measured - target) / target
                 target = t.targets[key]
                 g[key] = (value - target) / target if most else (value + target) / target
+                if g[key] > 0 and not out.reason:
+                    unit = TARGETS[key][0]
+                    out.reason = (f"{key}: {abs(value):.6g} {unit} against "
+                                  f"{'at most' if most else 'at least'} {target:.6g} {unit}")
         sens = sensitivities(x_toggle, dims)
         m["tolerance_sensitivity"] = float(math.sqrt(sum(float(v) ** 2 for v in sens.values())))
         if "tolerance_cost" in t.objectives:

@@ -192,7 +192,7 @@ def binding_constraint(evaluations: Sequence[Evaluation]) -> str:
     best = min(evaluations, key=lambda e: sum(max(v, 0.0) for v in e.constraints.values()))
     worst = max(best.constraints, key=best.constraints.__getitem__)
     return (f"{worst} binds: the candidate closest to feasible (of {len(evaluations)}) misses "
-            f"it by {best.constraints[worst]:.3g} of the target ({best.reason})")
+            f"it by {100 * best.constraints[worst]:.3g} % ({best.reason})")
 
 
 def objective_headers(keys: Sequence[str]) -> list[str]:

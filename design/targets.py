@@ -4,7 +4,7 @@ A targets file names a base preset (its clamp data, drive, motor and masses are 
 the linkage changes), the targets every design must meet (constraints), the objectives
 to trade against each other, and the bounds of the design variables::
 
-    preset = "lin2003_sm55"
+    preset = "lin2003_sm55"        # a shipped preset, or a TOML file (relative to this one)
     objectives = ["close_time", "thrust_peak", "installation_length"]
 
     [targets]
@@ -199,4 +199,9 @@ def load_targets(path: str | Path) -> Targets:
         table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ParameterError(f"targets file {path}: {exc}") from exc
+    preset = table.get("preset")
+    if isinstance(preset, str) and preset.endswith(".toml") and not Path(preset).is_absolute():
+        beside = Path(path).parent / preset  # a preset file named relative to the targets
+        if beside.is_file():
+            table["preset"] = str(beside)
     return targets_from_dict(table, str(path))

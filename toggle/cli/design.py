@@ -44,10 +44,13 @@ class _DoeAction(argparse.Action):
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from design.objectives import OBJECTIVES  # the registry only: no dask, no pymoo
     p = sub.add_parser("design", help="search clamp geometries for targets (Pareto set)",
-                       description=__doc__.split("\n\n")[0])
-    p.add_argument("targets", type=path, help="targets TOML file (docs/design.md; examples "
-                   "in design/examples/)")
+                       description="Search the double-toggle family for the targets of a "
+                       "TOML file and write the Pareto set, a preset of each design and "
+                       "figures (docs/design.md).")
+    p.add_argument("targets", type=path, help="targets TOML file (examples in "
+                   f"design/examples/); objectives: {', '.join(OBJECTIVES)}")
     p.add_argument("--out", type=path, default=Path("design-out"),
                    help="results folder; an existing one of the same targets is resumed")
     where = p.add_mutually_exclusive_group()
