@@ -22,6 +22,7 @@ GENERATIONS = integer(1, 100_000, "must be a number of generations between 1 and
 POPULATION = integer(4, 100_000, "must be a population between 4 and 100000")
 WORKERS = integer(0, 4096, "must be a number of local workers between 0 and 4096")
 DOE_SAMPLES = integer(1, 10_000_000, "must be a number of samples between 1 and 1e7")
+DEFAULT_GENERATIONS, DEFAULT_POPULATION = 20, 40
 
 
 def _doe(values: list[str]) -> tuple[str, int]:
@@ -63,13 +64,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     where.add_argument("--workers", type=WORKERS, default=None,
                        help="local worker processes (default: one per core; 0: no Dask, "
                             "evaluate in this process)")
-    how = p.add_mutually_exclusive_group()
-    how.add_argument("--doe", nargs=2, metavar=("lhs|sobol", "N"), action=_DoeAction,
-                     default=None, help="a design of experiments of N candidates instead of "
-                                        "the genetic algorithm")
-    p.add_argument("--generations", type=GENERATIONS, default=20,
-                   help="NSGA-II/III generations")
-    p.add_argument("--population", type=POPULATION, default=40, help="NSGA-II/III population")
+    p.add_argument("--doe", nargs=2, metavar=("lhs|sobol", "N"), action=_DoeAction,
+                   default=None, help="a design of experiments of N candidates instead of "
+                                      "the genetic algorithm")
+    p.add_argument("--generations", type=GENERATIONS, default=None,
+                   help=f"NSGA-II/III generations (default {DEFAULT_GENERATIONS})")
+    p.add_argument("--population", type=POPULATION, default=None,
+                   help=f"NSGA-II/III population (default {DEFAULT_POPULATION})")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the search (a seed replays)")
     p.add_argument("--no-figures", action="store_true", help="write no figures")
     add_json_argument(p)
@@ -84,12 +85,17 @@ def run(args: argparse.Namespace) -> int:
     from design.targets import load_targets
     from toggle.params import ParameterError
 
+    if args.doe and (args.generations or args.population):
+        raise ParameterError("--doe replaces the genetic algorithm: give it without "
+                             "--generations and --population")
     targets = load_targets(args.targets)
     check_writable_dir(args.out, "--out")
     method, samples = args.doe or (None, 0)
     try:
-        result = run_search(targets, args.out, generations=args.generations,
-                            population=args.population, doe_method=method, samples=samples,
+        result = run_search(targets, args.out,
+                            generations=args.generations or DEFAULT_GENERATIONS,
+                            population=args.population or DEFAULT_POPULATION,
+                            doe_method=method, samples=samples,
                             seed=args.seed, scheduler=args.scheduler, workers=args.workers,
                             progress=not args.json, connect_timeout=args.connect_timeout)
     except KeyboardInterrupt:
