@@ -184,8 +184,12 @@ def targets_from_dict(table: dict[str, Any], origin: str = "<targets>") -> Targe
     if not (0 < settings["alpha_lock"] < 0.5 and 2 <= settings["points"] <= 1000):
         raise ParameterError(f"{origin}: settings need 0 < alpha_lock < 0.5 rad and "
                              f"2 <= points <= 1000, got {settings}")
+    bounds = _bounds(table.get("bounds"), origin)
+    if bounds["alpha_open"][0] <= settings["alpha_lock"]:
+        raise ParameterError(f"{origin}: bounds.alpha_open must stay above settings.alpha_lock "
+                             f"= {settings['alpha_lock']:g} rad, got {bounds['alpha_open'][0]:g}")
     return Targets(preset=preset, objectives=tuple(objectives), targets=targets,
-                   bounds=_bounds(table.get("bounds"), origin), settings=settings,
+                   bounds=bounds, settings=settings,
                    origin=origin, description=str(table.get("description", "")))
 
 
