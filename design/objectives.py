@@ -20,7 +20,7 @@ from __future__ import annotations
 import hashlib
 import math
 import struct
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -296,8 +296,3 @@ def objective_matrix(evaluations: Sequence[Evaluation], keys: Sequence[str]) -> 
                    dtype=float).reshape(len(evaluations), len(keys))
     return -sense * raw
 
-
-def evaluate_all(evaluator: Callable[[Sequence[float]], Evaluation],
-                 vectors: Sequence[Sequence[float]]) -> list[Evaluation]:
-    """Evaluate candidates in this process, in order."""
-    return [evaluator(v) for v in vectors]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from design.objectives import OBJECTIVES, Evaluation, objective_matrix
+from design.objectives import Evaluation, objective_matrix
 from design.runner import CONNECT_TIMEOUT, Runner
 from design.store import Store
 from design.targets import VARIABLES, Targets
@@ -194,6 +194,3 @@ def binding_constraint(evaluations: Sequence[Evaluation]) -> str:
     return (f"{worst} binds: the candidate closest to feasible (of {len(evaluations)}) misses "
             f"it by {100 * best.constraints[worst]:.3g} % ({best.reason})")
 
-
-def objective_headers(keys: Sequence[str]) -> list[str]:
-    return [OBJECTIVES[k].header for k in keys]

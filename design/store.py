@@ -55,14 +55,8 @@ class Store:
     def __contains__(self, key: str) -> bool:
         return key in self._known
 
-    def __len__(self) -> int:
-        return len(self._known)
-
     def get(self, key: str) -> Evaluation:
         return self._known[key]
-
-    def all(self) -> list[Evaluation]:
-        return list(self._known.values())
 
     def append(self, evaluations: Iterable[Evaluation]) -> None:
         new = [e for e in evaluations if e.key not in self._known]
