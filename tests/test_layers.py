@@ -1,5 +1,6 @@
 """The packages' layers: toggle (the plant and its analysis) <- controllers (the planner)
-<- hil (the rig). A lower layer imports nothing of a higher one."""
+<- hil (the rig), and toggle <- controllers <- design (the clamp's synthesis). A lower layer
+imports nothing of a higher one, and design and hil nothing of each other."""
 
 from __future__ import annotations
 
@@ -12,8 +13,12 @@ LAYERS = {
     "toggle": ("toggle.plant", "toggle.plots", "toggle.rig_tables", "toggle.fmu_build",
                "toggle.cli.args"),
     "controllers": ("controllers.planner", "controllers.profiles", "controllers.bounds"),
+    "design": ("design.search", "design.runner", "design.output", "design.placement",
+               "design.figures", "design.timing"),
+    "hil": ("hil.cli", "hil.experiment", "hil.backends"),
 }
-HIGHER = {"toggle": ("controllers", "hil"), "controllers": ("hil",)}
+HIGHER = {"toggle": ("controllers", "hil", "design"), "controllers": ("hil", "design"),
+          "design": ("hil",), "hil": ("design",)}
 
 
 @pytest.mark.parametrize("layer", sorted(LAYERS))

@@ -23,7 +23,7 @@ from toggle.params import ParameterError
 
 #: Command modules, in the order ``toggle --help`` lists them.
 COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetry", "calibrate",
-            "tables", "build_fmu", "plan", "plot")
+            "tables", "build_fmu", "plan", "design", "plot")
 
 
 def build_parser() -> argparse.ArgumentParser:

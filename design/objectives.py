@@ -1,0 +1,298 @@
+"""The evaluation of one candidate clamp: its objectives and its constraints.
+
+A candidate is a vector of :data:`design.targets.VARIABLES`. :class:`Evaluator` turns it
+into a symmetric :class:`toggle.params.Mechanism` on the base preset (its clamp data,
+drive and masses), then measures it with the one model: seed 004's measures over the
+opening (:func:`toggle.study.angle_measures`), real-mold clamping up to the target force
+(:func:`toggle.elastics.analyse_clamping`), the closing-time bound
+(:mod:`design.timing`) and seed 003's tolerance synthesis
+(:mod:`toggle.synthesis`). A candidate that does not assemble, has no toggle, cannot open
+to its angle or cannot reach the clamp force is not an error: it gets a positive
+constraint value (a violation) and the reason, and the search moves on.
+
+Constraint values are normalised (0 is the limit, 1 a violation as large as the limit)
+so that their sum, the constraint violation NSGA-II ranks infeasible candidates by, adds
+like with like.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import struct
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from design.targets import TARGETS, VARIABLES, Targets
+from toggle.elastics import ClampingError, analyse_clamping
+from toggle.kinematics import AssemblyError, output_position, sensitivities, stroke_limits
+from toggle.params import HalfDims, Mechanism, ParameterError
+from toggle.statics import StaticsError
+from toggle.study import angle_grid, angle_measures, criteria
+
+
+@dataclass(frozen=True)
+class Objective:
+    """One objective: ``sense`` +1 to maximise, -1 to minimise; ``needs`` the preset's
+    sections it takes."""
+
+    key: str
+    label: str
+    unit: str
+    sense: int
+    needs: tuple[str, ...] = ()
+
+    def check(self, base: Mechanism, origin: str) -> None:
+        """Refuse an objective the base preset cannot evaluate, by name."""
+        for section in self.needs:
+            if getattr(base, section) is None:
+                raise ParameterError(f"{origin}: objective {self.key} needs the [{section}] "
+                                     f"section, which preset {base.name} does not have")
+
+    @property
+    def header(self) -> str:
+        return f"{self.key} ({self.unit})"
+
+
+#: Every objective a targets file may pick (``toggle design --help`` lists them).
+OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
+    Objective("force_amplification", "force amplification near lock-up (seed 004)", "1", 1),
+    Objective("stroke_ratio", "platen over crosshead stroke, open clamp", "1", 1),
+    Objective("velocity_ratio_peak", "peak platen over crosshead speed", "1", 1),
+    Objective("coping_angle_min", "minimum coping angle (seed 004)", "rad", 1),
+    Objective("velocity_ratio_close", "platen over crosshead speed entering mold protection",
+              "1", -1),
+    Objective("close_time", "closing time bound under the motor's limits", "s", -1,
+              ("clamp", "drive", "dynamics")),
+    Objective("thrust_peak", "peak crosshead thrust clamping to the force", "N", -1,
+              ("clamp",)),
+    Objective("link_stress", "peak axial link stress, clamped", "Pa", -1, ("clamp",)),
+    Objective("tiebar_stress", "tie-bar stress, clamped", "Pa", -1, ("clamp",)),
+    Objective("tolerance_cost", "cost of tolerances at seed 003's reliabilities", "1", -1),
+    Objective("tolerance_sensitivity", "RSS of platen-position sensitivities at the toggle",
+              "1", -1),
+    Objective("installation_length", "axial length of the linkage", "m", -1),
+)}
+
+#: Measures recorded for every feasible candidate besides the objectives, with units.
+MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_toggle": "m",
+            "link_ratio": "1"}
+
+#: The constraints, in the order of the G matrix; each is active when its target is set
+#: (assembly always; drive_thrust when the preset has a drive and clamp data).
+CONSTRAINTS = ("assembly", "mold_open_stroke", "installation_length", "max_link_ratio",
+               "clamp_force", "drive_thrust", "tolerances")
+
+#: Platen travel before mold contact over which the speed ratio "at mold close" is read
+#: (the planner's default mold-protection zone: the last tenth).
+PROTECT_FRACTION = 0.1
+
+
+def candidate_key(digest: str, vector: Sequence[float]) -> str:
+    """Hash of a candidate (and of the problem's digest): the key of its evaluation."""
+    raw = digest.encode() + b"".join(struct.pack("<d", float(v)) for v in vector)
+    return hashlib.sha256(raw).hexdigest()[:20]
+
+
+@dataclass
+class Evaluation:
+    """One evaluated candidate (SI). ``constraints``: value <= 0 is met; ``reason`` says
+    what fails for an infeasible one."""
+
+    key: str
+    variables: dict[str, float]
+    metrics: dict[str, float] = field(default_factory=dict)
+    constraints: dict[str, float] = field(default_factory=dict)
+    reason: str = ""
+
+    @property
+    def feasible(self) -> bool:
+        return all(v <= 0 for v in self.constraints.values())
+
+    def as_record(self) -> dict[str, Any]:
+        return {"key": self.key, "variables": self.variables, "metrics": self.metrics,
+                "constraints": self.constraints, "reason": self.reason}
+
+    @classmethod
+    def from_record(cls, record: Mapping[str, Any]) -> Evaluation:
+        return cls(record["key"], dict(record["variables"]), dict(record["metrics"]),
+                   dict(record["constraints"]), record.get("reason", ""))
+
+
+def half_dims(values: Mapping[str, float]) -> HalfDims:
+    """The half of a candidate (r2 = 0; r4c closes the triangle at alpha4)."""
+    a, b, angle = values["r4a"], values["r4b"], values["alpha4"]
+    r4c = math.sqrt(a * a + b * b - 2 * a * b * math.cos(angle))
+    return HalfDims(r1=values["d"], r2=0.0, r3=values["r3"], r4a=a, r4b=b, r4c=r4c,
+                    r5=values["r5"], e=values["e"])
+
+
+class Evaluator:
+    """Evaluates candidates of one targets file; build it once per process (a Dask worker
+    keeps it: :func:`design.runner.evaluate_chunk`)."""
+
+    def __init__(self, targets: Targets) -> None:
+        self.targets = targets
+        self.base = targets.base
+        self.digest = targets.digest()
+        self.active = self._active_constraints()
+        wanted = set(targets.objectives)
+        self._clamp = self.base.clamp is not None and bool(
+            wanted & {"close_time", "thrust_peak", "link_stress", "tiebar_stress"}
+            or "clamp_force" in targets.targets)
+        self._limits = None
+        if self.base.drive is not None:
+            from controllers.limits import drive_limits
+            self._limits = drive_limits(self.base)
+
+    def _active_constraints(self) -> tuple[str, ...]:
+        t, base = self.targets, self.base
+        on = {"assembly": True,
+              "mold_open_stroke": "mold_open_stroke" in t.targets,
+              "installation_length": "installation_length" in t.targets,
+              "max_link_ratio": "max_link_ratio" in t.targets,
+              "clamp_force": base.clamp is not None,
+              "drive_thrust": base.clamp is not None and base.drive is not None,
+              "tolerances": "tolerance_cost" in t.objectives}
+        return tuple(c for c in CONSTRAINTS if on[c])
+
+    def vector(self, values: Mapping[str, float]) -> np.ndarray:
+        return np.array([float(values[v]) for v in VARIABLES])
+
+    def values(self, vector: Sequence[float]) -> dict[str, float]:
+        return dict(zip(VARIABLES, (float(v) for v in vector)))
+
+    def mechanism(self, values: Mapping[str, float], x_open: float | None = None,
+                  name: str = "design") -> Mechanism:
+        """The candidate as a symmetric mechanism on the base preset, its clamp opening at
+        ``x_open`` to the target clamp force."""
+        dims = half_dims(values)
+        clamp = self.base.clamp
+        if clamp is not None:
+            clamp = replace(clamp, x_open=x_open, final_tiebar_force=self.targets.targets.get(
+                "clamp_force", clamp.final_tiebar_force))
+        return replace(self.base, name=name, lower=dims, upper=dims, clamp=clamp,
+                       description=f"designed by toggle design on {self.base.name}")
+
+    def __call__(self, vector: Sequence[float]) -> Evaluation:
+        values = self.values(vector)
+        out = Evaluation(candidate_key(self.digest, vector), values)
+        out.constraints = dict.fromkeys(self.active, 0.0)
+        try:
+            self._measure(values, out)
+        except (AssemblyError, ParameterError, StaticsError) as exc:
+            out.constraints["assembly"] = 1.0 + getattr(exc, "shortfall", 0.0)
+            out.reason = f"assembly: {exc}"
+        if not out.reason and not out.feasible:
+            worst = max(out.constraints, key=out.constraints.__getitem__)
+            out.reason = f"{worst}: violated by {out.constraints[worst]:.3g} of its limit"
+        return out
+
+    def _measure(self, values: dict[str, float], out: Evaluation) -> None:
+        t, m, g = self.targets, out.metrics, out.constraints
+        dims = half_dims(values)
+        x_toggle = stroke_limits(dims)[1]  # AssemblyError: no toggle
+        alphas = angle_grid(t.settings["alpha_lock"], values["alpha_open"],
+                            int(t.settings["points"]))
+        try:
+            measures = angle_measures(dims, alphas)
+        except AssemblyError as exc:  # cannot open that far: how far short, as a fraction
+            limit = getattr(exc, "alpha_limit", 0.0)
+            exc.shortfall = max(0.0, 1.0 - limit / values["alpha_open"])
+            raise
+        slowest = float(np.min(measures.velocity_ratio))
+        if slowest <= 0:  # the platen would turn back while the clamp opens
+            where = math.degrees(float(alphas[np.argmin(measures.velocity_ratio)]))
+            raise AssemblyError(f"the platen reverses while the clamp opens (velocity ratio "
+                                f"{slowest:.3g} at a toggle angle of {where:.4g} deg)")
+        m.update(criteria(measures))
+        m["velocity_ratio_peak"] = m.pop("velocity_ratio")
+        m["x_open"], m["x_toggle"] = float(measures.x[-1]), x_toggle
+        m["platen_stroke"] = float(measures.platen_stroke[-1])
+        m["crosshead_stroke"] = float(measures.crosshead_stroke[-1])
+        # read where a tenth of the platen's travel remains (platen_stroke rises with alpha)
+        m["velocity_ratio_close"] = float(np.interp(PROTECT_FRACTION * m["platen_stroke"],
+                                                    measures.platen_stroke,
+                                                    measures.velocity_ratio))
+        links = (dims.r3, dims.r4a, dims.r4b, dims.r4c, dims.r5)
+        m["link_ratio"] = max(links) / min(links)
+        # from the crosshead's rearmost position (behind the pivot if x_open < 0) to the
+        # platen joint at lock-up
+        m["installation_length"] = float(output_position(x_toggle, dims)) - min(0.0, m["x_open"])
+        for key, value, most in (("mold_open_stroke", -m["platen_stroke"], False),
+                                 ("installation_length", m["installation_length"], True),
+                                 ("max_link_ratio", m["link_ratio"], True)):
+            if key in g:  # a least target: -(measured - target) / target
+                target = t.targets[key]
+                g[key] = (value - target) / target if most else (value + target) / target
+                if g[key] > 0 and not out.reason:
+                    unit = TARGETS[key][0]
+                    out.reason = (f"{key}: {abs(value):.6g} {unit} against "
+                                  f"{'at most' if most else 'at least'} {target:.6g} {unit}")
+        sens = sensitivities(x_toggle, dims)
+        m["tolerance_sensitivity"] = float(math.sqrt(sum(float(v) ** 2 for v in sens.values())))
+        if "tolerance_cost" in t.objectives:
+            self._tolerances(values, m, g, out)
+        if self._clamp:
+            self._clamping(values, m, g, out)
+
+    def _tolerances(self, values: dict[str, float], m: dict[str, float],
+                    g: dict[str, float], out: Evaluation) -> None:
+        from toggle.synthesis import allocate, clamp_error_model
+        try:
+            m["tolerance_cost"] = allocate(clamp_error_model(self.mechanism(values))).cost
+        except ValueError as exc:
+            g["tolerances"] = 1.0
+            out.reason = f"tolerances: {exc}"
+
+    def _clamping(self, values: dict[str, float], m: dict[str, float],
+                  g: dict[str, float], out: Evaluation) -> None:
+        mech = self.mechanism(values, x_open=m["x_open"])
+        try:
+            result = analyse_clamping(mech)
+        except (ClampingError, StaticsError) as exc:
+            g["clamp_force"] = 1.0
+            out.reason = f"clamp_force: {exc}"
+            return
+        clamp = mech.clamp
+        m["thrust_peak"] = result.thrust_max
+        m["force_amplification_clamp"] = result.final.clamp_force / result.thrust_max
+        states = (result.final, result.hold)
+        links = clamp.links
+        m["link_stress"] = max(max(abs(s.link1_force) / links.area1,
+                                   abs(s.link2_bf_force) / links.area2,
+                                   abs(s.link2_cf_force) / links.area2) for s in states)
+        bars = clamp.tiebars
+        m["tiebar_stress"] = max(s.tiebar_force for s in states) / (bars.count * bars.area)
+        if "drive_thrust" in g:
+            most = self._limits.force(mech.drive)
+            g["drive_thrust"] = (result.thrust_max - most) / most
+            if g["drive_thrust"] > 0:
+                out.reason = (f"drive_thrust: the clamp needs {result.thrust_max:.6g} N, the "
+                              f"motor holds {most:.6g} N")
+                return
+        if "close_time" in self.targets.objectives:
+            self._close_time(mech, result.x_contact, result.x_final, m, g, out)
+
+    def _close_time(self, mech: Mechanism, x_contact: float, x_final: float,
+                    m: dict[str, float], g: dict[str, float], out: Evaluation) -> None:
+        from design.timing import StallError, close_time_bound
+        from toggle.plant import PlantConfig
+        try:
+            m["close_time"] = close_time_bound(PlantConfig(mech, x_contact=x_contact),
+                                               self._limits, m["x_open"], x_final)
+        except StallError as exc:
+            g["drive_thrust"] = max(g.get("drive_thrust", 0.0), 1.0)
+            out.reason = f"drive_thrust: {exc}"
+
+
+def objective_matrix(evaluations: Sequence[Evaluation], keys: Sequence[str]) -> np.ndarray:
+    """Objectives as minimised values (maximised ones negated); NaN where not measured."""
+    sense = np.array([OBJECTIVES[k].sense for k in keys], dtype=float)
+    raw = np.array([[e.metrics.get(k, math.nan) for k in keys] for e in evaluations],
+                   dtype=float).reshape(len(evaluations), len(keys))
+    return -sense * raw
+

@@ -1,0 +1,211 @@
+"""What a designer asks for: the targets file of ``toggle design`` (TOML, SI units).
+
+A targets file names a base preset (its clamp data, drive, motor and masses are kept; only
+the linkage changes), the targets every design must meet (constraints), the objectives
+to trade against each other, and the bounds of the design variables::
+
+    preset = "lin2003_sm55"        # a shipped preset, or a TOML file (relative to this one)
+    objectives = ["close_time", "thrust_peak", "installation_length"]
+
+    [targets]
+    clamp_force = 539365.75       # N, final tie-bar force (the machine's tonnage)
+    mold_open_stroke = 0.132      # m, least platen stroke
+    installation_length = 0.42    # m, most axial space of the linkage
+    max_link_ratio = 4.0          # longest over shortest link
+
+    [bounds]                      # [low, high], or one number to hold a variable fixed
+    d = [0.10, 0.17]              # m ... angles in rad
+
+Every bad key or value raises :class:`toggle.params.ParameterError` naming the file and
+the key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from toggle.params import Mechanism, ParameterError, load_preset
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+#: The design variables of the symmetric double-toggle family, in vector order, with unit
+#: and meaning. r2 is 0 (only d = r1 - r2 enters the kinematics); r4c follows from alpha4.
+VARIABLES: dict[str, tuple[str, str]] = {
+    "d": ("m", "height of the crosshead pin line above the triangular link's pivot (r1 - r2)"),
+    "r3": ("m", "crosshead link"),
+    "r4a": ("m", "triangular link, pivot to the crosshead link's pin"),
+    "r4b": ("m", "triangular link, pivot to the platen-side link's pin"),
+    "alpha4": ("rad", "angle of the triangular link at its pivot"),
+    "r5": ("m", "platen-side link"),
+    "e": ("m", "height of the platen joint above the triangular link's pivot"),
+    "alpha_open": ("rad", "toggle angle of the open clamp (sets crosshead and platen travel)"),
+}
+
+#: Keys of [targets]: unit and meaning. All optional; a missing one constrains nothing.
+TARGETS: dict[str, tuple[str, str]] = {
+    "clamp_force": ("N", "final tie-bar force to reach at the toggle (needs [clamp])"),
+    "mold_open_stroke": ("m", "least platen stroke from the open clamp to the toggle"),
+    "installation_length": ("m", "most axial length of the linkage"),
+    "max_link_ratio": ("1", "most ratio of the longest to the shortest link"),
+}
+
+#: Keys of [settings] with their defaults: the toggle angle where force amplification is
+#: read (seed 004's "near lock-up"), points on the opening, the friction of the cost model.
+SETTINGS: dict[str, float] = {"alpha_lock": math.radians(1.0), "points": 60}
+
+_TOP = {"preset", "objectives", "targets", "bounds", "settings", "description"}
+
+
+@dataclass(frozen=True)
+class Targets:
+    """A parsed targets file (SI). ``bounds`` maps every variable of :data:`VARIABLES`
+    to (low, high); low == high holds it fixed."""
+
+    preset: str
+    objectives: tuple[str, ...]
+    targets: dict[str, float]
+    bounds: dict[str, tuple[float, float]]
+    settings: dict[str, float]
+    origin: str = "<targets>"
+    description: str = ""
+
+    @property
+    def free(self) -> tuple[str, ...]:
+        """The variables the search varies (low < high), in vector order."""
+        return tuple(v for v in VARIABLES if self.bounds[v][0] < self.bounds[v][1])
+
+    @property
+    def base(self) -> Mechanism:
+        """The base preset (clamp data, drive and masses of every design)."""
+        return load_preset(self.preset)
+
+    def digest(self) -> str:
+        """Hash of everything that changes an evaluation: a store keyed by it is only reused
+        for the same problem."""
+        payload = json.dumps([self.preset, sorted(self.targets.items()),
+                              sorted(self.settings.items()), _preset_text(self.preset)],
+                             sort_keys=True)
+        return hashlib.sha256(payload.encode()).hexdigest()[:16]
+
+
+def _preset_text(preset: str) -> str:
+    from toggle.params import preset_table  # the parsed table: a comment change is no change
+    return json.dumps(preset_table(preset)[0], sort_keys=True, default=str)
+
+
+def _number(value: Any, where: str, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(
+            value):
+        raise ParameterError(f"{where} must be a finite number ({unit}), got {value!r}")
+    return float(value)
+
+
+def _bounds(table: Any, origin: str) -> dict[str, tuple[float, float]]:
+    if not isinstance(table, dict):
+        raise ParameterError(f"{origin}: [bounds] must be a table of [low, high] per variable")
+    unknown = set(table) - set(VARIABLES)
+    missing = set(VARIABLES) - set(table)
+    if unknown or missing:
+        raise ParameterError(f"{origin}: [bounds]: unknown {sorted(unknown)}, "
+                             f"missing {sorted(missing)} (variables: {', '.join(VARIABLES)})")
+    out = {}
+    for name in VARIABLES:
+        unit, value, where = VARIABLES[name][0], table[name], f"{origin}: bounds.{name}"
+        pair = value if isinstance(value, list) else [value, value]
+        if len(pair) != 2:
+            raise ParameterError(f"{where} must be [low, high] or one number ({unit}), "
+                                 f"got {value!r}")
+        lo, hi = (_number(v, where, unit) for v in pair)
+        if lo > hi:
+            raise ParameterError(f"{where}: low {lo:g} is above high {hi:g} {unit}")
+        if name not in ("d", "e", "alpha4", "alpha_open") and lo <= 0:
+            raise ParameterError(f"{where}: a link length must be > 0 m, got {lo:g}")
+        if name in ("alpha4", "alpha_open") and not 0 < lo <= hi < math.pi:
+            raise ParameterError(f"{where} must lie in (0, pi) rad, got [{lo:g}, {hi:g}]")
+        out[name] = (lo, hi)
+    return out
+
+
+def targets_from_dict(table: dict[str, Any], origin: str = "<targets>") -> Targets:
+    """A :class:`Targets` from a parsed TOML table; every fault names its key."""
+    from design.objectives import OBJECTIVES  # the registry lives with the evaluator
+
+    unknown = set(table) - _TOP
+    if unknown:
+        raise ParameterError(f"{origin}: unknown key(s) {sorted(unknown)}; "
+                             f"known: {', '.join(sorted(_TOP))}")
+    preset = table.get("preset")
+    if not isinstance(preset, str):
+        raise ParameterError(f"{origin}: preset must be a preset name or TOML path, "
+                             f"got {preset!r}")
+    base = load_preset(preset)
+    objectives = table.get("objectives")
+    if not (isinstance(objectives, list) and len(objectives) >= 2
+            and all(isinstance(o, str) for o in objectives)):
+        raise ParameterError(f"{origin}: objectives must be a list of at least two names "
+                             f"from {', '.join(OBJECTIVES)}, got {objectives!r}")
+    for name in objectives:
+        if name not in OBJECTIVES:
+            raise ParameterError(f"{origin}: objectives: unknown {name!r}; "
+                                 f"known: {', '.join(OBJECTIVES)}")
+        OBJECTIVES[name].check(base, origin)
+    if len(set(objectives)) != len(objectives):
+        raise ParameterError(f"{origin}: objectives: {objectives!r} names one twice")
+    raw = table.get("targets", {})
+    if not isinstance(raw, dict):
+        raise ParameterError(f"{origin}: [targets] must be a table")
+    targets = {}
+    for key, value in raw.items():
+        if key not in TARGETS:
+            raise ParameterError(f"{origin}: targets.{key} is unknown; "
+                                 f"known: {', '.join(TARGETS)}")
+        targets[key] = _number(value, f"{origin}: targets.{key}", TARGETS[key][0])
+        if targets[key] <= 0:
+            raise ParameterError(f"{origin}: targets.{key} must be > 0 {TARGETS[key][0]}, "
+                                 f"got {value!r}")
+    if "clamp_force" in targets and base.clamp is None:
+        raise ParameterError(f"{origin}: targets.clamp_force needs a preset with [clamp] "
+                             f"data; {preset} has none")
+    settings = dict(SETTINGS)
+    for key, value in table.get("settings", {}).items():
+        if key not in SETTINGS:
+            raise ParameterError(f"{origin}: settings.{key} is unknown; "
+                                 f"known: {', '.join(SETTINGS)}")
+        settings[key] = _number(value, f"{origin}: settings.{key}", "")
+    if not (0 < settings["alpha_lock"] < 0.5 and 2 <= settings["points"] <= 1000):
+        raise ParameterError(f"{origin}: settings need 0 < alpha_lock < 0.5 rad and "
+                             f"2 <= points <= 1000, got {settings}")
+    bounds = _bounds(table.get("bounds"), origin)
+    if bounds["alpha_open"][0] <= settings["alpha_lock"]:
+        raise ParameterError(f"{origin}: bounds.alpha_open must stay above settings.alpha_lock "
+                             f"= {settings['alpha_lock']:g} rad, got {bounds['alpha_open'][0]:g}")
+    return Targets(preset=preset, objectives=tuple(objectives), targets=targets,
+                   bounds=bounds, settings=settings,
+                   origin=origin, description=str(table.get("description", "")))
+
+
+def load_targets(path: str | Path) -> Targets:
+    """Read a targets file (:func:`targets_from_dict`)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParameterError(f"cannot read targets file {path}: {exc}") from exc
+    try:
+        table = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"targets file {path}: {exc}") from exc
+    preset = table.get("preset")
+    if isinstance(preset, str) and preset.endswith(".toml") and not Path(preset).is_absolute():
+        beside = Path(path).parent / preset  # a preset file named relative to the targets
+        if beside.is_file():
+            table["preset"] = str(beside)
+    return targets_from_dict(table, str(path))

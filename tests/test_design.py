@@ -1,0 +1,267 @@
+"""toggle design (issue 29): the evaluator against the one model, infeasible candidates as
+constraints, targets errors by key, the store's resume, presets the other commands take,
+the Pareto output, and seed 004's groups and seed 001's SM-55 against the front."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from contextlib import redirect_stderr, redirect_stdout
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from controllers.limits import drive_limits
+from design.objectives import OBJECTIVES, Evaluator, half_dims
+from design.output import write_preset
+from design.placement import design_values, place, reference_designs
+from design.search import pareto_front, run_search
+from design.targets import VARIABLES, load_targets, targets_from_dict
+from design.timing import close_time_bound
+from toggle.cli import main
+from toggle.elastics import analyse_clamping
+from toggle.kinematics import half_pose, stroke_limits
+from toggle.params import ParameterError, load_preset
+from toggle.plant import PlantConfig
+from toggle.study import angle_grid, angle_measures, criteria
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "design" / "examples"
+SM55, LI_MICRO = EXAMPLES / "sm55.toml", EXAMPLES / "li_micro.toml"
+
+
+def cli(*argv: str) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        try:
+            code = main(list(argv))
+        except SystemExit as exc:
+            code = int(exc.code)
+    return code, out.getvalue(), err.getvalue()
+
+
+def table(path: Path) -> dict:
+    from toggle.params import preset_table  # a TOML file, parsed as every preset is
+    return preset_table(str(path))[0]
+
+
+@pytest.fixture(scope="module")
+def sm55() -> tuple:
+    targets = load_targets(SM55)
+    evaluator = Evaluator(targets)
+    ref = evaluator(evaluator.vector(design_values(load_preset("lin2003_sm55"))))
+    return targets, evaluator, ref
+
+
+def test_the_sm55_as_a_candidate_is_the_sm55_of_the_one_model(sm55) -> None:
+    _, evaluator, ref = sm55
+    mech = load_preset("lin2003_sm55")
+    assert ref.feasible, ref.reason
+    assert ref.metrics["x_open"] == pytest.approx(mech.clamp.x_open, abs=1e-9)
+    clamped = analyse_clamping(mech)
+    assert ref.metrics["thrust_peak"] == pytest.approx(clamped.thrust_max, rel=1e-6)
+    x_tp = stroke_limits(mech.lower)[1]
+    stroke = float(half_pose(x_tp, mech.lower).L - half_pose(mech.clamp.x_open, mech.lower).L)
+    assert ref.metrics["platen_stroke"] == pytest.approx(stroke, abs=1e-8)
+    assert half_dims(ref.variables).r4c == pytest.approx(mech.lower.r4c, rel=1e-12)
+
+
+def test_the_closing_time_bound_is_below_every_stroke_the_drive_can_make(sm55) -> None:
+    _, evaluator, ref = sm55
+    mech = evaluator.mechanism(ref.variables, x_open=ref.metrics["x_open"])
+    limits = drive_limits(mech)
+    result = analyse_clamping(mech)
+    bound = close_time_bound(PlantConfig(mech, x_contact=result.x_contact), limits,
+                             ref.metrics["x_open"], result.x_final)
+    assert bound == pytest.approx(ref.metrics["close_time"], rel=1e-12)
+    v, a, s = limits.velocity, limits.acceleration, ref.metrics["crosshead_stroke"]
+    trapezoid = s / v + v / a  # rest to rest at the speed and acceleration limits only
+    assert trapezoid < bound < 0.6258  # toggle plan --min-time: 0.6258 s (docs/design.md)
+
+
+def test_seed_004_criteria_are_the_studys(sm55) -> None:
+    targets = load_targets(LI_MICRO)
+    evaluator = Evaluator(targets)
+    for name, values in reference_designs(targets).items():
+        e = evaluator(evaluator.vector(values))
+        dims = load_preset(name).lower
+        expect = criteria(angle_measures(dims, angle_grid(math.radians(1), math.pi / 2, 90)))
+        assert e.metrics["stroke_ratio"] == pytest.approx(expect["stroke_ratio"], rel=1e-9)
+        assert e.metrics["velocity_ratio_peak"] == pytest.approx(expect["velocity_ratio"],
+                                                                 rel=1e-9)
+        assert e.metrics["force_amplification"] == pytest.approx(
+            expect["force_amplification"], rel=1e-9)
+        assert e.feasible, (name, e.reason)  # the targets are the groups' envelope
+
+
+def test_infeasible_candidates_are_constraints_with_reasons(sm55) -> None:
+    _, evaluator, ref = sm55
+    no_toggle = evaluator(evaluator.vector({**ref.variables, "r4b": 0.115, "r5": 0.16,
+                                            "d": 0.175, "r3": 0.05, "r4a": 0.093}))
+    assert no_toggle.constraints["assembly"] > 0 and "assembl" in no_toggle.reason
+    far = evaluator(evaluator.vector({**ref.variables, "alpha_open": 3.0}))
+    assert far.constraints["assembly"] > 1  # 1 + the shortfall of the opening angle
+    weak = evaluator(evaluator.vector({**ref.variables, "e": 0.0, "r4b": 0.115, "r5": 0.30}))
+    assert not weak.feasible and weak.reason.split(":")[0] in weak.constraints
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(unit=st.lists(st.floats(0, 1), min_size=len(VARIABLES), max_size=len(VARIABLES)))
+def test_every_candidate_in_the_bounds_evaluates(sm55, unit: list[float]) -> None:
+    targets, evaluator, _ = sm55
+    lo = np.array([targets.bounds[v][0] for v in VARIABLES])
+    hi = np.array([targets.bounds[v][1] for v in VARIABLES])
+    e = evaluator(lo + np.array(unit) * (hi - lo))
+    assert all(math.isfinite(v) for v in e.constraints.values())
+    if e.feasible:
+        assert all(math.isfinite(e.metrics[k]) for k in targets.objectives)
+        assert e.metrics["platen_stroke"] >= targets.targets["mold_open_stroke"]
+    else:
+        assert e.reason
+
+
+@pytest.mark.parametrize("change, key", [
+    ({"targets": {"clamp_forse": 1.0}}, "targets.clamp_forse"),
+    ({"targets": {"mold_open_stroke": "long"}}, "targets.mold_open_stroke"),
+    ({"objectives": ["close_time", "speed"]}, "'speed'"),
+    ({"bounds": {"r3": [0.1, 0.05]}}, "bounds.r3"),
+    ({"bounds": {"alpha4": [0.1, 4.0]}}, "bounds.alpha4"),
+    ({"bounds": {"r3": None}}, "missing ['r3']"),
+    ({"settings": {"points": 1}}, "points"),
+    ({"preset": "li_micro", "objectives": ["close_time", "stroke_ratio"]}, "[clamp]"),
+])
+def test_a_malformed_targets_file_names_the_key(tmp_path: Path, change: dict, key: str
+                                                ) -> None:
+    base = table(SM55)
+    for k, v in change.items():
+        if isinstance(v, dict):
+            base[k] = {**base.get(k, {}), **v}
+            base[k] = {kk: vv for kk, vv in base[k].items() if vv is not None}
+        else:
+            base[k] = v
+    with pytest.raises(ParameterError, match=None) as err:
+        targets_from_dict(base, "t.toml")
+    assert key in str(err.value)
+    assert "t.toml" in str(err.value)
+
+
+def test_the_cli_refuses_bad_targets_in_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SM55.read_text().replace("[targets]", "[targets]\nforce = 3"))
+    code, _, err = cli("design", str(bad), "--workers", "0", "--out", str(tmp_path / "o"))
+    assert code == 2 and err.count("\n") == 1 and "targets.force" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_target_no_design_meets_names_the_binding_constraint(tmp_path: Path) -> None:
+    text = LI_MICRO.read_text().replace("mold_open_stroke = 0.2035", "mold_open_stroke = 0.5")
+    (tmp_path / "t.toml").write_text(text)
+    code, _, err = cli("design", str(tmp_path / "t.toml"), "--workers", "0", "--doe", "lhs",
+                       "24", "--out", str(tmp_path / "o"))
+    assert code == 2 and err.count("\n") == 1
+    assert "mold_open_stroke binds" in err
+
+
+def test_an_interrupted_search_resumes_where_it_stopped(tmp_path: Path) -> None:
+    targets = load_targets(LI_MICRO)
+    whole = run_search(targets, tmp_path / "a", doe_method="sobol", samples=16, workers=0)
+    record = tmp_path / "a" / "evaluations.jsonl"
+    lines = record.read_text().splitlines()
+    (tmp_path / "b").mkdir()
+    # a run killed after 6 results, in the middle of writing the 7th
+    (tmp_path / "b" / record.name).write_text("\n".join(lines[:7]) + "\n" + lines[7][:40])
+    again = run_search(targets, tmp_path / "b", doe_method="sobol", samples=16, workers=0)
+    assert again.evaluated == 10 and whole.evaluated == 16
+    assert [e.as_record() for e in again.evaluations] == [e.as_record()
+                                                         for e in whole.evaluations]
+    other = run_search(targets, tmp_path / "b", doe_method="sobol", samples=16, workers=0)
+    assert other.evaluated == 0
+    with pytest.raises(ParameterError, match="other targets"):
+        run_search(load_targets(SM55), tmp_path / "b", doe_method="lhs", samples=2, workers=0)
+
+
+def test_the_cli_writes_the_pareto_set_with_units_and_presets_the_other_commands_take(
+        tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    code, text, err = cli("design", str(LI_MICRO), "--workers", "0", "--generations", "4",
+                          "--population", "16", "--out", str(out), "--json")
+    assert code == 0, err
+    summary = json.loads(text)
+    rows = list(csv.DictReader((out / "pareto.csv").open()))
+    assert len(rows) == summary["pareto"] > 0
+    assert {"stroke_ratio (1)", "coping_angle_min (rad)", "r3 (m)", "alpha4 (rad)",
+            "platen_stroke (m)"} <= set(rows[0])
+    import pyarrow.parquet as pq
+    parquet = pq.read_table(out / "pareto.parquet").to_pylist()
+    assert [r["key"] for r in parquet] == [r["key"] for r in rows]
+    assert parquet[0]["r3 (m)"] == float(rows[0]["r3 (m)"])
+    preset = out / "presets" / f"design-{rows[0]['key'][:12]}.toml"
+    mech = load_preset(str(preset))
+    assert mech.lower == mech.upper == half_dims({v: float(rows[0][f"{v} ({u})"])
+                                                  for v, (u, _) in VARIABLES.items()})
+    code, text, err = cli("kinematics", "--preset", str(preset), "--json")
+    assert code == 0, err
+    assert (out / "front.png").stat().st_size > 1000
+
+
+def test_a_design_preset_carries_the_clamp_drive_and_masses(sm55, tmp_path: Path) -> None:
+    targets, evaluator, ref = sm55
+    path = write_preset(tmp_path / "d.toml", targets, ref, name="sm55-again")
+    mech = load_preset(str(path))
+    base = load_preset("lin2003_sm55")
+    assert (mech.drive, mech.dynamics) == (base.drive, base.dynamics)
+    assert mech.clamp.x_open == pytest.approx(base.clamp.x_open, abs=1e-12)
+    assert mech.clamp == replace(base.clamp, x_open=mech.clamp.x_open)
+    assert mech.lower == base.lower.replace(r4c=mech.lower.r4c)
+    assert mech.name == "sm55-again"
+
+
+def test_seed_004_groups_are_on_the_front_or_dominated_by_a_named_design(tmp_path: Path
+                                                                         ) -> None:
+    targets = load_targets(LI_MICRO)
+    result = run_search(targets, tmp_path, generations=8, population=24, workers=0)
+    placements = place(targets, result.front)
+    assert [p.name for p in placements] == [f"li_micro/{g}" for g in "1234567"]
+    keys = targets.objectives
+    for p in placements:
+        if p.dominated_by is None:  # no front design is as good everywhere, better somewhere
+            for design in result.front:
+                gains = [OBJECTIVES[k].sense * (design.metrics[k] - p.reference.metrics[k])
+                         for k in keys]
+                assert min(gains) < 0 or max(gains) <= 0
+        else:
+            assert p.margin == pytest.approx(min(p.improvements.values()))
+            assert p.margin >= 0 and max(p.improvements.values()) > 0
+    assert any(p.dominated_by for p in placements)
+    assert pareto_front(result.evaluations + [p.reference for p in placements], keys)
+
+
+def test_the_sm55_design_beats_the_sm55_on_two_objectives_at_its_force_and_stroke(sm55
+                                                                                  ) -> None:
+    targets, evaluator, ref = sm55
+    mech = load_preset(str(EXAMPLES / "sm55_design.toml"))
+    design = evaluator(evaluator.vector(design_values(mech)))
+    assert design.feasible, design.reason  # clamp force reached, stroke at least the SM-55's
+    assert design.metrics["platen_stroke"] >= targets.targets["mold_open_stroke"]
+    assert mech.clamp.final_tiebar_force == load_preset("lin2003_sm55").clamp.final_tiebar_force
+    better = [k for k in targets.objectives
+              if OBJECTIVES[k].sense * (design.metrics[k] - ref.metrics[k]) > 0]
+    assert len(better) >= 2, better
+
+
+def test_a_seed_replays_the_genetic_search_and_a_rerun_computes_nothing(tmp_path: Path
+                                                                        ) -> None:
+    targets = load_targets(LI_MICRO)  # four objectives: NSGA-III
+    first = run_search(targets, tmp_path / "a", generations=4, population=20, seed=5,
+                       workers=0)
+    second = run_search(targets, tmp_path / "b", generations=4, population=20, seed=5,
+                        workers=0)
+    assert [e.key for e in first.evaluations] == [e.key for e in second.evaluations]
+    again = run_search(targets, tmp_path / "a", generations=5, population=20, seed=5,
+                       workers=0)
+    assert 0 < again.evaluated <= 20  # only the new generation's candidates
