@@ -30,7 +30,9 @@ PHASES = ("close", "clamp_up", "hold", "open", "eject")
 
 
 def _rest(x: float, duration: float, period: float, cfg: PlantConfig) -> ProfileSamples:
-    """A dwell of ``duration`` s at rest at ``x``, its samples after time 0 (not at 0)."""
+    """A dwell of ``duration`` s at rest at ``x``: its samples after time 0 (none for 0 s)."""
+    if duration <= 0:
+        return ProfileSamples(*(np.zeros(0),) * 6)
     t = sample_times(duration, period)[1:]
     out = plant_outputs(np.full(t.size, x), 0.0 * t, 0.0 * t, cfg)
     return ProfileSamples(t, np.full(t.size, x), 0.0 * t, 0.0 * t,
@@ -39,14 +41,13 @@ def _rest(x: float, duration: float, period: float, cfg: PlantConfig) -> Profile
 
 
 def _join(parts: list[ProfileSamples]) -> ProfileSamples:
-    """Samples one after the other, each part's time shifted to follow the last."""
-    out, end = [], 0.0
-    for k, part in enumerate(parts):
-        if part.time.size == 0:
-            continue
-        first = 0 if k == 0 else int(part.time[0] == 0.0)  # a stroke repeats the join
-        out.append(ProfileSamples(*(c[first:] for c in (part.time + end, *part[1:]))))
+    """Samples one after the other, each part's time shifted to follow the last (a
+    stroke's first sample, at its time 0, is the last part's end and is left out)."""
+    out = [parts[0]]
+    for part in parts[1:]:
+        first = int(part.time.size > 0 and part.time[0] == 0.0)
         end = float(out[-1].time[-1])
+        out.append(ProfileSamples(*(c[first:] for c in (part.time + end, *part[1:]))))
     return ProfileSamples(*(np.concatenate(c) for c in zip(*out)))
 
 
