@@ -101,8 +101,8 @@ def cam_table(profile: Profile, drive: Drive, points: int | None = None, *,
     _choice("units", units, UNITS)
     _choice("interpolation", interpolation, INTERPOLATIONS)
     points = default_points(profile, interpolation) if points is None else points
-    if not (isinstance(points, int) and 2 <= points <= 1_000_000):
-        raise ParameterError(f"cam points must be an integer 2 to 1000000, got {points!r}")
+    if not (isinstance(points, int) and 2 <= points <= 100_000):
+        raise ParameterError(f"cam points must be an integer 2 to 100000, got {points!r}")
     t = np.linspace(0.0, profile.duration, points)
     x = profile.sample(t)[0]
     scale = 360.0 / profile.duration if master == "position" else 1.0

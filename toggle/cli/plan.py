@@ -8,6 +8,9 @@ S-curve strokes of the same duration and limits. Options are SI (m, s, N).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +80,29 @@ def _errors(args: argparse.Namespace) -> dict[str, float]:
     """The dimensional errors given as ``--delta-NAME`` (m), by the FMU's names."""
     return {name: value for name in ERRORS
             if (value := getattr(args, f"delta_{name}", None)) is not None}
+
+
+#: Seconds of planning before the progress bar shows.
+PROGRESS_AFTER = 2.0
+
+
+@contextlib.contextmanager
+def _progress(args: argparse.Namespace) -> Iterator[None]:
+    """A bar on stderr counting the seconds of planning, shown once it takes longer than
+    :data:`PROGRESS_AFTER` (not with ``--json``): the solves' count is not known ahead."""
+    from tqdm import tqdm
+
+    done = threading.Event()
+    with tqdm(desc="planning", unit="s", delay=PROGRESS_AFTER, bar_format="{desc}: {elapsed}",
+              disable=getattr(args, "json", False)) as bar:
+        ticker = threading.Thread(target=lambda: [bar.update(1) for _ in iter(
+            lambda: done.wait(1.0), True)], daemon=True)
+        ticker.start()
+        try:
+            yield
+        finally:
+            done.set()
+            ticker.join()
 
 
 def _plant(args: argparse.Namespace, errors: bool = True) -> tuple[PlantConfig, DriveLimits]:
@@ -205,6 +231,8 @@ def _molding_cycle(args: argparse.Namespace, plan: Plan, opening: Plan, limits: 
     duty = cycle.duty()
     drive = plan.config.mechanism.drive
     motor = check_motor(duty, drive, limits, args.rated_torque)
+    if args.duty_plot:
+        _plot_duty(args.duty_plot, cycle, limits)
     if args.cycle_out:
         with atomic_path(args.cycle_out) as tmp:
             write_profile_csv(tmp, cycle.samples(), {
@@ -212,7 +240,22 @@ def _molding_cycle(args: argparse.Namespace, plan: Plan, opening: Plan, limits: 
                 "mu": plan.config.friction, "cycle_time": cycle.cycle_time,
                 "hold": args.hold, "eject": args.eject})
     return {"phases": cycle.phases, **duty.report(), "motor": motor,
-            "csv": str(args.cycle_out) if args.cycle_out else None}
+            "csv": str(args.cycle_out) if args.cycle_out else None,
+            "duty_plot": str(args.duty_plot) if args.duty_plot else None}
+
+
+def _planned(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
+             ) -> tuple[ClampPlanner, Plan, dict[str, object] | None]:
+    """The planner and the plan asked for (robust, minimum time or least peak) and the
+    robust report (None unless ``--robust``)."""
+    if args.robust:
+        return _robust(args)
+    planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
+                          protection=_protection(args))
+    if args.min_time:
+        return planner, planner.minimum_time(args.force_limit), None
+    return planner, planner.best(args.duration or default_duration(planner), args.objective,
+                                 args.energy_weight), None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -222,32 +265,23 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError("--cycle plans one cycle: not with --trade-off")
     if args.break_speed is not None and not args.cycle:
         raise ParameterError("--break-speed caps the opening stroke: give --cycle too")
-    for name in ("hold", "eject", "cycle_out"):
+    for name in ("hold", "eject", "cycle_out", "duty_plot"):
         if getattr(args, name) and not args.cycle:
             raise ParameterError(f"--{name.replace('_', '-')} belongs to the molding cycle: "
                                  "give --cycle too")
     if args.export and not args.out:
         raise ParameterError("--export cam writes the table to --out: give --out")
-    if args.cycle_out:
-        check_writable(args.cycle_out, "--cycle-out")
+    for name in ("cycle_out", "duty_plot"):
+        if getattr(args, name):
+            check_writable(getattr(args, name), f"--{name.replace('_', '-')}")
     cfg, limits = _plant(args, errors=not args.robust)
     if args.trade_off:
         return _trade_off(args, cfg, limits)
-    robust = None
-    if args.robust:
-        planner, plan, robust = _robust(args)
-    elif args.min_time:
-        planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
-                              protection=_protection(args))
-        plan = planner.minimum_time(args.force_limit)
-    else:
-        planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
-                              protection=_protection(args))
-        plan = planner.best(args.duration or default_duration(planner), args.objective,
-                            args.energy_weight)
-    bound = planner.lower_bound()
+    with _progress(args):
+        planner, plan, robust = _planned(args, cfg, limits)
+        bound = planner.lower_bound()
+        opening, opener = _opening(args, cfg, limits) if args.cycle else (None, None)
     zone = planner.protection(plan)
-    opening, opener = _opening(args, cfg, limits) if args.cycle else (None, None)
     molding = _molding_cycle(args, plan, opener, limits) if opener else None
     base = baselines(cfg, limits, plan.duration)
     exported = None
@@ -451,6 +485,39 @@ def plot_trade_off(args: argparse.Namespace) -> int:
     return 0
 
 
+def _plot_duty(out: Path, cycle: MoldingCycle, limits: DriveLimits) -> str:
+    """``--duty-plot``: the motor's torque and speed over the molding cycle, in time and on
+    the torque-speed curve."""
+    from toggle.plots import plt, save_figure
+
+    duty = cycle.duty()
+    mech = cycle.closing.config.mechanism
+    fig, (ax_t, ax_c) = plt.subplots(1, 2, figsize=(12, 5))
+    ax_t.plot(duty.time, duty.torque, label="motor torque (N m)")
+    ax_t.axhline(duty.rms_torque, ls=":", color="C0", label=f"RMS {duty.rms_torque:.3g} N m")
+    ax_t.set_xlabel("time (s)")
+    ax_t.set_ylabel("motor torque (N m)")
+    ax_s = ax_t.twinx()
+    ax_s.plot(duty.time, duty.speed, color="C1", label="motor speed (rad/s)")
+    ax_s.set_ylabel("motor speed (rad/s)")
+    ax_t.legend(loc="upper left")
+    ax_s.legend(loc="upper right")
+    w = np.linspace(0.0, max(duty.peak_speed, limits.curve[-1][0]) * 1.1, 200)
+    ax_c.plot(w, limits.torque_at(w), "k", label="usable torque (torque-speed curve)")
+    if mech.drive.rated_torque is not None:
+        ax_c.axhline(mech.drive.rated_torque, ls="--", color="k", lw=1,
+                     label=f"rated (continuous) torque {mech.drive.rated_torque:.3g} N m")
+    ax_c.plot(np.abs(duty.speed), np.abs(duty.torque), ".", ms=2, label="the cycle (1 ms)")
+    ax_c.plot([0.0], [duty.rms_torque], "o", label=f"RMS torque {duty.rms_torque:.3g} N m")
+    ax_c.set_xlabel("motor speed (rad/s)")
+    ax_c.set_ylabel("motor torque (N m)")
+    ax_c.legend()
+    phases = cycle.phases
+    fig.suptitle(f"{mech.name}: the motor over a {cycle.cycle_time:.4g} s molding cycle "
+                 f"(hold {phases['hold']:g} s, eject {phases['eject']:g} s)")
+    return save_figure(fig, out)
+
+
 def _add_protection_arguments(p: argparse.ArgumentParser) -> None:
     zone = p.add_argument_group("mold protection: the last distance of platen travel before "
                                 "mold contact")
@@ -540,6 +607,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cycle-out", type=path, default=None,
                    help="with --cycle: the whole molding cycle's profile CSV (hil run "
                         "--profile replays it)")
+    p.add_argument("--duty-plot", type=path, default=None,
+                   help="with --cycle: PNG of the motor's torque and speed over the cycle, on "
+                        "its torque-speed curve")
     p.add_argument("--rated-torque", type=positive("torque in N m", 1e5, 1e-6), default=None,
                    help="the motor's rated (continuous) torque the cycle's RMS torque is "
                         "held to, N m (default: the preset's [drive] rated_torque)")
@@ -548,7 +618,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         help="write the plan as a cam table to --out instead of the profile")
     export.add_argument("--format", choices=cam.FORMATS, default="csv",
                         help="csv or PLCopen XML (TC6 v2.01) (default csv)")
-    export.add_argument("--points", type=integer(2, 1_000_000, "must be 2 to 1000000 points"),
+    export.add_argument("--points", type=integer(2, 100_000, "must be 2 to 100000 points"),
                         default=None, help="table points (default: one per 1 ms for linear, "
                         "per 10 ms for cubic interpolation)")
     export.add_argument("--interpolation", choices=cam.INTERPOLATIONS, default="cubic",
