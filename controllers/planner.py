@@ -15,8 +15,9 @@ own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
   the mold; the two agree up to contact, so this is the FMU's model;
 * objective the peak input force (epigraph variable s, |F| <= s at the nodes
   and interval midpoints, plus a small weight on the squared jerk to make the
-  optimum unique) or the integral of F^2; the minimum-time mode minimises the
-  duration under |F| <= force limit;
+  optimum unique), the integral of F^2, or the integral of the squared motor torque
+  (``"energy"``: the copper losses, :mod:`controllers.duty`), alone or weighted into the
+  peak; the minimum-time mode minimises the duration under |F| <= force limit;
 * constraints: rest at the open position and at the toggle, monotone stroke
   inside the stroke limits, velocity (nodes and midpoints), acceleration and
   jerk limits (:mod:`controllers.limits`), the motor torque with the drive's
@@ -33,11 +34,13 @@ problem has two families of local optima: slow or fast arrival at the mold,
 the latter braking through the thrust peak) and :meth:`ClampPlanner.lower_bound`
 gives what no stroke can beat (:mod:`controllers.bounds`).
 :meth:`ClampPlanner.minimum_time` lets the optimiser decide whether a force
-limit can be met, by continuation from the fastest stroke down to the limit,
-and checks the limit on the plan's 1 ms samples (tightening it where the
-samples between the nodes exceed it). With ``variants`` (the clamp with
-dimensional errors) the force limits and the peak hold for the worst plant:
-a robust plan.
+limit can be met, by continuation from the fastest stroke down to the limit
+(a trade-off's points each continued from the last), and checks the limit on the
+plan's 1 ms samples (tightening it where the samples between the nodes exceed it);
+a limit below the lower bound, or below the least peak of any duration
+(:meth:`ClampPlanner.least_peak`), is refused before the continuation. With
+``variants`` (the clamp with dimensional errors) the force limits and the peak
+hold for the worst plant: a robust plan.
 
 Variables are scaled by the stroke, a reference time (the kinematic minimum)
 and a reference force; the interval lengths of the two phases are variables
