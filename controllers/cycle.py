@@ -44,8 +44,8 @@ def _join(parts: list[ProfileSamples]) -> ProfileSamples:
     """Samples one after the other, each part's time shifted to follow the last (a
     stroke's first sample, at its time 0, is the last part's end and is left out)."""
     out = [parts[0]]
-    for part in parts[1:]:
-        first = int(part.time.size > 0 and part.time[0] == 0.0)
+    for part in (p for p in parts[1:] if p.time.size):  # a dwell of 0 s has no samples
+        first = int(part.time[0] == 0.0)
         end = float(out[-1].time[-1])
         out.append(ProfileSamples(*(c[first:] for c in (part.time + end, *part[1:]))))
     return ProfileSamples(*(np.concatenate(c) for c in zip(*out)))

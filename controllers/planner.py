@@ -134,6 +134,13 @@ _WEIGHTS = {"peak": [1.0, 0.0, 0.0, _REGULARISATION, 0.0], "rms": [0.0, 1.0, 0.0
 _LATE_STARTS = (1.0, 1.1, 1.25)
 _GAP = 3e-3
 _LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's continuation
+#: minimum_time asks :meth:`ClampPlanner.least_peak` (a best plan and one more solve) only
+#: for a limit within this fraction above the lower bound, where the bound may not be
+#: reached (chang2021: the least peak is 0.2 % above it); above, the continuation decides.
+_NEAR_BOUND = 0.05
+#: The same from a trade-off's previous point, which is already on the path (fewer steps:
+#: the dry cycle's curve spans a factor of four, 70 steps of 2 %).
+_TRADE_STEP = 0.08
 _BASELINE_STEP = 0.8  # factor on a baseline's acceleration while it breaks the torque curve
 _TIGHTEN = 4  # re-plans of minimum_time with the limit tightened by the excess between nodes
 #: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
@@ -1127,8 +1134,9 @@ class ClampPlanner:
         the requested one in steps of at most :data:`_LIMIT_STEP`, each warm-started from
         the last (a cold start under a tight limit stalls in a slow local optimum);
         ``continued``: ``start`` is the fastest plan under a looser limit (the previous
-        point of a trade-off), and the steps go down from it. A limit below the least peak
-        of any duration (:meth:`least_peak`) is refused before the continuation, which
+        point of a trade-off), and the steps (at most :data:`_TRADE_STEP`) go down from it.
+        A limit near the lower bound (:data:`_NEAR_BOUND`) and below the least peak of any
+        duration (:meth:`least_peak`) is refused before the continuation, which
         would otherwise end in IPOPT failing to meet it, warm and cold (a minute and a
         half on chang2021 at 14.91 N). The
         limit and the motor's torque-speed curve are imposed at the nodes and interval
@@ -1146,10 +1154,11 @@ class ClampPlanner:
         if plan is None:
             raise PlanningError(self._unreachable(limit, None))
         top = min(self.worst_peak(plan), self.force_limit)
-        if limit < top and limit < self.worst_peak(least := self.least_peak()):
+        near = limit < self.lower_bound() * (1 + _NEAR_BOUND)
+        if limit < top and near and limit < self.worst_peak(least := self.least_peak()):
             raise PlanningError(self._unreachable(limit, least) + (
                 " (the least peak of any duration it finds)"))
-        levels = self._levels(top, limit)
+        levels = self._levels(top, limit, _TRADE_STEP if continued else _LIMIT_STEP)
         imposed = limit
         for level in levels:
             imposed = level
@@ -1218,12 +1227,12 @@ class ClampPlanner:
         return self._least
 
     @staticmethod
-    def _levels(peak: float, limit: float) -> list[float]:
-        """Force limits from ``peak`` down to ``limit``, each at most :data:`_LIMIT_STEP`
+    def _levels(peak: float, limit: float, step: float = _LIMIT_STEP) -> list[float]:
+        """Force limits from ``peak`` down to ``limit``, each at most ``step``
         (relative) below the last; just ``limit`` if it is not below ``peak``."""
         if limit >= peak:
             return [limit]
-        steps = min(math.ceil(math.log(peak / limit) / math.log1p(_LIMIT_STEP)), 40)
+        steps = min(math.ceil(math.log(peak / limit) / math.log1p(step)), 40)
         return [float(v) for v in np.geomspace(peak, limit, steps + 1)[1:]]
 
     def _fastest(self, limit: float, start: Plan | None, warm: bool,

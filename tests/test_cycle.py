@@ -29,7 +29,8 @@ def cycle(tmp_path_factory):
     out = tmp_path_factory.mktemp("cycle") / "cycle.csv"
     with contextlib.redirect_stdout(io.StringIO()) as printed:
         assert main(["plan", "--cycle", "--hold", str(HOLD), "--eject", str(EJECT),
-                     "--cycle-out", str(out), "--json"]) == 0
+                     "--cycle-out", str(out), "--duty-plot", str(out.with_suffix(".png")),
+                     "--json"]) == 0
     return out, json.loads(printed.getvalue())
 
 
@@ -51,6 +52,7 @@ def test_the_cycle_is_its_phases_and_its_profile_returns_to_the_start(cycle):
     assert molding["rms_torque"] < molding["peak_torque"]
     assert 0 < molding["energy_regenerating"] < molding["energy_without_regeneration"]
     assert molding["motor"]["rated_torque"] == 1.2  # the preset's stated assumption
+    assert cycle.with_suffix(".png").stat().st_size > 10_000  # --duty-plot
 
 
 def test_hil_replays_the_cycle_as_it_is(cycle, tmp_path):
