@@ -15,8 +15,9 @@ own equations (:func:`toggle.plant.plant_outputs`, what the FMU compiles):
   the mold; the two agree up to contact, so this is the FMU's model;
 * objective the peak input force (epigraph variable s, |F| <= s at the nodes
   and interval midpoints, plus a small weight on the squared jerk to make the
-  optimum unique) or the integral of F^2; the minimum-time mode minimises the
-  duration under |F| <= force limit;
+  optimum unique), the integral of F^2, or the integral of the squared motor torque
+  (``"energy"``: the copper losses, :mod:`controllers.duty`), alone or weighted into the
+  peak; the minimum-time mode minimises the duration under |F| <= force limit;
 * constraints: rest at the open position and at the toggle, monotone stroke
   inside the stroke limits, velocity (nodes and midpoints), acceleration and
   jerk limits (:mod:`controllers.limits`), the motor torque with the drive's
@@ -33,11 +34,13 @@ problem has two families of local optima: slow or fast arrival at the mold,
 the latter braking through the thrust peak) and :meth:`ClampPlanner.lower_bound`
 gives what no stroke can beat (:mod:`controllers.bounds`).
 :meth:`ClampPlanner.minimum_time` lets the optimiser decide whether a force
-limit can be met, by continuation from the fastest stroke down to the limit,
-and checks the limit on the plan's 1 ms samples (tightening it where the
-samples between the nodes exceed it). With ``variants`` (the clamp with
-dimensional errors) the force limits and the peak hold for the worst plant:
-a robust plan.
+limit can be met, by continuation from the fastest stroke down to the limit
+(a trade-off's points each continued from the last), and checks the limit on the
+plan's 1 ms samples (tightening it where the samples between the nodes exceed it);
+a limit below the lower bound, or below the least peak of any duration
+(:meth:`ClampPlanner.least_peak`), is refused before the continuation. With
+``variants`` (the clamp with dimensional errors) the force limits and the peak
+hold for the worst plant: a robust plan.
 
 Variables are scaled by the stroke, a reference time (the kinematic minimum)
 and a reference force; the interval lengths of the two phases are variables
@@ -105,7 +108,7 @@ from toggle.params import (
 )
 from toggle.plant import PlantConfig, configure, plant_outputs
 
-OBJECTIVES = ("peak", "rms")
+OBJECTIVES = ("peak", "rms", "energy")
 CONTACT_SPEED = 5e-3  # m/s, default limit on the platen's speed at mold contact
 #: Default mold-protection distance: this fraction of the platen's travel from the open
 #: position to mold contact (4.5 mm of chang2021's 45 mm; see :func:`protection_entry`).
@@ -119,13 +122,25 @@ INTERVALS = 200
 CREEP_FACTOR = 10.0
 _REGULARISATION = 1e-2  # weight of the squared jerk (relative to its limit), for uniqueness
 _BINDING = 0.99  # a limit counts as binding above this fraction of its value
-#: Objective weights (peak, force integral, duration, jerk regularisation) of each objective.
-_WEIGHTS = {"peak": [1.0, 0.0, 0.0, _REGULARISATION], "rms": [0.0, 1.0, 0.0, 0.0]}
+#: Objective weights (peak, force integral, duration, jerk regularisation, and whether the
+#: integral is of the motor torque, with the drive's inertia, rather than of the input force)
+#: of each objective: "energy" minimises the integral of the squared motor torque, the
+#: motor's copper losses (R / k_t^2 times it), the part of a stroke's energy the motion
+#: decides (:mod:`controllers.duty`).
+_WEIGHTS = {"peak": [1.0, 0.0, 0.0, _REGULARISATION, 0.0], "rms": [0.0, 1.0, 0.0, 0.0, 0.0],
+            "energy": [0.0, 1.0, 0.0, 0.0, 1.0]}
 #: best(): stretches of the late S-curve starts, and the gap to the lower bound that ends
 #: the search (relative).
 _LATE_STARTS = (1.0, 1.1, 1.25)
 _GAP = 3e-3
 _LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's continuation
+#: minimum_time asks :meth:`ClampPlanner.least_peak` (a best plan and one more solve) only
+#: for a limit within this fraction above the lower bound, where the bound may not be
+#: reached (chang2021: the least peak is 0.2 % above it); above, the continuation decides.
+_NEAR_BOUND = 0.05
+#: The same from a trade-off's previous point, which is already on the path (fewer steps:
+#: the dry cycle's curve spans a factor of four, 70 steps of 2 %).
+_TRADE_STEP = 0.08
 _BASELINE_STEP = 0.8  # factor on a baseline's acceleration while it breaks the torque curve
 _TIGHTEN = 4  # re-plans of minimum_time with the limit tightened by the excess between nodes
 #: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
@@ -247,6 +262,22 @@ def plan_config(
     return cfg.with_(mu=mu, x_contact=x_contact)
 
 
+def objective_weights(objective: str, energy_weight: float = 0.0) -> list[float]:
+    """The problem's objective weights (:data:`_WEIGHTS`) of ``objective`` plus
+    ``energy_weight`` times the integral of the squared motor torque (in the problem's
+    scaling: force over the reference force, time over the reference time)."""
+    if objective not in OBJECTIVES:
+        raise ParameterError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+    if not (math.isfinite(energy_weight) and energy_weight >= 0):
+        raise ParameterError(f"energy weight must be a number >= 0, got {energy_weight!r}")
+    if energy_weight and objective != "peak":
+        raise ParameterError(f"an energy weight adds to the peak objective, not to {objective}")
+    weights = list(_WEIGHTS[objective])
+    if energy_weight:
+        weights[1], weights[4] = energy_weight, 1.0
+    return weights
+
+
 def _min_jerk(tau: np.ndarray) -> tuple[np.ndarray, ...]:
     """Rest-to-rest septic polynomial on [0, 1] and its first three derivatives."""
     c = np.array([-20.0, 70.0, -84.0, 35.0, 0, 0, 0, 0])
@@ -279,15 +310,16 @@ _SOURCE = code_digest(__name__)
 _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 _JET = 10  # rows of a node's plant data: value, gradient (3), Hessian upper triangle (6)
 #: The problem's parameters, in order: objective weights (peak, force integral, duration,
-#: jerk regularisation), mold-contact position (m), force scale (N), time scale T_ref (s),
-#: jerk limit (m/s^3), platen speed limit at contact (m/s), pin friction mu; the drive:
-#: travel per motor radian (m/rad), efficiency, reflected mass of rotor and screw (kg),
-#: the factor on the torque-speed curve
-#: (1, less where minimum_time tightens it), the curve's speeds (rad/s) and torques (N m),
-#: padded to :data:`MAX_CURVE_POINTS` points; the mold-protection zone's platen speed cap
-#: (m/s) and input-force cap (N).
-PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "x_contact", "f_ref", "t_ref",
-              "jerk", "contact_speed", "mu", "travel", "efficiency", "drive_mass",
+#: jerk regularisation; the mass eta m_drive whose acceleration the integral adds to the
+#: input force, kg: 0, or the drive's for the motor torque), mold-contact position (m),
+#: force scale (N), time scale T_ref (s), jerk limit (m/s^3), platen speed limit at contact
+#: (m/s), pin friction mu; the drive: travel per motor radian (m/rad), efficiency,
+#: reflected mass of rotor and screw (kg), the factor on the torque-speed curve (1, less
+#: where minimum_time tightens it), the curve's speeds (rad/s) and torques (N m), padded
+#: to :data:`MAX_CURVE_POINTS` points; the mold-protection zone's platen speed cap (m/s)
+#: and input-force cap (N).
+PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "w_inertia", "x_contact", "f_ref",
+              "t_ref", "jerk", "contact_speed", "mu", "travel", "efficiency", "drive_mass",
               "torque_factor",
               *(f"curve_speed{k}" for k in range(MAX_CURVE_POINTS)),
               *(f"curve_torque{k}" for k in range(MAX_CURVE_POINTS)),
@@ -541,6 +573,11 @@ class StrokeProblem:
         def integral(Fp: ca.SX, step: ca.SX) -> ca.SX:  # trapezoidal rule
             return step * (ca.sumsqr(Fp) - (Fp[0] ** 2 + Fp[-1] ** 2) / 2)
 
+        # the integrand: the input force, or (w_inertia = eta m_drive) the motor torque over
+        # p / eta (toggle.drive.drive_torque), at the nodes in F's order (node n1 twice)
+        N = n1 + self.n2
+        F = F + p[_P["w_inertia"]] * ca.vertcat(z[2, :n1 + 1].T, z[2, n1:N + 1].T) / p[
+            _P["f_ref"]]
         energy = (integral(F[:na + 1], th1) + integral(F[na:n1 + 1], thz)
                   + integral(F[n1 + 1:], th2))
         duration = ca.sum1(h)
@@ -745,6 +782,7 @@ class ClampPlanner:
         self.f_ref = self._reference_force()
         #: whether this planner's plans need the torque rows (see :meth:`_run`)
         self._torque = False
+        self._least: Plan | None = None  # :meth:`least_peak`, once computed
 
     @property
     def creep_speed(self) -> float:
@@ -792,6 +830,8 @@ class ClampPlanner:
         torque-speed curve and protection caps (speed, force; None: none), then the plants'
         force scales."""
         drive = self.config.mechanism.drive
+        weights = [*weights, 0.0][:5]
+        weights[4] *= drive.efficiency * reflected_mass(drive)  # w_inertia, kg
         return [*weights, self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
                 self.contact_speed, self.config.friction, travel_per_radian(drive),
                 drive.efficiency, reflected_mass(drive), torque_factor,
@@ -990,7 +1030,7 @@ class ClampPlanner:
                          lbg=lbg, ubg=ubg, **args)
         elapsed = time.perf_counter() - tic
         stats = solver.stats()
-        solution = {k: np.asarray(sol[k]).ravel() for k in ("x", "lam_x", "lam_g")}
+        solution = {k: np.asarray(sol[k]).ravel() for k in ("x", "lam_x", "lam_g", "f")}
         solution["scales"] = np.array([self.t_ref, self.f_ref])
         plan = self._plan(problem, solution, objective, elapsed, int(stats["iter_count"]), warm)
         return plan, bool(stats["success"])
@@ -1014,13 +1054,13 @@ class ClampPlanner:
         return Plan(profile, self.config, objective, t_contact, elapsed, iterations, warm, sol)
 
     def solve(self, duration: float, objective: str = "peak", *, start: Plan | None = None,
-              warm: bool = True) -> Plan:
-        """The stroke of ``duration`` s minimising the peak input force (``"peak"``) or
-        the integral of its square (``"rms"``); raises :class:`PlanningError` if none exists."""
-        if objective not in OBJECTIVES:
-            raise ParameterError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+              warm: bool = True, energy_weight: float = 0.0) -> Plan:
+        """The stroke of ``duration`` s minimising the peak input force (``"peak"``), the
+        integral of its square (``"rms"``) or of the squared motor torque (``"energy"``),
+        plus ``energy_weight`` times the latter (:func:`objective_weights`); raises
+        :class:`PlanningError` if none exists."""
+        weights = objective_weights(objective, energy_weight)
         self.check_duration(duration)
-        weights = _WEIGHTS[objective]
         plan, ok = self._run(weights, (duration, duration), self.force_limit, objective, start,
                              warm)
         if not ok and warm:  # a poor warm start: retry from the cold guess
@@ -1047,23 +1087,27 @@ class ClampPlanner:
                 f"smoothed Coulomb friction fades and plans and baselines alike would be "
                 f"compared on an artefact; the longest stroke planned is {self.longest:.4g} s")
 
-    def best(self, duration: float, objective: str = "peak") -> Plan:
+    def best(self, duration: float, objective: str = "peak", energy_weight: float = 0.0
+             ) -> Plan:
         """:meth:`solve` from several starts, the best plan: the polynomial guess, the
         previous plan (warm) and late S-curves (:meth:`_late_guess`), stopping once a peak
         plan is within :data:`_GAP` of :meth:`lower_bound`. The problem has two families
-        of local optima, slow and fast arrival at the mold; a single start finds either."""
-        if objective not in OBJECTIVES:
-            raise ParameterError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+        of local optima, slow and fast arrival at the mold; a single start finds either.
+        Judged by the peak on the 1 ms samples, the RMS force, or (energy, weighted) the
+        objective's value."""
+        weights = objective_weights(objective, energy_weight)
         previous = self.last
-        key = self.worst_peak if objective == "peak" else (lambda p: p.rms_force)
-        good = self.lower_bound() * (1 + _GAP) if objective == "peak" else 0.0
-        plans = [self.solve(duration, objective, warm=False)]
+        key = (self.worst_peak if weights[1] == 0 else (lambda p: p.rms_force)
+               if objective == "rms" else (lambda p: float(p.solution["f"][0])))
+        good = self.lower_bound() * (1 + _GAP) if weights[1] == 0 else 0.0
+        plans = [self.solve(duration, objective, warm=False, energy_weight=energy_weight)]
         if previous is not None:
-            plans.append(self.solve(duration, objective, start=previous))
+            plans.append(self.solve(duration, objective, start=previous,
+                                    energy_weight=energy_weight))
         for stretch in _LATE_STARTS:
             if key(min(plans, key=key)) <= good:
                 break
-            plan, ok = self._run(_WEIGHTS[objective], (duration, duration), self.force_limit,
+            plan, ok = self._run(weights, (duration, duration), self.force_limit,
                                  objective, None, False,
                                  guess=self._late_guess(duration, stretch))
             if ok:
@@ -1081,14 +1125,20 @@ class ClampPlanner:
                                 self.limits.acceleration, self.creep_speed)
 
     def minimum_time(self, force_limit: float | None = None, *, start: Plan | None = None,
-                     warm: bool = True) -> Plan:
+                     warm: bool = True, continued: bool = False) -> Plan:
         """The fastest stroke with |input force| at most ``force_limit`` N (default: the
         motor-torque limit) at every instant, also between the nodes.
 
         The optimiser decides whether a limit can be met: it first plans the fastest stroke
         under the torque limit alone, then lowers the force limit from that plan's peak to
         the requested one in steps of at most :data:`_LIMIT_STEP`, each warm-started from
-        the last (a cold start under a tight limit stalls in a slow local optimum). The
+        the last (a cold start under a tight limit stalls in a slow local optimum);
+        ``continued``: ``start`` is the fastest plan under a looser limit (the previous
+        point of a trade-off), and the steps (at most :data:`_TRADE_STEP`) go down from it.
+        A limit near the lower bound (:data:`_NEAR_BOUND`) and below the least peak of any
+        duration (:meth:`least_peak`) is refused before the continuation, which
+        would otherwise end in IPOPT failing to meet it, warm and cold (a minute and a
+        half on chang2021 at 14.91 N). The
         limit and the motor's torque-speed curve are imposed at the nodes and interval
         midpoints; where the plan's 1 ms samples through the plant still exceed either, it
         is tightened by the excess and the plan repeated."""
@@ -1099,10 +1149,16 @@ class ClampPlanner:
             raise PlanningError(self._unreachable(limit, None) + (
                 f": no stroke of any duration peaks below {self.lower_bound():.4g} N "
                 "(the lower bound, inertia relief included)"))
-        plan = self._fastest(self.force_limit, start, warm)
+        plan = start if continued and start is not None else self._fastest(
+            self.force_limit, start, warm)
         if plan is None:
             raise PlanningError(self._unreachable(limit, None))
-        levels = self._levels(min(self.worst_peak(plan), self.force_limit), limit)
+        top = min(self.worst_peak(plan), self.force_limit)
+        near = limit < self.lower_bound() * (1 + _NEAR_BOUND)
+        if limit < top and near and limit < self.worst_peak(least := self.least_peak()):
+            raise PlanningError(self._unreachable(limit, least) + (
+                " (the least peak of any duration it finds)"))
+        levels = self._levels(top, limit, _TRADE_STEP if continued else _LIMIT_STEP)
         imposed = limit
         for level in levels:
             imposed = level
@@ -1146,7 +1202,7 @@ class ClampPlanner:
         bottom = bound * (1 + _GAP) if bound > 0 else top / 4
         for limit in np.geomspace(top, bottom, points)[1:]:
             try:
-                plan = self.minimum_time(float(limit), start=start)
+                plan = self.minimum_time(float(limit), start=start, continued=True)
             except PlanningError:
                 break
             finally:
@@ -1155,13 +1211,28 @@ class ClampPlanner:
             start = plan
         return plans
 
+    def least_peak(self) -> Plan:
+        """The stroke of least peak input force the planner finds over every duration up
+        to :attr:`longest`: the best plan of the default duration (:meth:`best`), then
+        with the duration free, warm from it (kept: computed once per planner). No force
+        limit below its peak is met by any plan the continuation of :meth:`minimum_time`
+        reaches."""
+        if self._least is None:
+            previous = self.problem.last
+            start = self.best(default_duration(self))
+            plan, ok = self._run(_WEIGHTS["peak"], (self.t_ref, self.longest),
+                                 self.force_limit, "peak", start, True)
+            self._least = min([start, *([plan] if ok else [])], key=self.worst_peak)
+            self.problem.last = previous
+        return self._least
+
     @staticmethod
-    def _levels(peak: float, limit: float) -> list[float]:
-        """Force limits from ``peak`` down to ``limit``, each at most :data:`_LIMIT_STEP`
+    def _levels(peak: float, limit: float, step: float = _LIMIT_STEP) -> list[float]:
+        """Force limits from ``peak`` down to ``limit``, each at most ``step``
         (relative) below the last; just ``limit`` if it is not below ``peak``."""
         if limit >= peak:
             return [limit]
-        steps = min(math.ceil(math.log(peak / limit) / math.log1p(_LIMIT_STEP)), 40)
+        steps = min(math.ceil(math.log(peak / limit) / math.log1p(step)), 40)
         return [float(v) for v in np.geomspace(peak, limit, steps + 1)[1:]]
 
     def _fastest(self, limit: float, start: Plan | None, warm: bool,
@@ -1169,7 +1240,7 @@ class ClampPlanner:
         """The minimum-time plan under the force limit and the torque-speed curve (times
         ``torque_factor``) imposed at nodes and midpoints, or None if IPOPT finds none
         (warm, then cold)."""
-        bounds, weights = (self.t_ref, 100 * self.t_ref), [0.0, 0.0, 1.0, _REGULARISATION]
+        bounds, weights = (self.t_ref, 100 * self.t_ref), [0.0, 0.0, 1.0, _REGULARISATION, 0.0]
         plan, ok = self._run(weights, bounds, limit, "time", start, warm,
                              torque_factor=torque_factor)
         if not ok and warm:

@@ -79,8 +79,16 @@ def reciprocating_trajectory(
 
 
 def profile_cycles(forward: Trajectory, cycles: int) -> Trajectory:
-    """A planned forward stroke, replayed ``cycles`` times with its time-mirror as the return."""
-    return _repeat_cycles(forward.x_cmd, forward.x_cmd[::-1], cycles, forward.period)
+    """A planned forward stroke, replayed ``cycles`` times with its time-mirror as the return;
+    a whole cycle (``toggle plan --cycle-out``: it ends where it starts, its own opening
+    stroke and dwells included) replayed ``cycles`` times as it is."""
+    x = forward.x_cmd
+    if abs(x[-1] - x[0]) <= DEFAULT_END_TOL < np.ptp(x):
+        if not (isinstance(cycles, int) and cycles >= 1):
+            raise TrajectoryError(f"cycles must be a positive integer, got {cycles!r}")
+        return Trajectory.from_positions(np.concatenate([np.tile(x[:-1], cycles), x[-1:]]),
+                                         forward.period)
+    return _repeat_cycles(x, x[::-1], cycles, forward.period)
 
 
 def planned_trajectory(preset: str, period: float = DEFAULT_PERIOD, *,

@@ -477,6 +477,25 @@ def test_minimum_time_under_a_force_limit_met_only_with_inertia_relief(chang, ca
         planner.minimum_time(0.99 * planner.lower_bound())
 
 
+def test_a_limit_below_the_least_peak_is_refused_before_the_continuation(chang, monkeypatch):
+    """Between the lower bound and the least peak the planner finds over every duration no
+    plan exists: ``minimum_time`` refuses such a limit naming that least peak after one
+    minimum-time solve (the fastest stroke), not after the continuation down to it, which
+    ended in IPOPT failing warm and cold (87 s at 14.91 N, issue 30)."""
+    from controllers.planner import ClampPlanner
+
+    _, _, planner, _ = chang
+    least = planner.least_peak()
+    assert planner.lower_bound() < planner.worst_peak(least) <= planner.best(DURATION).peak_force
+    solves, real = [], ClampPlanner._fastest
+    monkeypatch.setattr(ClampPlanner, "_fastest",
+                        lambda self, *a, **k: solves.append(a) or real(self, *a, **k))
+    limit = (planner.lower_bound() + planner.worst_peak(least)) / 2
+    with pytest.raises(PlanningError, match="least peak of any duration"):
+        planner.minimum_time(limit)
+    assert len(solves) == 1
+
+
 def test_best_plan_finds_the_lower_optimum_and_respects_the_bound(chang):
     """The default-duration peak plan: below 14.99 N (a single cold start may stop at a local
     optimum near 15.04 N) and above the reachable-set bound, within 0.5 % of it."""

@@ -8,10 +8,16 @@ S-curve strokes of the same duration and limits. Options are SI (m, s, N).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from controllers import cam
+from controllers.cycle import MoldingCycle
+from controllers.duty import check_motor, motor_duty
 from controllers.limits import DriveLimits, drive_limits
 from controllers.planner import (
     CONTACT_SPEED,
@@ -28,7 +34,7 @@ from controllers.planner import (
     planner_for,
 )
 from controllers.profiles import predict, read_profile_csv, write_profile_csv
-from toggle.cli.args import atomic_path, check_writable, integer, path, positive
+from toggle.cli.args import atomic_path, check_writable, integer, number, path, positive
 from toggle.cli.common import (
     FRICTION,
     LINK_ERROR,
@@ -74,6 +80,29 @@ def _errors(args: argparse.Namespace) -> dict[str, float]:
     """The dimensional errors given as ``--delta-NAME`` (m), by the FMU's names."""
     return {name: value for name in ERRORS
             if (value := getattr(args, f"delta_{name}", None)) is not None}
+
+
+#: Seconds of planning before the progress bar shows.
+PROGRESS_AFTER = 2.0
+
+
+@contextlib.contextmanager
+def _progress(args: argparse.Namespace) -> Iterator[None]:
+    """A bar on stderr counting the seconds of planning, shown once it takes longer than
+    :data:`PROGRESS_AFTER` (not with ``--json``): the solves' count is not known ahead."""
+    from tqdm import tqdm
+
+    done = threading.Event()
+    with tqdm(desc="planning", unit="s", delay=PROGRESS_AFTER, bar_format="{desc}: {elapsed}",
+              disable=getattr(args, "json", False)) as bar:
+        ticker = threading.Thread(target=lambda: [bar.update(1) for _ in iter(
+            lambda: done.wait(1.0), True)], daemon=True)
+        ticker.start()
+        try:
+            yield
+        finally:
+            done.set()
+            ticker.join()
 
 
 def _plant(args: argparse.Namespace, errors: bool = True) -> tuple[PlantConfig, DriveLimits]:
@@ -156,7 +185,7 @@ def _trade_off(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits) 
 
 
 def _opening(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
-             ) -> dict[str, object]:
+             ) -> tuple[dict[str, object], Plan]:
     """``--cycle``: the fastest opening (break-away) stroke from the toggle back to the open
     position under the drive's force limit (and ``--force-limit``), the platen leaving the
     mold at most at ``--contact-speed`` and at most at ``--break-speed`` over the
@@ -172,7 +201,61 @@ def _opening(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
             "break_away_force": float(np.max(np.abs(s.input_force[s.time <= plan.t_contact]))),
             "mold_break_peak_platen_speed": zone["peak_platen_speed"],
             "end_position": float(s.position[-1]), "end_velocity": float(s.velocity[-1]),
-            "binding_limits": opener.binding_limits(plan, args.force_limit)}
+            "binding_limits": opener.binding_limits(plan, args.force_limit)}, plan
+
+
+def _export(args: argparse.Namespace, plan: Plan, cfg: PlantConfig, limits: DriveLimits,
+            settings: dict[str, object]) -> dict[str, object]:
+    """``--export cam``: the plan's cam table written to ``--out`` and checked as the drive
+    will interpolate it (:mod:`controllers.cam`)."""
+    table = cam.cam_table(plan.profile, cfg.mechanism.drive, args.points, master=args.master,
+                          units=args.units, interpolation=args.interpolation)
+    check = cam.check_table(table, args.interpolation, cfg, limits, plan.peak_force)
+    with atomic_path(args.out) as tmp:
+        if args.format == "csv":
+            cam.write_csv(tmp, table, args.interpolation, settings)
+        else:
+            tmp.write_text(cam.plcopen_xml(table, args.interpolation, settings))
+    return {"format": args.format, "points": int(table.master.size), "master": args.master,
+            "units": args.units, "interpolation": args.interpolation,
+            "master_unit": cam.MASTER_UNIT[args.master], "slave_unit": cam.SLAVE_UNIT[args.units],
+            "as_interpolated": check}
+
+
+def _molding_cycle(args: argparse.Namespace, plan: Plan, opening: Plan, limits: DriveLimits
+                   ) -> dict[str, object]:
+    """``--cycle``: the whole molding cycle with the ``--hold`` and ``--eject`` dwells, its
+    times and the motor's duty over it (refused if the motor is too small for its RMS
+    torque); ``--cycle-out`` writes it for ``hil run --profile``."""
+    cycle = MoldingCycle(plan, opening, args.hold, args.eject)
+    duty = cycle.duty()
+    drive = plan.config.mechanism.drive
+    motor = check_motor(duty, drive, limits, args.rated_torque)
+    if args.duty_plot:
+        _plot_duty(args.duty_plot, cycle, limits)
+    if args.cycle_out:
+        with atomic_path(args.cycle_out) as tmp:
+            write_profile_csv(tmp, cycle.samples(), {
+                "preset": args.preset, "x_contact": plan.config.x_contact,
+                "mu": plan.config.friction, "cycle_time": cycle.cycle_time,
+                "hold": args.hold, "eject": args.eject})
+    return {"phases": cycle.phases, **duty.report(), "motor": motor,
+            "csv": str(args.cycle_out) if args.cycle_out else None,
+            "duty_plot": str(args.duty_plot) if args.duty_plot else None}
+
+
+def _planned(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
+             ) -> tuple[ClampPlanner, Plan, dict[str, object] | None]:
+    """The planner and the plan asked for (robust, minimum time or least peak) and the
+    robust report (None unless ``--robust``)."""
+    if args.robust:
+        return _robust(args)
+    planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
+                          protection=_protection(args))
+    if args.min_time:
+        return planner, planner.minimum_time(args.force_limit), None
+    return planner, planner.best(args.duration or default_duration(planner), args.objective,
+                                 args.energy_weight), None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -182,25 +265,31 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError("--cycle plans one cycle: not with --trade-off")
     if args.break_speed is not None and not args.cycle:
         raise ParameterError("--break-speed caps the opening stroke: give --cycle too")
+    for name in ("hold", "eject", "cycle_out", "duty_plot"):
+        if getattr(args, name) and not args.cycle:
+            raise ParameterError(f"--{name.replace('_', '-')} belongs to the molding cycle: "
+                                 "give --cycle too")
+    if args.export and not args.out:
+        raise ParameterError("--export cam writes the table to --out: give --out")
+    for name in ("cycle_out", "duty_plot"):
+        if getattr(args, name):
+            check_writable(getattr(args, name), f"--{name.replace('_', '-')}")
     cfg, limits = _plant(args, errors=not args.robust)
     if args.trade_off:
         return _trade_off(args, cfg, limits)
-    robust = None
-    if args.robust:
-        planner, plan, robust = _robust(args)
-    elif args.min_time:
-        planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
-                              protection=_protection(args))
-        plan = planner.minimum_time(args.force_limit)
-    else:
-        planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
-                              protection=_protection(args))
-        plan = planner.best(args.duration or default_duration(planner), args.objective)
-    bound = planner.lower_bound()
+    with _progress(args):
+        planner, plan, robust = _planned(args, cfg, limits)
+        bound = planner.lower_bound()
+        opening, opener = _opening(args, cfg, limits) if args.cycle else (None, None)
     zone = planner.protection(plan)
-    opening = _opening(args, cfg, limits) if args.cycle else None
+    molding = _molding_cycle(args, plan, opener, limits) if opener else None
     base = baselines(cfg, limits, plan.duration)
-    if args.out:
+    exported = None
+    if args.export:
+        exported = _export(args, plan, cfg, limits, {
+            "preset": args.preset, "x_contact": cfg.x_contact, "mu": cfg.friction,
+            "objective": plan.objective, "peak_force": plan.peak_force})
+    elif args.out:
         with atomic_path(args.out) as tmp:  # no half-written CSV
             write_profile_csv(tmp, plan.samples, {
                 "preset": args.preset, "x_contact": cfg.x_contact, "mu": cfg.friction,
@@ -213,11 +302,11 @@ def run(args: argparse.Namespace) -> int:
                 "opening_time": opening and opening["opening_time"],
             })
     peak = plan.peak_force
+    drive = cfg.mechanism.drive
     trap, scurve = base["trapezoidal"].peak_force, base["s_curve"].peak_force
     force_limit = min(args.force_limit or np.inf, planner.force_limit)
     # the baselines are held to the plan's limits (the input force, the motor's torque-speed
     # curve): one that breaks them is no comparison
-    drive = cfg.mechanism.drive
     feasible = {name: bool(samples.peak_force <= force_limit and limits.torque_ratio(
                     drive, samples.velocity, samples.acceleration, samples.input_force) <= 1.0)
                 for name, samples in base.items()}
@@ -233,6 +322,10 @@ def run(args: argparse.Namespace) -> int:
         "protection": zone,
         "opening": opening,
         "cycle_time": opening and plan.duration + opening["opening_time"],
+        "molding_cycle": molding,
+        "duty": motor_duty(plan.samples.time, plan.samples.velocity, plan.samples.acceleration,
+                           plan.samples.input_force, drive).report(),
+        "cam": exported,
         "x_open": planner.x_open,
         "x_contact": cfg.x_contact,
         "x_final": planner.x_final,
@@ -301,14 +394,46 @@ def run(args: argparse.Namespace) -> int:
               f"mold break {opening['mold_break_time']:.4g} s, peak {opening['peak_force']:.4g} "
               f"N); cycle {result['cycle_time']:.4g} s; opening binding limits: "
               f"{', '.join(opening['binding_limits']) or 'none'}")
+    if molding:
+        _print_molding(molding)
+    if exported:
+        check = exported["as_interpolated"]
+        print(f"cam table ({exported['format']}, {exported['points']} points, master "
+              f"{exported['master_unit']}, slave {exported['slave_unit']}) written to {args.out}; "
+              f"as the drive interpolates it ({exported['interpolation']}): velocity "
+              f"{100 * check['velocity']:.2f} %, acceleration {100 * check['acceleration']:.2f} "
+              f"%, motor torque {100 * check['motor_torque']:.2f} % of their limits, peak input "
+              f"force {100 * check['peak_force']:.2f} % of the plan's")
+        over = [name.replace("_", " ") for name in ("velocity", "acceleration", "motor_torque",
+                                                     "peak_force") if check[name] > 1.01]
+        if over:
+            print(f"the table breaks the plan by more than 1 % in: {', '.join(over)}; give "
+                  "more --points or --interpolation cubic")
     if robust:
         rows = [(name, *values.values()) for name, values in robust.items()]
         print("peak input force (N) on each clamp of the robust plan, the nominal clamp's "
               "plan and the S-curve:")
         print(table(("clamp", "robust", "nominal", "S-curve"), rows))
-    if args.out:
+    if args.out and not exported:
         print(f"profile written to {args.out}")
     return 0
+
+
+def _print_molding(molding: dict) -> None:
+    """The molding cycle's times and the motor's duty, printed."""
+    phases = ", ".join(f"{name.replace('_', '-')} {value:.4g} s"
+                       for name, value in molding["phases"].items())
+    motor = molding["motor"]
+    rated = (f" ({100 * motor['rms_over_rated']:.1f} % of the rated {motor['rated_torque']:.4g}"
+             " N m)" if motor["rated_torque"] else " (no rated torque in the preset)")
+    print(f"molding cycle {molding['cycle_time']:.4g} s: {phases}; motor RMS torque "
+          f"{molding['rms_torque']:.4g} N m{rated}, peak {molding['peak_torque']:.4g} N m "
+          f"({100 * motor['peak_over_curve']:.1f} % of the torque-speed curve), peak speed "
+          f"{molding['peak_speed']:.4g} rad/s; energy per cycle "
+          f"{molding['energy_regenerating']:.4g} J with regeneration, "
+          f"{molding['energy_without_regeneration']:.4g} J without; "
+          f"integral of torque^2 {molding['torque_squared_integral']:.4g} N^2 m^2 s (copper "
+          "losses: times R / k_t^2)")
 
 
 def plot(args: argparse.Namespace) -> int:
@@ -358,6 +483,39 @@ def plot_trade_off(args: argparse.Namespace) -> int:
     ax.legend()
     print(save_figure(fig, args.out))
     return 0
+
+
+def _plot_duty(out: Path, cycle: MoldingCycle, limits: DriveLimits) -> str:
+    """``--duty-plot``: the motor's torque and speed over the molding cycle, in time and on
+    the torque-speed curve."""
+    from toggle.plots import plt, save_figure
+
+    duty = cycle.duty()
+    mech = cycle.closing.config.mechanism
+    fig, (ax_t, ax_c) = plt.subplots(1, 2, figsize=(12, 5))
+    ax_t.plot(duty.time, duty.torque, label="motor torque (N m)")
+    ax_t.axhline(duty.rms_torque, ls=":", color="C0", label=f"RMS {duty.rms_torque:.3g} N m")
+    ax_t.set_xlabel("time (s)")
+    ax_t.set_ylabel("motor torque (N m)")
+    ax_s = ax_t.twinx()
+    ax_s.plot(duty.time, duty.speed, color="C1", label="motor speed (rad/s)")
+    ax_s.set_ylabel("motor speed (rad/s)")
+    ax_t.legend(loc="upper left")
+    ax_s.legend(loc="upper right")
+    w = np.linspace(0.0, max(duty.peak_speed, limits.curve[-1][0]) * 1.1, 200)
+    ax_c.plot(w, limits.torque_at(w), "k", label="usable torque (torque-speed curve)")
+    if mech.drive.rated_torque is not None:
+        ax_c.axhline(mech.drive.rated_torque, ls="--", color="k", lw=1,
+                     label=f"rated (continuous) torque {mech.drive.rated_torque:.3g} N m")
+    ax_c.plot(np.abs(duty.speed), np.abs(duty.torque), ".", ms=2, label="the cycle (1 ms)")
+    ax_c.plot([0.0], [duty.rms_torque], "o", label=f"RMS torque {duty.rms_torque:.3g} N m")
+    ax_c.set_xlabel("motor speed (rad/s)")
+    ax_c.set_ylabel("motor torque (N m)")
+    ax_c.legend()
+    phases = cycle.phases
+    fig.suptitle(f"{mech.name}: the motor over a {cycle.cycle_time:.4g} s molding cycle "
+                 f"(hold {phases['hold']:g} s, eject {phases['eject']:g} s)")
+    return save_figure(fig, out)
 
 
 def _add_protection_arguments(p: argparse.ArgumentParser) -> None:
@@ -415,8 +573,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--force-limit", type=positive("force in N", 1e9), default=None,
                    help="input-force limit of --min-time, N (default: the torque limit's)")
     p.add_argument("--objective", choices=OBJECTIVES, default="peak",
-                   help="minimise the peak input force or the integral of its square "
+                   help="minimise the peak input force, the integral of its square or the "
+                        "integral of the squared motor torque (energy: the copper losses) "
                         "(default peak)")
+    p.add_argument("--energy-weight", type=number(0.0, 1e6, "must be a weight from 0 to 1e6"),
+                   default=0.0,
+                   help="with --objective peak: add this weight times the energy objective "
+                        "(default 0)")
     p.add_argument("--contact-speed", type=positive("speed in m/s", 1.0, 1e-6),
                    default=CONTACT_SPEED,
                    help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
@@ -434,6 +597,38 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--break-speed", type=positive("speed in m/s", 10.0, 1e-6), default=None,
                    help="with --cycle: platen speed cap over the protection distance after "
                         "the mold separates, m/s (default none)")
+    p.add_argument("--hold", type=number(0.0, 3600.0, "must be a dwell of 0 to 3600 s"),
+                   default=0.0,
+                   help="with --cycle: the hold dwell, mold locked (injection, cooling), s "
+                        "(default 0)")
+    p.add_argument("--eject", type=number(0.0, 3600.0, "must be a dwell of 0 to 3600 s"),
+                   default=0.0,
+                   help="with --cycle: the ejection dwell at the open position, s (default 0)")
+    p.add_argument("--cycle-out", type=path, default=None,
+                   help="with --cycle: the whole molding cycle's profile CSV (hil run "
+                        "--profile replays it)")
+    p.add_argument("--duty-plot", type=path, default=None,
+                   help="with --cycle: PNG of the motor's torque and speed over the cycle, on "
+                        "its torque-speed curve")
+    p.add_argument("--rated-torque", type=positive("torque in N m", 1e5, 1e-6), default=None,
+                   help="the motor's rated (continuous) torque the cycle's RMS torque is "
+                        "held to, N m (default: the preset's [drive] rated_torque)")
+    export = p.add_argument_group("cam table export (--export cam --out FILE)")
+    export.add_argument("--export", choices=("cam",), default=None,
+                        help="write the plan as a cam table to --out instead of the profile")
+    export.add_argument("--format", choices=cam.FORMATS, default="csv",
+                        help="csv or PLCopen XML (TC6 v2.01) (default csv)")
+    export.add_argument("--points", type=integer(2, 100_000, "must be 2 to 100000 points"),
+                        default=None, help="table points (default: one per 1 ms for linear, "
+                        "per 10 ms for cubic interpolation)")
+    export.add_argument("--interpolation", choices=cam.INTERPOLATIONS, default="cubic",
+                        help="how the drive interpolates the table (default cubic)")
+    export.add_argument("--master", choices=cam.MASTERS, default="time",
+                        help="master: time (s) or a virtual master axis, 0-360 deg per stroke "
+                             "(default time)")
+    export.add_argument("--units", choices=cam.UNITS, default="si",
+                        help="slave units: si (m), motor (revolutions), counts (encoder) "
+                             "(default si)")
     p.add_argument("--robust", action="store_true",
                    help="plan for the nominal clamp and the one with the --delta-NAME errors "
                         "at once (the worst of the two, each against its S-curve)")
