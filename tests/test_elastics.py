@@ -160,6 +160,15 @@ def test_cli_plot_writes_figures(tmp_path):
             "fig7_thrust_max.png", "fig8_motor_torque.png"} <= names
 
 
+def test_cli_plot_at_a_vanishing_clamp_force_draws_every_figure(tmp_path):
+    """Found by the CLI fuzz: at 1e-300 N there is no clamping travel, and the torque figure's
+    time axis (1.25 times its duration) was empty, refused after figures 4-7 were written.
+    The hold is drawn for 1 ms; every figure's data is computed before the first file."""
+    assert main(["plot", "clamp", "--preset", "lin2003_sm55", "--clamp-force", "1e-300",
+                 "--mu", "0.1", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "fig8_motor_torque.png").stat().st_size > 0
+
+
 @pytest.mark.parametrize("delta_r8", [0.0, 0.3e-3])
 def test_contact_for_clamp_force_is_the_plants_exact_inverse(delta_r8):
     """The plant at rest in the final position holds exactly the requested clamp force

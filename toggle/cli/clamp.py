@@ -128,6 +128,17 @@ def plot(args: argparse.Namespace) -> int:
     results = [analyse_clamping(mech, mu, tiebar_force=args.clamp_force, x_contact=args.contact)
                for mu in args.mu]
     curves = [clamping_curves(mech, r) for r in results]
+    # every figure's data before the first file, so that a refusal leaves no figure behind
+    mus = np.linspace(0.0, max(max(args.mu), 0.2), 21)
+    peaks = [analyse_clamping(mech, m, tiebar_force=args.clamp_force,
+                              x_contact=args.contact).thrust_max for m in mus]
+    histories = []
+    if mech.drive is not None:
+        speed = args.rpm * 2 * math.pi / 60
+        for r in results:  # 1.25 times the clamping travel's duration, at least 1 ms of hold
+            t_end = max(1.25 * r.crosshead_travel / (speed * travel_per_radian(mech.drive)),
+                        1e-3)
+            histories.append((r, torque_history(mech, r, np.linspace(0.0, t_end, 400), speed)))
     panels = [
         ("fig4_tiebar_force.png", "Total tie-bar force $F_c$ (kN)",
          lambda c: c.state.tiebar_force / 1e3, False),
@@ -149,9 +160,6 @@ def plot(args: argparse.Namespace) -> int:
         print(save_figure(fig, out / name))
         plt.close(fig)
 
-    mus = np.linspace(0.0, max(max(args.mu), 0.2), 21)
-    peaks = [analyse_clamping(mech, m, tiebar_force=args.clamp_force,
-                              x_contact=args.contact).thrust_max for m in mus]
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(mus, np.array(peaks) / 1e3, marker="o")
     ax.set_xlabel(r"Friction coefficient $\mu$ (1)")
@@ -160,12 +168,9 @@ def plot(args: argparse.Namespace) -> int:
     print(save_figure(fig, out / "fig7_thrust_max.png"))
     plt.close(fig)
 
-    if mech.drive is not None:
-        speed = args.rpm * 2 * math.pi / 60
+    if histories:
         fig, ax = plt.subplots(figsize=(6, 4))
-        for r in results:
-            t_end = 1.25 * r.crosshead_travel / (speed * travel_per_radian(mech.drive))
-            h = torque_history(mech, r, np.linspace(0.0, t_end, 400), speed)
+        for r, h in histories:
             ax.plot(h.t, h.torque, label=f"$\\mu_d$ = {r.mu:g}")
         ax.set_xlabel("Time since mold contact (s)")
         ax.set_ylabel("Motor torque $T_m$ (N m)")
