@@ -382,10 +382,12 @@ class RigPlant(Plant):
     def __init__(self, port: str, *, realtime: bool = True,
                  telemetry_timeout: float | None = None,
                  ack_timeout: float | None = None,
+                 heartbeat_ms: float | None = None,
                  notify: Callable[[str], None] | None = None) -> None:
         super().__init__()
         self.port = port
         self.ack_timeout = ack_timeout  # None: the protocol's 20 ms
+        self.heartbeat_ms = heartbeat_ms  # None: the protocol's 250 ms
         self.realtime = realtime
         self.telemetry_timeout = telemetry_timeout
         self.notify = notify or (lambda _msg: None)
@@ -429,6 +431,8 @@ class RigPlant(Plant):
             link.configure(p.Config(
                 force_limit_n=s.force_limit,
                 steps_min=sc.steps(lo, self._x0), steps_max=sc.steps(hi, self._x0),
+                **({} if self.heartbeat_ms is None
+                   else {"heartbeat_timeout_ms": round(self.heartbeat_ms)}),
             ))
         except RigError as exc:
             link.close()

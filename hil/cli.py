@@ -103,6 +103,7 @@ def _backend(s: RunSettings) -> Plant:
         timeout = s.watchdog_ms * 1e-3 if s.watchdog_ms is not None else None
         return RigPlant(s.port, telemetry_timeout=timeout,
                         ack_timeout=None if s.ack_ms is None else s.ack_ms * 1e-3,
+                        heartbeat_ms=s.heartbeat_ms,
                         notify=lambda msg: print(f"hil run: {msg}", file=sys.stderr))
     return FmuPlant(s.fmu)
 

@@ -27,7 +27,7 @@ RUN_DEFAULTS: dict[str, Any] = {
     "backend": "fmu", "port": None, "preset": "chang2021", "profile": None, "cycles": 3,
     "speed": None, "delta_r8": 0.0, "mu": None, "x_contact": None, "force_limit": 400.0,
     "out": None, "watchdog_ms": None, "max_duration": 3600.0, "fmu": None, "as_built": True,
-    "ack_ms": None,
+    "ack_ms": None, "heartbeat_ms": None,
 }
 #: The real rig's load cell's range, N: a force limit above it could never trip there.
 LOAD_CELL_RANGE = 500.0
@@ -62,6 +62,7 @@ class RunSettings:
     #: the simulated rig carries the prototype's as-built errors (toggle.rig_tables)
     as_built: bool
     ack_ms: float | None = None  # the host's wait for an ACK (docs/rig-protocol.md §6)
+    heartbeat_ms: float | None = None  # the MCU's heartbeat watchdog (docs/rig-protocol.md §7)
     json: bool = False
     quiet: bool = False
     profile_sha256: str | None = None
@@ -101,6 +102,10 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
                    help="with --real: the host's wait for each ACK before it retransmits, ms "
                         "(default 20, for a 921 600-baud UART or USB; the firmware in QEMU "
                         "takes a byte about every 50 us, a full chunk in ~15 ms: give 100)")
+    p.add_argument("--heartbeat-ms", type=float, default=None, dest="heartbeat_ms",
+                   help="with --real: the MCU's heartbeat watchdog, ms: it stops the rig when "
+                        "the host is silent this long (default 250; at least 50, at most 1000; "
+                        "the host sends a heartbeat every 20 ms)")
     p.add_argument("--max-duration", type=float, default=None, dest="max_duration",
                    help=f"refuse runs longer than this, s (default "
                         f"{RUN_DEFAULTS['max_duration']:g})")
@@ -158,6 +163,7 @@ def check(v: dict[str, Any]) -> None:
          if v["backend"] == "real" else "must be > 0 (N)"),
         ("watchdog_ms", 0.0, 10_000.0, "must be > 0 and at most 10000 ms"),
         ("ack_ms", 0.0, 1000.0, "must be > 0 and at most 1000 ms"),
+        ("heartbeat_ms", 49.999, 1000.0, "must be at least 50 and at most 1000 ms"),
         ("max_duration", 0.0, math.inf, "must be > 0 s"),
     ):
         value = v[key]

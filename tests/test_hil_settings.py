@@ -62,6 +62,8 @@ def test_bad_config_is_refused_by_name(tmp_path, capsys, text: str, message: str
     (["--mu", "-1"], "--mu"),
     (["--watchdog-ms", "0"], "--watchdog-ms"),
     (["--watchdog-ms", "-5"], "--watchdog-ms"),
+    (["--heartbeat-ms", "10"], "--heartbeat-ms"),
+    (["--heartbeat-ms", "5000"], "--heartbeat-ms"),
     (["--x-contact", "1"], "--x-contact"),
     (["--delta-r8", "1.0"], "--delta-r8"),
     (["--speed", "0.2"], "--speed"),
