@@ -249,7 +249,7 @@ def _run_script(script: str, spec: dict, cwd: Path, env: Mapping[str, str] | Non
         cwd=cwd,
         env=env,
     )
-    assert run.returncode == 0, run.stderr
+    assert run.returncode == 0, (run.returncode, run.stderr)  # a crash leaves stderr empty
     return json.loads(run.stdout.strip().splitlines()[-1])
 
 
