@@ -23,6 +23,8 @@ speed) through the clamping, where the smooth friction model would fade out.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from toggle.plant import PlantConfig, plant_outputs
@@ -60,8 +62,31 @@ def peak_lower_bound(cfg: PlantConfig, x_final: float, v_max: float, a_max: floa
     m_in = float(np.mean(np.asarray(plant_outputs(X, V, 1.0, cfg).input_force) - F))
     F0 = np.minimum(F[:-1], F[1:])  # the least force over each step, each speed
     E, dx = v**2 / 2, np.diff(xs)
-    lo, hi = 0.0, float(F.max())
+    return least_possible(lambda s: _sweep(s, F0, m_in, E, dx, a_max), float(F.max()),
+                          float(np.abs(F[0]).max()), tol)
+
+
+def least_possible(possible: Callable[[float], bool], top: float, start: float, tol: float
+                   ) -> float:
+    """The bisection of [0, ``top``] for the least peak ``possible`` allows, to ``tol``
+    relative: the last value found impossible (0 if every one is possible).
+
+    It starts at the largest force on the grid, which near the toggle is many orders above
+    the bound (hundreds of halvings). Whether a peak is possible grows with the peak (a
+    larger one allows every stroke a smaller one does), so a bracket found by doubling
+    from ``start`` (the force at contact) decides the early steps without a sweep: the
+    same steps, the same answer, a twentieth of the sweeps. Where every peak is possible
+    (no mold force to build: the dry cycle) the bisection would walk down to the smallest
+    float, a thousand sweeps, to answer 0.
+    """
+    if possible(0.0):
+        return 0.0
+    below, above = 0.0, max(start, tol)
+    while above < top and not possible(above):
+        below, above = above, 2 * above
+    lo, hi = 0.0, top
     while hi - lo > tol * hi:
         mid = (lo + hi) / 2
-        lo, hi = (lo, mid) if _sweep(mid, F0, m_in, E, dx, a_max) else (mid, hi)
+        feasible = mid >= above or (mid > below and possible(mid))
+        lo, hi = (lo, mid) if feasible else (mid, hi)
     return lo

@@ -138,9 +138,11 @@ _LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's
 #: for a limit within this fraction above the lower bound, where the bound may not be
 #: reached (chang2021: the least peak is 0.2 % above it); above, the continuation decides.
 _NEAR_BOUND = 0.05
-#: The same from a trade-off's previous point, which is already on the path (fewer steps:
-#: the dry cycle's curve spans a factor of four, 70 steps of 2 %).
-_TRADE_STEP = 0.08
+#: The same from a trade-off's previous point, which is already on the path: one step to
+#: the next point where they are within 40 % (six points of the dry cycle's curve, a factor
+#: of four, are 32 % apart; steps of 8 % took 26 solves, one step 11, the same curve to
+#: 2e-5).
+_TRADE_STEP = 0.4
 _BASELINE_STEP = 0.8  # factor on a baseline's acceleration while it breaks the torque curve
 _TIGHTEN = 4  # re-plans of minimum_time with the limit tightened by the excess between nodes
 #: The variables are scaled (see :class:`StrokeProblem`), so MUMPS's own row and column
@@ -783,6 +785,7 @@ class ClampPlanner:
         #: whether this planner's plans need the torque rows (see :meth:`_run`)
         self._torque = False
         self._least: Plan | None = None  # :meth:`least_peak`, once computed
+        self._bound: float | None = None  # :meth:`lower_bound`, once computed
 
     @property
     def creep_speed(self) -> float:
@@ -1115,14 +1118,17 @@ class ClampPlanner:
         self.problem.last = min(plans, key=key)
         return self.problem.last
 
-    @functools.lru_cache(maxsize=1)  # noqa: B019 - one planner per plant, kept by planner_for
     def lower_bound(self) -> float:
         """A lower bound on the peak input force of any stroke under this planner's
-        limits, of any duration (:func:`controllers.bounds.peak_lower_bound`), N."""
-        if self.problem.opening:  # the bound is the clamping's; none for the opening
-            return 0.0
-        return peak_lower_bound(self.config, self.x_final, self.limits.velocity,
-                                self.limits.acceleration, self.creep_speed)
+        limits, of any duration (:func:`controllers.bounds.peak_lower_bound`), N; computed
+        once per planner (a trade-off asks each of its two planners in turn). With variants
+        the plant's bound still holds for :meth:`worst_peak`, which is at least the plant's
+        peak."""
+        if self._bound is None:  # the bound is the clamping's; none for the opening
+            self._bound = 0.0 if self.problem.opening else peak_lower_bound(
+                self.config, self.x_final, self.limits.velocity, self.limits.acceleration,
+                self.creep_speed)
+        return self._bound
 
     def minimum_time(self, force_limit: float | None = None, *, start: Plan | None = None,
                      warm: bool = True, continued: bool = False) -> Plan:
@@ -1379,6 +1385,24 @@ def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CO
     return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
                         problem=problem, variants=variants, scales=scales,
                         protection=protection)
+
+
+def trade_off_curve(cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
+                    intervals: int, protection: Protection, points: int,
+                    progress: Callable[[], object] | None = None) -> list[Plan]:
+    """:meth:`ClampPlanner.trade_off` of the plant's planner (:func:`planner_for`): a
+    job for :class:`controllers.background.Background`."""
+    return planner_for(cfg, limits, contact_speed, intervals,
+                       protection=protection).trade_off(points, progress)
+
+
+def best_plan(cfg: PlantConfig, limits: DriveLimits, contact_speed: float, intervals: int,
+              protection: Protection, duration: float, objective: str,
+              progress: Callable[[], object] | None = None) -> Plan:
+    """:meth:`ClampPlanner.best` of the plant's planner (:func:`planner_for`): a job for
+    :class:`controllers.background.Background` (``progress`` is not called)."""
+    return planner_for(cfg, limits, contact_speed, intervals,
+                       protection=protection).best(duration, objective)
 
 
 def baseline_stroke(cfg: PlantConfig, limits: DriveLimits, duration: float,

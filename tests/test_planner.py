@@ -496,6 +496,43 @@ def test_a_limit_below_the_least_peak_is_refused_before_the_continuation(chang, 
     assert len(solves) == 1
 
 
+def _plain_bisection(possible, top: float, tol: float) -> float:
+    """The bound's bisection as it was before issue 30: a sweep at every step."""
+    lo, hi = 0.0, top
+    while hi - lo > tol * hi:
+        mid = (lo + hi) / 2
+        lo, hi = (lo, mid) if possible(mid) else (mid, hi)
+    return lo
+
+
+@settings(max_examples=300, deadline=None)
+@given(threshold=st.one_of(st.just(0.0), st.floats(1e-9, 1e9)),
+       top_factor=st.floats(1.0, 1e30), start=st.floats(1e-6, 1e6),
+       tol=st.sampled_from([1e-4, 1e-6]))
+def test_the_bracketed_bisection_is_the_plain_one(threshold, top_factor, start, tol):
+    """The bound's bisection skips the steps monotonicity decides (issue 30: it took 1075
+    sweeps to answer 0 in a dry cycle, a third of ``--trade-off``'s time): the same answer
+    to the last bit, for any threshold, top and start."""
+    from controllers.bounds import least_possible
+
+    top = max(threshold, 1e-9) * top_factor
+    assert least_possible(lambda s: s >= threshold, top, start, tol) == _plain_bisection(
+        lambda s: s >= threshold, top, tol)
+
+
+def test_the_bound_takes_few_sweeps(chang, monkeypatch):
+    from controllers import bounds
+
+    cfg, limits, planner, _ = chang
+    sweeps, real = [], bounds._sweep
+    monkeypatch.setattr(bounds, "_sweep", lambda *a: sweeps.append(a[0]) or real(*a))
+    for plant, most in ((cfg, 40), (cfg.with_(x_contact=planner.x_final - 1e-6), 1)):
+        sweeps.clear()
+        bound = bounds.peak_lower_bound(plant, planner.x_final, limits.velocity,
+                                        limits.acceleration, planner.creep_speed)
+        assert len(sweeps) <= most and (bound > 14.9 if most > 1 else bound == 0.0)
+
+
 def test_best_plan_finds_the_lower_optimum_and_respects_the_bound(chang):
     """The default-duration peak plan: below 14.99 N (a single cold start may stop at a local
     optimum near 15.04 N) and above the reachable-set bound, within 0.5 % of it."""
@@ -577,6 +614,7 @@ def test_trade_off_with_the_mold_and_in_a_dry_cycle(tmp_path, capsys, monkeypatc
     """``toggle plan --trade-off`` (issue 17): each curve buys force with time, the mold's
     ends within 0.5 % of the lower bound and never below it, the dry cycle (the mold at the
     toggle) needs far less force; ``toggle plot trade-off`` draws the same curves."""
+    from controllers import background
     from controllers.planner import ClampPlanner
 
     computed, real, ticks = {}, ClampPlanner.trade_off, []
@@ -586,6 +624,9 @@ def test_trade_off_with_the_mold_and_in_a_dry_cycle(tmp_path, capsys, monkeypatc
         return computed[self.config.x_contact]
 
     monkeypatch.setattr(ClampPlanner, "trade_off", keep)
+    # both curves in this process, where the patch is (tests/test_background.py: the
+    # second process)
+    monkeypatch.setattr(background, "parallel", lambda: False)
     assert main(["plan", "--trade-off", "2", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert len(ticks) == 4  # the progress bar moved once per force limit of both curves

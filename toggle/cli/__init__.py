@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 from collections.abc import Sequence
 
+from controllers.background import Terminated
 from toggle.cli.args import (
     add_version,
     join_negative_numbers,
@@ -51,6 +53,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.handler(args) or 0)
     except BrokenPipeError:
         return quiet_broken_pipe()
+    except Terminated:  # SIGTERM while a planning process ran: that process is stopped
+        print(f"toggle {command}: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print(f"toggle {command}: interrupted", file=sys.stderr)
         return 130

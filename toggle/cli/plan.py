@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from controllers import cam
+from controllers.background import Background
 from controllers.cycle import MoldingCycle
 from controllers.duty import check_motor, motor_duty
 from controllers.limits import DriveLimits, drive_limits
@@ -29,9 +30,11 @@ from controllers.planner import (
     Protection,
     baseline_stroke,
     baselines,
+    best_plan,
     default_duration,
     plan_config,
     planner_for,
+    trade_off_curve,
 )
 from controllers.profiles import predict, read_profile_csv, write_profile_csv
 from toggle.cli.args import atomic_path, check_writable, integer, number, path, positive
@@ -138,7 +141,10 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     scale = curve["erroneous"].peak_force / curve["nominal"].peak_force
     planner = planner_for(cfg, limits, args.contact_speed, args.intervals, (erroneous,), (scale,),
                           _protection(args))
-    plan, plain = planner.best(duration, args.objective), nominal.best(duration, args.objective)
+    # the nominal plan, to compare, in a second process while this one plans the robust one
+    with Background(best_plan, cfg, limits, args.contact_speed, args.intervals,
+                    _protection(args), duration, args.objective) as nominal_plan:
+        plan, plain = planner.best(duration, args.objective), nominal_plan.result()
     report = {}
     for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
         report[name] = {"robust_plan_peak_force": predict(plan.profile, plant).peak_force,
@@ -154,14 +160,25 @@ def _trade_off_curves(args: argparse.Namespace, cfg: PlantConfig, limits: DriveL
     from tqdm import tqdm
 
     dry = cfg.with_(x_contact=clamp_stroke(cfg.mechanism)[1] - DRY_CONTACT)
-    curves = {}
-    # a minute or more of IPOPT on two cores: a bar on stderr, as for the Monte Carlo
+    common = (limits, args.contact_speed, args.intervals, _protection(args), args.trade_off)
+    planners = {name: planner_for(plant, *common[:3], protection=common[3])
+                for name, plant in (("mold", cfg), ("dry_cycle", dry))}
+    # seconds of IPOPT per curve: the dry cycle's in a second process (two cores), a bar
+    # on stderr counting both curves' limits
     with tqdm(total=2 * args.trade_off, desc="trade-off", unit="limit",
-              disable=getattr(args, "json", False)) as bar:
-        for name, plant in (("mold", cfg), ("dry_cycle", dry)):
-            planner = planner_for(plant, limits, args.contact_speed, args.intervals,
-                                  protection=_protection(args))
-            curves[name] = planner, planner.trade_off(args.trade_off, bar.update)
+              disable=getattr(args, "json", False)) as bar, \
+            Background(trade_off_curve, dry, *common) as dry_curve:
+        seen = 0
+
+        def tick() -> None:
+            nonlocal seen
+            bar.update(1 + dry_curve.ticks() - seen)
+            seen = dry_curve.ticks()
+
+        mold = planners["mold"].trade_off(args.trade_off, tick)
+        curves = {"mold": (planners["mold"], mold),
+                  "dry_cycle": (planners["dry_cycle"], dry_curve.result())}
+        bar.update(dry_curve.ticks() - seen)
     return curves
 
 

@@ -1,0 +1,139 @@
+"""A planning job in a second process: two independent IPOPT runs at once on two cores.
+
+A trade-off's two curves (with the mold, and the dry cycle) and a robust plan's nominal
+twin are independent solves, each seconds of IPOPT, which holds the GIL; the second runs in
+a child process while the parent computes the first. The child is spawned (a fresh
+interpreter: forking a process that holds CasADi, IPOPT and a progress bar's thread is not
+safe), loads the compiled problem from the disk cache, and sends back progress ticks and
+its result (or its exception) over a pipe.
+
+The parent owns the child: leaving the ``with`` block any way (the result, an error,
+Ctrl-C) terminates it, a SIGTERM to the parent is turned into :class:`Terminated` for that
+(instead of ending the parent with the child left running), and the kernel kills the child
+if the parent dies without a word (``PR_SET_PDEATHSIG``, Linux). The child ignores Ctrl-C
+from the terminal: the parent decides, and stops it. With one core for this process
+(:func:`parallel`) the job runs in this process when its result is asked for, as before.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from multiprocessing.connection import Connection
+from types import FrameType, TracebackType
+from typing import Any
+
+_PR_SET_PDEATHSIG = 1
+
+
+def parallel() -> bool:
+    """Whether a second process would run beside this one: two cores or more for it."""
+    return len(os.sched_getaffinity(0)) >= 2 if hasattr(os, "sched_getaffinity") else (
+        (os.cpu_count() or 1) >= 2)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM while a child runs: unwinds like Ctrl-C, so that the child is stopped."""
+
+
+def _die_with_parent() -> None:
+    """Ask the kernel to kill this process when its parent ends (Linux; elsewhere the
+    parent's ``with`` block is the only guard)."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
+def _child(conn: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+    """The child's body: ``fn(*args, progress=tick)``, its result or exception sent back."""
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        result = ("result", fn(*args, progress=lambda: conn.send(("tick", None))))
+    except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it
+        result = ("error", exc)
+    conn.send(result)
+    conn.close()
+
+
+class Background:
+    """``fn(*args, progress=callable)`` running in a child process; use as a context
+    manager, then :meth:`result`. :meth:`ticks` counts the progress calls seen so far."""
+
+    def __init__(self, fn: Callable[..., Any], *args: Any) -> None:
+        self._job, self._done = (fn, args), None
+        self._ticks = 0
+        self._previous_term: Any = None
+        self._process: Any = None
+        if parallel():
+            context = multiprocessing.get_context("spawn")
+            self._conn, child_end = context.Pipe(duplex=False)
+            self._process = context.Process(target=_child, args=(child_end, fn, args),
+                                            daemon=True)
+            self._process.start()
+            child_end.close()
+
+    def __enter__(self) -> Background:
+        if threading.current_thread() is threading.main_thread():
+            self._previous_term = signal.signal(signal.SIGTERM, self._terminate)
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    @staticmethod
+    def _terminate(signum: int, frame: FrameType | None) -> None:
+        raise Terminated(f"signal {signum}")
+
+    def _tick(self) -> None:
+        self._ticks += 1
+
+    def _receive(self, block: bool) -> None:
+        if self._process is None:  # in this process, when asked
+            if block and self._done is None:
+                fn, args = self._job
+                self._done = ("result", fn(*args, progress=self._tick))
+            return
+        while self._done is None and (block or self._conn.poll()):
+            try:
+                kind, value = self._conn.recv()
+            except EOFError:
+                self._process.join()
+                raise RuntimeError(f"the planning process ended without an answer "
+                                   f"(exit status {self._process.exitcode})") from None
+            if kind == "tick":
+                self._tick()
+            else:
+                self._done = (kind, value)
+
+    def ticks(self) -> int:
+        """The child's progress calls received so far (without waiting)."""
+        self._receive(block=False)
+        return self._ticks
+
+    def result(self) -> Any:
+        """Wait for the child; its result, or its exception raised here."""
+        self._receive(block=True)
+        assert self._done is not None
+        kind, value = self._done
+        if kind == "error":
+            raise value
+        return value
+
+    def close(self) -> None:
+        """Stop the child if it still runs, and restore SIGTERM's handler."""
+        if self._process is not None:
+            if self._process.is_alive():
+                self._process.terminate()
+            self._process.join()
+            self._conn.close()
+        if self._previous_term is not None:
+            signal.signal(signal.SIGTERM, self._previous_term)
+            self._previous_term = None

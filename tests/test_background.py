@@ -1,0 +1,151 @@
+"""The second planning process (controllers/background.py): its answer, its errors, and
+that it never outlives its parent: leaving the block, SIGTERM, Ctrl-C, SIGKILL."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import background_jobs as jobs
+import pytest
+
+from controllers import background
+from controllers.background import Background, Terminated
+
+TESTS = Path(__file__).parent
+
+
+def alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie counts as gone)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return False
+    return state != "Z"
+
+
+def wait_for(predicate, timeout: float = 20.0) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def planning_children(pid: int) -> list[int]:
+    """The processes ``pid`` spawned to plan (not a compiler, not multiprocessing's
+    resource tracker)."""
+    found = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            try:
+                command = Path(f"/proc/{child}/cmdline").read_bytes()
+            except FileNotFoundError:
+                continue
+            found += [int(child)] if b"spawn_main" in command else []
+    return found
+
+
+@pytest.fixture
+def two_cores(monkeypatch):
+    monkeypatch.setattr(background, "parallel", lambda: True)
+
+
+def test_the_answer_and_the_ticks_come_from_a_second_process(two_cores):
+    with Background(jobs.count, 5) as job:
+        answer = job.result()
+        assert answer == {"n": 5, "pid": answer["pid"]} and answer["pid"] != os.getpid()
+        assert job.ticks() == 5
+
+
+def test_one_core_runs_the_job_here_when_asked(monkeypatch):
+    monkeypatch.setattr(background, "parallel", lambda: False)
+    with Background(jobs.count, 3) as job:
+        assert job.ticks() == 0  # nothing runs before the result is asked for
+        assert job.result() == {"n": 3, "pid": os.getpid()} and job.ticks() == 3
+
+
+def test_the_childs_error_is_raised_here(two_cores):
+    with Background(jobs.refuse, "no stroke meets 1 N") as job, pytest.raises(
+            ValueError, match="no stroke meets 1 N"):
+        job.result()
+
+
+def test_leaving_the_block_stops_the_child(two_cores, tmp_path):
+    pid_file = tmp_path / "pid"
+    with pytest.raises(RuntimeError), Background(jobs.sleep_forever, str(pid_file)):
+        assert wait_for(pid_file.exists)
+        raise RuntimeError("the parent's own work failed")
+    assert not alive(int(pid_file.read_text()))
+
+
+def test_sigterm_in_the_block_is_terminated_and_stops_the_child(two_cores, tmp_path):
+    pid_file = tmp_path / "pid"
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(Terminated), Background(jobs.sleep_forever, str(pid_file)) as job:
+        assert wait_for(pid_file.exists)
+        os.kill(os.getpid(), signal.SIGTERM)
+        job.result()
+    assert not alive(int(pid_file.read_text()))
+    assert signal.getsignal(signal.SIGTERM) is before  # restored
+
+
+def test_a_killed_parent_takes_the_child_with_it(tmp_path):
+    """SIGKILL leaves no handler to run: the kernel ends the child (PR_SET_PDEATHSIG)."""
+    pid_file = tmp_path / "pid"
+    script = textwrap.dedent(f"""
+        import sys, time
+        sys.path.insert(0, {str(TESTS)!r})
+        import background_jobs
+        from controllers import background
+        background.parallel = lambda: True
+        with background.Background(background_jobs.sleep_forever, {str(pid_file)!r}):
+            time.sleep(60)
+    """)
+    parent = subprocess.Popen([sys.executable, "-c", script])
+    try:
+        assert wait_for(pid_file.exists)
+        child = int(pid_file.read_text())
+        assert alive(child)
+        parent.kill()
+        parent.wait()
+        assert wait_for(lambda: not alive(child), 10)
+    finally:
+        parent.kill()
+
+
+@pytest.mark.parametrize("how, status, said", [
+    ("sigterm", 128 + signal.SIGTERM, "toggle plan: terminated"),
+    ("ctrl-c", 130, "toggle plan: interrupted"),
+])
+def test_toggle_plan_trade_off_stopped_leaves_no_process(how, status, said):
+    """SIGTERM to toggle, or Ctrl-C to its process group (the terminal's), while both
+    curves are planned: the exit status says so and the dry cycle's process is gone."""
+    toggle = Path(sys.executable).with_name("toggle")
+    proc = subprocess.Popen([str(toggle), "plan", "--trade-off", "6", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        # (a cold cache compiles the problem first, for a minute on a loaded machine)
+        assert wait_for(lambda: proc.poll() is not None or bool(planning_children(proc.pid)),
+                        300)
+        helpers = planning_children(proc.pid)
+        assert helpers, "no planning process was started"
+        time.sleep(1.0)  # well into the solves
+        if how == "sigterm":
+            proc.send_signal(signal.SIGTERM)
+        else:
+            os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == status and out == ""
+    assert err.strip().splitlines()[-1] == said
+    assert wait_for(lambda: not any(alive(pid) for pid in helpers), 5)
