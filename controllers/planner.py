@@ -155,6 +155,12 @@ _WARM = {"warm_start_init_point": "yes", "mu_strategy": "monotone", "mu_init": 1
          "warm_start_bound_push": 1e-9, "warm_start_bound_frac": 1e-9,
          "warm_start_slack_bound_push": 1e-9, "warm_start_slack_bound_frac": 1e-9,
          "warm_start_mult_bound_push": 1e-9}
+#: A minimum-time solve warm-starts from a plan under another force limit (the steps of
+#: :meth:`ClampPlanner.minimum_time`'s continuation, a trade-off's next point), farther off:
+#: there the barrier starts at 1e-5 (chang2021's trade-off curve with the mold: 1270 warm
+#: iterations at 1e-7, 550 at 1e-5, the same curve to 3e-7; a re-plan of another duration
+#: or mold height takes 3-27 iterations at 1e-7 and 20-27 at 1e-5).
+_WARM_FAR = {**_WARM, "mu_init": 1e-5}
 
 
 class PlanningError(ValueError):
@@ -472,7 +478,7 @@ class StrokeProblem:
         #: :data:`PARAMETERS`, then each plant's force scale (its forces count divided by it),
         #: then each plant's :data:`MASSES`
         self.n_parameters = len(PARAMETERS) + len(self.plants) * (1 + len(MASSES))
-        self._solvers: dict[tuple[bool, bool], Any] = {}
+        self._solvers: dict[tuple[bool, bool, bool], Any] = {}
         self.last: Plan | None = None  # the latest plan, for any mold height
         self._build()
 
@@ -713,16 +719,19 @@ class StrokeProblem:
         return np.asarray(self._force(z, [cfg.x_contact, cfg.friction,
                                           *_masses(cfg)]))[0]
 
-    def solver(self, warm: bool, energy: bool) -> Any:
-        """The IPOPT instance, cold or with the warm-start options, for an objective with
-        the force integral (``energy``) or without it (each built once)."""
-        if (warm, energy) not in self._solvers:
+    def solver(self, warm: bool, energy: bool, far: bool = False) -> Any:
+        """The IPOPT instance, cold or with the warm-start options (``far``: from a plan
+        under another force limit, :data:`_WARM_FAR`), for an objective with the force
+        integral (``energy``) or without it (each built once)."""
+        far = far and warm
+        if (warm, energy, far) not in self._solvers:
             nlp, grad_f = self._nlp[energy]
-            opts = {"ipopt": {**_IPOPT, **(_WARM if warm else {})}, "print_time": False,
+            options = (_WARM_FAR if far else _WARM) if warm else {}
+            opts = {"ipopt": {**_IPOPT, **options}, "print_time": False,
                     "error_on_fail": False, "calc_lam_p": False, "no_nlp_grad": True,
                     "grad_f": grad_f, **self._derivatives}
-            self._solvers[warm, energy] = ca.nlpsol("plan", "ipopt", nlp, opts)
-        return self._solvers[warm, energy]
+            self._solvers[warm, energy, far] = ca.nlpsol("plan", "ipopt", nlp, opts)
+        return self._solvers[warm, energy, far]
 
 
 @functools.lru_cache(maxsize=8)
@@ -1026,7 +1035,7 @@ class ClampPlanner:
             args = (self._stretched(start, target, problem) if warm
                     else {"x0": self._initial_guess(target)})
         args["x0"] = np.clip(args["x0"], lbx, ubx)
-        solver = problem.solver(warm, energy=weights[1] > 0)
+        solver = problem.solver(warm, energy=weights[1] > 0, far=objective == "time")
         tic = time.perf_counter()
         with signals_survive():  # IPOPT would turn a Ctrl-C into a failed solve
             sol = solver(p=self._parameters(weights, torque_factor, caps), lbx=lbx, ubx=ubx,
