@@ -7,24 +7,12 @@ Run: python benchmarks/bench_kinematics.py
 
 from __future__ import annotations
 
-import statistics
-import time
-from collections.abc import Callable
-
 import numpy as np
+from timing import median_time
 
 from toggle import load_preset
 from toggle.kinematics import half_motion, half_pose, output_position
 from toggle.tolerance import it_tolerances, monte_carlo
-
-
-def median_time(fn: Callable[[], object], runs: int = 7) -> float:
-    times = []
-    for _ in range(runs):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
 
 
 def main() -> None:

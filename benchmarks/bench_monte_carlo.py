@@ -17,12 +17,12 @@ import os
 
 os.sched_setaffinity(0, {0})  # one core, before numpy starts any thread pool
 
-import statistics  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable  # noqa: E402
 from unittest import mock  # noqa: E402
 
 import numpy as np  # noqa: E402
+import timing  # noqa: E402
 
 from toggle import load_preset, mc_kernel  # noqa: E402
 from toggle.kinematics import output_position, toggle_position  # noqa: E402
@@ -34,13 +34,8 @@ POOL = 8  # distinct chunks of draws the kernels evaluate in turn
 
 
 def median_time(fn: Callable[[], object], runs: int) -> float:
-    fn()  # warm-up
-    times = []
-    for _ in range(runs):
-        t = time.process_time()
-        fn()
-        times.append(time.process_time() - t)
-    return statistics.median(times)
+    """CPU seconds of this process, the median after a warm-up call."""
+    return timing.median_time(fn, runs, clock=time.process_time, warm_up=True)
 
 
 def report(n: int, runs: int) -> None:
