@@ -29,6 +29,8 @@ from multiprocessing.connection import Connection
 from types import FrameType, TracebackType
 from typing import Any
 
+from toggle.interrupts import Terminated
+
 _PR_SET_PDEATHSIG = 1
 
 
@@ -36,10 +38,6 @@ def parallel() -> bool:
     """Whether a second process would run beside this one: two cores or more for it."""
     return len(os.sched_getaffinity(0)) >= 2 if hasattr(os, "sched_getaffinity") else (
         (os.cpu_count() or 1) >= 2)
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM while a child runs: unwinds like Ctrl-C, so that the child is stopped."""
 
 
 def _die_with_parent() -> None:

@@ -15,7 +15,8 @@ import background_jobs as jobs
 import pytest
 
 from controllers import background
-from controllers.background import Background, Terminated
+from controllers.background import Background
+from toggle.interrupts import Terminated
 
 TESTS = Path(__file__).parent
 

@@ -21,6 +21,11 @@ from types import FrameType
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM turned into an exception (:class:`controllers.background.Background` does,
+    so that its child process is stopped): unwinds like Ctrl-C; ``toggle`` exits 143."""
+
+
 @contextmanager
 def signals_survive() -> Iterator[None]:
     """Run a block (a CasADi solve) so that SIGINT or SIGTERM, if a Python handler takes

@@ -13,13 +13,13 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from controllers.background import Terminated
 from toggle.cli.args import (
     add_version,
     join_negative_numbers,
     quiet_broken_pipe,
     use_help_formatter,
 )
+from toggle.interrupts import Terminated
 from toggle.kinematics import AssemblyError
 from toggle.params import ParameterError
 
