@@ -1,18 +1,94 @@
-"""Shared fixtures and hypothesis strategies."""
+"""Shared fixtures and hypothesis strategies; how the suite shares two cores.
+
+Under pytest-xdist (``-n 2``, the default in pyproject.toml) two tests run at a time, but
+never a computing test beside one that runs against real time (the emulated rig at 1 kHz,
+signals sent after a delay, a cluster of processes with timeouts): those two kinds take
+turns, each kind two at a time (two rig tests take about one core). A test that must have
+the machine to itself (QEMU emulating the MCU, the soak test that brings its own load)
+runs alone. The computing tests run first, then the real-time ones, then those alone, so
+that the turns change rarely.
+"""
 
 from __future__ import annotations
 
+import fcntl
 import math
 import os
 import signal
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import settings
 from hypothesis import strategies as st
 
 from toggle.params import HalfDims, Mechanism, load_preset
+
+# no per-example deadline: a second worker or a compile of the planner's problem on the
+# other core makes an example's time meaningless (the tests bound their work by counts)
+settings.register_profile("suite", deadline=None)
+settings.load_profile("suite")
+
+#: Modules whose every test runs against real time (see the module docstring); single
+#: tests elsewhere carry ``@pytest.mark.real_time``.
+REAL_TIME_MODULES = frozenset({
+    "test_background", "test_design_cluster", "test_fmu_masters", "test_hil_faults",
+    "test_hil_interrupts", "test_host_link", "test_protocol_conformance",
+    "test_rig_cleanroom", "test_serial_link",
+})
+#: Modules whose tests run alone (``@pytest.mark.alone`` for single tests).
+ALONE_MODULES = frozenset({"test_firmware_board", "test_firmware_qemu_run", "test_hil_soak"})
+KINDS = ("computing", "real_time", "alone")
+
+
+def _kind(item: pytest.Item) -> str:
+    module = item.module.__name__.rsplit(".", 1)[-1]
+    if item.get_closest_marker("alone") or module in ALONE_MODULES:
+        return "alone"
+    if item.get_closest_marker("real_time") or module in REAL_TIME_MODULES:
+        return "real_time"
+    return "computing"
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The computing tests first, then the real-time ones, then those alone (each kind in
+    its collected order)."""
+    items.sort(key=lambda item: KINDS.index(_kind(item)))
+
+
+def _flock(path: Path, mode: int) -> int:
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+    fcntl.flock(fd, mode)
+    return fd
+
+
+@pytest.fixture(autouse=True)
+def _turns(request: pytest.FixtureRequest,
+           tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Under pytest-xdist: a test holds its kind's lock shared while it runs, having waited
+    (behind the gate, which orders the entries) until no test of the other kind runs; a test
+    alone holds the gate and both kinds' locks. The kernel drops a dead worker's locks."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:  # one process: nothing runs beside it
+        yield
+        return
+    shared = tmp_path_factory.getbasetemp().parent  # the run's, above each worker's own
+    lock = {name: shared / f"turns.{name}" for name in ("gate", *KINDS[:2])}
+    kind = _kind(request.node)
+    gate = _flock(lock["gate"], fcntl.LOCK_EX)
+    if kind == "alone":
+        held = [gate, *(_flock(lock[k], fcntl.LOCK_EX) for k in KINDS[:2])]
+    else:
+        held = [_flock(lock[kind], fcntl.LOCK_SH)]
+        other = KINDS[1 - KINDS.index(kind)]
+        os.close(_flock(lock[other], fcntl.LOCK_EX))  # waits for the other kind to end
+        os.close(gate)
+    try:
+        yield
+    finally:
+        for fd in reversed(held):
+            os.close(fd)
 
 
 @pytest.fixture(scope="session")

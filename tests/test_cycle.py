@@ -60,6 +60,7 @@ def test_the_cycle_is_its_phases_and_its_profile_returns_to_the_start(cycle):
     assert cycle.with_suffix(".png").stat().st_size > 10_000  # --duty-plot
 
 
+@pytest.mark.real_time
 def test_hil_replays_the_cycle_as_it_is_on_both_back_ends(cycle, tmp_path):
     """A profile that ends where it starts is a whole cycle: replayed as it is, not with
     its mirror as the return; the FMU back-end runs it and counts the cycles, and the

@@ -41,6 +41,7 @@ def fmu_run(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.real_time
 def test_real_backend_on_the_emulator_agrees_with_the_fmu(fmu_run, tmp_path):
     out = tmp_path / "rig"
     with emulator() as emu:
@@ -76,6 +77,7 @@ def test_config_file_selects_the_backend(tmp_path, capsys):
     assert main(["run", "--config", str(bad)]) == 2
 
 
+@pytest.mark.real_time
 def test_stall_mid_run_stops_and_keeps_every_sample(tmp_path):
     out = tmp_path / "stalled"
     with emulator(FaultPlan(stall_at=0.8, stall_for=0.5)) as emu:
@@ -89,6 +91,7 @@ def test_stall_mid_run_stops_and_keeps_every_sample(tmp_path):
     assert np.all(np.diff(data.t) > 0)
 
 
+@pytest.mark.real_time
 def test_reset_mid_run_aborts_with_a_clear_message(tmp_path, capsys):
     out = tmp_path / "reset"
     with emulator(FaultPlan(reset_at=0.5)) as emu:
