@@ -2,7 +2,7 @@
 + ``hil run --real``.
 
 Default options only (the planned default job, 3 cycles), with a CPU-hog process beside
-it. CI runs it once; the soak is ``HIL_SOAK_RUNS=20 pytest tests/test_hil_soak.py -s``,
+it. CI runs it once; the soak is ``HIL_SOAK_RUNS=20 pytest -n 0 tests/test_hil_soak.py -s``,
 which prints the telemetry arrival jitter over all runs. Every run must complete: no
 abort, no link error, every cycle; and the emulated rig's run is the simulated rig's
 (``hil run``, the README's first command) to the encoder's resolution and the load cell's
