@@ -138,6 +138,11 @@ _LIMIT_STEP = 0.02  # largest relative step of the force limit in minimum_time's
 #: for a limit within this fraction above the lower bound, where the bound may not be
 #: reached (chang2021: the least peak is 0.2 % above it); above, the continuation decides.
 _NEAR_BOUND = 0.05
+#: The least peak's local optima differ by a few 1e-5 with the starts a planner's history
+#: gives :meth:`ClampPlanner.best` (chang2021: 14.94101 N in a fresh process, 14.94045 N
+#: warm from other plans); a limit within this fraction below the least peak found is left
+#: to the continuation, not refused.
+_LEAST_MARGIN = 1e-4
 #: The same from a trade-off's previous point, which is already on the path: one step to
 #: the next point where they are within 40 % (six points of the dry cycle's curve, a factor
 #: of four, are 32 % apart; steps of 8 % took 26 solves, one step 11, the same curve to
@@ -1151,7 +1156,8 @@ class ClampPlanner:
         ``continued``: ``start`` is the fastest plan under a looser limit (the previous
         point of a trade-off), and the steps (at most :data:`_TRADE_STEP`) go down from it.
         A limit near the lower bound (:data:`_NEAR_BOUND`) and below the least peak of any
-        duration (:meth:`least_peak`) is refused before the continuation, which
+        duration (:meth:`least_peak`, less :data:`_LEAST_MARGIN`) is refused before the
+        continuation, which
         would otherwise end in IPOPT failing to meet it, warm and cold (a minute and a
         half on chang2021 at 14.91 N). The
         limit and the motor's torque-speed curve are imposed at the nodes and interval
@@ -1170,7 +1176,8 @@ class ClampPlanner:
             raise PlanningError(self._unreachable(limit, None))
         top = min(self.worst_peak(plan), self.force_limit)
         near = limit < self.lower_bound() * (1 + _NEAR_BOUND)
-        if limit < top and near and limit < self.worst_peak(least := self.least_peak()):
+        if limit < top and near and limit < self.worst_peak(
+                least := self.least_peak()) * (1 - _LEAST_MARGIN):
             raise PlanningError(self._unreachable(limit, least) + (
                 " (the least peak of any duration it finds)"))
         levels = self._levels(top, limit, _TRADE_STEP if continued else _LIMIT_STEP)

@@ -481,12 +481,16 @@ def test_a_limit_below_the_least_peak_is_refused_before_the_continuation(chang, 
     """Between the lower bound and the least peak the planner finds over every duration no
     plan exists: ``minimum_time`` refuses such a limit naming that least peak after one
     minimum-time solve (the fastest stroke), not after the continuation down to it, which
-    ended in IPOPT failing warm and cold (87 s at 14.91 N, issue 30)."""
-    from controllers.planner import ClampPlanner
+    ended in IPOPT failing warm and cold (87 s at 14.91 N, issue 30). The least peak is
+    the least the planner finds: a best plan found later, warm from other plans, may be
+    lower by up to the margin the refusal leaves (two pytest workers: 14.94076 N at 3 s
+    against 14.94101 N, the order of the tests having changed the starts)."""
+    from controllers.planner import _LEAST_MARGIN, ClampPlanner
 
     _, _, planner, _ = chang
     least = planner.least_peak()
-    assert planner.lower_bound() < planner.worst_peak(least) <= planner.best(DURATION).peak_force
+    assert planner.lower_bound() < planner.worst_peak(least) * (1 - _LEAST_MARGIN) <= (
+        planner.best(DURATION).peak_force)
     solves, real = [], ClampPlanner._fastest
     monkeypatch.setattr(ClampPlanner, "_fastest",
                         lambda self, *a, **k: solves.append(a) or real(self, *a, **k))
