@@ -673,7 +673,9 @@ class SerialLink:
             with self._write_lock:
                 ser.write(data)
         except (serial.SerialException, OSError) as exc:
-            lost = LinkLostError(f"write to {self.url} failed: {exc}")
+            # a port that refuses a write is gone (EIO: the cable pulled, the pty hung up),
+            # said as the reader says it, whichever of the two meets the hang-up first
+            lost = LinkLostError(f"{self.url} disconnected: {exc}")
             self._fail(lost)
             raise lost from exc
 

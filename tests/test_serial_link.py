@@ -196,6 +196,23 @@ def test_disconnect_is_detected_and_closes_cleanly(rig: Callable[..., Rig]) -> N
     assert link.info is None and not link._reader.is_alive()
 
 
+def test_a_hang_up_met_by_a_write_is_a_disconnect(rig: Callable[..., Rig], monkeypatch) -> None:
+    """A write can meet the hang-up before the reader does (two pytest workers timed it so:
+    the run failed with "write to /dev/pts/1 failed: ... Input/output error" and never said
+    disconnected); the link says the same either way."""
+    import serial
+
+    _, link = rig()
+
+    def hung_up(data: bytes) -> int:
+        raise serial.SerialException("write failed: [Errno 5] Input/output error")
+
+    monkeypatch.setattr(link._ser, "write", hung_up)
+    with pytest.raises(LinkLostError, match=r"disconnected: write failed: \[Errno 5\]"):
+        link.stop()
+    assert isinstance(link.failure, LinkLostError)  # the reader stops on it too
+
+
 def test_reset_mid_run_is_reported_as_a_reset(rig: Callable[..., Rig]) -> None:
     emulator, link = rig(faults=FaultPlan(reset_at=0.05))
     old_boot = link.info.boot_id
