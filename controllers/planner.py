@@ -1157,10 +1157,9 @@ class ClampPlanner:
         point of a trade-off), and the steps (at most :data:`_TRADE_STEP`) go down from it.
         A limit near the lower bound (:data:`_NEAR_BOUND`) and below the least peak of any
         duration (:meth:`least_peak`, less :data:`_LEAST_MARGIN`) is refused before the
-        continuation, which
-        would otherwise end in IPOPT failing to meet it, warm and cold (a minute and a
-        half on chang2021 at 14.91 N). The
-        limit and the motor's torque-speed curve are imposed at the nodes and interval
+        continuation, which would otherwise end in IPOPT failing to meet it, warm and cold
+        (a minute and a half on chang2021 at 14.91 N). The limit and the motor's
+        torque-speed curve are imposed at the nodes and interval
         midpoints; where the plan's 1 ms samples through the plant still exceed either, it
         is tightened by the excess and the plan repeated."""
         limit = self.force_limit if force_limit is None else min(force_limit, self.force_limit)

@@ -1,12 +1,12 @@
 """Shared fixtures and hypothesis strategies; how the suite shares two cores.
 
 Under pytest-xdist (``-n 2``, the default in pyproject.toml) two tests run at a time, but
-never a computing test beside one that runs against real time (the emulated rig at 1 kHz,
-signals sent after a delay, a cluster of processes with timeouts): those two kinds take
-turns, each kind two at a time (two rig tests take about one core). A test that must have
-the machine to itself (QEMU emulating the MCU, the soak test that brings its own load)
-runs alone. The computing tests run first, then the real-time ones, then those alone, so
-that the turns change rarely.
+never a computing test beside one that runs against real time (marked ``real_time``: the
+emulated rig at 1 kHz, signals sent after a delay, a cluster of processes with timeouts):
+those two kinds take turns, each kind two at a time (two rig tests take about one core).
+A test that must have the machine to itself (marked ``alone``: QEMU emulating the MCU, the
+soak test that brings its own load) runs alone. The computing tests run first, then the
+real-time ones, then those alone, so that the turns change rarely.
 """
 
 from __future__ import annotations
@@ -31,25 +31,14 @@ from toggle.params import HalfDims, Mechanism, load_preset
 settings.register_profile("suite", deadline=None)
 settings.load_profile("suite")
 
-#: Modules whose every test runs against real time (see the module docstring); single
-#: tests elsewhere carry ``@pytest.mark.real_time``.
-REAL_TIME_MODULES = frozenset({
-    "test_background", "test_design_cluster", "test_fmu_masters", "test_hil_faults",
-    "test_hil_interrupts", "test_host_link", "test_protocol_conformance",
-    "test_rig_cleanroom", "test_serial_link",
-})
-#: Modules whose tests run alone (``@pytest.mark.alone`` for single tests).
-ALONE_MODULES = frozenset({"test_firmware_board", "test_firmware_qemu_run", "test_hil_soak"})
 KINDS = ("computing", "real_time", "alone")
 
 
 def _kind(item: pytest.Item) -> str:
-    module = item.module.__name__.rsplit(".", 1)[-1]
-    if item.get_closest_marker("alone") or module in ALONE_MODULES:
-        return "alone"
-    if item.get_closest_marker("real_time") or module in REAL_TIME_MODULES:
-        return "real_time"
-    return "computing"
+    """A test's kind: its (or its module's) mark ``real_time`` or ``alone``, else
+    computing."""
+    return next((kind for kind in ("alone", "real_time") if item.get_closest_marker(kind)),
+                "computing")
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

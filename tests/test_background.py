@@ -18,6 +18,8 @@ from controllers import background
 from controllers.background import Background
 from toggle.interrupts import Terminated
 
+pytestmark = pytest.mark.real_time
+
 TESTS = Path(__file__).parent
 
 

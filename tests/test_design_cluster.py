@@ -21,6 +21,8 @@ from design.output import write_csv
 from design.search import run_search
 from design.targets import load_targets
 
+pytestmark = pytest.mark.real_time
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "design" / "examples"
 BIN = Path(sys.executable).parent
 #: A small search of cheap objectives: SM-55 geometry (about 20 ms per candidate).

@@ -19,6 +19,8 @@ from hil.backends import RigSetup
 from hil.firmware_qemu import BOARD_DIR, QemuRig, build_qemu_image, qemu_available
 from hil.mcu_model import RigHardware
 
+pytestmark = pytest.mark.alone
+
 serial = pytest.importorskip("serial")
 
 NUCLEO_OUT = Path(__file__).resolve().parent.parent / "build" / "firmware" / "board-nucleo"

@@ -20,6 +20,8 @@ from hil_host import SHORT_RUN, hil
 
 from hil.firmware_qemu import qemu_available
 
+pytestmark = pytest.mark.alone
+
 # QEMU's UART takes a byte about every 50 us; QEMU's clock runs on while a loaded machine
 # (the suite's other worker, QEMU's own thread) holds back the relay: 1 s of heartbeat
 # watchdog, where a gap of 251 ms once stopped the run at the default 250 ms

@@ -34,6 +34,8 @@ from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
 from toggle.plant import DriveState, configure, follow, plant_outputs
 
+pytestmark = pytest.mark.real_time
+
 X_OPEN, X_TOGGLE = stroke_limits(configure("chang2021").mechanism.lower)
 X_CONTACT = X_TOGGLE - 1e-3
 OUTPUTS = ["x", "velocity", "acceleration", "platen_position", "input_force", "clamp_force",

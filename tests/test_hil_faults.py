@@ -36,6 +36,8 @@ from controllers.profiles import ProfileSamples, s_curve, write_profile_csv
 from hil import protocol as p
 from hil.rig_emulator import FaultPlan
 
+pytestmark = pytest.mark.real_time
+
 AT = 0.6  # s after the first START (the homing move) when a scheduled fault strikes
 
 

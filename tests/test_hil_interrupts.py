@@ -24,6 +24,8 @@ import pytest
 from hil import interrupts
 from hil.interrupts import Interrupted, SignalGuard, in_import, started_as_hil
 
+pytestmark = pytest.mark.real_time
+
 COMMANDS = {
     "python -m hil.cli": [sys.executable, "-m", "hil.cli"],
     "console script": [str(Path(sys.executable).with_name("hil"))],

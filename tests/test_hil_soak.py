@@ -22,6 +22,8 @@ from pathlib import Path
 import pytest
 from hil_host import hil
 
+pytestmark = pytest.mark.alone
+
 RUNS = int(os.environ.get("HIL_SOAK_RUNS", "1"))
 FIRMWARE = ["--firmware"] if os.environ.get("HIL_SOAK_FIRMWARE") == "1" else []
 

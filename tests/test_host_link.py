@@ -38,6 +38,8 @@ from hil.serial_link import (
     sample_distance,
 )
 
+pytestmark = pytest.mark.real_time
+
 U32 = 1 << 32
 RELAXED = 0.5  # s: host watchdog where timing is not under test
 

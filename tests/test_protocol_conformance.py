@@ -12,10 +12,14 @@ from __future__ import annotations
 import random
 import time
 
+import pytest
+
 from hil import protocol as p
 from hil.mcu_model import McuModel, RigHardware
 from hil.rig_emulator import FaultPlan, RigEmulator
 from hil.serial_link import SerialLink
+
+pytestmark = pytest.mark.real_time
 
 
 def flat(x: float, t: float) -> tuple[float, float]:

@@ -32,7 +32,8 @@ from cleanroom_rig import (
 
 from hil.cli import main
 
-pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty")
+pytestmark = [pytest.mark.real_time,
+              pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty")]
 
 
 @pytest.fixture

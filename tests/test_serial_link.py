@@ -27,6 +27,8 @@ from hil.serial_link import (
     SerialLink,
 )
 
+pytestmark = pytest.mark.real_time
+
 PERIOD = 1e-3
 STIFFNESS = 2e3  # N/m of the placeholder plant
 RELAXED = 0.5  # s: host watchdog where timing is not under test
