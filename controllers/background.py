@@ -11,7 +11,10 @@ The parent owns the child: leaving the ``with`` block any way (the result, an er
 Ctrl-C) terminates it, a SIGTERM to the parent is turned into :class:`Terminated` for that
 (instead of ending the parent with the child left running), and the kernel kills the child
 if the parent dies without a word (``PR_SET_PDEATHSIG``, Linux). The child ignores Ctrl-C
-from the terminal: the parent decides, and stops it. With one core for this process
+from the terminal from its first instruction: it is spawned with SIGINT blocked (the mask is
+inherited across exec; a Ctrl-C during the child's seconds of imports ended it with a
+traceback, and the parent with exit status 1), then ignores it and unblocks; the parent
+decides, and stops it. With one core for this process
 (:func:`parallel`) the job runs in this process when its result is asked for, as before.
 """
 
@@ -24,7 +27,8 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from multiprocessing import resource_tracker
 from multiprocessing.connection import Connection
 from types import FrameType, TracebackType
 from typing import Any
@@ -48,10 +52,26 @@ def _die_with_parent() -> None:
             ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
+@contextlib.contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """SIGINT held back from this thread (and from a process started meanwhile, which
+    inherits the mask); one that arrives meanwhile is delivered on leaving.
+
+    multiprocessing's resource tracker, started with the first child, unblocks SIGINT
+    whatever the mask was: it is started first."""
+    resource_tracker.ensure_running()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def _child(conn: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
     """The child's body: ``fn(*args, progress=tick)``, its result or exception sent back."""
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a pending one is dropped
     try:
         result = ("result", fn(*args, progress=lambda: conn.send(("tick", None))))
     except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it
@@ -74,7 +94,8 @@ class Background:
             self._conn, child_end = context.Pipe(duplex=False)
             self._process = context.Process(target=_child, args=(child_end, fn, args),
                                             daemon=True)
-            self._process.start()
+            with _sigint_blocked():
+                self._process.start()
             child_end.close()
 
     def __enter__(self) -> Background:

@@ -82,16 +82,20 @@ def recorded_samples(run_dir: Path) -> list[int]:
         return [int(row["sample"]) for row in csv.DictReader(fh)]
 
 
-def sent_samples(log: EmulatorLog, first: int) -> list[int]:
+def sent_samples(log: EmulatorLog, first: int, earliest_boot: bool = False) -> list[int]:
     """What the emulator sent intact for the run whose first recorded sample is ``first``: from
     the run's START to the first sample at standstill (docs/rig-protocol.md, section 11).
 
     The run is the latest START at or before ``first`` in a boot that sent ``first`` intact:
     the START's own sample may have been corrupted on the wire (the dropped-bytes fault), so the
-    first recorded sample can follow it."""
-    sent_first = {b for b, sample, _, intact in log.written if sample == first and intact}
-    boot, start = next((b, s) for b, s in reversed(log.run_starts)
-                       if s <= first and b in sent_first)
+    first recorded sample can follow it. A reset restarts the sample count, so two boots can
+    both have sent ``first``: the latest boot is taken, or with ``earliest_boot`` the earliest
+    (the run before a reset, where the run after it sent the same sample number)."""
+    # the boots (random ids) that sent ``first`` intact, in the order they sent it
+    sent_first = list(dict.fromkeys(b for b, sample, _, intact in log.written
+                                    if sample == first and intact))
+    boot = sent_first[0] if earliest_boot else sent_first[-1]
+    start = max(s for b, s in log.run_starts if b == boot and s <= first)
     out = []
     for b, sample, state, intact in log.written:
         if b != boot or sample < start or not intact:
