@@ -27,13 +27,12 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator
-from multiprocessing import resource_tracker
+from collections.abc import Callable
 from multiprocessing.connection import Connection
 from types import FrameType, TracebackType
 from typing import Any
 
-from toggle.interrupts import Terminated
+from toggle.interrupts import Terminated, signals_held
 
 _PR_SET_PDEATHSIG = 1
 
@@ -50,21 +49,6 @@ def _die_with_parent() -> None:
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
-
-
-@contextlib.contextmanager
-def _sigint_blocked() -> Iterator[None]:
-    """SIGINT held back from this thread (and from a process started meanwhile, which
-    inherits the mask); one that arrives meanwhile is delivered on leaving.
-
-    multiprocessing's resource tracker, started with the first child, unblocks SIGINT
-    whatever the mask was: it is started first."""
-    resource_tracker.ensure_running()
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _child(conn: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
@@ -94,7 +78,7 @@ class Background:
             self._conn, child_end = context.Pipe(duplex=False)
             self._process = context.Process(target=_child, args=(child_end, fn, args),
                                             daemon=True)
-            with _sigint_blocked():
+            with signals_held(signal.SIGINT):
                 self._process.start()
             child_end.close()
 

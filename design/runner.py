@@ -18,12 +18,14 @@ import logging
 import math
 import os
 import re
+import signal
 from collections.abc import Sequence
 from typing import Any
 
 from design.objectives import Evaluation, Evaluator, candidate_key
 from design.store import Store
 from design.targets import Targets
+from toggle.interrupts import signals_held
 from toggle.params import ParameterError
 
 #: A scheduler address as ``dask scheduler`` prints it.
@@ -88,9 +90,18 @@ class Runner:
             from dask.distributed import Client, LocalCluster
             n = self.workers or os.cpu_count() or 1
             # the workers' own log lines (a cancelled task at Ctrl-C) are not the user's news
-            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                         dashboard_address=":0", silence_logs=logging.CRITICAL)
-            self.client = Client(self._cluster)
+            # Ctrl-C or SIGTERM while the cluster starts is acted on once it is up (stopped
+            # half-way, distributed's cleanup failed with a traceback), and its event loop
+            # and worker processes never see the terminal's Ctrl-C: this process closes them
+            try:
+                with signals_held(signal.SIGINT, signal.SIGTERM):
+                    self._cluster = LocalCluster(
+                        n_workers=n, threads_per_worker=1, processes=True,
+                        dashboard_address=":0", silence_logs=logging.CRITICAL)
+                    self.client = Client(self._cluster)
+            except BaseException:
+                self.__exit__()
+                raise
         return self
 
     def __exit__(self, *exc: object) -> None:

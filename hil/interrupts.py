@@ -23,14 +23,13 @@ they opened (a rig's session); ``hil run`` then replaces both with a :class:`Sig
 
 from __future__ import annotations
 
-import os
 import signal
 import sys
-import threading
 from types import FrameType, TracebackType
 
-#: Interval at which a signal that arrived inside an import is delivered again, s.
-REDELIVER = 0.005
+from toggle import interrupts
+from toggle.interrupts import in_import, redeliver, say_interrupted
+
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
@@ -45,26 +44,6 @@ class Interrupted(BaseException):  # noqa: N818 - a signal, like KeyboardInterru
     def exit_code(self) -> int:
         """128 + the signal number: 130 for SIGINT, 143 for SIGTERM (shell convention)."""
         return 128 + self.signum
-
-
-def in_import(frame: FrameType | None) -> bool:
-    """The main thread, interrupted at ``frame``, is importing a module (an exception raised
-    there may be swallowed or turned into an ImportError by the C code that imports)."""
-    while frame is not None:
-        if frame.f_code.co_filename.startswith("<frozen importlib"):
-            return True
-        frame = frame.f_back
-    return False
-
-
-def redeliver(signum: int, still_pending: object) -> None:
-    """Send ``signum`` to the main thread again after REDELIVER s if ``still_pending()``."""
-    def again() -> None:
-        if still_pending():
-            signal.pthread_kill(threading.main_thread().ident, signum)
-    timer = threading.Timer(REDELIVER, again)
-    timer.daemon = True
-    timer.start()
 
 
 class SignalGuard:
@@ -117,16 +96,6 @@ class SignalGuard:
             signal.signal(sig, handler)
 
 
-def _say(signum: int) -> None:
-    # os.write, not print: the signal may interrupt a print to stderr (a reentrant call)
-    os.write(2, f"hil: interrupted by {signal.Signals(signum).name}\n".encode())
-
-
-def _exit_at_once(signum: int, _frame: FrameType | None) -> None:
-    _say(signum)
-    os._exit(128 + signum)  # starting up: nothing is open, nothing to flush
-
-
 class _ExitCleanly:
     """SIGINT/SIGTERM -> one line and SystemExit(130/143), never inside an import."""
 
@@ -136,7 +105,7 @@ class _ExitCleanly:
     def __call__(self, signum: int, frame: FrameType | None) -> None:
         if self.pending is None:
             self.pending = signum
-            _say(signum)
+            say_interrupted("hil", signum)
         if in_import(frame):
             redeliver(signum, lambda: self.pending is not None)
             return
@@ -147,36 +116,19 @@ class _ExitCleanly:
 def install_exit_handlers() -> None:
     """SIGINT and SIGTERM end the process at once with one line and 130/143 (the ``hil``
     process while it starts: imports, before :func:`exit_cleanly_on_signals`)."""
-    for sig in SIGNALS:
-        signal.signal(sig, _exit_at_once)
+    interrupts.install_exit_handlers("hil")
 
 
 def exit_cleanly_on_signals() -> None:
     """In the ``hil`` process (start-up handlers installed), once main() runs: SIGINT and
     SIGTERM print one line and raise SystemExit(130/143), so ``with`` blocks close what they
     opened. Elsewhere (main() called in a test's process) nothing changes."""
-    if all(signal.getsignal(sig) is _exit_at_once for sig in SIGNALS):
+    if interrupts.exiting_at_once():
         handler = _ExitCleanly()
         for sig in SIGNALS:
             signal.signal(sig, handler)
 
 
 def started_as_hil(argv: list[str] | None = None, orig_argv: list[str] | None = None) -> bool:
-    """True in the process of the ``hil`` command: its console script (``sys.argv[0]`` is
-    .../hil) or ``python -m hil.cli`` (``sys.orig_argv``: while a ``-m`` package is being
-    imported, ``sys.argv[0]`` is only '-m')."""
-    argv = sys.argv if argv is None else argv
-    orig = getattr(sys, "orig_argv", []) if orig_argv is None else orig_argv
-    if argv and os.path.basename(argv[0]) in ("hil", "hil.exe", "hil-script.py"):
-        return True
-    args = iter(orig[1:])
-    for arg in args:
-        if arg == "-m":
-            return next(args, None) == "hil.cli"
-        if arg.startswith("-m"):
-            return arg == "-mhil.cli"
-        if arg in ("-X", "-W"):
-            next(args, None)  # the option's value
-        elif arg.startswith("-c") or not arg.startswith("-"):
-            return False  # -c or a script: not the command
-    return False
+    """True in the process of the ``hil`` command (:func:`toggle.interrupts.started_as`)."""
+    return interrupts.started_as("hil", "hil.cli", argv, orig_argv)

@@ -4,8 +4,9 @@ None of the project's protocol, host or emulator code was read or imported to wr
 this: COBS, CRC-16/CCITT-FALSE, the message layouts, the state machine, the safety
 checks, the trajectory buffer, duplicate/STALE handling, the heartbeat watchdog,
 telemetry at 1 kHz and the home switch are all implemented here from the document.
-The only project code used is the mechanics (`hil.rig_physics.ClampPhysics`) and the
-open position of the stroke (`hil.backends.RigSetup().stroke[0]`).
+The only project code used is the mechanics (`hil.rig_physics.ClampPhysics`), the
+open position of the stroke (`hil.backends.RigSetup().stroke[0]`) and SCHED_FIFO
+scheduling for the serving process (`hil.realtime.set_realtime`).
 
 Readings taken where the document leaves a choice (see the clean-room report):
 
@@ -669,10 +670,14 @@ def _i32(v: float) -> int:
 
 def serve(conn: Connection, x_open: float, noise_n: float = 0.2, future: bool = False) -> None:
     """Child-process main: run an Mcu on a pty with a 1 ms tick loop until told to quit."""
+    from hil.realtime import set_realtime
     from hil.rig_physics import ClampPhysics
 
-    with contextlib.suppress(OSError):  # an MCU is real-time: best effort, if allowed
-        os.setpriority(os.PRIO_PROCESS, 0, -10)
+    # an MCU is real time: SCHED_FIFO where allowed (a nice level alone left it starved
+    # past the host's HELLO retries on a loaded machine), else a higher priority
+    if not set_realtime():
+        with contextlib.suppress(OSError):
+            os.setpriority(os.PRIO_PROCESS, 0, -10)
     master, slave = os.openpty()
     tty.setraw(slave)
     os.set_blocking(master, False)

@@ -5,8 +5,10 @@ never a computing test beside one that runs against real time (marked ``real_tim
 emulated rig at 1 kHz, signals sent after a delay, a cluster of processes with timeouts):
 those two kinds take turns, each kind two at a time (two rig tests take about one core).
 A test that must have the machine to itself (marked ``alone``: QEMU emulating the MCU, the
-soak test that brings its own load) runs alone. The computing tests run first, then the
-real-time ones, then those alone, so that the turns change rarely.
+soak test that brings its own load, and the tests whose processes compute on both cores
+against a clock: ``toggle plan``'s two planning processes signalled, a Dask cluster with
+timeouts; beside a rig test they starved its rig) runs alone. The computing tests run
+first, then the real-time ones, then those alone, so that the turns change rarely.
 """
 
 from __future__ import annotations

@@ -123,6 +123,7 @@ def test_a_killed_parent_takes_the_child_with_it(tmp_path):
         parent.kill()
 
 
+@pytest.mark.alone  # two IPOPT processes on the two cores: beside a rig test they starved it
 @pytest.mark.parametrize("how, after, status, said", [
     ("sigterm", 1.0, 128 + signal.SIGTERM, "toggle plan: terminated"),
     ("ctrl-c", 1.0, 130, "toggle plan: interrupted"),
@@ -154,6 +155,6 @@ def test_toggle_plan_trade_off_stopped_leaves_no_process(how, after, status, sai
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == status and out == ""
+    assert proc.returncode == status and out == "", err
     assert err.strip().splitlines()[-1] == said and "Traceback" not in err
     assert wait_for(lambda: not any(alive(pid) for pid in helpers), 5)

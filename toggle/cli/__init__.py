@@ -19,7 +19,7 @@ from toggle.cli.args import (
     quiet_broken_pipe,
     use_help_formatter,
 )
-from toggle.interrupts import Terminated
+from toggle.interrupts import Terminated, unwind_on_signals
 from toggle.kinematics import AssemblyError
 from toggle.params import ParameterError
 
@@ -44,16 +44,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``toggle`` script; returns the exit status.
 
     Exit codes: 0 done, 2 a usage error (a bad option, preset or value), 1 a runtime
-    failure (a file that cannot be read or written, a solver that fails), 130 Ctrl-C.
+    failure (a file that cannot be read or written, a solver that fails), 130 Ctrl-C, 143
+    SIGTERM.
     """
     args = build_parser().parse_args(join_negative_numbers(
         sys.argv[1:] if argv is None else list(argv)))
+    # from here a signal unwinds into the handlers below (while the commands' modules load
+    # and the arguments are parsed, toggle/__init__.py's end the process at once)
+    unwind_on_signals()
     command = " ".join(filter(None, (args.command, getattr(args, "kind", None))))
     try:
         return int(args.handler(args) or 0)
     except BrokenPipeError:
         return quiet_broken_pipe()
-    except Terminated:  # SIGTERM while a planning process ran: that process is stopped
+    except Terminated:  # SIGTERM: a planning process that ran is stopped
         print(f"toggle {command}: terminated", file=sys.stderr)
         return 128 + signal.SIGTERM
     except KeyboardInterrupt:

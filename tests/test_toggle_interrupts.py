@@ -1,0 +1,66 @@
+"""Ctrl-C and SIGTERM at any moment of a ``toggle`` command: exit 130/143 and one line.
+
+The console script imports numpy, scipy and CasADi before and while the command runs; a
+Ctrl-C in that first second printed a KeyboardInterrupt traceback, and a SIGTERM killed
+the process without a word. toggle/__init__.py installs the start-up handlers first
+(toggle.interrupts.install_exit_handlers), main() replaces them with handlers that unwind
+(toggle.interrupts.unwind_on_signals). The planning processes: tests/test_background.py;
+the Dask cluster: tests/test_design_cluster.py.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from toggle.interrupts import started_as
+
+pytestmark = pytest.mark.real_time
+
+TOGGLE = Path(sys.executable).with_name("toggle")
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: s after the start: the interpreter, the CLI's imports (numpy, from 0.1 s), the planner's
+#: (casadi) and its compiled problem, the solve (about 1 s on, for 3 s)
+DELAYS = (0.15, 0.4, 0.8, 1.5, 2.5)
+SAID = {signal.SIGINT: ("interrupted by SIGINT", "toggle plan: interrupted"),
+        signal.SIGTERM: ("interrupted by SIGTERM", "toggle plan: terminated")}
+
+
+@pytest.mark.parametrize("delay", DELAYS)
+@pytest.mark.parametrize("signum", SIGNALS, ids=lambda s: signal.Signals(s).name)
+def test_a_signal_at_any_moment_of_toggle_plan_exits_with_its_code_and_one_line(
+        signum: int, delay: float) -> None:
+    proc = subprocess.Popen([str(TOGGLE), "plan", "--json"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True,
+                            # as from a terminal: a background job's ignored SIGINT is not
+                            # inherited
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        out, err = proc.communicate(timeout=delay)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signum)
+        out, err = proc.communicate(timeout=60)
+    else:
+        pytest.fail(f"toggle plan ended before {delay} s: {err}")
+    assert proc.returncode == 128 + signum and out == "", err
+    assert "Traceback" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].endswith(SAID[signum]), err
+
+
+def test_only_the_toggle_command_installs_the_start_up_handlers() -> None:
+    python = "/usr/bin/python3"
+    assert started_as("toggle", "toggle.cli", ["/venv/bin/toggle", "plan"],
+                      [python, "/venv/bin/toggle", "plan"])
+    assert not started_as("toggle", "toggle.cli", ["/venv/bin/hil", "run"],
+                          [python, "/venv/bin/hil", "run"])
+    assert not started_as("toggle", "toggle.cli", ["/venv/bin/pytest"],
+                          [python, "/venv/bin/pytest"])
+    assert not started_as("toggle", "toggle.cli", ["-c"], [python, "-c", "import toggle"])
+    # this process (pytest) keeps Python's own handlers: importing toggle changed nothing
+    assert signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
