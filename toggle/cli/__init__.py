@@ -54,7 +54,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     unwind_on_signals()
     command = " ".join(filter(None, (args.command, getattr(args, "kind", None))))
     try:
-        return int(args.handler(args) or 0)
+        try:
+            return int(args.handler(args) or 0)
+        except Exception as exc:  # a signal's exception wrapped by C code: the signal
+            stop = signal_cause(exc)
+            if stop is None:
+                raise
+            raise stop from None
     except BrokenPipeError:
         return quiet_broken_pipe()
     except Terminated:  # SIGTERM: a planning process that ran is stopped
@@ -69,6 +75,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, RuntimeError) as exc:
         print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
+
+
+def signal_cause(exc: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (or :class:`Terminated`) ``exc`` is, or was raised from: a
+    signal handler's exception raised in Python code that C code called (CasADi's
+    ``DM.__array__``) comes back as SystemError("... returned a result with an exception
+    set") with the signal's exception as its cause."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return seen
+        seen = seen.__cause__ or seen.__context__
+    return None
 
 
 def one_line(exc: BaseException) -> str:
