@@ -681,7 +681,12 @@ def serve(conn: Connection, x_open: float, noise_n: float = 0.2, future: bool = 
     master, slave = os.openpty()
     tty.setraw(slave)
     os.set_blocking(master, False)
-    mcu = Mcu(ClampPhysics("chang2021", 0.0), x_open, noise_n=noise_n, future=future)
+    physics = ClampPhysics("chang2021", 0.0)
+    # the plant is built now, at rest at the open position, not in the first period (a
+    # real MCU's first period is as short as the others): on a loaded machine the build
+    # took 170 ms of that period, and the host's first HELLO went unanswered (6 x 20 ms)
+    physics(x_open, 0.0)
+    mcu = Mcu(physics, x_open, noise_n=noise_n, future=future)
     pending: deque[bytes] = deque()
     conn.send(os.ttyname(slave))
     t0 = time.monotonic()

@@ -242,14 +242,15 @@ def load_module(path: Path, name: str) -> ModuleType:
 def _run_script(script: str, spec: dict, cwd: Path, env: Mapping[str, str] | None = None
                 ) -> dict:
     run = subprocess.run(
-        [sys.executable, "-c", script, json.dumps(spec)],
+        # faulthandler: a crash of the master (Ecos once died of SIGSEGV) prints its stacks
+        [sys.executable, "-X", "faulthandler", "-c", script, json.dumps(spec)],
         capture_output=True,
         text=True,
         timeout=120,
         cwd=cwd,
         env=env,
     )
-    assert run.returncode == 0, (run.returncode, run.stderr)  # a crash leaves stderr empty
+    assert run.returncode == 0, (run.returncode, run.stderr)
     return json.loads(run.stdout.strip().splitlines()[-1])
 
 
