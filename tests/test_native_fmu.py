@@ -398,8 +398,6 @@ def test_two_instances_run_in_libcosim(native: Path, tmp_path: Path):
     assert result["last"]["long_r8"]["input_force"] != result["last"]["nominal"]["input_force"]
 
 
-# Ecos's process crashed (SIGSEGV) once in two CI runs beside another worker, never alone
-@pytest.mark.alone
 def test_ecos_drives_both_builds_and_the_python_one_twice(native: Path, unzipped: Path,
                                                          tmp_path: Path):
     """Ecos, a C++ master we did not write, sets x_cmd before every step over a closing and
