@@ -143,6 +143,7 @@ def test_ctrl_c_stops_the_local_cluster_and_keeps_the_record(tmp_path: Path) -> 
     assert search.returncode == 130
     assert stderr.splitlines()[-1] == "toggle design: interrupted", stderr
     assert "Traceback" not in stderr and 0 < kept < 2000
+    assert f"the evaluations so far are kept in {out}" in stderr
 
 
 def has_children(pid: int) -> bool:
@@ -182,3 +183,4 @@ def test_a_signal_while_the_local_cluster_starts_ends_cleanly(signum: int, said:
         stop(search)
     assert search.returncode == 128 + signum, stderr
     assert "Traceback" not in stderr and stderr.splitlines()[-1] == said, stderr
+    assert "nothing was kept" in stderr and not (tmp_path / "out").exists()

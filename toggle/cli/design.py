@@ -99,8 +99,13 @@ def run(args: argparse.Namespace) -> int:
                             seed=args.seed, scheduler=args.scheduler, workers=args.workers,
                             progress=not args.json, connect_timeout=args.connect_timeout)
     except KeyboardInterrupt:
-        print(f"toggle design: the evaluations so far are kept in {args.out}; run the same "
-              "command again to resume", file=sys.stderr)
+        from design.store import FILE
+        if (args.out / FILE).exists():  # written with the first evaluation received
+            print(f"toggle design: the evaluations so far are kept in {args.out}; run the same "
+                  "command again to resume", file=sys.stderr)
+        else:
+            print("toggle design: stopped before any evaluation finished; nothing was kept",
+                  file=sys.stderr)
         raise
     if not result.front:
         raise ParameterError(f"no design meets the targets of {targets.origin}: "
