@@ -28,7 +28,7 @@ import sys
 from types import FrameType, TracebackType
 
 from toggle import interrupts
-from toggle.interrupts import in_import, redeliver, say_interrupted
+from toggle.interrupts import in_import, redeliver
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -96,21 +96,11 @@ class SignalGuard:
             signal.signal(sig, handler)
 
 
-class _ExitCleanly:
-    """SIGINT/SIGTERM -> one line and SystemExit(130/143), never inside an import."""
-
-    def __init__(self) -> None:
-        self.pending: int | None = None
-
-    def __call__(self, signum: int, frame: FrameType | None) -> None:
-        if self.pending is None:
-            self.pending = signum
-            say_interrupted("hil", signum)
-        if in_import(frame):
-            redeliver(signum, lambda: self.pending is not None)
-            return
-        code, self.pending = 128 + self.pending, None
-        raise SystemExit(code)  # unwinds: ports close, sessions end; no traceback
+def _exit_cleanly() -> interrupts.RaiseOutsideImports:
+    """SIGINT/SIGTERM -> one line and SystemExit(130/143), never inside an import: it
+    unwinds, ports close, sessions end; no traceback."""
+    return interrupts.RaiseOutsideImports(lambda signum: SystemExit(128 + signum),
+                                          announce="hil")
 
 
 def install_exit_handlers() -> None:
@@ -123,10 +113,7 @@ def exit_cleanly_on_signals() -> None:
     """In the ``hil`` process (start-up handlers installed), once main() runs: SIGINT and
     SIGTERM print one line and raise SystemExit(130/143), so ``with`` blocks close what they
     opened. Elsewhere (main() called in a test's process) nothing changes."""
-    if interrupts.exiting_at_once():
-        handler = _ExitCleanly()
-        for sig in SIGNALS:
-            signal.signal(sig, handler)
+    interrupts.unwind_on_signals(_exit_cleanly())
 
 
 def started_as_hil(argv: list[str] | None = None, orig_argv: list[str] | None = None) -> bool:

@@ -131,7 +131,7 @@ def test_a_signal_inside_an_import_is_raised_after_it(tmp_path: Path,
 
 def test_the_exit_handler_exits_after_an_import_not_inside_it(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    previous = signal.signal(signal.SIGINT, interrupts._ExitCleanly())
+    previous = signal.signal(signal.SIGINT, interrupts._exit_cleanly())
     try:
         with pytest.raises(SystemExit) as info:
             import_swallowing(tmp_path, "swallows_at_start", monkeypatch)

@@ -80,6 +80,10 @@ def test_only_the_toggle_command_installs_the_start_up_handlers() -> None:
     assert not started_as("toggle", "toggle.cli", ["/venv/bin/pytest"],
                           [python, "/venv/bin/pytest"])
     assert not started_as("toggle", "toggle.cli", ["-c"], [python, "-c", "import toggle"])
+    # a planning process spawned from toggle: its sys.argv is the parent's
+    assert not started_as("toggle", "toggle.cli", ["/venv/bin/toggle", "plan"],
+                          [python, "-c", "from multiprocessing.spawn import spawn_main",
+                           "--multiprocessing-fork"])
     # this process (pytest) keeps Python's own handlers: importing toggle changed nothing
     assert signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -13,15 +13,11 @@ handlers are installed. The names below load their modules on first use.
 from __future__ import annotations
 
 import importlib
-import sys
 from typing import Any
 
 from toggle.interrupts import install_exit_handlers, started_as
 
-# the command's own process, not a planning or Dask process multiprocessing spawned from it
-# (it copies the parent's sys.argv; its parent stops it with SIGTERM, silently)
-if (started_as("toggle", "toggle.cli")
-        and "--multiprocessing-fork" not in getattr(sys, "orig_argv", [])):
+if started_as("toggle", "toggle.cli"):
     install_exit_handlers("toggle")
 
 _EXPORTS = {"AssemblyError": "toggle.kinematics", "HalfDims": "toggle.params",

@@ -124,9 +124,12 @@ def started_as(command: str, module: str, argv: list[str] | None = None,
                orig_argv: list[str] | None = None) -> bool:
     """True in the process of ``command``: its console script (``sys.argv[0]`` is
     .../COMMAND) or ``python -m MODULE`` (``sys.orig_argv``: while a ``-m`` package is
-    being imported, ``sys.argv[0]`` is only '-m')."""
+    being imported, ``sys.argv[0]`` is only '-m'); never in a process that multiprocessing
+    spawned from it (a planning or Dask process, which its parent stops silently)."""
     argv = sys.argv if argv is None else argv
     orig = getattr(sys, "orig_argv", []) if orig_argv is None else orig_argv
+    if "--multiprocessing-fork" in orig:
+        return False  # a process multiprocessing spawned: it copied its parent's sys.argv
     scripts = (command, f"{command}.exe", f"{command}-script.py")
     if argv and os.path.basename(argv[0]) in scripts:
         return True
@@ -143,33 +146,42 @@ def started_as(command: str, module: str, argv: list[str] | None = None,
     return False
 
 
-class RaiseOutsideImports:
-    """SIGINT -> KeyboardInterrupt, SIGTERM -> :class:`Terminated`, raised in the main
-    thread where the signal finds it, but never inside an import: there it is delivered
-    again after the import."""
+def signal_exception(signum: int) -> KeyboardInterrupt:
+    """What a signal raises in ``toggle``: KeyboardInterrupt, :class:`Terminated` for
+    SIGTERM."""
+    return Terminated(f"signal {signum}") if signum == signal.SIGTERM else KeyboardInterrupt()
 
-    def __init__(self) -> None:
+
+class RaiseOutsideImports:
+    """A signal handler: ``exception(signum)`` raised in the main thread where the signal
+    finds it, but never inside an import: there it is delivered again after the import.
+    ``announce``: the command that says ``interrupted by SIGNAME`` at the first signal."""
+
+    def __init__(self, exception: Callable[[int], BaseException] = signal_exception,
+                 announce: str | None = None) -> None:
+        self.exception, self.announce = exception, announce
         self.pending: int | None = None
 
     def __call__(self, signum: int, frame: FrameType | None) -> None:
         if self.pending is None:
             self.pending = signum
+            if self.announce is not None:
+                say_interrupted(self.announce, signum)
         if in_import(frame):
             redeliver(signum, lambda: self.pending is not None)
             return
         signum, self.pending = self.pending, None
-        if signum == signal.SIGTERM:
-            raise Terminated(f"signal {signum}")
-        raise KeyboardInterrupt
+        raise self.exception(signum)
 
 
-def unwind_on_signals() -> None:
+def unwind_on_signals(handler: RaiseOutsideImports | None = None) -> None:
     """In a command's process (start-up handlers installed), once its main() runs: SIGINT
-    and SIGTERM raise KeyboardInterrupt and :class:`Terminated`, which main() turns into one
-    line and 130/143 after ``with`` blocks closed what they opened. Elsewhere (main()
-    called in a test's process) nothing changes."""
+    and SIGTERM raise through ``handler`` (default: KeyboardInterrupt and
+    :class:`Terminated`, which ``toggle``'s main() turns into one line and 130/143) after
+    ``with`` blocks closed what they opened. Elsewhere (main() called in a test's process)
+    nothing changes."""
     if exiting_at_once():
-        handler = RaiseOutsideImports()
+        handler = handler or RaiseOutsideImports()
         for sig in SIGNALS:
             signal.signal(sig, handler)
 
