@@ -21,7 +21,7 @@ import numpy as np
 from bench_fmu_trivial import TRIVIAL_SLAVE, time_step
 from fmpy import extract
 
-from toggle.fmu_build import build_fmu
+from fmu_src.build import build_fmu
 from toggle.kinematics import stroke_limits
 from toggle.plant import PlantOutputs, configure
 

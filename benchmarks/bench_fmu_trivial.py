@@ -19,8 +19,8 @@ from pathlib import Path
 
 from fmpy import extract
 
-from toggle.fmu_build import build_fmu
-from toggle.fmu_host import start_slave
+from fmu_src.build import build_fmu
+from fmu_src.host import start_slave
 
 REPO = Path(__file__).resolve().parents[1]
 TRIVIAL_SLAVE = REPO / "tests" / "fmu_fixtures" / "trivial_slave.py"

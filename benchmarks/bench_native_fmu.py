@@ -33,8 +33,8 @@ from bench_fmu import STEP, clamp_case
 from bench_fmu_trivial import TRIVIAL_SLAVE, time_step
 from fmpy import extract
 
-from toggle.fmu_build import build_fmu
-from toggle.native_fmu import build_native_fmu
+from fmu_src.build import build_fmu
+from fmu_src.native_build import build_native_fmu
 from toggle.plant import PlantOutputs
 
 PLAIN_SLAVE = Path(__file__).with_name("trivial_plain_slave.py")
@@ -121,7 +121,7 @@ def c_loop_us(unzip_dir: Path, work: Path, x_cmd: str, outputs: list[str],
     """µs per set-input + doStep + get outputs called from C (no fmpy), one 1e6-step run."""
     from fmpy import read_model_description
 
-    from toggle.native_fmu import fmi2_headers
+    from fmu_src.c_code import fmi2_headers
 
     source, exe = work / "loop.c", work / "loop"
     if not exe.exists():
@@ -144,7 +144,7 @@ def trivial_c_fmu(work: Path) -> Path:
     """benchmarks/trivial_c_fmu.c compiled and zipped as an FMI 2.0 Co-Simulation FMU."""
     import zipfile
 
-    from toggle.native_fmu import fmi2_headers
+    from fmu_src.c_code import fmi2_headers
 
     lib = work / "TrivialC.so"
     subprocess.run(["gcc", "-std=c99", "-O2", "-shared", "-fPIC", "-I", str(fmi2_headers()),

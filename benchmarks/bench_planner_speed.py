@@ -1,7 +1,8 @@
 """The slow planning answers of issue 30, before and after: wall and CPU time, same answer.
 
-Runs each command with a baseline ``toggle`` (``--before``, default the untouched main
-checkout's /work/main/.venv/bin/toggle) and with this checkout's, in the same run, the
+Runs each command with a baseline ``toggle`` (``--before``: the ``toggle`` script of
+another checkout's venv, e.g. one of the commit before the change) and with this
+checkout's, in the same run, the
 compiled-code cache warm (``--warm-up``: each command once untimed first; by default on
 this checkout's side, whose changed code compiles for tens of seconds at first). Prints a
 table: median wall time and CPU time (the process and its children: on a shared machine
@@ -9,7 +10,7 @@ the CPU time is the steadier figure) of each side, their ratio, the exit status 
 input force of the first / last plan; a refusal's exit status), and whether the answers
 agree within 1e-4 relative.
 
-    python benchmarks/bench_planner_speed.py [--before PATH] [--repeat N] [--warm-up SIDE]
+    python benchmarks/bench_planner_speed.py --before PATH [--repeat N] [--warm-up SIDE]
 """
 
 from __future__ import annotations
@@ -69,7 +70,8 @@ def same(a: list[float], b: list[float]) -> bool:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--before", type=Path, default=Path("/work/main/.venv/bin/toggle"))
+    parser.add_argument("--before", type=Path, required=True,
+                        help="the baseline toggle script, e.g. OTHER_CHECKOUT/.venv/bin/toggle")
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--warm-up", choices=("none", "before", "after", "both"),
                         default="after", help="run every command of that side once untimed "

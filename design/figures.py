@@ -10,8 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from design.objectives import OBJECTIVES, Evaluation
+from design.objectives import Evaluation
 from design.placement import Placement
+from design.targets import OBJECTIVES
 from toggle.plots import plt, save_figure
 
 #: Pairs of objectives drawn at most (the first objectives' pairs).

@@ -26,56 +26,12 @@ from typing import Any
 
 import numpy as np
 
-from design.targets import TARGETS, VARIABLES, Targets
+from design.targets import OBJECTIVES, TARGETS, VARIABLES, Targets
 from toggle.elastics import ClampingError, analyse_clamping
 from toggle.kinematics import AssemblyError, output_position, sensitivities, stroke_limits
 from toggle.params import HalfDims, Mechanism, ParameterError
 from toggle.statics import StaticsError
 from toggle.study import angle_grid, angle_measures, criteria
-
-
-@dataclass(frozen=True)
-class Objective:
-    """One objective: ``sense`` +1 to maximise, -1 to minimise; ``needs`` the preset's
-    sections it takes."""
-
-    key: str
-    label: str
-    unit: str
-    sense: int
-    needs: tuple[str, ...] = ()
-
-    def check(self, base: Mechanism, origin: str) -> None:
-        """Refuse an objective the base preset cannot evaluate, by name."""
-        for section in self.needs:
-            if getattr(base, section) is None:
-                raise ParameterError(f"{origin}: objective {self.key} needs the [{section}] "
-                                     f"section, which preset {base.name} does not have")
-
-    @property
-    def header(self) -> str:
-        return f"{self.key} ({self.unit})"
-
-
-#: Every objective a targets file may pick (``toggle design --help`` lists them).
-OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
-    Objective("force_amplification", "force amplification near lock-up (seed 004)", "1", 1),
-    Objective("stroke_ratio", "platen over crosshead stroke, open clamp", "1", 1),
-    Objective("velocity_ratio_peak", "peak platen over crosshead speed", "1", 1),
-    Objective("coping_angle_min", "minimum coping angle (seed 004)", "rad", 1),
-    Objective("velocity_ratio_close", "platen over crosshead speed entering mold protection",
-              "1", -1),
-    Objective("close_time", "closing time bound under the motor's limits", "s", -1,
-              ("clamp", "drive", "dynamics")),
-    Objective("thrust_peak", "peak crosshead thrust clamping to the force", "N", -1,
-              ("clamp",)),
-    Objective("link_stress", "peak axial link stress, clamped", "Pa", -1, ("clamp",)),
-    Objective("tiebar_stress", "tie-bar stress, clamped", "Pa", -1, ("clamp",)),
-    Objective("tolerance_cost", "cost of tolerances at seed 003's reliabilities", "1", -1),
-    Objective("tolerance_sensitivity", "RSS of platen-position sensitivities at the toggle",
-              "1", -1),
-    Objective("installation_length", "axial length of the linkage", "m", -1),
-)}
 
 #: Measures recorded for every feasible candidate besides the objectives, with units.
 MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_toggle": "m",

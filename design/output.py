@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from design.objectives import MEASURES, OBJECTIVES, Evaluation, half_dims
-from design.targets import VARIABLES, Targets
-from toggle.cli.args import atomic_path
+from design.objectives import MEASURES, Evaluation, half_dims
+from design.targets import OBJECTIVES, VARIABLES, Targets
+from toggle.files import atomic_path
 from toggle.params import DIMENSIONS, preset_table, select_group, split_group
 
 
@@ -56,15 +57,17 @@ def write_parquet(path: Path, targets: Targets, evaluations: Sequence[Evaluation
     return path
 
 
-def preset_dict(targets: Targets, evaluation: Evaluation, name: str) -> dict[str, Any]:
-    """The design as a preset table (SI), ready for :func:`toml_text`."""
+def preset_dict(targets: Targets, evaluation: Evaluation, name: str,
+                origin: str | None = None) -> dict[str, Any]:
+    """The design as a preset table (SI), ready for :func:`toml_text`; ``origin``: how its
+    description names the targets file (default: as the targets name it)."""
     base, group = split_group(targets.preset)
     table = select_group(preset_table(base)[0], group, targets.origin)
     table = {k: v for k, v in table.items() if k not in ("lower", "upper", "half")}
     dims = half_dims(evaluation.variables)
     table["name"] = name
     table["description"] = (f"designed by toggle design from {targets.preset} for "
-                            f"{targets.origin} (key {evaluation.key})")
+                            f"{origin or targets.origin} (key {evaluation.key})")
     table["half"] = {d: getattr(dims, d) for d in DIMENSIONS}
     if "clamp" in table:
         table["clamp"] = dict(table["clamp"], x_open=evaluation.metrics["x_open"])
@@ -98,10 +101,13 @@ def toml_text(table: Mapping[str, Any], prefix: str = "") -> str:
 
 def write_preset(path: Path, targets: Targets, evaluation: Evaluation,
                  name: str | None = None) -> Path:
-    """Write a design as a preset TOML file."""
+    """Write a design as a preset TOML file. It names its targets file relative to its own
+    folder, never by the machine's absolute path (the file moves with the project)."""
     stem = name or f"design-{evaluation.key[:12]}"
-    text = (f"# {stem}: written by toggle design (SI units); load with --preset {path}\n"
-            + toml_text(preset_dict(targets, evaluation, stem)))
+    origin = (os.path.relpath(targets.origin, path.parent)
+              if Path(targets.origin).is_file() else targets.origin)
+    text = (f"# {stem}: written by toggle design (SI units); load it with --preset and its "
+            f"path\n" + toml_text(preset_dict(targets, evaluation, stem, origin)))
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return path

@@ -14,8 +14,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from design.objectives import OBJECTIVES, Evaluation, Evaluator
-from design.targets import Targets
+from design.objectives import Evaluation, Evaluator
+from design.targets import OBJECTIVES, Targets
 from toggle.kinematics import half_pose, stroke_limits
 from toggle.params import Mechanism, load_preset, preset_groups, split_group
 

@@ -16,10 +16,10 @@ from pathlib import Path
 
 from pythonfmu import DefaultExperiment
 
-from toggle import fmu_state
+from fmu_src import state as fmu_state
+from fmu_src.slave import DeclaredSlave, Var
+from fmu_src.state import StateError
 from toggle.drive import reflected_mass, travel_per_radian
-from toggle.fmu_slave import DeclaredSlave, Var
-from toggle.fmu_state import StateError
 from toggle.kinematics import stroke_limits
 from toggle.params import (
     DYNAMICS_PARAMETERS,

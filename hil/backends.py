@@ -237,10 +237,9 @@ def default_fmu_path(preset: str = "chang2021") -> Path:
     build/<preset>/ToggleClamp.fmu for another shipped preset; for a preset file,
     build/presets/<its stem>-<hash of its bytes>/ToggleClamp.fmu: one FMU per preset, and a
     new one when the file is edited (its FMU bundles the file as it was)."""
-    from toggle.fmu_build import PACKAGE_DIR
+    from fmu_src.build import ROOT
 
-    root = PACKAGE_DIR.parent
-    base = (root if (root / "pyproject.toml").is_file() else Path.cwd()) / "build"
+    base = (ROOT if (ROOT / "pyproject.toml").is_file() else Path.cwd()) / "build"
     path = preset_file(preset)
     if path is not None:
         digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
@@ -251,12 +250,12 @@ def default_fmu_path(preset: str = "chang2021") -> Path:
 def ensure_fmu(path: Path | None = None, preset: str = "chang2021") -> Path:
     """The FMU of ``preset`` at ``path``, built first if it is missing or older than the
     model sources."""
-    from toggle.fmu_build import DEFAULT_SLAVE, PACKAGE_DIR, build_fmu
-    from toggle.fmu_guard import GUARD_SOURCE
+    from fmu_src.build import FMU_SRC_DIR, PACKAGE_DIR, build_fmu
+    from fmu_src.guard_build import GUARD_SOURCE
 
     path = Path(path) if path is not None else default_fmu_path(preset)
-    sources = [*PACKAGE_DIR.rglob("*.py"), *PACKAGE_DIR.rglob("*.toml"), DEFAULT_SLAVE,
-               GUARD_SOURCE]
+    sources = [*PACKAGE_DIR.rglob("*.py"), *PACKAGE_DIR.rglob("*.toml"),
+               *FMU_SRC_DIR.glob("*.py"), GUARD_SOURCE]
     newest = max(p.stat().st_mtime for p in sources if p.is_file())
     if not path.is_file() or path.stat().st_mtime < newest:
         built = build_fmu(path.parent, preset=preset)
@@ -284,7 +283,7 @@ class FmuPlant(Plant):
     def _activate(self) -> None:
         from fmpy import extract
 
-        from toggle.fmu_host import start_slave
+        from fmu_src.host import start_slave
 
         s = self.setup
         x_open = s.stroke[0]

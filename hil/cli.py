@@ -36,7 +36,7 @@ from hil.run_settings import (
     resolve_settings,
 )
 from hil.samples import Trajectory, TrajectoryError
-from toggle.cli.args import (
+from toggle.args import (
     add_version,
     join_negative_numbers,
     path,

@@ -14,7 +14,7 @@ from hil import protocol as p
 from hil.backends import fault_names
 from hil.homing import home
 from hil.serial_link import CommandError, RigError, SerialLink
-from toggle.cli.args import PROBABILITY, TIME, number
+from toggle.args import PROBABILITY, TIME, number
 
 
 def mold_position(text: str) -> float | str:

@@ -15,7 +15,7 @@ from hil.rsm import (
     plot_rsm,
     toggle_cos_theta8,
 )
-from toggle.cli.args import path
+from toggle.args import path
 from toggle.json_text import json_text
 from toggle.params import load_preset
 

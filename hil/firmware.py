@@ -29,7 +29,7 @@ FIRMWARE = ROOT / "firmware"
 CORE_DIR, SIM_DIR, HOST_DIR = FIRMWARE / "core", FIRMWARE / "sim", FIRMWARE / "host"
 BUILD_DIR = ROOT / "build" / "firmware"
 LIBRARY = "librigfw.so"
-#: Flags of the firmware's own C (core, sim, host glue); the FMU's C gets toggle.native_fmu's.
+#: Flags of the firmware's own C (core, sim, host glue); the FMU's C gets fmu_src.native_build's.
 FIRMWARE_CFLAGS = ("-std=c11", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror", "-Wconversion",
                    "-Wshadow", "-fvisibility=hidden")  # core.mk's CORE_CFLAGS and more
 #: With RIGFW_SANITIZE=1 in the environment the host build is instrumented with
@@ -79,11 +79,11 @@ def build_host_firmware(preset: str = "chang2021") -> Path:
     edit rebuilds and an unchanged tree reuses the library. RuntimeError with gcc's stderr
     when a compilation fails.
     """
-    from toggle.native_fmu import (
+    from fmu_src.c_code import fmi2_headers
+    from fmu_src.native_build import (
         CFLAGS,
         GENERATED,
         GENERATED_CFLAGS,
-        fmi2_headers,
         generate_sources,
     )
 

@@ -146,13 +146,14 @@ def build_qemu_image(setup: RigSetup, hw: RigHardware, seed: int) -> Path:
     """Build (or reuse) the QEMU image of the firmware on the simulated rig of ``setup``;
     return its ELF file.
 
-    The FMU's C is generated (toggle.native_fmu.generate_sources) with the FMI headers and
+    The FMU's C is generated (fmu_src.native_build.generate_sources) with the FMI headers and
     rig_setup.h into build/firmware/qemu-<preset>-<hash>/, whose hash covers those files,
     the firmware's sources and the board's Makefile; ``make -C firmware/board qemu GEN=...``
     then links build/firmware/board-qemu-<preset>-<hash>/rig.elf. RuntimeError with the
     compiler's output when the build fails, or naming the missing Debian packages.
     """
-    from toggle.native_fmu import fmi2_headers, generate_sources
+    from fmu_src.c_code import fmi2_headers
+    from fmu_src.native_build import generate_sources
 
     missing = qemu_available(need_qemu=False)
     if missing:

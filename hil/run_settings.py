@@ -18,8 +18,8 @@ from typing import Any
 
 from controllers.profiles import read_profile_settings
 from hil.backends import MAX_SPEED, RigSetup, simulated_speed_limit
-from toggle.cli.args import check_writable_dir
 from toggle.elastics import clamp_stroke
+from toggle.files import check_writable_dir
 from toggle.params import ParameterError, load_preset, tomllib
 
 #: Built-in defaults of every setting a --config file may hold.

@@ -26,8 +26,8 @@ from types import ModuleType
 
 import numpy as np
 
-from toggle.fmu_build import DEFAULT_SLAVE
-from toggle.fmu_slave import Var
+from fmu_src.build import DEFAULT_SLAVE
+from fmu_src.slave import Var
 
 FRESH_PROCESS = textwrap.dedent(
     """
@@ -42,11 +42,11 @@ FRESH_PROCESS = textwrap.dedent(
     signal = np.array(list(zip(times, values)), dtype=[("time", float), (name, float)])
     res = simulate_fmu(str(unzip), stop_time=spec["stop_time"], step_size=spec["step_size"],
                        input=signal, start_values=spec["start_values"], output=spec["output"])
-    bundled = [m.__file__ for n, m in sys.modules.items() if n.startswith("toggle_")
+    bundled = [m.__file__ for n, m in sys.modules.items() if n.startswith(("toggle_", "fmu_src_"))
                and "." not in n and str(getattr(m, "__file__", "")).endswith("__init__.py")]
     print(json.dumps({"last": {n: float(res[n][-1]) for n in spec["output"]},
                       "toggle": bundled[0] if bundled else None,
-                      "host_toggle": "toggle" in sys.modules}))
+                      "host_toggle": bool({"toggle", "fmu_src"} & set(sys.modules))}))
     """
 )
 
@@ -136,8 +136,8 @@ def built_fmu(kind: str = "clamp") -> Path:
     """An FMU built once per test session and shared by the test modules: ``"clamp"`` (the
     pythonfmu build of chang2021), ``"native"`` (its native build), ``"trivial"`` and
     ``"staircase"`` (the slaves in fmu_fixtures/). Read-only: extract it to use it."""
-    from toggle.fmu_build import build_fmu
-    from toggle.native_fmu import build_native_fmu
+    from fmu_src.build import build_fmu
+    from fmu_src.native_build import build_native_fmu
 
     folder = Path(tempfile.mkdtemp(prefix=f"toggle_{kind}_fmu_"))
     atexit.register(shutil.rmtree, folder, ignore_errors=True)
@@ -149,7 +149,7 @@ def built_fmu(kind: str = "clamp") -> Path:
 
 def compile_c_host(folder: Path) -> Path:
     """tests/fmu_c_host.c (a C master: dlopen, no Python, no environment) compiled."""
-    from toggle.native_fmu import fmi2_headers
+    from fmu_src.c_code import fmi2_headers
 
     host = folder / "host"
     subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(fmi2_headers()),

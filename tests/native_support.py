@@ -11,7 +11,8 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from toggle.native_fmu import build_native_fmu, fmi_headers
+from fmu_src.c_code import fmi_headers
+from fmu_src.native_build import build_native_fmu
 
 _ROOT = Path(tempfile.mkdtemp(prefix="toggle_native_tests_"))
 atexit.register(shutil.rmtree, _ROOT, ignore_errors=True)

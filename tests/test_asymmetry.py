@@ -21,9 +21,9 @@ from toggle.asymmetry import (
     toggle_force,
 )
 from toggle.calibration import calibrate, compare, load_force_table
-from toggle.cli import main
 from toggle.kinematics import AssemblyError
 from toggle.params import load_preset
+from toggle_cli import main
 
 MECH = load_preset("chang2021")
 #: Prediction tolerance for Tables 7-8 (issue 8).

@@ -15,10 +15,10 @@ from controllers import cam
 from controllers.limits import drive_limits
 from controllers.planner import default_duration, plan_config, planner_for
 from controllers.profiles import s_curve
-from toggle.cli import main
+from fmu_src.build import build_fmu
 from toggle.elastics import clamp_stroke
-from toggle.fmu_build import build_fmu
 from toggle.params import load_preset
+from toggle_cli import main
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from toggle.cli import main
+from toggle_cli import main
 
 MM = 1e-3
 

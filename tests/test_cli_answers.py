@@ -14,10 +14,10 @@ from matplotlib.figure import Figure
 
 from hil.cli import build_parser as hil_parser
 from hil.cli import main as hil
-from toggle.cli import build_parser as toggle_parser
-from toggle.cli import main as toggle
 from toggle.params import load_preset
 from toggle.rig_tables import CHANG2021_READING
+from toggle_cli import build_parser as toggle_parser
+from toggle_cli import main as toggle
 
 
 def answer(main, argv: list[str], capsys) -> tuple[int, str, str]:
@@ -42,7 +42,7 @@ def regular(tmp_path: Path) -> Path:
 
 
 def test_plan_refuses_an_unwritable_out_before_solving(monkeypatch, capsys, regular):
-    import toggle.cli.plan as plan_cli
+    import toggle_cli.plan as plan_cli
 
     monkeypatch.setattr(plan_cli, "planner_for", lambda *a, **k: pytest.fail("solved first"))
     code, _, err = answer(toggle, ["plan", "--out", str(regular / "plan.csv")], capsys)
@@ -232,7 +232,7 @@ def test_tables_rows_options_are_never_silently_unused(capsys):
 def test_plan_masses_take_commas_or_words_and_refuse_a_field_twice(capsys):
     """``--masses a=1 b=2`` (words, like every other list option) was refused with the
     top-level usage ('unrecognized arguments: b=2'); a field given twice took the last."""
-    from toggle.cli.plan import _masses
+    from toggle_cli.plan import _masses
 
     assert _masses(["platen_friction=5", "platen_rate=2"]) == _masses(
         ["platen_friction=5,platen_rate=2"]) == {"platen_friction": 5.0, "platen_rate": 2.0}
@@ -280,7 +280,7 @@ def test_version_of_both_commands(capsys):
 
 
 def test_piping_into_head_ends_quietly():
-    code = ("import sys; from toggle.cli import main; sys.exit(main(['kinematics', "
+    code = ("import sys; from toggle_cli import main; sys.exit(main(['kinematics', "
             "'--points', '20000']))")
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)

@@ -21,9 +21,9 @@ from hil.mcu_model import RigHardware
 from hil.rig_emulator import spawn_emulator
 from hil.rig_physics import ClampPhysics
 from hil.samples import Trajectory
-from toggle.cli import main
 from toggle.elastics import clamp_stroke
 from toggle.params import load_preset
+from toggle_cli import main
 
 HOLD, EJECT = 2.0, 0.5
 

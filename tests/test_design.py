@@ -8,6 +8,7 @@ import csv
 import io
 import json
 import math
+import os
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import replace
 from pathlib import Path
@@ -18,18 +19,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from controllers.limits import drive_limits
-from design.objectives import OBJECTIVES, Evaluator, half_dims
+from design.objectives import Evaluator, half_dims
 from design.output import write_preset
 from design.placement import design_values, place, reference_designs
 from design.search import pareto_front, run_search
-from design.targets import VARIABLES, load_targets, targets_from_dict
+from design.targets import OBJECTIVES, VARIABLES, load_targets, targets_from_dict
 from design.timing import close_time_bound
-from toggle.cli import main
 from toggle.elastics import analyse_clamping
 from toggle.kinematics import half_pose, stroke_limits
 from toggle.params import ParameterError, load_preset
 from toggle.plant import PlantConfig
 from toggle.study import angle_grid, angle_measures, criteria
+from toggle_cli import main
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "design" / "examples"
 SM55, LI_MICRO = EXAMPLES / "sm55.toml", EXAMPLES / "li_micro.toml"
@@ -219,6 +220,9 @@ def test_a_design_preset_carries_the_clamp_drive_and_masses(sm55, tmp_path: Path
     assert mech.clamp == replace(base.clamp, x_open=mech.clamp.x_open)
     assert mech.lower == base.lower.replace(r4c=mech.lower.r4c)
     assert mech.name == "sm55-again"
+    text = path.read_text()  # the targets file named relative to the preset, not absolutely
+    assert str(tmp_path) not in text and str(SM55.parent) not in text
+    assert f"for {os.path.relpath(SM55, tmp_path)} (key" in text
 
 
 def test_seed_004_groups_are_on_the_front_or_dominated_by_a_named_design(tmp_path: Path

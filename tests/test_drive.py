@@ -11,7 +11,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from toggle.cli import main
 from toggle.drive import (
     contact_from_pulses,
     encoder_pulses,
@@ -26,6 +25,7 @@ from toggle.elastics import ClampingError, analyse_clamping
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_mechanism, load_preset
 from toggle.plant import DriveState, PlantError, configure, follow, lag_transition, plant_outputs
+from toggle_cli import main
 
 SM55 = load_preset("lin2003_sm55")
 RPM = 2 * math.pi / 60  # rad/s per rpm
@@ -294,7 +294,7 @@ def test_the_default_drive_follows_any_staircase_at_any_fixed_step(h, levels, ho
     refused, and far within the input link's bounds (at most ~40 m/s^2 observed)."""
     from fmu_support import load_module
 
-    from toggle.fmu_build import DEFAULT_SLAVE
+    from fmu_src.build import DEFAULT_SLAVE
 
     table = {v.name: v for v in load_module(DEFAULT_SLAVE, "clamp_fmu_drive").ToggleClamp.VARIABLES}
     bandwidth, damping, x_cmd = (table[n] for n in ("drive_bandwidth", "drive_damping", "x_cmd"))

@@ -10,7 +10,6 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from toggle.cli import main
 from toggle.elastics import (
     ClampingError,
     analyse_clamping,
@@ -21,6 +20,7 @@ from toggle.elastics import (
     contact_position,
 )
 from toggle.params import load_preset
+from toggle_cli import main
 
 KGF = 9.80665  # N, the paper's unit of force
 SM55 = load_preset("lin2003_sm55")

@@ -19,9 +19,9 @@ from fmu_support import (
     validator_problems,
 )
 
-from toggle.fmu_build import extend_model_description
-from toggle.fmu_host import start_slave
-from toggle.fmu_slave import Var
+from fmu_src.build import extend_model_description
+from fmu_src.host import start_slave
+from fmu_src.slave import Var
 
 SLAVE_FILE = Path(__file__).parent / "fmu_fixtures" / "trivial_slave.py"
 TRIVIAL = load_module(SLAVE_FILE, "trivial_slave_inproc")
@@ -81,18 +81,21 @@ def test_description_carries_units_limits_and_structure(fmu: Path):
 
 
 def test_bundle_is_the_slave_and_the_modules_it_uses_under_a_name_of_their_own(fmu: Path):
-    """No top-level ``toggle`` (it would be shared with the host's and other FMUs'), only
-    the modules the slave imports, and no binary for a platform no test loads."""
+    """No top-level ``toggle`` or ``fmu_src`` (they would be shared with the host's and
+    other FMUs'), only the modules the slave imports, and no binary for a platform no test
+    loads."""
     with zipfile.ZipFile(fmu) as archive:
         names = set(archive.namelist())
         stub = archive.read("resources/slavemodule.txt").decode().strip()
-    package = stub.removesuffix("_slave")
-    assert package.startswith("toggle_") and len(package) == len("toggle_") + 12
+    digest = stub.removeprefix("toggle_").removesuffix("_slave")
+    assert len(digest) == 12 and int(digest, 16) >= 0
+    package = f"fmu_src_{digest}"
     assert {f"resources/{stub}.py", f"resources/{package}/__init__.py",
-            f"resources/{package}/fmu_slave.py", f"resources/{package}/trivial_slave.py",
+            f"resources/{package}/slave.py", f"resources/{package}/trivial_slave.py",
             "binaries/linux64/TrivialGain.so", "binaries/linux64/pythonfmu-export.so"} <= names
-    assert not any(n.startswith(("resources/toggle/", "binaries/win64")) for n in names)
-    assert not any(n.startswith(f"resources/{package}/cli") for n in names)
+    assert not any(n.startswith(("resources/toggle/", "resources/fmu_src/", "binaries/win64"))
+                   for n in names)
+    assert not any(n.startswith(f"resources/{package}/build") for n in names)
 
 
 def test_output_dependencies_are_written_as_indices():

@@ -32,9 +32,9 @@ from fmu_support import (
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fmu_src.build import DEFAULT_SLAVE
+from fmu_src.host import start_slave
 from toggle.drive import motor_torque
-from toggle.fmu_build import DEFAULT_SLAVE
-from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
 from toggle.params import DYNAMICS_PARAMETERS, Dynamics, dynamics_fields, dynamics_parameters
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs

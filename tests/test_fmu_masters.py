@@ -29,8 +29,8 @@ from fmpy.fmi2 import fmi2Error, fmi2OK, fmi2Terminated
 from fmu_support import built_fmu, compile_c_host, load_module
 from fmu_support import run_c_host as _run_host
 
-from toggle.fmu_build import DEFAULT_SLAVE, PACKAGE_DIR
-from toggle.fmu_host import start_slave
+from fmu_src.build import DEFAULT_SLAVE, PACKAGE_DIR
+from fmu_src.host import start_slave
 from toggle.kinematics import stroke_limits
 from toggle.plant import DriveState, configure, follow, plant_outputs
 
@@ -143,7 +143,7 @@ def test_two_versions_of_the_project_run_side_by_side_in_one_process(fmu: Path, 
     other = _script(f"""
         import json, sys
         sys.path.insert(0, {str(copy)!r})
-        from toggle.fmu_build import build_fmu
+        from fmu_src.build import build_fmu
         print(json.dumps({{"fmu": str(build_fmu({str(tmp_path / 'other')!r}))}}))
     """, cwd=copy)["fmu"]
     runs = _script(SIMULATE, json.dumps([[str(fmu), {}], [other, {}], [str(fmu), {}]]),
@@ -203,7 +203,7 @@ STATE_RUN = """
     import json, sys
     from pathlib import Path
     from fmpy import extract
-    from toggle.fmu_host import start_slave
+    from fmu_src.host import start_slave
     spec = json.loads(sys.argv[1])
     folder = extract(spec["fmu"])
     slave, refs = start_slave(Path(folder), "state", spec["start"])
@@ -357,7 +357,7 @@ def test_log_categories_filter_information_messages(unzipped: Path, logging: boo
     md = read_model_description(str(unzipped))
     from fmpy.fmi2 import FMU2Slave
 
-    from toggle.fmu_host import log_callbacks
+    from fmu_src.host import log_callbacks
 
     log: list[tuple[int, str]] = []
     slave = FMU2Slave(guid=md.guid, unzipDirectory=str(unzipped),
@@ -408,7 +408,7 @@ def test_fmi_compliance_checker_finds_no_problem(fmu: Path, tmp_path: Path, clos
 
 def test_one_fmu_per_preset_with_its_values_as_start_values(tmp_path: Path,
                                                            capsys: pytest.CaptureFixture):
-    from toggle.cli import main
+    from toggle_cli import main
 
     assert main(["build-fmu", "--preset", "lin2003_sm55", "--out", str(tmp_path)]) == 0
     md = read_model_description(capsys.readouterr().out.strip())

@@ -35,9 +35,9 @@ from fmpy.fmi2 import fmi2Error
 from fmu_support import built_fmu, load_module
 from pythonfmu.enums import Fmi2Status
 
-from toggle import fmu_state
-from toggle.fmu_build import DEFAULT_SLAVE
-from toggle.fmu_host import start_slave
+from fmu_src import state as fmu_state
+from fmu_src.build import DEFAULT_SLAVE
+from fmu_src.host import start_slave
 from toggle.kinematics import stroke_limits
 from toggle.plant import configure
 

@@ -154,7 +154,7 @@ def test_profile_away_from_the_start_is_approached_and_a_too_fast_one_refused(
 def test_a_replayed_plan_reproduces_the_planners_peak(tmp_path, capsys) -> None:
     """`toggle plan --out` carries the mold, preset and friction; `hil run --profile` uses them
     (on the clamp it was planned for: the model, --no-as-built)."""
-    from toggle.cli import main as toggle_main
+    from toggle_cli import main as toggle_main
 
     profile = tmp_path / "p.csv"
     assert toggle_main(["plan", "--preset", "chang2021", "--duration", "3", "--json",
@@ -202,7 +202,7 @@ def test_the_default_job_plans_for_the_rig_as_built(tmp_path) -> None:
 
 def test_either_fmu_gives_the_same_run(tmp_path) -> None:
     """The pythonfmu FMU (default, or given) and the native FMU: identical summaries."""
-    from toggle.native_fmu import build_native_fmu
+    from fmu_src.native_build import build_native_fmu
 
     argv = ["run", "--speed", "40e-3", "--cycles", "1", "--quiet"]
     native = build_native_fmu(tmp_path / "native")

@@ -1,30 +1,44 @@
-"""The packages' layers: toggle (the plant and its analysis) <- controllers (the planner)
-<- hil (the rig), and toggle <- controllers <- design (the clamp's synthesis). A lower layer
-imports nothing of a higher one, and design and hil nothing of each other."""
+"""The floors of the project (tests/import_graph.py): every import of every module runs down
+a floor or stays in its package, packages on one floor import nothing of each other, every
+package has a floor, and no modules import each other in a circle."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
-import pytest
-
-LAYERS = {
-    "toggle": ("toggle.plant", "toggle.plots", "toggle.rig_tables", "toggle.fmu_build",
-               "toggle.cli.args"),
-    "controllers": ("controllers.planner", "controllers.profiles", "controllers.bounds"),
-    "design": ("design.search", "design.runner", "design.output", "design.placement",
-               "design.figures", "design.timing"),
-    "hil": ("hil.cli", "hil.experiment", "hil.backends"),
-}
-HIGHER = {"toggle": ("controllers", "hil", "design"), "controllers": ("hil", "design"),
-          "design": ("hil",), "hil": ("design",)}
+from import_graph import FLOORS, ROOT, cycles, findings, module_graph, packages
 
 
-@pytest.mark.parametrize("layer", sorted(LAYERS))
-def test_a_layer_imports_nothing_above_it(layer: str) -> None:
-    code = (f"import sys\nimport {', '.join(LAYERS[layer])}\n"
+def test_every_import_runs_down_and_nothing_is_circular() -> None:
+    assert findings() == []
+
+
+def test_every_package_folder_has_a_floor() -> None:
+    assert set(packages()) == set(FLOORS)
+
+
+def test_the_model_imports_nothing_above_it_at_run_time() -> None:
+    """Beyond the source: importing the model's modules loads no other package."""
+    modules = sorted(m for m in module_graph() if m.split(".")[0] == "toggle")
+    code = ("import importlib, sys\n"
+            f"for m in {modules!r}: importlib.import_module(m)\n"
             "print(sorted({m.split('.')[0] for m in sys.modules}))")
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                            check=True).stdout
-    assert not [pkg for pkg in HIGHER[layer] if f"'{pkg}'" in loaded], loaded
+                            check=True, cwd=ROOT).stdout
+    assert not [pkg for pkg in FLOORS if pkg != "toggle" and f"'{pkg}'" in loaded], loaded
+
+
+def test_the_checks_find_an_import_up_a_circle_and_an_unplaced_package(tmp_path: Path) -> None:
+    """The checker itself: a tree with each fault is reported."""
+    for pkg, text in {"toggle": "from controllers import plan\n",
+                      "controllers": "", "extra": ""}.items():
+        (tmp_path / pkg).mkdir()
+        (tmp_path / pkg / "__init__.py").write_text(text)
+    (tmp_path / "controllers" / "plan.py").write_text("from controllers import other\n")
+    (tmp_path / "controllers" / "other.py").write_text("from controllers.plan import x\n")
+    found = findings(tmp_path)
+    assert "package extra/ has no floor in tests/import_graph.py FLOORS" in found
+    assert any("toggle (floor 0) imports controllers.plan (floor 1): up" in f for f in found)
+    assert cycles(module_graph(tmp_path)) == [["controllers.other", "controllers.plan"]]

@@ -18,8 +18,8 @@ from fmpy import extract
 from fmu_support import close_slave
 from native_support import native_build, native_sources
 
-from toggle.fmu_host import start_slave
-from toggle.native_fmu import slave_variables
+from fmu_src.host import start_slave
+from fmu_src.native_build import slave_variables
 
 VARIABLES = {v.name: v for v in slave_variables()[0]}
 BANDWIDTHS = (1e-3, 1.0, 20.0, VARIABLES["drive_bandwidth"].max)  # Hz

@@ -33,11 +33,12 @@ from fmu_support import (
 )
 from native_support import native_build
 
+from fmu_src.build import build_fmu
+from fmu_src.c_code import fmi2_headers
+from fmu_src.host import start_slave
+from fmu_src.native_build import slave_variables
 from toggle.drive import motor_torque
-from toggle.fmu_build import build_fmu
-from toggle.fmu_host import start_slave
 from toggle.kinematics import stroke_limits
-from toggle.native_fmu import fmi2_headers, slave_variables
 from toggle.params import ParameterError
 from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
 
@@ -479,7 +480,7 @@ def test_fmi_compliance_checker_finds_no_problem(native: Path, tmp_path: Path, c
 
 
 def test_command_line_builds_the_native_fmu(tmp_path: Path, capsys: pytest.CaptureFixture):
-    from toggle.cli import main
+    from toggle_cli import main
 
     assert main(["build-fmu", "--native", "--preset", "chang2021", "--out", str(tmp_path)]) == 0
     assert capsys.readouterr().out.strip() == str(tmp_path / "ToggleClampNative.fmu")

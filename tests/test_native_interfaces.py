@@ -28,9 +28,10 @@ from fmpy.sundials import CVodeSolver
 from fmpy.validation import validate_fmu
 from native_support import native_build
 
-from toggle.fmu_host import start_slave
+from fmu_src.c_code import fmi_headers
+from fmu_src.host import start_slave
+from fmu_src.native_build import slave_variables
 from toggle.kinematics import stroke_limits
-from toggle.native_fmu import fmi_headers, slave_variables
 from toggle.plant import PlantOutputs, configure
 
 OUTPUTS = list(PlantOutputs._fields)
@@ -160,7 +161,7 @@ def test_model_exchange_needs_a_drive_lag(both: dict):
     md = read_model_description(folder)
     model = FMU2Model(guid=md.guid, unzipDirectory=folder,
                       modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
-    from toggle.fmu_host import log_callbacks
+    from fmu_src.host import log_callbacks
 
     model.instantiate(callbacks=log_callbacks(lambda s, text: log.append((s, text))))
     model.setupExperiment(startTime=0.0)

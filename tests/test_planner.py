@@ -38,12 +38,12 @@ from controllers.profiles import (
     s_curve,
     write_profile_csv,
 )
-from toggle.cli import main
+from fmu_src.build import build_fmu
 from toggle.elastics import ClampingError, clamp_stroke
-from toggle.fmu_build import build_fmu
 from toggle.interrupts import signals_survive
 from toggle.params import Dynamics, load_preset
 from toggle.plant import plant_outputs
+from toggle_cli import main
 
 DURATION = 3.0
 #: Assumed masses of the SM-55 (its preset has no [dynamics]): crosshead, links, platen, guides.
@@ -249,7 +249,7 @@ def test_the_planners_key_covers_the_plant_it_compiles_and_nothing_else():
     used = code_modules("controllers.planner")
     assert {"toggle.plant", "toggle.kinematics", "toggle.statics", "toggle.asymmetry",
             "controllers.profiles"} <= set(used)
-    assert not {"toggle.plots", "toggle.press", "toggle.cli", "hil.cli"} & set(used)
+    assert not {"toggle.plots", "toggle.press", "toggle_cli", "hil.cli"} & set(used)
 
 
 def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, tmp_path, monkeypatch):
@@ -569,7 +569,7 @@ def test_robust_plan_beats_the_s_curve_on_both_clamps(capsys):
 
 def test_dimension_errors_are_named_as_the_fmu_names_them():
     from fmu_src.toggle_clamp_fmu import ERRORS as FMU_ERRORS
-    from toggle.cli.plan import ERRORS
+    from toggle_cli.plan import ERRORS
 
     assert ERRORS == FMU_ERRORS
     nominal = plan_config("chang2021")

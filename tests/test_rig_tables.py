@@ -20,7 +20,6 @@ from toggle.asymmetry import (
     hysteretic_force,
     slip_state_along,
 )
-from toggle.cli import main
 from toggle.kinematics import stroke_limits
 from toggle.params import load_preset
 from toggle.plant import (
@@ -47,6 +46,7 @@ from toggle.rig_tables import (
     rig_dynamics,
     rig_errors,
 )
+from toggle_cli import main
 
 NOMINAL = load_preset("chang2021")
 X_OPEN, X_TP = stroke_limits(NOMINAL.lower)

@@ -10,7 +10,6 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from toggle.cli import main
 from toggle.kinematics import AssemblyError
 from toggle.params import HalfDims, ParameterError, load_preset, preset_groups
 from toggle.study import (
@@ -26,6 +25,7 @@ from toggle.study import (
     study_groups,
     sweep,
 )
+from toggle_cli import main
 
 # Seed 004, Table 1 (mm, deg) and Table 2: L1, L2, lambda1, L3, L4, lambda2, L5 (mm).
 GAMMA0, THETA, H, h = 3.193, 13.664, 220.0, 199.0

@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from toggle import press, synthesis
-from toggle.cli import main
 from toggle.kinematics import half_pose, sensitivities, toggle_position
 from toggle.params import ParameterError
+from toggle_cli import main
 
 SAMPLES = 100_000  # the CLI checks with 1e6; enough here for 3-sigma margins of ~0.3 %
 

@@ -17,7 +17,7 @@ from cli_fuzz import check_answer, invocations, path_values
 from hypothesis import HealthCheck, given, settings
 from matplotlib.figure import Figure
 
-from toggle.cli import build_parser, main
+from toggle_cli import build_parser, main
 
 ROOT = Path(tempfile.mkdtemp(prefix="toggle_fuzz_"))
 PATHS = path_values(ROOT)
@@ -50,8 +50,8 @@ def monkeypatch_module():
 
 @pytest.fixture(autouse=True, scope="module")
 def cheap(monkeypatch_module) -> None:
-    import toggle.cli.build_fmu as build_cli
-    import toggle.native_fmu as native
+    import fmu_src.native_build as native
+    import toggle_cli.build_fmu as build_cli
 
     def fake_build(out: Path, *_args: object, **_kwargs: object) -> Path:
         path = Path(out) / "ToggleClamp.fmu"

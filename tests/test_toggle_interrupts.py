@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from toggle.cli import signal_cause
 from toggle.interrupts import Terminated, started_as
+from toggle_cli import signal_cause
 
 pytestmark = pytest.mark.real_time
 
@@ -73,15 +73,15 @@ def test_a_signal_raised_where_c_code_called_python_is_still_the_signal() -> Non
 
 def test_only_the_toggle_command_installs_the_start_up_handlers() -> None:
     python = "/usr/bin/python3"
-    assert started_as("toggle", "toggle.cli", ["/venv/bin/toggle", "plan"],
+    assert started_as("toggle", "toggle_cli", ["/venv/bin/toggle", "plan"],
                       [python, "/venv/bin/toggle", "plan"])
-    assert not started_as("toggle", "toggle.cli", ["/venv/bin/hil", "run"],
+    assert not started_as("toggle", "toggle_cli", ["/venv/bin/hil", "run"],
                           [python, "/venv/bin/hil", "run"])
-    assert not started_as("toggle", "toggle.cli", ["/venv/bin/pytest"],
+    assert not started_as("toggle", "toggle_cli", ["/venv/bin/pytest"],
                           [python, "/venv/bin/pytest"])
-    assert not started_as("toggle", "toggle.cli", ["-c"], [python, "-c", "import toggle"])
+    assert not started_as("toggle", "toggle_cli", ["-c"], [python, "-c", "import toggle"])
     # a planning process spawned from toggle: its sys.argv is the parent's
-    assert not started_as("toggle", "toggle.cli", ["/venv/bin/toggle", "plan"],
+    assert not started_as("toggle", "toggle_cli", ["/venv/bin/toggle", "plan"],
                           [python, "-c", "from multiprocessing.spawn import spawn_main",
                            "--multiprocessing-fork"])
     # this process (pytest) keeps Python's own handlers: importing toggle changed nothing

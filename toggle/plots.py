@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 plt.rcParams.update({"axes.grid": True, "grid.alpha": 0.3})
 import numpy as np  # noqa: E402
 
-from toggle.cli.args import atomic_path  # noqa: E402
+from toggle.files import atomic_path  # noqa: E402
 from toggle.kinematics import half_motion, sensitivities, stroke_limits  # noqa: E402
 from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES, Mechanism  # noqa: E402
 from toggle.tolerance import asymmetry, it_tolerances  # noqa: E402

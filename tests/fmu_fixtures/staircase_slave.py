@@ -8,7 +8,7 @@ import math
 
 from pythonfmu import DefaultExperiment
 
-from toggle.fmu_slave import DeclaredSlave, Var
+from fmu_src.slave import DeclaredSlave, Var
 
 
 class Staircase(DeclaredSlave):

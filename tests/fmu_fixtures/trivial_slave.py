@@ -6,8 +6,8 @@ rollback is tested on internal state, not only on registered variables.
 
 from pythonfmu import DefaultExperiment
 
-from toggle import fmu_state
-from toggle.fmu_slave import DeclaredSlave, Var
+from fmu_src import state as fmu_state
+from fmu_src.slave import DeclaredSlave, Var
 
 U_MAX = 1.0  # m/s, the input range the trivial model accepts
 

@@ -10,7 +10,7 @@ way in a Python host. A checksum proves nothing (anyone can recompute one): the
 payload is parsed within bounds (:data:`MAX_PAYLOAD` bytes, :data:`MAX_CONTAINERS`
 lists and objects, numbers of at most :data:`MAX_NUMBER` characters), so no input
 can exhaust the parser, and the slave then checks every field
-(:meth:`toggle.fmu_slave.DeclaredSlave._set_fmu_state`). Floats round-trip exactly
+(:meth:`fmu_src.slave.DeclaredSlave._set_fmu_state`). Floats round-trip exactly
 (JSON writes ``repr``), so a restored instance continues bit for bit; a non-finite
 value (an input a master set to NaN) is written as the text ``"nan"``, ``"inf"`` or
 ``"-inf"``.

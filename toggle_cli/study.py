@@ -15,17 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from toggle.cli.args import integer, number
-from toggle.cli.common import (
-    MM,
-    POINTS,
-    add_json_argument,
-    add_out_argument,
-    add_preset_argument,
-    deg,
-    print_json,
-    table,
-)
+from toggle.args import integer, number
 from toggle.params import DIMENSIONS, HALVES, ParameterError, load_preset
 from toggle.study import (
     CRITERIA,
@@ -37,6 +27,16 @@ from toggle.study import (
     rank_groups,
     study_groups,
     sweep,
+)
+from toggle_cli.common import (
+    MM,
+    POINTS,
+    add_json_argument,
+    add_out_argument,
+    add_preset_argument,
+    deg,
+    print_json,
+    table,
 )
 
 #: Labels of the criteria in tables and figures (angles in degrees).

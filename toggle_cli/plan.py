@@ -37,8 +37,13 @@ from controllers.planner import (
     trade_off_curve,
 )
 from controllers.profiles import predict, read_profile_csv, write_profile_csv
-from toggle.cli.args import atomic_path, check_writable, integer, number, path, positive
-from toggle.cli.common import (
+from toggle.args import integer, number, path, positive
+from toggle.drive import motor_torque
+from toggle.elastics import clamp_stroke
+from toggle.files import atomic_path, check_writable
+from toggle.params import DYNAMICS_PARAMETERS, HALVES, PAPER_NAMES, ParameterError
+from toggle.plant import PlantConfig, with_errors
+from toggle_cli.common import (
     FRICTION,
     LINK_ERROR,
     POSITION,
@@ -47,10 +52,6 @@ from toggle.cli.common import (
     print_json,
     table,
 )
-from toggle.drive import motor_torque
-from toggle.elastics import clamp_stroke
-from toggle.params import DYNAMICS_PARAMETERS, HALVES, PAPER_NAMES, ParameterError
-from toggle.plant import PlantConfig, with_errors
 
 MASS_FIELDS = tuple(field for field, _, _ in DYNAMICS_PARAMETERS.values())
 #: The dimensional errors, named as the FMU names its delta_* parameters.

@@ -14,8 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from toggle.cli.args import path, positive
-from toggle.cli.common import (
+from toggle.args import path, positive
+from toggle.drive import encoder_pulses, motor_torque, torque_history, travel_per_radian
+from toggle.elastics import ClampingResult, analyse_clamping, clamping_curves
+from toggle.params import Mechanism
+from toggle_cli.common import (
     FORCE,
     FRICTION,
     MM,
@@ -27,9 +30,6 @@ from toggle.cli.common import (
     print_json,
     table,
 )
-from toggle.drive import encoder_pulses, motor_torque, torque_history, travel_per_radian
-from toggle.elastics import ClampingResult, analyse_clamping, clamping_curves
-from toggle.params import Mechanism
 
 KGF = 9.80665  # N per kgf, for tables and figures only
 PAPER_MUS = (0.0, 0.01, 0.05, 0.10, 0.17)

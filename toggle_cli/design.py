@@ -15,8 +15,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from toggle.cli.args import check_writable_dir, integer, path, positive
-from toggle.cli.common import SEED, add_json_argument, print_json
+from toggle.args import integer, path, positive
+from toggle.files import check_writable_dir
+from toggle_cli.common import SEED, add_json_argument, print_json
 
 GENERATIONS = integer(1, 100_000, "must be a number of generations between 1 and 100000")
 POPULATION = integer(4, 100_000, "must be a population between 4 and 100000")
@@ -45,7 +46,7 @@ class _DoeAction(argparse.Action):
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from design.objectives import OBJECTIVES  # the registry only: no dask, no pymoo
+    from design.targets import OBJECTIVES  # the registry only: no dask, no pymoo
     p = sub.add_parser("design", help="search clamp geometries for targets (Pareto set)",
                        description="Search the double-toggle family for the targets of a "
                        "TOML file and write the Pareto set, a preset of each design and "
@@ -78,11 +79,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from design.objectives import OBJECTIVES
     from design.output import write_results
     from design.placement import place
     from design.search import binding_constraint, run_search
-    from design.targets import load_targets
+    from design.targets import OBJECTIVES, load_targets
     from toggle.params import ParameterError
 
     if args.doe and (args.generations or args.population):

@@ -6,8 +6,10 @@ import argparse
 
 import numpy as np
 
-from toggle.cli.args import integer
-from toggle.cli.common import (
+from toggle.args import integer
+from toggle.kinematics import half_motion, half_pose, mirror_angles, stroke_limits
+from toggle.params import HALVES, Mechanism
+from toggle_cli.common import (
     MM,
     add_json_argument,
     add_out_argument,
@@ -17,8 +19,6 @@ from toggle.cli.common import (
     print_json,
     table,
 )
-from toggle.kinematics import half_motion, half_pose, mirror_angles, stroke_limits
-from toggle.params import HALVES, Mechanism
 
 
 def summary(mech: Mechanism) -> dict:

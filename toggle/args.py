@@ -13,8 +13,7 @@ import math
 import os
 import re
 import sys
-import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 
@@ -122,49 +121,3 @@ def quiet_broken_pipe() -> int:
     with contextlib.suppress(OSError, ValueError):  # in-process stdout has no descriptor
         os.dup2(devnull, sys.stdout.fileno())
     return 1
-
-
-def check_writable(target: Path, option: str) -> None:
-    """Refuse an output file that cannot be written, before any work is done (a file is
-    created and removed in the nearest existing folder)."""
-    if target.is_dir():
-        raise OSError(f"{option} {target}: is a directory, not a file")
-    _check_folder(target.parent, option, target)
-
-
-def check_writable_dir(target: Path, option: str) -> None:
-    """Refuse an output folder that cannot be created or written into."""
-    if target.exists() and not target.is_dir():
-        raise OSError(f"{option} {target}: not a directory")
-    _check_folder(target, option, target)
-
-
-def _check_folder(folder: Path, option: str, target: Path) -> None:
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent
-    if not folder.is_dir():
-        raise OSError(f"{option} {target}: {folder} is not a directory")
-    try:
-        with tempfile.TemporaryFile(dir=folder):
-            pass
-    except OSError as exc:
-        raise OSError(f"{option} {target}: cannot write in {folder} ({exc.strerror})") from exc
-
-
-@contextlib.contextmanager
-def atomic_path(target: Path) -> Iterator[Path]:
-    """A temporary path next to ``target``, renamed onto it only when the block succeeds:
-    a failed write leaves no half-written file."""
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.",
-                                   suffix=target.suffix)
-    except OSError as exc:
-        raise OSError(f"{target}: cannot write there ({exc.strerror})") from exc
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, target)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)

@@ -10,7 +10,8 @@ import argparse
 import numpy as np
 
 from toggle.asymmetry import asymmetry, force_curves, plot_force_curves
-from toggle.cli.common import (
+from toggle.kinematics import stroke_limits
+from toggle_cli.common import (
     LINK_ERROR,
     MM,
     SPEED,
@@ -20,7 +21,6 @@ from toggle.cli.common import (
     mechanism,
     print_json,
 )
-from toggle.kinematics import stroke_limits
 
 
 def summary(args: argparse.Namespace) -> dict:

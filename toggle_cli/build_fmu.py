@@ -1,7 +1,7 @@
 """``toggle build-fmu``: write build/ToggleClamp.fmu (FMI 2.0 Co-Simulation) of one preset.
 
 ``--native`` writes the native FMU instead: the plant generated to C, no Python at run
-time (:mod:`toggle.native_fmu`), for FMI 2.0 or 3.0 (``--fmi-version``), Co-Simulation,
+time (:mod:`fmu_src.native_build`), for FMI 2.0 or 3.0 (``--fmi-version``), Co-Simulation,
 Model Exchange or both (``--interface``); build/ToggleClampNative.fmu by default (2, cs).
 """
 
@@ -10,14 +10,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from toggle.cli.args import check_writable_dir, path
-from toggle.fmu_build import build_fmu
+from fmu_src.build import build_fmu
+from toggle.args import path
+from toggle.files import check_writable_dir
 
 
 def run(args: argparse.Namespace) -> int:
     check_writable_dir(args.out, "--out")  # before the build, not after it
     if args.native:
-        from toggle.native_fmu import build_native_fmu
+        from fmu_src.native_build import build_native_fmu
 
         print(build_native_fmu(args.out, args.preset, args.fmi_version, args.interface))
     else:

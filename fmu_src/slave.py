@@ -16,7 +16,7 @@ variables. The base class supplies what pythonfmu 0.7 does not:
   (and to be finite) when initialisation ends; outputs are checked to be
   finite after every step (never a NaN);
 * outputs read in Initialization Mode are computed from the values set so far;
-* the FMU state is plain data (:mod:`toggle.fmu_state`): every variable plus
+* the FMU state is plain data (:mod:`fmu_src.state`): every variable plus
   :meth:`model_state`, serialised as checksummed JSON, never pickle; a state
   set is input to validate: every field is checked with the rules of the
   phase it was taken in (before initialisation the values as set so far;
@@ -26,7 +26,7 @@ variables. The base class supplies what pythonfmu 0.7 does not:
   frees everything it holds at once (no reference cycle left for the
   garbage collector to find at interpreter exit);
 * units, descriptions, min/max and ModelStructure dependencies reach
-  modelDescription.xml (see :mod:`toggle.fmu_build`).
+  modelDescription.xml (see :mod:`fmu_src.build`).
 
 State convention: attributes that :meth:`step` changes must be rebound, not
 mutated in place (floats, tuples, frozen dataclasses), so the per-step
@@ -44,7 +44,7 @@ from xml.etree.ElementTree import Element
 from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real, String
 from pythonfmu.enums import Fmi2Status
 
-from toggle import fmu_state
+from fmu_src import state as fmu_state
 
 _DEFAULT_VARIABILITY = {"parameter": "fixed", "input": "continuous", "output": "continuous"}
 _STATE_KEYS = frozenset({"fmu", "values", "phase", "failure", "model"})
@@ -155,7 +155,7 @@ class DeclaredSlave(Fmi2Slave):
 
     def restore_model_state(self, state: Any) -> None:
         """Check and rebuild what :meth:`model_state` saved (the variables are already set
-        and the parameters checked); raise :class:`~toggle.fmu_state.StateError` naming a
+        and the parameters checked); raise :class:`~fmu_src.state.StateError` naming a
         field no initialised instance could hold."""
         fmu_state.keys(state, frozenset(), "the model state")
 
@@ -258,7 +258,7 @@ class DeclaredSlave(Fmi2Slave):
 
     def _restore(self, state: Any) -> None:
         """Check every field of ``state`` with the rules of the phase it was taken in, and
-        set it; raises :class:`~toggle.fmu_state.StateError` (or the plant's error) naming
+        set it; raises :class:`~fmu_src.state.StateError` (or the plant's error) naming
         the first field that no instance of this FMU could hold."""
         state = fmu_state.keys(state, _STATE_KEYS, "the state")
         if state["fmu"] != self.state_identity():
@@ -305,7 +305,7 @@ class DeclaredSlave(Fmi2Slave):
         import importlib
 
         # build time only, in the building Python: by a name the bundling leaves alone
-        fmu_build = importlib.import_module("toggle.fmu_build")
+        fmu_build = importlib.import_module("fmu_src.build")
         root = super().to_xml(model_options or {})
         fmu_build.extend_model_description(root, self.VARIABLES)
         return root

@@ -1,27 +1,38 @@
 """The ``toggle`` command line: one sub-command per module in this package.
 
-Each command module defines ``add_parser(subparsers)``; a module may also
-define ``add_plot_parser(plot_subparsers)`` to add a ``toggle plot <kind>``
-figure. Values are SI inside; the tables convert to mm and degrees.
+The top floor of the project: it imports the model (toggle), the planner (controllers),
+the FMU builders (fmu_src) and the clamp synthesis (design); nothing imports it. Each
+command module defines ``add_parser(subparsers)``; a module may also define
+``add_plot_parser(plot_subparsers)`` to add a ``toggle plot <kind>`` figure. Values are SI
+inside; the tables convert to mm and degrees.
+
+The command's process gets its SIGINT/SIGTERM handlers on this file's first lines, before
+numpy and the rest load (a Ctrl-C in its first second printed a KeyboardInterrupt
+traceback); :func:`main` then installs handlers that unwind.
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import signal
-import sys
-from collections.abc import Sequence
+from toggle.interrupts import install_exit_handlers, started_as
 
-from toggle.cli.args import (
+if started_as("toggle", "toggle_cli"):
+    install_exit_handlers("toggle")
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import signal  # noqa: E402
+import sys  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+
+from toggle.args import (  # noqa: E402
     add_version,
     join_negative_numbers,
     quiet_broken_pipe,
     use_help_formatter,
 )
-from toggle.interrupts import Terminated, unwind_on_signals
-from toggle.kinematics import AssemblyError
-from toggle.params import ParameterError
+from toggle.interrupts import Terminated, unwind_on_signals  # noqa: E402
+from toggle.kinematics import AssemblyError  # noqa: E402
+from toggle.params import ParameterError  # noqa: E402
 
 #: Command modules, in the order ``toggle --help`` lists them.
 COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetry", "calibrate",
@@ -35,7 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_version(parser)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
-        importlib.import_module(f"toggle.cli.{name}").add_parser(sub)
+        importlib.import_module(f"toggle_cli.{name}").add_parser(sub)
     use_help_formatter(parser)
     return parser
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
+from toggle.args import path
 from toggle.calibration import (
     FITTABLE,
     MAX_FITTED,
@@ -20,8 +21,8 @@ from toggle.calibration import (
     load_force_table,
     table_mechanism,
 )
-from toggle.cli.args import path
-from toggle.cli.common import (
+from toggle.params import ParameterError, load_preset
+from toggle_cli.common import (
     MM,
     SPEED,
     add_json_argument,
@@ -30,7 +31,6 @@ from toggle.cli.common import (
     print_json,
     table,
 )
-from toggle.params import ParameterError, load_preset
 
 #: Units of the fittable parameters, for the printed summary.
 FITTED_UNITS = {"free_play": "m", "contact_stiffness": "N/m^1.5", "series_stiffness": "N/m",

@@ -12,7 +12,8 @@ from dataclasses import asdict
 from typing import Any
 
 from toggle import press, synthesis
-from toggle.cli.common import (
+from toggle.params import load_preset
+from toggle_cli.common import (
     CLAMP_PRESETS,
     MM,
     SAMPLES,
@@ -23,7 +24,6 @@ from toggle.cli.common import (
     print_json,
     table,
 )
-from toggle.params import load_preset
 
 
 def error_model(preset: str) -> synthesis.ErrorModel:

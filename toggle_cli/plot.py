@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 import importlib
 
-from toggle.cli import COMMANDS
+from toggle_cli import COMMANDS
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plot", help="write PNG figures (kinds listed below)")
     kinds = p.add_subparsers(dest="kind", required=True, metavar="KIND")
     for name in COMMANDS:
-        module = importlib.import_module(f"toggle.cli.{name}")
+        module = importlib.import_module(f"toggle_cli.{name}")
         if hasattr(module, "add_plot_parser"):
             module.add_plot_parser(kinds)

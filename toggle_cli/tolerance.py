@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
-from toggle.cli.args import integer
-from toggle.cli.common import (
+from toggle.args import integer
+from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES
+from toggle.tolerance import asymmetry, it_tolerances, monte_carlo
+from toggle_cli.common import (
     IT_GRADE,
     MM,
     POSITION,
@@ -18,8 +20,6 @@ from toggle.cli.common import (
     print_json,
     table,
 )
-from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES
-from toggle.tolerance import asymmetry, it_tolerances, monte_carlo
 
 
 def run(args: argparse.Namespace) -> int:

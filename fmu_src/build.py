@@ -3,10 +3,10 @@
 pythonfmu writes no units, no min/max, no output dependencies and no
 InitialUnknowns, so fmpy's validator rejects its FMUs.
 :func:`extend_model_description` (called from
-:meth:`toggle.fmu_slave.DeclaredSlave.to_xml`) completes the description from
-the slave's :class:`~toggle.fmu_slave.Var` table; :func:`build_fmu` bundles the
-modules of ``toggle`` that the slave uses under a name unique to their code,
-puts the FMI guard (:mod:`toggle.fmu_guard`) in front of pythonfmu's binary and
+:meth:`fmu_src.slave.DeclaredSlave.to_xml`) completes the description from
+the slave's :class:`~fmu_src.slave.Var` table; :func:`build_fmu` bundles the
+modules of ``toggle`` and ``fmu_src`` that the slave uses under names unique to their
+code, puts the FMI guard (:mod:`fmu_src.guard_build`) in front of pythonfmu's binary and
 refuses to write an FMU that fmpy does not validate.
 """
 
@@ -24,12 +24,15 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement
 
-import toggle
-from toggle.fmu_slave import Var
+from fmu_src.slave import Var
 
-PACKAGE_DIR = Path(toggle.__file__).resolve().parent
-DEFAULT_SLAVE = PACKAGE_DIR.parent / "fmu_src" / "toggle_clamp_fmu.py"
-MODULE_PREFIX = "toggle_"
+#: This package's folder, and the project's root (the model package toggle/ beside it).
+FMU_SRC_DIR = Path(__file__).resolve().parent
+ROOT = FMU_SRC_DIR.parent
+PACKAGE_DIR = ROOT / "toggle"
+DEFAULT_SLAVE = FMU_SRC_DIR / "toggle_clamp_fmu.py"
+#: The project's packages an FMU bundles (the model, and this one's slave support).
+BUNDLED_PACKAGES = ("toggle", "fmu_src")
 #: resources/ file listing the site-packages of the Python the FMU was built with.
 PYTHON_PATHS = "python_paths.txt"
 
@@ -114,7 +117,7 @@ def check_variables(variables: Sequence[Var]) -> None:
     inputs = {v.name for v in variables if v.causality == "input"}
     for var in variables:
         if not var.is_string and var.unit not in UNITS:
-            raise ValueError(f"{var.name}: unit {var.unit!r} is not in toggle.fmu_build.UNITS")
+            raise ValueError(f"{var.name}: unit {var.unit!r} is not in fmu_src.build.UNITS")
         unknown = set(var.depends_on or ()) - inputs
         if unknown:
             raise ValueError(f"{var.name}: depends_on names non-inputs {sorted(unknown)}")
@@ -168,23 +171,23 @@ for _path in (_paths.read_text().splitlines() if _paths.is_file() else ()):
     if _path and _path not in _sys.path:
         _sys.path.append(_path)
 """
-_IMPORT = re.compile(r"^(\s*)(from|import)\s+toggle(?=[\s.])", re.MULTILINE)
+_IMPORT = re.compile(r"^(\s*)(from|import)\s+(toggle|fmu_src)(?=[\s.])", re.MULTILINE)
 
 
 def bundled_modules(slave_file: Path) -> tuple[list[str], str]:
-    """The ``toggle`` modules the slave imports, and its slave class (in a fresh interpreter)."""
+    """The project's modules the slave imports, and its slave class (in a fresh interpreter)."""
     code = ("import importlib.util, sys\n"
             "from pythonfmu import Fmi2Slave\n"
             f"spec = importlib.util.spec_from_file_location('_slave', {str(slave_file)!r})\n"
             "module = importlib.util.module_from_spec(spec)\n"
             "spec.loader.exec_module(module)\n"
             "print(' '.join(sorted(m for m in sys.modules "
-            "if m == 'toggle' or m.startswith('toggle.'))))\n"
+            f"if m.split('.')[0] in {BUNDLED_PACKAGES!r})))\n"
             "print(' '.join(k for k, v in vars(module).items() if isinstance(v, type) "
             "and issubclass(v, Fmi2Slave) and v.__module__ == '_slave'))")
-    env = {**os.environ, "PYTHONPATH": str(PACKAGE_DIR.parent)}
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                            env=env, cwd=PACKAGE_DIR.parent)
+                            env=env, cwd=ROOT)
     if result.returncode:
         raise RuntimeError(f"the slave {slave_file} does not import:\n{result.stderr}")
     modules, classes = result.stdout.splitlines()
@@ -196,8 +199,9 @@ def bundled_modules(slave_file: Path) -> tuple[list[str], str]:
 def stage_sources(slave_file: Path, preset: str | None, stage: Path) -> tuple[Path, list[Path]]:
     """Copy the slave and the modules it uses into ``stage`` under a name unique to the code.
 
-    The bundled package is ``toggle_<hash of the bundled sources>``, with its
-    imports rewritten to that name and the slave module inside it, so an FMU
+    The bundled packages are ``toggle_<hash>`` and ``fmu_src_<hash>`` (the hash of the
+    bundled sources), with their imports rewritten to those names and the slave module
+    inside the second, so an FMU
     never shares Python modules with another version of the project or with a
     ``toggle`` installed in the host (pythonfmu imports into the host's
     ``sys.modules``). pythonfmu's entry script is a generated stub that imports
@@ -207,27 +211,27 @@ def stage_sources(slave_file: Path, preset: str | None, stage: Path) -> tuple[Pa
     """
     modules, slave_class = bundled_modules(slave_file)
     files = {}
-    for module in modules:
-        relative = Path(*module.split(".")[1:])
-        source = PACKAGE_DIR / relative / "__init__.py"
+    for module in {*modules, "fmu_src"}:  # the slave goes into fmu_src's bundle
+        relative = Path(*module.split("."))
+        source = ROOT / relative / "__init__.py"
         if not source.is_file():
-            source = (PACKAGE_DIR / relative).with_suffix(".py")
-        files[source.relative_to(PACKAGE_DIR)] = source.read_text(encoding="utf-8")
-    files[Path(f"{slave_file.stem}.py")] = slave_file.read_text(encoding="utf-8")
+            source = (ROOT / relative).with_suffix(".py")
+        files[source.relative_to(ROOT)] = source.read_text(encoding="utf-8")
+    files[Path("fmu_src", f"{slave_file.stem}.py")] = slave_file.read_text(encoding="utf-8")
     if preset is not None:
-        files[Path("preset.toml")] = preset_table_text(preset)
+        files[Path("fmu_src", "preset.toml")] = preset_table_text(preset)
     digest = hashlib.sha256(repr(sorted(files.items())).encode()).hexdigest()[:12]
-    package = f"{MODULE_PREFIX}{digest}"
     for relative, text in files.items():
-        target = stage / package / relative
+        target = stage / f"{relative.parts[0]}_{digest}" / Path(*relative.parts[1:])
         target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_text(_IMPORT.sub(rf"\1\2 {package}", text), encoding="utf-8")
-    script = stage / f"{package}_slave.py"
+        target.write_text(_IMPORT.sub(rf"\1\2 \3_{digest}", text), encoding="utf-8")
+    script = stage / f"toggle_{digest}_slave.py"
     script.write_text(f'"""pythonfmu entry point written by toggle build-fmu."""\n{_SITE_HEADER}'
-                      f"from {package}.{slave_file.stem} import {slave_class}  # noqa: E402\n",
-                      encoding="utf-8")
+                      f"from fmu_src_{digest}.{slave_file.stem} import {slave_class}"
+                      "  # noqa: E402\n", encoding="utf-8")
     (stage / PYTHON_PATHS).write_text("\n".join(python_paths()) + "\n")
-    return script, [stage / package, stage / PYTHON_PATHS]
+    packages = sorted({stage / f"{relative.parts[0]}_{digest}" for relative in files})
+    return script, [*packages, stage / PYTHON_PATHS]
 
 
 def python_paths() -> list[str]:
@@ -258,10 +262,10 @@ def build_fmu(
 ) -> Path:
     """Build ``<out_dir>/<ModelName>.fmu`` from a slave file; return its path.
 
-    The modules of ``toggle`` that the slave uses are bundled in ``resources/``
+    The modules of ``toggle`` and ``fmu_src`` that the slave uses are bundled in ``resources/``
     under a name unique to their code (see :func:`stage_sources`), with the
     preset's TOML for the clamp slave; the binary is the FMI guard
-    (:mod:`toggle.fmu_guard`) in front of pythonfmu's library. The FMU runs in
+    (:mod:`fmu_src.guard_build`) in front of pythonfmu's library. The FMU runs in
     the Python it was built with (docs/fmu.md). Raises RuntimeError if the
     guard does not compile or fmpy's validator finds problems in the result.
     """
@@ -269,7 +273,7 @@ def build_fmu(
     from fmpy.validation import validate_fmu
     from pythonfmu import FmuBuilder
 
-    from toggle.fmu_guard import INNER_LIBRARY, PLATFORM, compile_guard
+    from fmu_src.guard_build import INNER_LIBRARY, PLATFORM, compile_guard
 
     slave_file = Path(slave_file).resolve()
     if not slave_file.is_file():
@@ -284,8 +288,8 @@ def build_fmu(
         try:
             built = Path(FmuBuilder.build_FMU(script, dest=tmp, project_files=project))
         finally:  # FmuBuilder imports the script and leaves it on sys.path/sys.modules
-            for name in [m for m in sys.modules
-                         if m.split(".")[0] in (script.stem, project[0].name)]:
+            bundled = {script.stem, *(path.name for path in project)}
+            for name in [m for m in sys.modules if m.split(".")[0] in bundled]:
                 sys.modules.pop(name, None)
             while str(stage) in sys.path:
                 sys.path.remove(str(stage))

@@ -1,6 +1,6 @@
 """Helpers shared by the command modules: preset option, argument types, JSON and tables.
 
-The argument types are :mod:`toggle.cli.args`'s, so ``toggle`` and ``hil`` judge a value alike.
+The argument types are :mod:`toggle.args`'s, so ``toggle`` and ``hil`` judge a value alike.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from toggle.cli.args import integer, number, path, positive
+from toggle.args import integer, number, path, positive
 from toggle.json_text import json_text
 from toggle.params import Mechanism, load_preset
 

@@ -13,15 +13,8 @@ from __future__ import annotations
 
 import argparse
 
-from toggle.cli.args import check_writable_dir, path
-from toggle.cli.common import (
-    MM,
-    SPEED,
-    add_json_argument,
-    add_preset_argument,
-    mechanism,
-    print_json,
-)
+from toggle.args import path
+from toggle.files import check_writable_dir
 from toggle.rig_calibration import (
     FORCE_FITTABLE,
     MAX_FORCE_FITTED,
@@ -35,6 +28,14 @@ from toggle.rig_calibration import (
     load_paper_tables,
     plot_tables,
     simulate_tables,
+)
+from toggle_cli.common import (
+    MM,
+    SPEED,
+    add_json_argument,
+    add_preset_argument,
+    mechanism,
+    print_json,
 )
 
 LABELS = {**STAT_LABELS, "stroke": "S"}
