@@ -104,8 +104,11 @@ def write_preset(path: Path, targets: Targets, evaluation: Evaluation,
     """Write a design as a preset TOML file. It names its targets file relative to its own
     folder, never by the machine's absolute path (the file moves with the project)."""
     stem = name or f"design-{evaluation.key[:12]}"
-    origin = (os.path.relpath(targets.origin, path.parent)
-              if Path(targets.origin).is_file() else targets.origin)
+    origin = targets.origin
+    if Path(origin).is_file():  # relative where the two share a folder, else its name
+        shared = os.path.commonpath([Path(origin).resolve(), path.resolve().parent])
+        origin = (os.path.relpath(origin, path.parent) if Path(shared).parent != Path(shared)
+                  else Path(origin).name)
     text = (f"# {stem}: written by toggle design (SI units); load it with --preset and its "
             f"path\n" + toml_text(preset_dict(targets, evaluation, stem, origin)))
     with atomic_path(path) as tmp:

@@ -8,7 +8,6 @@ import csv
 import io
 import json
 import math
-import os
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import replace
 from pathlib import Path
@@ -222,7 +221,13 @@ def test_a_design_preset_carries_the_clamp_drive_and_masses(sm55, tmp_path: Path
     assert mech.name == "sm55-again"
     text = path.read_text()  # the targets file named relative to the preset, not absolutely
     assert str(tmp_path) not in text and str(SM55.parent) not in text
-    assert f"for {os.path.relpath(SM55, tmp_path)} (key" in text
+    assert f"for {SM55.name} (key" in text  # no folder in common: its name
+    copy = tmp_path / "job" / "sm55.toml"  # a targets file and its run in one folder
+    copy.parent.mkdir()
+    copy.write_text(SM55.read_text())
+    inside = write_preset(copy.parent / "out" / "d.toml", load_targets(copy), ref)
+    assert "for ../sm55.toml (key" in inside.read_text()
+    assert str(tmp_path) not in inside.read_text()
 
 
 def test_seed_004_groups_are_on_the_front_or_dominated_by_a_named_design(tmp_path: Path
