@@ -267,24 +267,26 @@ def export(path: Path, profile: Profile, cfg: PlantConfig, limits: DriveLimits,
     def build(n: int) -> cam.CamTable:
         return cam.cam_table(profile, drive, n, master=master, units=units, whole=whole)
 
-    needed = None
-    if points is None:
-        needed = points = cam.points_needed(build, interpolation, cfg, limits, planned_peak,
-                                            profile, cycle)
-        if points is None:
+    found = points is None
+    if found:
+        needed = cam.points_needed(build, interpolation, cfg, limits, planned_peak, profile,
+                                   cycle)
+        if needed is None:
             raise ParameterError(f"no {fmt} table of up to {cam.MAX_POINTS} points keeps the "
                                  f"plan at the {cycle * 1e6:g} us drive cycle")
-    table = build(points)
-    check = cam.check_table(table, interpolation, cfg, limits, planned_peak, cycle,
-                            profile=profile)
+        points, check = needed
+    else:
+        check = cam.check_table(build(points), interpolation, cfg, limits, planned_peak,
+                                cycle, profile=profile)
     if not cam.keeps(check):
         needed = cam.points_needed(build, interpolation, cfg, limits, planned_peak, profile,
                                    cycle)
         raise ParameterError(
             f"the {points}-point {fmt} table ({interpolation}) breaks the plan at the "
             f"{cycle * 1e6:g} us drive cycle: {', '.join(cam.breaches(check))}; "
-            + (f"it needs at least {needed} points (--points {needed}, or no --points)"
+            + (f"it needs at least {needed[0]} points (--points {needed[0]}, or no --points)"
                if needed else "no number of points keeps it"))
+    table = build(points)
     with atomic_path(path) as tmp:
         if fmt == "csv":
             write_csv(tmp, table, interpolation, settings)
@@ -294,6 +296,6 @@ def export(path: Path, profile: Profile, cfg: PlantConfig, limits: DriveLimits,
             tmp.write_text(plcopen_xml(table, settings))
     return {"format": fmt, "points": points, "master": master, "units": units,
             "interpolation": interpolation, "drive_cycle": cycle,
-            "points_found": needed is not None,
+            "points_found": found,
             "master_unit": MASTER_UNIT[master], "slave_unit": SLAVE_UNIT[units],
             "as_interpolated": check}
