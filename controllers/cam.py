@@ -253,10 +253,9 @@ def parse_cycle(text: str) -> float:
 
 
 def breaches(check: dict[str, float]) -> list[str]:
-    """What a check breaks, in words with its figure (empty: it keeps the plan)."""
-    out = [f"{name.replace('_', ' ')} {100 * check[name]:.1f} % of "
-           + ("the plan's" if name == "peak_force" else "its limit")
-           for name in RATIOS if name in check and check[name] > TOLERANCE]
-    out += [f"{name.replace('_', ' ')} {100 * check[name]:.2f} % of the plan's"
-            for name in ERRORS if name in check and check[name] > FOLLOWING]
-    return out
+    """What a check breaks, each with its figure in % (of its limit, of the plan's peak
+    force, of the stroke, of the plan's peak velocity); empty: it keeps the plan."""
+    return ([f"{name.replace('_', ' ')} {100 * check[name]:.1f} %"
+             for name in RATIOS if name in check and check[name] > TOLERANCE]
+            + [f"{name.replace('_', ' ')} {100 * check[name]:.2f} %"
+               for name in ERRORS if name in check and check[name] > FOLLOWING])

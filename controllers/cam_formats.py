@@ -9,8 +9,11 @@
   master), the ``ClampCam : MC_CAM_REF`` describing it (byType 3, XYVA: fifth-order
   polynomials between the points), and a program POU ``ClampCamIn`` whose ST body hands
   ``ClampCam`` to MC_CamTableSelect and couples the slave with MC_CamIn. The form is the
-  IEC initialisation code CODESYS's cam editor generates ("Display Generated Code");
-  its PLCopenXML import reads the project.
+  IEC initialisation code CODESYS's cam editor generates ("Display Generated Code").
+* ``twincat``: the same project for TwinCAT's NC camming: ``ARRAY [1..N] OF
+  MC_MotionFunctionPoint`` (MasterPos, SlavePos, SlaveVelo, SlaveAcc, each segment a
+  MOTIONFUNCTYPE_POLYNOM5_MM quintic) and an MC_CAM_REF of table type
+  MC_TABLETYPE_MOTIONFUNCTION (:data:`DIALECTS`).
 * ``pvt``: a drive's position-velocity-time table in whole encoder counts: one row per
   point at a fixed time step, position (counts) and velocity (counts/s) as integers;
   the drive interpolates each segment with the cubic through both ends' position and
@@ -27,6 +30,8 @@ import datetime as dt
 import io
 import os
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,26 +44,77 @@ from toggle.files import atomic_path
 from toggle.params import ParameterError
 from toggle.plant import PlantConfig
 
-FORMATS = ("csv", "plcopen", "pvt")
+FORMATS = ("csv", "plcopen", "twincat", "pvt")
 #: How the drive interpolates each format's table; csv: the user's (linear or cubic).
-INTERPOLATION = {"plcopen": "pva-quintic", "pvt": "pv-cubic"}
+INTERPOLATION = {"plcopen": "pva-quintic", "twincat": "pva-quintic", "pvt": "pv-cubic"}
 CSV_INTERPOLATIONS = ("linear", "cubic")
 TC6 = "http://www.plcopen.org/xml/tc6_0201"
 XHTML = "http://www.w3.org/1999/xhtml"
-#: The program POU's ST body: select the cam, couple the slave to the master with it.
-PROGRAM_BODY = """Select(Master := Master, Slave := Slave, CamTable := ClampCam, Execute := Start,
+@dataclass(frozen=True)
+class Dialect:
+    """A motion library's cam in a PLCopen project: the point type and its members (the
+    master, the slave's position, velocity and acceleration among them), the cam
+    reference MC_CamTableSelect takes, and the program that selects it and couples."""
+
+    library: str
+    point_type: str
+    lower: int  # the points array's first index
+    xyva: tuple[str, str, str, str]  # the members holding X, Y, V, A
+    row: Callable[[int, int, tuple[float, ...]], dict[str, str]]  # index, count, XYVA
+    cam_ref: Callable[[int, str], dict[str, str]]  # count, points variable
+    program_vars: tuple[tuple[str, str, str, str | None], ...]  # section, name, type, init
+    body: str
+
+
+_AXES = (("inOutVars", "Master", "AXIS_REF", None), ("inOutVars", "Slave", "AXIS_REF", None),
+         ("inputVars", "Start", "BOOL", None), ("outputVars", "InSync", "BOOL", None),
+         ("outputVars", "Error", "BOOL", None),
+         ("externalVars", "ClampCam", "MC_CAM_REF", None),
+         ("localVars", "Select", "MC_CamTableSelect", None),
+         ("localVars", "Couple", "MC_CamIn", None))
+_OUTPUTS = """InSync := Couple.InSync;
+Error := Select.Error OR Couple.Error;
+"""
+#: CODESYS SoftMotion (SM3_Basic): SMC_CAMXYVA points, MC_CAM_REF byType 3 (XYVA);
+#: MC_CamTableSelect gives the CamTableID MC_CamIn couples with (PLCopen Part 1).
+CODESYS = Dialect(
+    "CODESYS SoftMotion SM3_Basic", "SMC_CAMXYVA", 0, ("dX", "dY", "dV", "dA"),
+    lambda i, n, xyva: dict(zip(("dX", "dY", "dV", "dA"), map(repr, xyva))),
+    lambda n, points: {"nElements": str(n), "byType": "3", "xStart": "{x0}",
+                       "xEnd": "{x1}", "nTappets": "0", "strCAMName": "'ClampCam'",
+                       "pce": f"ADR({points})"},
+    _AXES, """Select(Master := Master, Slave := Slave, CamTable := ClampCam, Execute := Start,
        Periodic := FALSE, MasterAbsolute := TRUE, SlaveAbsolute := FALSE);
 Couple(Master := Master, Slave := Slave, Execute := Select.Done,
        CamTableID := Select.CamTableID);
-InSync := Couple.InSync;
-Error := Select.Error OR Couple.Error;
-"""
-#: The program's interface: section, name, type (derived type names are the libraries').
-PROGRAM_VARS = (("inOutVars", "Master", "AXIS_REF"), ("inOutVars", "Slave", "AXIS_REF"),
-                ("inputVars", "Start", "BOOL"), ("outputVars", "InSync", "BOOL"),
-                ("outputVars", "Error", "BOOL"), ("externalVars", "ClampCam", "MC_CAM_REF"),
-                ("localVars", "Select", "MC_CamTableSelect"),
-                ("localVars", "Couple", "MC_CamIn"))
+""" + _OUTPUTS)
+
+
+def _motion_function_point(i: int, n: int, xyva: tuple[float, ...]) -> dict[str, str]:
+    """Point ``i`` of ``n``: a motion point (Y, Y', Y'' as given) opening a quintic."""
+    return {"PointIndex": str(i + 1), "FunctionType": "MOTIONFUNCTYPE_POLYNOM5_MM",
+            "PointType": "MOTIONPOINTTYPE_MOTION", "RelIndexNextPoint": "1",
+            **dict(zip(("MasterPos", "SlavePos", "SlaveVelo", "SlaveAcc"), map(repr, xyva))),
+            "SlaveJerk": "0.0"}
+
+
+#: TwinCAT NC camming (Tc2_MC2_Camming): MC_MotionFunctionPoint points joined by
+#: fifth-order polynomials (MOTIONFUNCTYPE_POLYNOM5_MM: motion to motion, Y, Y', Y'' at
+#: both ends), MC_CAM_REF of table type MC_TABLETYPE_MOTIONFUNCTION; its
+#: MC_CamTableSelect and MC_CamIn both take the table's ID.
+TWINCAT = Dialect(
+    "TwinCAT Tc2_MC2_Camming", "MC_MotionFunctionPoint", 1,
+    ("MasterPos", "SlavePos", "SlaveVelo", "SlaveAcc"), _motion_function_point,
+    lambda n, points: {"pArray": f"ADR({points})", "ArraySize": f"SIZEOF({points})",
+                       "TableType": "MC_TABLETYPE_MOTIONFUNCTION", "NoOfRows": str(n),
+                       "NoOfColumns": "1"},
+    (*_AXES, ("localVars", "CamId", "MC_CAM_ID", "1")),
+    """Select(Master := Master, Slave := Slave, CamTable := ClampCam, Execute := Start,
+       Periodic := FALSE, CamTableID := CamId);
+Couple(Master := Master, Slave := Slave, Execute := Select.Done, CamTableID := CamId);
+""" + _OUTPUTS)
+DIALECTS = {"plcopen": CODESYS, "twincat": TWINCAT}
+
 ELEMENTARY = ("BOOL", "LREAL", "INT", "BYTE")
 
 
@@ -159,15 +215,18 @@ def _struct_value(parent: ET.Element, members: dict[str, str]) -> None:
         _sub(_sub(struct, "value", member=member), "simpleValue", value=value)
 
 
-def plcopen_xml(table: CamTable, settings: dict[str, object], name: str = "ClampCam") -> str:
-    """The table as a PLCopen TC6 XML v2.01 project (module docstring)."""
+def plcopen_xml(table: CamTable, settings: dict[str, object], fmt: str = "plcopen",
+                name: str = "ClampCam") -> str:
+    """The table as a PLCopen TC6 XML v2.01 project for ``fmt``'s motion library
+    (:data:`DIALECTS`; module docstring)."""
+    dialect = DIALECTS[fmt]
     ET.register_namespace("", TC6)
     ET.register_namespace("xhtml", XHTML)
     root = ET.Element(f"{{{TC6}}}project")
     created = creation_time().replace(tzinfo=None).isoformat()
     _sub(root, "fileHeader", companyName="toggle-clamp", productName="toggle plan",
          productVersion="1", creationDateTime=created,
-         contentDescription="cam of a planned clamp stroke, CODESYS SoftMotion XYVA")
+         contentDescription=f"cam of a planned clamp stroke, {dialect.library}")
     content = _sub(root, "contentHeader", name=name, modificationDateTime=created)
     coordinates = _sub(content, "coordinateInfo")
     for language in ("fbd", "ld", "sfc"):
@@ -176,47 +235,50 @@ def plcopen_xml(table: CamTable, settings: dict[str, object], name: str = "Clamp
     _sub(types, "dataTypes")
     pou = _sub(_sub(types, "pous"), "pou", name=f"{name}In", pouType="program")
     interface = _sub(pou, "interface")
-    for section in dict.fromkeys(s for s, _, _ in PROGRAM_VARS):
+    for section in dict.fromkeys(v[0] for v in dialect.program_vars):
         block = _sub(interface, section)
-        for _, var, type_name in (v for v in PROGRAM_VARS if v[0] == section):
-            _type(_sub(block, "variable", name=var), type_name)
-    _text(_sub(_sub(pou, "body"), "ST"), PROGRAM_BODY)
+        for _, var, type_name, initial in (v for v in dialect.program_vars
+                                           if v[0] == section):
+            variable = _sub(block, "variable", name=var)
+            _type(variable, type_name)
+            if initial is not None:
+                _sub(_sub(variable, "initialValue"), "simpleValue", value=initial)
+    _text(_sub(_sub(pou, "body"), "ST"), dialect.body)
     resource = _sub(_sub(_sub(_sub(root, "instances"), "configurations"), "configuration",
                          name="Clamp"), "resource", name="Drive")
     variables = _sub(resource, "globalVars", name=f"{name}Data")  # MC_CAM_REF: an FB
     points = _sub(variables, "variable", name=f"{name}_A")
     array = _sub(_sub(points, "type"), "array")
-    _sub(array, "dimension", lower="0", upper=str(table.master.size - 1))
-    _sub(_sub(array, "baseType"), "derived", name="SMC_CAMXYVA")
+    n = table.master.size
+    _sub(array, "dimension", lower=str(dialect.lower), upper=str(dialect.lower + n - 1))
+    _sub(_sub(array, "baseType"), "derived", name=dialect.point_type)
     values = _sub(_sub(points, "initialValue"), "arrayValue")
-    for row in zip(*(c.tolist() for c in (table.master, table.slave, table.velocity,
-                                           table.acceleration))):
-        _struct_value(_sub(values, "value"), dict(zip(("dX", "dY", "dV", "dA"),
-                                                      map(repr, row))))
+    for i, row in enumerate(zip(*(c.tolist() for c in (
+            table.master, table.slave, table.velocity, table.acceleration)))):
+        _struct_value(_sub(values, "value"), dialect.row(i, n, row))
     cam = _sub(variables, "variable", name=name)
     _type(cam, "MC_CAM_REF")
     _struct_value(_sub(cam, "initialValue"), {
-        "nElements": str(table.master.size), "byType": "3",
-        "xStart": repr(float(table.master[0])), "xEnd": repr(float(table.master[-1])),
-        "nTappets": "0", "strCAMName": f"'{name}'", "pce": f"ADR({name}_A)"})
+        k: v.format(x0=repr(float(table.master[0])), x1=repr(float(table.master[-1])))
+        for k, v in dialect.cam_ref(n, f"{name}_A").items()})
     m, s, v, a = _units(table)
     text = "; ".join(f"{k} = {value}" for k, value in
-                     _header(table, INTERPOLATION["plcopen"], settings).items()
-                     if value is not None)
-    _text(_sub(points, "documentation"),
-          f"dX [{m}], dY [{s}], dV [{v}], dA [{a}]; {text}")
+                     _header(table, INTERPOLATION[fmt], settings).items() if value is not None)
+    _text(_sub(points, "documentation"), "; ".join(
+        f"{member} [{unit}]" for member, unit in zip(dialect.xyva, (m, s, v, a))) + f"; {text}")
     ET.indent(root)
     return ET.tostring(root, encoding="unicode", xml_declaration=True)
 
 
-def read_plcopen(text: str, name: str = "ClampCam") -> tuple[np.ndarray, ...]:
-    """dX, dY, dV and dA of the points of a project written by :func:`plcopen_xml`."""
+def read_plcopen(text: str, fmt: str = "plcopen", name: str = "ClampCam"
+                 ) -> tuple[np.ndarray, ...]:
+    """X, Y, V and A of the points of a project written by :func:`plcopen_xml`."""
     root = ET.fromstring(text)
     ns = {"p": TC6}
     points = root.findall(f".//p:variable[@name='{name}_A']/p:initialValue/p:arrayValue/"
                           "p:value/p:structValue", ns)
     data = [[float(p.find(f"p:value[@member='{m}']/p:simpleValue", ns).get("value"))
-             for m in ("dX", "dY", "dV", "dA")] for p in points]
+             for m in DIALECTS[fmt].xyva] for p in points]
     return tuple(np.array(data).T)
 
 
@@ -235,7 +297,9 @@ def program_st(text: str) -> str:
         for var in block.findall("p:variable", ns):
             kind = var.find("p:type/*", ns)
             type_name = kind.get("name") or kind.tag.split("}")[1]
-            lines.append(f"  {var.get('name')} : {type_name};")
+            initial = var.find("p:initialValue/p:simpleValue", ns)
+            lines.append(f"  {var.get('name')} : {type_name}"
+                         + (f" := {initial.get('value')};" if initial is not None else ";"))
         lines.append("END_VAR")
     lines.append(pou.find("p:body/p:ST/x:xhtml", ns).text.rstrip())
     lines.append("END_PROGRAM")
@@ -283,7 +347,8 @@ def export(path: Path, profile: Profile, cfg: PlantConfig, limits: DriveLimits,
                                    cycle)
         raise ParameterError(
             f"the {points}-point {fmt} table ({interpolation}) breaks the plan at the "
-            f"{cycle * 1e6:g} us drive cycle: {', '.join(cam.breaches(check))}; "
+            f"{cycle * 1e6:g} us drive cycle (of the limits, the planned peak force, stroke "
+            f"and peak velocity): {', '.join(cam.breaches(check))}; "
             + (f"it needs at least {needed[0]} points (--points {needed[0]}, or no --points)"
                if needed else "no number of points keeps it"))
     table = build(points)
@@ -293,7 +358,7 @@ def export(path: Path, profile: Profile, cfg: PlantConfig, limits: DriveLimits,
         elif fmt == "pvt":
             write_pvt(tmp, table, settings)
         else:
-            tmp.write_text(plcopen_xml(table, settings))
+            tmp.write_text(plcopen_xml(table, settings, fmt))
     return {"format": fmt, "points": points, "master": master, "units": units,
             "interpolation": interpolation, "drive_cycle": cycle,
             "points_found": found,

@@ -48,16 +48,17 @@ def _export(default_plan, tmp_path, fmt, **options):
 
 def test_every_plcopen_export_of_the_default_plan_validates_against_tc6(
         default_plan, tmp_path, tc6, capsys):
-    """Every master and unit, through the module and the command: the files are TC6 XML
-    v2.01 by the schema; the schema is no pushover (the old export's XHTML in the TC6
-    namespace fails it)."""
-    files, points = [], None
-    for master in cam.MASTERS:
-        for units in cam.UNITS:
-            out, report = _export(default_plan, tmp_path / f"{master}-{units}", "plcopen",
-                                  master=master, units=units, points=points)
-            files.append(out)
-            points = report["points"]  # found once; the others checked with it
+    """Both PLCopen formats (CODESYS, TwinCAT), every master and unit, through the module
+    and the command: the files are TC6 XML v2.01 by the schema; the schema is no pushover
+    (the old export's XHTML in the TC6 namespace fails it)."""
+    files, points = [], {}
+    for fmt in ("plcopen", "twincat"):
+        for master in cam.MASTERS:
+            for units in cam.UNITS:
+                out, report = _export(default_plan, tmp_path / f"{fmt}-{master}-{units}", fmt,
+                                      master=master, units=units, points=points.get(fmt))
+                files.append(out)
+                points[fmt] = report["points"]  # found once; the others checked with it
     out = tmp_path / "cli.xml"
     assert main(["plan", "--export", "cam", "--format", "plcopen", "--out", str(out)]) == 0
     capsys.readouterr()

@@ -635,16 +635,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         help="write the plan as a cam table to --out instead of the profile")
     export.add_argument("--format", choices=cam_formats.FORMATS, default="csv",
                         help="csv; plcopen: PLCopen XML (TC6 v2.01) with CODESYS SoftMotion's "
-                        "XYVA cam and a program calling MC_CamTableSelect/MC_CamIn; pvt: a "
-                        "drive's position-velocity-time table in whole encoder counts "
-                        "(default csv)")
+                        "XYVA cam and a program calling MC_CamTableSelect/MC_CamIn; twincat: "
+                        "the same with TwinCAT's motion-function points; pvt: a drive's "
+                        "position-velocity-time table in whole encoder counts (default csv)")
     export.add_argument("--points", type=integer(2, 100_000, "must be 2 to 100000 points"),
                         default=None, help="table points (default: the fewest that keep the "
                         "plan at the drive cycle; more given and breaking it: refused)")
     export.add_argument("--interpolation", choices=cam_formats.CSV_INTERPOLATIONS,
                         default=None, help="how the drive interpolates a csv table (default "
-                        "cubic; plcopen is fifth-order through X, Y, V, A, pvt cubic through "
-                        "P, V)")
+                        "cubic; plcopen and twincat are fifth-order through X, Y, V, A, pvt "
+                        "cubic through P, V)")
     export.add_argument("--drive-cycle", type=_drive_cycle, default=cam.DRIVE_CYCLE,
                         help="the drive's interpolation cycle the table is checked at, e.g. "
                              "125us, 1ms (default 125us)")
