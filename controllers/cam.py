@@ -43,6 +43,9 @@ MASTER_UNIT = {"time": "s", "position": "deg"}
 SLAVE_UNIT = {"si": "m", "motor": "rev", "counts": "counts"}
 #: The drive's interpolation cycle the tables are checked at by default, s.
 DRIVE_CYCLE = 125e-6
+#: The drive cycles accepted, s: position loops and fieldbus cycles of servo drives (the
+#: check's cost grows as the stroke time over the cycle).
+CYCLES = (50e-6, 10e-3)
 #: A table keeps the plan when every ratio is at most this.
 TOLERANCE = 1.01
 MAX_POINTS = 100_000
@@ -127,8 +130,8 @@ def drive_samples(table: CamTable, interpolation: str, cycle: float = DRIVE_CYCL
     the cycle: what its feed-forward and its following error see). Time, position,
     velocity, acceleration, SI."""
     choice("interpolation", interpolation, INTERPOLATIONS)
-    if not (math.isfinite(cycle) and 1e-6 <= cycle <= 0.1):
-        raise ParameterError(f"drive cycle must be 1 us to 100 ms, got {cycle!r} s")
+    if not (math.isfinite(cycle) and CYCLES[0] <= cycle <= CYCLES[1]):
+        raise ParameterError(f"drive cycle must be 50 us to 10 ms, got {cycle!r} s")
     t_k, x_k, v_k, a_k = table.knots_si()
     t = sample_times(table.duration, cycle)
     if interpolation == "linear":
@@ -239,7 +242,7 @@ _SECONDS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 
 
 def parse_cycle(text: str) -> float:
-    """A drive cycle such as ``125us``, ``0.5ms`` or ``1e-4`` (s), in s: 1 us to 100 ms."""
+    """A drive cycle such as ``125us``, ``0.5ms`` or ``1e-4`` (s), in s (:data:`CYCLES`)."""
     number = text.strip().lower()
     unit = next((u for u in ("ms", "us", "µs", "s") if number.endswith(u)), "s")
     try:
@@ -247,8 +250,8 @@ def parse_cycle(text: str) -> float:
     except ValueError:
         raise ParameterError(f"drive cycle must be a time such as 125us, 1ms or 1e-4 "
                              f"(s), got {text!r}") from None
-    if not (math.isfinite(value) and 1e-6 <= value <= 0.1):
-        raise ParameterError(f"drive cycle must be 1 us to 100 ms, got {text!r}")
+    if not (math.isfinite(value) and CYCLES[0] <= value <= CYCLES[1]):
+        raise ParameterError(f"drive cycle must be 50 us to 10 ms, got {text!r}")
     return value
 
 

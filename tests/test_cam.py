@@ -238,12 +238,15 @@ def test_cli_exports_the_table_and_refuses_bad_options(tmp_path, capsys):
     mech = load_preset("chang2021")
     x_open, x_final = clamp_stroke(mech)
     assert slave[-1] == pytest.approx((x_final - x_open) / (mech.drive.ratio * mech.drive.lead))
-    for bad in (["--format", "xls"], ["--drive-cycle", "fast"], ["--drive-cycle", "1s"]):
+    for bad in (["--format", "xls"], ["--drive-cycle", "fast"], ["--drive-cycle", "1s"],
+                ["--drive-cycle", "20us"]):
         with pytest.raises(SystemExit) as refused:
             main(["plan", "--export", "cam", *bad, "--out", str(out)])
         assert refused.value.code == 2
     assert main(["plan", "--export", "cam"]) == 2
     assert "--out" in capsys.readouterr().err
+    assert main(["plan", "--drive-cycle", "1ms", "--out", str(tmp_path / "p.csv")]) == 2
+    assert "--export cam" in capsys.readouterr().err
     assert main(["plan", "--export", "cam", "--format", "pvt", "--master", "position",
                  "--out", str(out)]) == 2
     assert "--master time --units counts" in capsys.readouterr().err
@@ -253,6 +256,6 @@ def test_drive_cycles_parse_with_their_units():
     assert cam.parse_cycle("125us") == pytest.approx(125e-6)
     assert cam.parse_cycle("0.5ms") == pytest.approx(5e-4)
     assert cam.parse_cycle("1e-4") == pytest.approx(1e-4)
-    for bad in ("0us", "nan", "2s", "ms"):
+    for bad in ("0us", "nan", "2s", "ms", "10us", "20ms"):
         with pytest.raises(ParameterError, match="drive cycle"):
             cam.parse_cycle(bad)

@@ -229,7 +229,7 @@ def _export(args: argparse.Namespace, plan: Plan, cfg: PlantConfig, limits: Driv
     return cam_formats.export(args.out, plan.profile, cfg, limits, plan.peak_force,
                               args.format, settings, points=args.points, master=args.master,
                               units=args.units, interpolation=args.interpolation,
-                              cycle=args.drive_cycle)
+                              cycle=args.drive_cycle or cam.DRIVE_CYCLE)
 
 
 def _drive_cycle(text: str) -> float:
@@ -289,6 +289,10 @@ def run(args: argparse.Namespace) -> int:
                                  "give --cycle too")
     if args.export and not args.out:
         raise ParameterError("--export cam writes the table to --out: give --out")
+    for name in ("points", "interpolation", "units", "drive_cycle"):
+        if getattr(args, name) is not None and not args.export:
+            raise ParameterError(f"--{name.replace('_', '-')} belongs to the cam export: "
+                                 "give --export cam too")
     for name in ("cycle_out", "duty_plot"):
         if getattr(args, name):
             check_writable(getattr(args, name), f"--{name.replace('_', '-')}")
@@ -645,7 +649,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         default=None, help="how the drive interpolates a csv table (default "
                         "cubic; plcopen and twincat are fifth-order through X, Y, V, A, pvt "
                         "cubic through P, V)")
-    export.add_argument("--drive-cycle", type=_drive_cycle, default=cam.DRIVE_CYCLE,
+    export.add_argument("--drive-cycle", type=_drive_cycle, default=None,
                         help="the drive's interpolation cycle the table is checked at, e.g. "
                              "125us, 1ms (default 125us)")
     export.add_argument("--master", choices=cam.MASTERS, default="time",
