@@ -56,8 +56,9 @@ def draw(rng: random.Random, out: Path) -> list[str]:
     elif kind == "energy":
         argv += ["--energy-weight", f"{rng.uniform(0, 5):.2f}"]
     elif kind == "cam":
-        argv += ["--export", "cam", "--format", rng.choice(["csv", "plcopen"]),
-                 "--interpolation", rng.choice(["linear", "cubic"]),
+        fmt, interpolation = rng.choice(["csv", "plcopen"]), rng.choice(["linear", "cubic"])
+        argv += ["--export", "cam", "--format", fmt,  # plcopen's interpolation is its own
+                 *(["--interpolation", interpolation] if fmt == "csv" else []),
                  "--units", rng.choice(["si", "motor", "counts"]), "--out",
                  str(out / "cam.out")]
     elif kind == "protect":

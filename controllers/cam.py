@@ -1,38 +1,34 @@
-"""Cam tables of a plan, as a servo drive or motion controller loads them, and their check.
+"""Cam tables of a plan, as a servo drive or motion controller loads them, and their check
+at the drive's interpolation cycle.
 
-A drive runs a cam as a table of master to slave positions that it re-interpolates
-(linearly, or with a cubic spline through the points) at every control cycle. The
-master is time (s) or a virtual master axis turning once per profile (degrees,
-0 to 360, at constant speed: the PLCopen MC_CamIn master); the slave is the
-crosshead's travel from the open position in SI (m), in motor revolutions (through
-the belt and screw: R lead per turn, :mod:`toggle.drive`) or in encoder counts
-(``pulses_per_rev`` per turn; written with decimals, as drives that take LREAL
-tables read them, so that rounding to whole counts does not become acceleration noise).
+A drive runs a cam as a table of points that it interpolates at every cycle of its
+position loop (125 us on a typical servo drive). The master is time (s) or a virtual
+master axis turning once per profile (degrees, 0 to 360 at constant speed: the PLCopen
+MC_CamIn master); the slave is the crosshead's travel from the open position in SI (m),
+in motor revolutions (R lead per turn, :mod:`toggle.drive`) or in encoder counts
+(``pulses_per_rev`` per turn). Each point carries the slave's position, velocity and
+acceleration over the master (per s or per degree), as the formats that take them need.
 
-:func:`drive_samples` re-interpolates a table as the drive does and samples it every
-control cycle (1 ms); :func:`check_table` runs those samples through the plant
-(:func:`toggle.plant.plant_outputs`, the planner's and the FMU's model) and gives the
+How the drive interpolates is the format's (:data:`INTERPOLATIONS`): ``linear`` and
+``cubic`` (a spline through the positions) for plain position tables, ``pv-cubic``
+(cubic Hermite through position and velocity: a PVT table) and ``pva-quintic`` (the
+fifth-order polynomial through position, velocity and acceleration at both ends of each
+segment: CODESYS SoftMotion's XYVA cams). :func:`drive_samples` interpolates a table so
+and samples it every drive cycle; :func:`check_table` runs the samples through the plant
+(:func:`toggle.plant.plant_outputs`, the planner's and the FMU's model) and gives
 velocity, acceleration, motor torque and input force against the plan's limits: what
-the drive will really command, not what the plan meant.
-
-Formats: CSV (``# key = value`` lines, then ``master [unit],slave [unit]``) and PLCopen
-XML (TC6 XML v2.01, namespace ``http://www.plcopen.org/xml/tc6_0201``): a project with a
-``CamPoint`` structure (MasterPosition, SlavePosition: LREAL) and a constant global
-``CamTable : ARRAY [0..N-1] OF CamPoint`` initialised with the table, which IEC 61131-3
-tools import and pass to their MC_CamTableSelect (:func:`read_plcopen` reads it back).
+the drive will really command. :func:`points_needed` finds the fewest points that keep
+them within 1 %. The files are :mod:`controllers.cam_formats`.
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import math
-import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
-from scipy.interpolate import CubicSpline
+from scipy.interpolate import BPoly, CubicHermiteSpline, CubicSpline, PPoly
 
 from controllers.limits import DriveLimits
 from controllers.profiles import Profile, sample_times
@@ -41,186 +37,228 @@ from toggle.plant import PlantConfig, plant_outputs
 
 MASTERS = ("time", "position")
 UNITS = ("si", "motor", "counts")
-INTERPOLATIONS = ("linear", "cubic")
-FORMATS = ("csv", "plcopen")
+INTERPOLATIONS = ("linear", "cubic", "pv-cubic", "pva-quintic")
 #: The unit of the master and of the slave as written, by master / units.
 MASTER_UNIT = {"time": "s", "position": "deg"}
 SLAVE_UNIT = {"si": "m", "motor": "rev", "counts": "counts"}
-#: The drive's control cycle the table is checked on, s.
-CYCLE = 1e-3
-TC6 = "http://www.plcopen.org/xml/tc6_0201"
+#: The drive's interpolation cycle the tables are checked at by default, s.
+DRIVE_CYCLE = 125e-6
+#: The drive cycles accepted, s: position loops and fieldbus cycles of servo drives (the
+#: check's cost grows as the stroke time over the cycle).
+CYCLES = (50e-6, 10e-3)
+#: A table keeps the plan when every ratio is at most this.
+TOLERANCE = 1.01
+MAX_POINTS = 100_000
+#: A table follows the plan when its position and velocity errors are at most this.
+FOLLOWING = 0.01
+ERRORS = ("position_error", "velocity_error")
+RATIOS = ("velocity", "acceleration", "motor_torque", "peak_force")
 
 
 @dataclass(frozen=True)
 class CamTable:
-    """Master and slave positions (in ``master``'s and ``units``' units), the profile's
-    duration (s), the crosshead's open position (m) and the drive that converts."""
+    """Master and slave positions with the slave's velocity and acceleration over the
+    master (in ``kind``'s and ``units``' units: per s or per degree), the profile's
+    duration (s), the crosshead's open position (m) and the drive that converts;
+    ``whole`` when the slave and its velocity are whole numbers (encoder counts)."""
 
     master: np.ndarray
     slave: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
     kind: str  # master: time or position
     units: str
     duration: float
     x_open: float
     drive: Drive = field(repr=False)
+    whole: bool = False
 
-    def slave_si(self, slave: np.ndarray) -> np.ndarray:
-        """Slave values in the table's units as crosshead positions, m."""
-        return self.x_open + np.asarray(slave) / _per_metre(self.units, self.drive)
+    @property
+    def per_second(self) -> float:
+        """Master units per second (1 for time, 360 / duration for the virtual axis)."""
+        return 360.0 / self.duration if self.kind == "position" else 1.0
 
-    def master_time(self, master: np.ndarray) -> np.ndarray:
-        """Master values as time, s."""
-        return np.asarray(master) * (self.duration / 360.0 if self.kind == "position" else 1.0)
+    @property
+    def per_metre(self) -> float:
+        """Slave units per metre of crosshead travel."""
+        return per_metre(self.units, self.drive)
+
+    def knots_si(self) -> tuple[np.ndarray, ...]:
+        """The points as time (s), crosshead position (m), velocity and acceleration (SI)."""
+        k, s = self.per_second, self.per_metre
+        return (self.master / k, self.x_open + self.slave / s, self.velocity * k / s,
+                self.acceleration * k * k / s)
 
 
-def _per_metre(units: str, drive: Drive) -> float:
+def per_metre(units: str, drive: Drive) -> float:
     """Slave units per metre of crosshead travel."""
     turn = drive.ratio * drive.lead  # crosshead travel per motor turn, m
     return {"si": 1.0, "motor": 1.0 / turn, "counts": drive.pulses_per_rev / turn}[units]
 
 
-def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
+def choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
+    """Refuse ``value`` outside ``allowed`` in one line."""
     if value not in allowed:
         raise ParameterError(f"cam {name} must be one of {', '.join(allowed)}, got {value!r}")
 
 
-def default_points(profile: Profile, interpolation: str) -> int:
-    """Points of a table a drive can follow within 1 % of the plan: one per control cycle
-    for linear interpolation (between points its velocity steps, and each step is an
-    acceleration over one cycle), one per 10 ms for a cubic spline."""
-    step = CYCLE if interpolation == "linear" else 10 * CYCLE
-    return math.ceil(profile.duration / step - 1e-9) + 1
-
-
-def cam_table(profile: Profile, drive: Drive, points: int | None = None, *,
-              master: str = "time", units: str = "si", interpolation: str = "cubic"
-              ) -> CamTable:
-    """The profile as a cam table of ``points`` equally spaced master positions (default
-    :func:`default_points`), the slave's travel from the profile's start."""
-    _choice("master", master, MASTERS)
-    _choice("units", units, UNITS)
-    _choice("interpolation", interpolation, INTERPOLATIONS)
-    points = default_points(profile, interpolation) if points is None else points
-    if not (isinstance(points, int) and 2 <= points <= 100_000):
-        raise ParameterError(f"cam points must be an integer 2 to 100000, got {points!r}")
+def cam_table(profile: Profile, drive: Drive, points: int, *, master: str = "time",
+              units: str = "si", whole: bool = False) -> CamTable:
+    """The profile as a cam table of ``points`` equally spaced master positions, the
+    slave's travel from the profile's start; ``whole`` rounds the slave and its velocity
+    to whole units (a drive table in integer encoder counts)."""
+    choice("master", master, MASTERS)
+    choice("units", units, UNITS)
+    if not (isinstance(points, int) and 2 <= points <= MAX_POINTS):
+        raise ParameterError(f"cam points must be an integer 2 to {MAX_POINTS}, got {points!r}")
     t = np.linspace(0.0, profile.duration, points)
-    x = profile.sample(t)[0]
-    scale = 360.0 / profile.duration if master == "position" else 1.0
-    return CamTable(t * scale, (x - x[0]) * _per_metre(units, drive), master, units,
-                    profile.duration, float(x[0]), drive)
+    x, v, a = profile.sample(t)
+    k = 360.0 / profile.duration if master == "position" else 1.0
+    s = per_metre(units, drive)
+    slave, velocity = (x - x[0]) * s, v * s / k
+    if whole:
+        slave, velocity = np.rint(slave), np.rint(velocity)
+    return CamTable(t * k, slave, velocity, a * s / k**2, master, units, profile.duration,
+                    float(x[0]), drive, whole)
 
 
-def drive_samples(table: CamTable, interpolation: str, period: float = CYCLE
+def drive_samples(table: CamTable, interpolation: str, cycle: float = DRIVE_CYCLE
                   ) -> tuple[np.ndarray, ...]:
-    """The crosshead motion the drive commands from the table: re-interpolated
-    (``linear``, or a cubic spline with the rest at both ends the table's ends keep)
-    and sampled every ``period`` s; velocity and acceleration as the drive's position
-    setpoints give them (central differences over the periods). Time, position, velocity,
-    acceleration, SI."""
-    _choice("interpolation", interpolation, INTERPOLATIONS)
-    t_knots = table.master_time(table.master)
-    x_knots = table.slave_si(table.slave)
-    t = sample_times(table.duration, period)
+    """The crosshead motion the drive commands from the table: interpolated as
+    ``interpolation`` says and sampled every ``cycle`` s; velocity and acceleration as
+    the drive's position setpoints give them (central first and second differences over
+    the cycle: what its feed-forward and its following error see). Time, position,
+    velocity, acceleration, SI."""
+    choice("interpolation", interpolation, INTERPOLATIONS)
+    if not (math.isfinite(cycle) and CYCLES[0] <= cycle <= CYCLES[1]):
+        raise ParameterError(f"drive cycle must be 50 us to 10 ms, got {cycle!r} s")
+    t_k, x_k, v_k, a_k = table.knots_si()
+    t = sample_times(table.duration, cycle)
     if interpolation == "linear":
-        x = np.interp(t, t_knots, x_knots)
+        x = np.interp(t, t_k, x_k)
+    elif interpolation == "cubic":
+        x = CubicSpline(t_k, x_k, bc_type="clamped")(t)
+    elif interpolation == "pv-cubic":
+        x = CubicHermiteSpline(t_k, x_k, v_k)(t)
     else:
-        x = CubicSpline(t_knots, x_knots, bc_type="clamped")(t)
-    v = np.gradient(x, t)
-    a = np.gradient(v, t)
+        quintic = BPoly.from_derivatives(t_k, np.column_stack([x_k, v_k, a_k]))
+        x = PPoly.from_bernstein_basis(quintic)(t)  # the same polynomials, 20x faster
+    h = t[1] - t[0]
+    v = np.gradient(x, h)
+    a = np.empty_like(x)
+    a[1:-1] = (x[2:] - 2.0 * x[1:-1] + x[:-2]) / h**2
+    a[0], a[-1] = a[1], a[-2]
     return t, x, v, a
 
 
 def check_table(table: CamTable, interpolation: str, cfg: PlantConfig, limits: DriveLimits,
-                planned_peak: float) -> dict[str, float]:
-    """The table as the drive interpolates it, through the plant: the largest velocity,
-    acceleration and motor torque over their limits and the peak input force over the
-    plan's (each at most 1.01 for a table that keeps the plan within 1 %)."""
-    t, x, v, a = drive_samples(table, interpolation)
-    force = np.asarray(plant_outputs(x, v, a, cfg).input_force, float)
-    peak = float(np.max(np.abs(force)))
-    return {"velocity": float(np.max(np.abs(v))) / limits.velocity,
-            "acceleration": float(np.max(np.abs(a))) / limits.acceleration,
-            "motor_torque": limits.torque_ratio(table.drive, v, a, force),
-            "peak_force": peak / planned_peak, "peak_force_newton": peak}
+                planned_peak: float, cycle: float = DRIVE_CYCLE, *,
+                profile: Profile | None = None, plant: bool = True) -> dict[str, float]:
+    """The table as the drive interpolates it at ``cycle``, through the plant: the
+    largest velocity, acceleration and motor torque over their limits and the peak input
+    force over the plan's (each at most :data:`TOLERANCE` for a table that keeps the plan
+    within 1 %); with the plan's ``profile``, how far the motion strays from it: the
+    largest position error over the stroke and velocity error over the plan's peak
+    velocity (each at most :data:`FOLLOWING`). ``plant=False``: no force nor torque."""
+    t, x, v, a = drive_samples(table, interpolation, cycle)
+    ratios = {"velocity": float(np.max(np.abs(v))) / limits.velocity,
+              "acceleration": float(np.max(np.abs(a))) / limits.acceleration}
+    if profile is not None:
+        x_plan, v_plan, _ = profile.sample(t)
+        ratios.update(
+            position_error=float(np.max(np.abs(x - x_plan)) / abs(x_plan[-1] - x_plan[0])),
+            velocity_error=float(np.max(np.abs(v - v_plan)) / np.max(np.abs(v_plan))))
+    if plant:
+        force = np.asarray(plant_outputs(x, v, a, cfg).input_force, float)
+        peak = float(np.max(np.abs(force)))
+        ratios.update(motor_torque=limits.torque_ratio(table.drive, v, a, force),
+                      peak_force=peak / planned_peak, peak_force_newton=peak)
+    return ratios
 
 
-def _header(table: CamTable, interpolation: str, settings: dict[str, object]) -> dict:
-    return {**settings, "master": table.kind, "units": table.units,
-            "interpolation": interpolation, "duration": table.duration,
-            "x_open": table.x_open, "points": int(table.master.size)}
+def keeps(check: dict[str, float]) -> bool:
+    """Whether a check keeps every limit within 1 % and follows the plan within 1 % (of
+    the ratios it has)."""
+    return (all(check[name] <= TOLERANCE for name in RATIOS if name in check)
+            and all(check[name] <= FOLLOWING for name in ERRORS if name in check))
 
 
-def write_csv(path: str | Path, table: CamTable, interpolation: str,
-              settings: dict[str, object]) -> None:
-    """The table as CSV: ``# key = value`` lines (what it was made for, SI), then the
-    columns with their units."""
-    buffer = io.StringIO()
-    for key, value in _header(table, interpolation, settings).items():
-        if value is not None:
-            buffer.write(f"# {key} = {value!r}\n" if isinstance(value, str)
-                         else f"# {key} = {value}\n")
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow([f"master [{MASTER_UNIT[table.kind]}]",
-                     f"slave [{SLAVE_UNIT[table.units]}]"])
-    writer.writerows(zip(map(repr, table.master.tolist()), map(repr, table.slave.tolist())))
-    Path(path).write_text(buffer.getvalue().replace("'", '"'))
+def points_needed(build: Callable[[int], CamTable], interpolation: str, cfg: PlantConfig,
+                  limits: DriveLimits, planned_peak: float, profile: Profile,
+                  cycle: float = DRIVE_CYCLE) -> tuple[int, dict[str, float]] | None:
+    """The fewest points, and their check, for which ``build(points)``'s table keeps the
+    plan at ``cycle`` and follows ``profile``; None if no count up to :data:`MAX_POINTS`
+    does (a table in whole counts whose rounding alone breaks a limit). The kinematics
+    decide, on counts growing by a quarter, then by bisection; the plant confirms, and
+    where it does not, the search goes on with the plant. The check is not monotonic in
+    the count everywhere (linear knots beat against the cycle), so "fewest" is the least
+    of the bracket found: one point fewer breaks the plan."""
+    checks: dict[int, dict[str, float]] = {}
+
+    def kinematic(n: int) -> bool:
+        return keeps(check_table(build(n), interpolation, cfg, limits, planned_peak, cycle,
+                                 profile=profile, plant=False))
+
+    def full(n: int) -> bool:
+        checks[n] = check_table(build(n), interpolation, cfg, limits, planned_peak, cycle,
+                                profile=profile)
+        return keeps(checks[n])
+
+    def grow(k: int) -> int:
+        return max(k + 1, math.ceil(k * 1.25))
+
+    below, n = _first_passing(kinematic, 1, 2, grow)
+    if n is None:
+        return None
+    n = _bisect(kinematic, below, n)
+    if not full(n):
+        below, n = _first_passing(full, n, grow(n), grow)
+        if n is None:
+            return None
+        n = _bisect(full, below, n)
+    return n, checks[n]  # full(n) passed: in the first test or the bisection
 
 
-def read_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Master and slave columns of a cam CSV."""
-    rows = [r for r in Path(path).read_text().splitlines() if r and not r.startswith("#")]
-    data = np.array([[float(v) for v in r.split(",")] for r in rows[1:]])
-    return data[:, 0], data[:, 1]
+def _first_passing(ok: Callable[[int], bool], below: int, n: int,
+                   grow: Callable[[int], int]) -> tuple[int, int | None]:
+    """The first count from ``n`` on (grown by ``grow``) that passes, with the last that
+    failed before it; (last, None) if none up to :data:`MAX_POINTS` does."""
+    while not ok(n):
+        if n >= MAX_POINTS:
+            return n, None
+        below, n = n, min(MAX_POINTS, grow(n))
+    return below, n
 
 
-def _sub(parent: ET.Element, tag: str, **attrs: str) -> ET.Element:
-    return ET.SubElement(parent, f"{{{TC6}}}{tag}", attrs)
+def _bisect(ok: Callable[[int], bool], below: int, n: int) -> int:
+    """The least passing count in (below, n], ``below`` failing and ``n`` passing."""
+    while n - below > 1:
+        middle = (below + n) // 2
+        below, n = (below, middle) if ok(middle) else (middle, n)
+    return n
 
 
-def plcopen_xml(table: CamTable, interpolation: str, settings: dict[str, object],
-                name: str = "ClampCam") -> str:
-    """The table as a PLCopen TC6 XML v2.01 project (module docstring)."""
-    ET.register_namespace("", TC6)
-    root = ET.Element(f"{{{TC6}}}project")
-    _sub(root, "fileHeader", companyName="toggle-clamp", productName="toggle plan",
-         productVersion="1", creationDateTime="2026-01-01T00:00:00")
-    content = _sub(root, "contentHeader", name=name)
-    coordinates = _sub(content, "coordinateInfo")
-    for language in ("fbd", "ld", "sfc"):
-        _sub(_sub(coordinates, language), "scaling", x="1", y="1")
-    types = _sub(root, "types")
-    struct = _sub(_sub(_sub(_sub(types, "dataTypes"), "dataType", name="CamPoint"),
-                       "baseType"), "struct")
-    for member in ("MasterPosition", "SlavePosition"):
-        _sub(_sub(struct, "variable", name=member), "type").append(
-            ET.Element(f"{{{TC6}}}LREAL"))
-    _sub(types, "pous")
-    resource = _sub(_sub(_sub(_sub(root, "instances"), "configurations"), "configuration",
-                         name="Clamp"), "resource", name="Drive")
-    variables = _sub(resource, "globalVars", constant="true")
-    variable = _sub(variables, "variable", name="CamTable")
-    array = _sub(_sub(variable, "type"), "array")
-    _sub(array, "dimension", lower="0", upper=str(table.master.size - 1))
-    _sub(_sub(array, "baseType"), "derived", name="CamPoint")
-    values = _sub(_sub(variable, "initialValue"), "arrayValue")
-    for m, s in zip(table.master.tolist(), table.slave.tolist()):
-        point = _sub(_sub(values, "value"), "structValue")
-        for member, number in (("MasterPosition", m), ("SlavePosition", s)):
-            _sub(_sub(point, "value", member=member), "simpleValue", value=repr(number))
-    text = "; ".join(f"{k} = {v}" for k, v in _header(table, interpolation, settings).items()
-                     if v is not None)
-    _sub(_sub(variable, "documentation"), "xhtml").text = (
-        f"master [{MASTER_UNIT[table.kind]}], slave [{SLAVE_UNIT[table.units]}]; {text}")
-    ET.indent(root)
-    return ET.tostring(root, encoding="unicode", xml_declaration=True)
+_SECONDS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 
 
-def read_plcopen(text: str) -> tuple[np.ndarray, np.ndarray]:
-    """Master and slave positions of a table written by :func:`plcopen_xml`."""
-    root = ET.fromstring(text)
-    ns = {"p": TC6}
-    points = root.findall(".//p:variable[@name='CamTable']/p:initialValue/p:arrayValue/"
-                          "p:value/p:structValue", ns)
-    data = [[float(p.find(f"p:value[@member='{m}']/p:simpleValue", ns).get("value"))
-             for m in ("MasterPosition", "SlavePosition")] for p in points]
-    return tuple(np.array(data).T)
+def parse_cycle(text: str) -> float:
+    """A drive cycle such as ``125us``, ``0.5ms`` or ``1e-4`` (s), in s (:data:`CYCLES`)."""
+    number = text.strip().lower()
+    unit = next((u for u in ("ms", "us", "µs", "s") if number.endswith(u)), "s")
+    try:
+        value = float(number.removesuffix(unit)) * _SECONDS[unit]
+    except ValueError:
+        raise ParameterError(f"drive cycle must be a time such as 125us, 1ms or 1e-4 "
+                             f"(s), got {text!r}") from None
+    if not (math.isfinite(value) and CYCLES[0] <= value <= CYCLES[1]):
+        raise ParameterError(f"drive cycle must be 50 us to 10 ms, got {text!r}")
+    return value
+
+
+def breaches(check: dict[str, float]) -> list[str]:
+    """What a check breaks, each with its figure in % (of its limit, of the plan's peak
+    force, of the stroke, of the plan's peak velocity); empty: it keeps the plan."""
+    return ([f"{name.replace('_', ' ')} {100 * check[name]:.1f} %"
+             for name in RATIOS if name in check and check[name] > TOLERANCE]
+            + [f"{name.replace('_', ' ')} {100 * check[name]:.2f} %"
+               for name in ERRORS if name in check and check[name] > FOLLOWING])

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers import cam
+from controllers import cam, cam_formats
 from controllers.background import Background
 from controllers.cycle import MoldingCycle
 from controllers.duty import check_motor, motor_duty
@@ -224,20 +224,20 @@ def _opening(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
 
 def _export(args: argparse.Namespace, plan: Plan, cfg: PlantConfig, limits: DriveLimits,
             settings: dict[str, object]) -> dict[str, object]:
-    """``--export cam``: the plan's cam table written to ``--out`` and checked as the drive
-    will interpolate it (:mod:`controllers.cam`)."""
-    table = cam.cam_table(plan.profile, cfg.mechanism.drive, args.points, master=args.master,
-                          units=args.units, interpolation=args.interpolation)
-    check = cam.check_table(table, args.interpolation, cfg, limits, plan.peak_force)
-    with atomic_path(args.out) as tmp:
-        if args.format == "csv":
-            cam.write_csv(tmp, table, args.interpolation, settings)
-        else:
-            tmp.write_text(cam.plcopen_xml(table, args.interpolation, settings))
-    return {"format": args.format, "points": int(table.master.size), "master": args.master,
-            "units": args.units, "interpolation": args.interpolation,
-            "master_unit": cam.MASTER_UNIT[args.master], "slave_unit": cam.SLAVE_UNIT[args.units],
-            "as_interpolated": check}
+    """``--export cam``: the plan's cam table written to ``--out``, checked as the drive
+    interpolates it at ``--drive-cycle`` (:mod:`controllers.cam_formats`)."""
+    return cam_formats.export(args.out, plan.profile, cfg, limits, plan.peak_force,
+                              args.format, settings, points=args.points, master=args.master,
+                              units=args.units, interpolation=args.interpolation,
+                              cycle=args.drive_cycle or cam.DRIVE_CYCLE)
+
+
+def _drive_cycle(text: str) -> float:
+    """argparse type of ``--drive-cycle`` (:func:`controllers.cam.parse_cycle`)."""
+    try:
+        return cam.parse_cycle(text)
+    except ParameterError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _molding_cycle(args: argparse.Namespace, plan: Plan, opening: Plan, limits: DriveLimits
@@ -289,6 +289,10 @@ def run(args: argparse.Namespace) -> int:
                                  "give --cycle too")
     if args.export and not args.out:
         raise ParameterError("--export cam writes the table to --out: give --out")
+    for name in ("points", "interpolation", "units", "drive_cycle"):
+        if getattr(args, name) is not None and not args.export:
+            raise ParameterError(f"--{name.replace('_', '-')} belongs to the cam export: "
+                                 "give --export cam too")
     for name in ("cycle_out", "duty_plot"):
         if getattr(args, name):
             check_writable(getattr(args, name), f"--{name.replace('_', '-')}")
@@ -416,17 +420,16 @@ def run(args: argparse.Namespace) -> int:
         _print_molding(molding)
     if exported:
         check = exported["as_interpolated"]
-        print(f"cam table ({exported['format']}, {exported['points']} points, master "
-              f"{exported['master_unit']}, slave {exported['slave_unit']}) written to {args.out}; "
-              f"as the drive interpolates it ({exported['interpolation']}): velocity "
+        print(f"cam table ({exported['format']}, {exported['points']} points"
+              f"{' (the fewest that keep the plan)' if exported['points_found'] else ''}, "
+              f"master {exported['master_unit']}, slave {exported['slave_unit']}) written to "
+              f"{args.out}; as the drive interpolates it ({exported['interpolation']}) every "
+              f"{exported['drive_cycle'] * 1e6:g} us: velocity "
               f"{100 * check['velocity']:.2f} %, acceleration {100 * check['acceleration']:.2f} "
               f"%, motor torque {100 * check['motor_torque']:.2f} % of their limits, peak input "
-              f"force {100 * check['peak_force']:.2f} % of the plan's")
-        over = [name.replace("_", " ") for name in ("velocity", "acceleration", "motor_torque",
-                                                     "peak_force") if check[name] > 1.01]
-        if over:
-            print(f"the table breaks the plan by more than 1 % in: {', '.join(over)}; give "
-                  "more --points or --interpolation cubic")
+              f"force {100 * check['peak_force']:.2f} % of the plan's; off the plan by at most "
+              f"{100 * check['position_error']:.3f} % of the stroke and "
+              f"{100 * check['velocity_error']:.2f} % of its peak velocity")
     if robust:
         rows = [(name, *values.values()) for name, values in robust.items()]
         print("peak input force (N) on each clamp of the robust plan, the nominal clamp's "
@@ -634,19 +637,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     export = p.add_argument_group("cam table export (--export cam --out FILE)")
     export.add_argument("--export", choices=("cam",), default=None,
                         help="write the plan as a cam table to --out instead of the profile")
-    export.add_argument("--format", choices=cam.FORMATS, default="csv",
-                        help="csv or PLCopen XML (TC6 v2.01) (default csv)")
+    export.add_argument("--format", choices=cam_formats.FORMATS, default="csv",
+                        help="csv; plcopen: PLCopen XML (TC6 v2.01) with CODESYS SoftMotion's "
+                        "XYVA cam and a program calling MC_CamTableSelect/MC_CamIn; twincat: "
+                        "the same with TwinCAT's motion-function points; pvt: a drive's "
+                        "position-velocity-time table in whole encoder counts (default csv)")
     export.add_argument("--points", type=integer(2, 100_000, "must be 2 to 100000 points"),
-                        default=None, help="table points (default: one per 1 ms for linear, "
-                        "per 10 ms for cubic interpolation)")
-    export.add_argument("--interpolation", choices=cam.INTERPOLATIONS, default="cubic",
-                        help="how the drive interpolates the table (default cubic)")
+                        default=None, help="table points (default: the fewest that keep the "
+                        "plan at the drive cycle; more given and breaking it: refused)")
+    export.add_argument("--interpolation", choices=cam_formats.CSV_INTERPOLATIONS,
+                        default=None, help="how the drive interpolates a csv table (default "
+                        "cubic; plcopen and twincat are fifth-order through X, Y, V, A, pvt "
+                        "cubic through P, V)")
+    export.add_argument("--drive-cycle", type=_drive_cycle, default=None,
+                        help="the drive's interpolation cycle the table is checked at, e.g. "
+                             "125us, 1ms (default 125us)")
     export.add_argument("--master", choices=cam.MASTERS, default="time",
                         help="master: time (s) or a virtual master axis, 0-360 deg per stroke "
                              "(default time)")
-    export.add_argument("--units", choices=cam.UNITS, default="si",
+    export.add_argument("--units", choices=cam.UNITS, default=None,
                         help="slave units: si (m), motor (revolutions), counts (encoder) "
-                             "(default si)")
+                             "(default si; pvt: counts)")
     p.add_argument("--robust", action="store_true",
                    help="plan for the nominal clamp and the one with the --delta-NAME errors "
                         "at once (the worst of the two, each against its S-curve)")
