@@ -24,7 +24,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement
 
-from fmu_src.slave import Var
+from fmu_src.slave import Var, hidden_names
 
 #: This package's folder, and the project's root (the model package toggle/ beside it).
 FMU_SRC_DIR = Path(__file__).resolve().parent
@@ -130,6 +130,10 @@ def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
     root.set("copyright", "Copyright (c) the toggle-clamp authors")
     root.set("license", "MIT")
     scalars = root.find("ModelVariables")
+    hidden = hidden_names(variables)  # registered after the table; the guard sets them
+    for sv in list(scalars)[len(variables):]:
+        if sv.get("name") in hidden:
+            scalars.remove(sv)
     names = [sv.get("name") for sv in scalars]
     if names != [v.name for v in variables]:
         raise ValueError(f"registered variables {names} differ from the table")
@@ -149,6 +153,9 @@ def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
     cosim = root.find("CoSimulation")
     cosim.set("canGetAndSetFMUstate", "true")
     cosim.set("canSerializeFMUstate", "true")
+    # the guard passes fmi2SetRealInputDerivatives on (fmu_src.slave, hidden variables)
+    cosim.set("canInterpolateInputs", "true")
+    cosim.set("maxOutputDerivativeOrder", "0")
     units = {v.unit for v in variables if not v.is_string}
     root.insert(list(root).index(cosim) + 1, unit_definitions(units))
 

@@ -35,7 +35,7 @@ from toggle.plant import (
     HystereticPlant,
     PlantConfig,
     configure,
-    follow,
+    drive_step,
 )
 
 _PRESET_FILE = Path(__file__).with_name("preset.toml")
@@ -163,8 +163,10 @@ class ToggleClamp(DeclaredSlave):
 
     def step(self, current_time: float, step_size: float) -> None:
         self._plant.plant.check_input(self.x_cmd)  # a position error first, not a speed
-        drive = follow(self._drive, self.x_cmd, step_size, self.drive_bandwidth,
-                       self.drive_damping)
+        # x_cmd and its derivatives are the master's at the step's start (FMI 2.0 4.2.2)
+        drive = drive_step(self._drive, self.x_cmd, step_size, self.drive_bandwidth,
+                           self.drive_damping, self.input_derivative("x_cmd", 1),
+                           self.input_derivative("x_cmd", 2))
         self._publish(drive)
 
     def state_identity(self) -> str:

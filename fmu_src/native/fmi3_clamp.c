@@ -1,7 +1,7 @@
 /* FMI 3.0 Co-Simulation and Model Exchange API of the toggle clamp: a thin layer over
  * clamp_core.c, the core under the FMI 2.0 API too. Co-Simulation steps exactly as FMI 2.0
- * Co-Simulation does, except that FMI 3.0 has no equivalent of fmi2SetRealInputDerivatives:
- * the command over a step is always the parabola through the last three commands. Value
+ * Co-Simulation does without input derivatives (FMI 3.0 has no fmi2SetRealInputDerivatives):
+ * x_cmd set before fmi3DoStep(t, h) is the command at t, held over the step. Value
  * references: the Float64 variables from 0 as in FMI 2.0, preset CLAMP_VR_PRESET, time
  * TIME_VR. One allocation per instance and per saved state, none per step. */
 #include <stdio.h>
@@ -21,6 +21,7 @@ typedef struct {
 
 static void deliver(void *env, int error, const char *msg) {
     Instance *c = env;
+    if (!c->log) return;  /* FMI 3.0 allows a NULL logMessage */
     c->log(c->env, error ? fmi3Error : fmi3OK, error ? "logStatusError" : "logAll", msg);
 }
 
@@ -37,9 +38,8 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 static Instance *instantiate(fmi3String name, fmi3String token, int me, fmi3Boolean logging,
                              fmi3InstanceEnvironment env, fmi3LogMessageCallback log) {
     (void)name;  /* the FMU reads no file: any resource path works */
-    if (!log) return NULL;
     if (!token || strcmp(token, CLAMP_GUID) != 0 || !(me ? CLAMP_HAS_ME : CLAMP_HAS_CS)) {
-        log(env, fmi3Error, "logStatusError", !token || strcmp(token, CLAMP_GUID)
+        if (log) log(env, fmi3Error, "logStatusError", !token || strcmp(token, CLAMP_GUID)
             ? "instantiation token mismatch" : "this FMU does not declare that interface");
         return NULL;
     }
@@ -98,7 +98,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
                                        fmi3Float64 tolerance, fmi3Float64 startTime,
                                        fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
     (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
-    CORE(instance)->time = startTime;
+    CORE(instance)->s.time = startTime;
     return status(core_enter_initialisation(CORE(instance)));
 }
 
@@ -118,7 +118,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           size_t nValueReferences, fmi3Float64 values[], size_t nValues) {
     if (nValues != nValueReferences) return unsupported(instance, "GetFloat64 of arrays");
     for (size_t i = 0; i < nValueReferences; i++) {
-        if (valueReferences[i] == TIME_VR) values[i] = CORE(instance)->time;
+        if (valueReferences[i] == TIME_VR) values[i] = CORE(instance)->s.time;
         else if (core_get_real(CORE(instance), &valueReferences[i], 1, &values[i]) != CORE_OK)
             return fmi3Error;
     }
@@ -158,7 +158,6 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     *terminateSimulation = fmi3False;
     *earlyReturn = fmi3False;
     *lastSuccessfulTime = currentCommunicationPoint + (ok == CORE_OK ? communicationStepSize : 0);
-    if (ok == CORE_OK) CORE(instance)->time = *lastSuccessfulTime;
     return status(ok);
 }
 
@@ -190,7 +189,7 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
 }
 
 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
-    CORE(instance)->time = time;
+    CORE(instance)->s.time = time;
     return fmi3OK;
 }
 
