@@ -146,6 +146,64 @@ def plant_functions(cfg: PlantConfig) -> list[ca.Function]:
     return functions
 
 
+class Dependencies(NamedTuple):
+    """ModelStructure's direct dependencies, by variable name: ``run``, of each output and
+    state derivative on the continuous states and the input in Model Exchange; ``init``, of
+    each initial unknown on the input and the parameters in Initialization Mode."""
+
+    run: dict[str, tuple[str, ...]]
+    init: dict[str, tuple[str, ...]]
+
+
+def _depends(expr: Any, symbols: Sequence[Any], names: Sequence[str]) -> list[tuple[str, ...]]:
+    """For each entry of ``expr``, the names of the scalar ``symbols`` it depends on
+    (CasADi's structural sparsity of the Jacobian)."""
+    jac = ca.jacobian(expr, ca.vertcat(*symbols)).sparsity()
+    return [tuple(names[j] for j in sorted({jac.get_col()[k] for k in range(jac.nnz())
+                                             if jac.row()[k] == i}))
+            for i in range(expr.numel())]
+
+
+def structure_dependencies(cfg: PlantConfig) -> Dependencies:
+    """The dependencies of every output and derivative, from the sparsity of the generated
+    plant functions (:func:`plant_functions`, all variants united) and of the core's Model
+    Exchange equations: der(x) = velocity, der(velocity) = w^2 (x_cmd - x) - 2 zeta w
+    velocity (the drive lag), der(slip_state) = (sign(v) - z) |v| / slip_distance (Dahl)."""
+    functions = plant_functions(cfg)
+    x, v, z, u, w, zeta = (ca.SX.sym(n) for n in ("x", "v", "z", "u", "w", "zeta"))
+    a = w * w * (u - x) - 2 * zeta * w * v  # clamp_core.c lag_acceleration
+    states = ("x", "velocity", "slip_state", "x_cmd")
+    errors = [ca.SX.sym(f"delta_{PAPER_NAMES[half][dim]}") for half in HALVES
+              for dim in DIMENSIONS]
+    mu, x_contact = ca.SX.sym("mu"), ca.SX.sym("x_contact")
+    masses = [ca.SX.sym(n) for n in (*MASS_FIELDS, *DRIVE_FIELDS)]
+    mech = cfg.mechanism
+    nominal = mech.lower.as_tuple() + mech.upper.as_tuple()
+    dims = [n + e for n, e in zip(nominal, errors)]
+    known = [u, *errors, mu, *masses, x_contact]
+    known_names = ["x_cmd", *(str(e) for e in errors), "mu", *(str(m) for m in masses),
+                   "x_contact"]
+    run: dict[str, set[str]] = {}
+    init: dict[str, set[str]] = {}
+    for f in functions:
+        params = (ca.vertcat(*dims[:len(DIMENSIONS)]), ca.vertcat(*dims[len(DIMENSIONS):]),
+                  mu, ca.vertcat(*masses), x_contact)
+        y_run = f(ca.vertcat(x, v, a, z), *params)
+        y_init = f(ca.vertcat(u, 0, 0, 0), *params)
+        for name, deps in zip(PlantOutputs._fields, _depends(y_run, [x, v, z, u], states)):
+            run.setdefault(name, set()).update(deps)
+        for name, deps in zip(PlantOutputs._fields, _depends(y_init, known, known_names)):
+            init.setdefault(name, set()).update(deps)
+    slip = (ca.sign(v) - z) * ca.fabs(v) / cfg.asymmetry.slip_distance
+    for (_, der, _), expr in zip(ME_STATES, (v, a, slip)):
+        run[der] = set(_depends(expr, [x, v, z, u], states)[0])
+        init[der] = set()  # the derivatives are 0 at rest, where initialisation puts the drive
+    init["slip_state"] = set()  # relaxed at initialisation
+    order = {n: i for i, n in enumerate(states + tuple(known_names))}
+    return Dependencies(*({k: tuple(sorted(d, key=order.__getitem__)) for k, d in m.items()}
+                          for m in (run, init)))
+
+
 def geometry_function() -> ca.Function:
     """(x, dims[8]) -> (theta3, theta4 - asin(e / (r4b + r5))); NaN where a half cannot assemble."""
     x, p = ca.SX.sym("x"), ca.SX.sym("dims", len(DIMENSIONS))
@@ -322,9 +380,14 @@ def _source_files(node: Element, sources: Sequence[str]) -> None:
 
 def model_description(variables: Sequence[Var], guid: str, sources: Sequence[str],
                       description: str, step_size: float, stop_time: float,
-                      fmi_version: int = 2, interface: str = "cs") -> bytes:
+                      fmi_version: int = 2, interface: str = "cs",
+                      dependencies: Dependencies | None = None) -> bytes:
     """modelDescription.xml of the native FMU: the pythonfmu FMU's variables; with Model
-    Exchange also the slip state and the derivatives of the three continuous states."""
+    Exchange also the slip state and the derivatives of the three continuous states.
+    ``dependencies``: ModelStructure's (default: :func:`structure_dependencies` of the
+    chang2021 plant; the structure is that of every preset)."""
+    if dependencies is None:
+        dependencies = structure_dependencies(configure("chang2021"))
     check_variables(variables)
     name = model_name(fmi_version, interface)
     me = interface in ("me", "both")
@@ -346,7 +409,8 @@ def model_description(variables: Sequence[Var], guid: str, sources: Sequence[str
                    description="Simulation time", unit="s")
     for row in rows:
         (_fmi2_variable if fmi_version == 2 else _fmi3_variable)(scalars, row, by_name)
-    root.append((_fmi2_structure if fmi_version == 2 else _fmi3_structure)(rows, me))
+    root.append((_fmi2_structure if fmi_version == 2 else _fmi3_structure)(rows, me,
+                                                                          dependencies))
     indent(root, "  ")
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"
 
@@ -401,40 +465,62 @@ def _fmi3_variable(scalars: Element, row: _Row, by_name: dict[str, _Row]) -> Non
     SubElement(scalars, "Float64", attrib)
 
 
-def _fmi2_structure(rows: Sequence[_Row], me: bool) -> Element:
-    """Outputs (CS only: no direct dependency on x_cmd; with Model Exchange the outputs
-    depend on the states and x_cmd, left undeclared), Derivatives, InitialUnknowns."""
-    index = {r.name: i + 1 for i, r in enumerate(rows)}
+def _unknowns(rows: Sequence[_Row], me: bool) -> tuple[list[_Row], list[_Row], list[_Row]]:
+    """The outputs, the state derivatives (Model Exchange) and the initial unknowns."""
     outputs = [r for r in rows if r.causality == "output"]
-    derivatives = [r for r in rows if r.derivative_of]
+    derivatives = [r for r in rows if r.derivative_of] if me else []
+    initial = [r for r in rows if r.causality == "output" or (me and r.causality == "local")]
+    return outputs, derivatives, initial
+
+
+def _run_dependencies(row: _Row, me: bool, deps: Dependencies) -> tuple[str, ...]:
+    """An output's or derivative's direct dependencies on states and input: in
+    Co-Simulation none (the outputs are computed in doStep), with Model Exchange the
+    sparsity's (the acceleration, forces and torque depend on x_cmd through the lag)."""
+    return deps.run[row.name] if me else ()
+
+
+def _fmi2_structure(rows: Sequence[_Row], me: bool, deps: Dependencies) -> Element:
+    """Outputs, Derivatives and InitialUnknowns with their dependencies (indices)."""
+    index = {r.name: i + 1 for i, r in enumerate(rows)}
+    # a dependency on a state is one on the state variable (x, velocity, slip_state)
+    outputs, derivatives, initial = _unknowns(rows, me)
     node = Element("ModelStructure")
+
+    def unknown(parent: Element, row: _Row, names: Sequence[str]) -> None:
+        SubElement(parent, "Unknown", index=str(index[row.name]),
+                   dependencies=" ".join(str(index[n]) for n in names))
+
     out_node = SubElement(node, "Outputs")
     for row in outputs:
-        SubElement(out_node, "Unknown", {"index": str(index[row.name])}
-                   | ({} if me else {"dependencies": ""}))
+        unknown(out_node, row, _run_dependencies(row, me, deps))
     if me:
         der_node = SubElement(node, "Derivatives")
         for row in derivatives:
-            SubElement(der_node, "Unknown", index=str(index[row.name]))
+            unknown(der_node, row, deps.run[row.name])
     init_node = SubElement(node, "InitialUnknowns")
-    unknowns = outputs + ([by for by in rows if by.causality == "local"] if me else [])
-    for row in sorted(unknowns, key=lambda r: index[r.name]):
-        SubElement(init_node, "Unknown", index=str(index[row.name]))
+    for row in sorted(initial, key=lambda r: index[r.name]):
+        unknown(init_node, row, deps.init[row.name])
     return node
 
 
-def _fmi3_structure(rows: Sequence[_Row], me: bool) -> Element:
+def _fmi3_structure(rows: Sequence[_Row], me: bool, deps: Dependencies) -> Element:
+    """Output, ContinuousStateDerivative and InitialUnknown with their dependencies
+    (value references)."""
+    vr = {r.name: r.vr for r in rows}
+    outputs, derivatives, initial = _unknowns(rows, me)
     node = Element("ModelStructure")
-    for row in rows:
-        if row.causality == "output":
-            SubElement(node, "Output", {"valueReference": str(row.vr)}
-                       | ({} if me else {"dependencies": ""}))
-    for row in rows:
-        if row.derivative_of and me:
-            SubElement(node, "ContinuousStateDerivative", valueReference=str(row.vr))
-    for row in rows:
-        if row.causality == "output" or (me and row.causality == "local"):
-            SubElement(node, "InitialUnknown", valueReference=str(row.vr))
+
+    def unknown(tag: str, row: _Row, names: Sequence[str]) -> None:
+        SubElement(node, tag, valueReference=str(row.vr),
+                   dependencies=" ".join(str(vr[n]) for n in names))
+
+    for row in outputs:
+        unknown("Output", row, _run_dependencies(row, me, deps))
+    for row in derivatives:
+        unknown("ContinuousStateDerivative", row, deps.run[row.name])
+    for row in initial:
+        unknown("InitialUnknown", row, deps.init[row.name])
     return node
 
 
@@ -546,10 +632,11 @@ def build_native_fmu(out_dir: Path, preset: str = "chang2021", fmi_version: int 
         library = Path(tmp) / f"{name}.so"
         compile_library(src, sources, library, fmi_version)
         stop = experiment.stop_time if math.isfinite(experiment.stop_time) else 10.0
+        dependencies = structure_dependencies(configure(preset))
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
             zf.writestr("modelDescription.xml", model_description(
                 variables, guid, sources, description, experiment.step_size, stop,
-                fmi_version, interface))
+                fmi_version, interface, dependencies))
             zf.write(library, f"binaries/{platform}/{name}.so")
             for path in sorted(src.iterdir()):
                 zf.write(path, f"sources/{path.name}")
