@@ -20,7 +20,7 @@ import subprocess
 import sys
 import tempfile
 import zipfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement
 
@@ -89,8 +89,10 @@ def unit_definitions(units: Iterable[str]) -> Element:
     return node
 
 
-def model_structure(variables: Sequence[Var]) -> Element:
-    """Outputs with their direct input dependencies; InitialUnknowns = all outputs."""
+def model_structure(variables: Sequence[Var],
+                    initial: Mapping[str, Sequence[str]] | None = None) -> Element:
+    """Outputs with their direct input dependencies; InitialUnknowns = all outputs, with
+    the inputs and parameters each depends on in ``initial`` (none given: every known)."""
     index = {v.name: i + 1 for i, v in enumerate(variables)}  # 1-based ModelVariables order
     node = Element("ModelStructure")
     outputs = [v for v in variables if v.causality == "output"]
@@ -104,7 +106,10 @@ def model_structure(variables: Sequence[Var]) -> Element:
         SubElement(out_node, "Unknown", attrib)
     init_node = SubElement(node, "InitialUnknowns")
     for var in outputs:  # no dependencies attribute: may depend on every known at init
-        SubElement(init_node, "Unknown", index=str(index[var.name]))
+        attrib = {"index": str(index[var.name])}
+        if initial is not None:
+            attrib["dependencies"] = " ".join(str(index[n]) for n in initial[var.name])
+        SubElement(init_node, "Unknown", attrib)
     return node
 
 
@@ -123,8 +128,10 @@ def check_variables(variables: Sequence[Var]) -> None:
             raise ValueError(f"{var.name}: depends_on names non-inputs {sorted(unknown)}")
 
 
-def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
-    """Complete pythonfmu's modelDescription tree in place from the variable table."""
+def extend_model_description(root: Element, variables: Sequence[Var],
+                             initial: Mapping[str, Sequence[str]] | None = None) -> None:
+    """Complete pythonfmu's modelDescription tree in place from the variable table
+    (``initial``: the initial unknowns' dependencies, see :func:`model_structure`)."""
     check_variables(variables)
     root.set("version", project_version())
     root.set("copyright", "Copyright (c) the toggle-clamp authors")
@@ -160,7 +167,7 @@ def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
     root.insert(list(root).index(cosim) + 1, unit_definitions(units))
 
     root.remove(root.find("ModelStructure"))
-    root.append(model_structure(variables))
+    root.append(model_structure(variables, initial))
 
 
 _SITE_HEADER = f"""\

@@ -346,5 +346,10 @@ class DeclaredSlave(Fmi2Slave):
         # build time only, in the building Python: by a name the bundling leaves alone
         fmu_build = importlib.import_module("fmu_src.build")
         root = super().to_xml(model_options or {})
-        fmu_build.extend_model_description(root, self.VARIABLES)
+        fmu_build.extend_model_description(root, self.VARIABLES, self.initial_dependencies())
         return root
+
+    def initial_dependencies(self) -> dict[str, tuple[str, ...]] | None:
+        """Build time: each output's dependencies in Initialization Mode (inputs and
+        parameters), or None for "every known"."""
+        return None

@@ -169,6 +169,15 @@ class ToggleClamp(DeclaredSlave):
                            self.input_derivative("x_cmd", 2))
         self._publish(drive)
 
+    def initial_dependencies(self) -> dict[str, tuple[str, ...]]:
+        """From CasADi's sparsity of the plant (fmu_src.structure), as the native build's."""
+        import importlib
+
+        # build time only, in the building Python: by a name the bundling leaves alone
+        structure = importlib.import_module("fmu_src.structure")
+        init = structure.structure_dependencies(configure(MECHANISM)).init
+        return {v.name: init[v.name] for v in self.VARIABLES if v.causality == "output"}
+
     def state_identity(self) -> str:
         return f"ToggleClamp {MECHANISM.name}"
 
