@@ -32,7 +32,7 @@ from fmu_support import run_c_host as _run_host
 from fmu_src.build import DEFAULT_SLAVE, PACKAGE_DIR
 from fmu_src.host import start_slave
 from toggle.kinematics import stroke_limits
-from toggle.plant import DriveState, configure, follow, plant_outputs
+from toggle.plant import DriveState, configure, drive_step, plant_outputs
 
 pytestmark = pytest.mark.real_time
 
@@ -81,7 +81,7 @@ def test_c_host_loads_the_fmu_twice_and_exits_cleanly(c_host: Path, unzipped: Pa
     then exit: status 0 every run (pythonfmu alone crashed at exit in every C host)."""
     drive = DriveState.at_rest(-3.4386e-3)
     for k in range(1, 501):  # the host's ramp, in the same floating-point operations, through
-        drive = follow(drive, -3.4386e-3 + (0.04 + 3.4386e-3) * k / 500.0, 1e-3,
+        drive = drive_step(drive, -3.4386e-3 + (0.04 + 3.4386e-3) * k / 500.0, 1e-3,
                        DEFAULT_BANDWIDTH, 0.7)  # the default drive lag
     want = float(plant_outputs(drive.x, drive.v, drive.a, configure("chang2021")).input_force)
     for _ in range(int(os.environ.get("FMU_HOST_RUNS", "2"))):
@@ -401,7 +401,7 @@ def test_fmi_compliance_checker_finds_no_problem(fmu: Path, tmp_path: Path, clos
     result = np.genfromtxt(out, delimiter=",", names=True)
     drive = DriveState.at_rest(X_OPEN)  # the default drive lag, x_cmd(t) set before each step
     for x_cmd in x[:-1] if closing else ():
-        drive = follow(drive, float(x_cmd), 1e-3, DEFAULT_BANDWIDTH, 0.7)
+        drive = drive_step(drive, float(x_cmd), 1e-3, DEFAULT_BANDWIDTH, 0.7)
     assert result["x"][-1] == pytest.approx(drive.x, abs=1e-9)
     assert result["x"][-1] == pytest.approx(X_TOGGLE if closing else X_OPEN, abs=1e-4)
 
