@@ -13,10 +13,14 @@
 
 #define TIME_VR 1001u
 
+/* Model Exchange's modes after initialisation (FMI 3.0 section 3.2): Event Mode first. */
+typedef enum { MODE_EVENT, MODE_CONTINUOUS } MeMode;
+
 typedef struct {
     Core core;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
+    MeMode mode;
 } Instance;
 
 static void deliver(void *env, int error, const char *msg) {
@@ -67,9 +71,15 @@ fmi3Instance fmi3InstantiateCoSimulation(
     fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
     size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
     fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate) {
-    (void)resourcePath; (void)visible; (void)eventModeUsed; (void)earlyReturnAllowed;
+    (void)resourcePath; (void)visible; (void)earlyReturnAllowed;
     (void)requiredIntermediateVariables; (void)nRequiredIntermediateVariables;
     (void)intermediateUpdate;
+    if (eventModeUsed) {  /* only for an FMU with hasEventMode="true" */
+        if (logMessage)
+            logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                       "eventModeUsed: this FMU has no Event Mode (hasEventMode=\"false\")");
+        return NULL;
+    }
     return instantiate(instanceName, instantiationToken, 0, loggingOn, instanceEnvironment,
                        logMessage);
 }
@@ -103,10 +113,34 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
+    ((Instance *)instance)->mode = MODE_EVENT;  /* Model Exchange enters Event Mode */
     return status(core_exit_initialisation(CORE(instance)));
 }
 
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) { (void)instance; return fmi3OK; }
+/* Model Exchange: 1 if the instance is initialised and in `mode`, else an error is logged. */
+static int in_mode(fmi3Instance instance, MeMode mode, const char *who) {
+    Core *c = CORE(instance);
+    if (!c->s.me) {
+        core_say(c, 1, "fmi3%s: a Co-Simulation instance (hasEventMode=\"false\": it has no "
+                 "Event Mode)", who);
+        return 0;
+    }
+    if (c->s.phase != PHASE_STEPPING || ((Instance *)instance)->mode != mode) {
+        core_say(c, 1, "fmi3%s: only in %s", who, mode == MODE_EVENT ? "Event Mode"
+                 : "Continuous-Time Mode");
+        return 0;
+    }
+    return 1;
+}
+
+fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
+    Core *c = CORE(instance);
+    if (c->s.me && c->s.phase == PHASE_STEPPING) {  /* from Continuous-Time Mode, or again */
+        ((Instance *)instance)->mode = MODE_EVENT;
+        return fmi3OK;
+    }
+    return in_mode(instance, MODE_EVENT, "EnterEventMode") ? fmi3OK : fmi3Error;
+}
 fmi3Status fmi3Terminate(fmi3Instance instance) { return status(core_terminate(CORE(instance))); }
 
 fmi3Status fmi3Reset(fmi3Instance instance) {
@@ -169,7 +203,8 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
                                     fmi3Boolean *valuesOfContinuousStatesChanged,
                                     fmi3Boolean *nextEventTimeDefined,
                                     fmi3Float64 *nextEventTime) {
-    (void)instance;  /* no events, no discrete states */
+    if (!in_mode(instance, MODE_EVENT, "UpdateDiscreteStates")) return fmi3Error;
+    /* no events, no discrete states */
     *discreteStatesNeedUpdate = *terminateSimulation = fmi3False;
     *nominalsOfContinuousStatesChanged = *valuesOfContinuousStatesChanged = fmi3False;
     *nextEventTimeDefined = fmi3False;
@@ -177,13 +212,18 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     return fmi3OK;
 }
 
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) { (void)instance; return fmi3OK; }
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
+    if (!in_mode(instance, MODE_EVENT, "EnterContinuousTimeMode")) return fmi3Error;
+    ((Instance *)instance)->mode = MODE_CONTINUOUS;
+    return fmi3OK;
+}
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
                                        fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode,
                                        fmi3Boolean *terminateSimulation) {
-    (void)instance; (void)noSetFMUStatePriorToCurrentPoint;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!in_mode(instance, MODE_CONTINUOUS, "CompletedIntegratorStep")) return fmi3Error;
     *enterEventMode = *terminateSimulation = fmi3False;
     return fmi3OK;
 }
