@@ -1,5 +1,5 @@
 """Any unpack path (issue 28): the pythonfmu FMU extracted under a folder whose path holds
-a space, ``%``, ``#`` and ``é`` runs in fmpy (a fresh process), in the C host and in the
+a space, ``%``, ``#``, ``é`` and the text ``%20`` runs in fmpy (a fresh process), in the C host and in the
 FMI Compliance Checker (when FMUCHECK names it). Masters pass the resource folder as a
 percent-encoded file: URI; the guard decodes it and hands pythonfmu (which decodes only
 %20 itself) the plain path."""
@@ -17,7 +17,7 @@ from fmu_support import built_fmu, compile_c_host, run_c_host, run_fresh
 from toggle.kinematics import stroke_limits
 from toggle.plant import configure
 
-ODD = "unpacked here 100% #1 é"
+ODD = "unpacked here 100% #1 é %20 a%20b"  # pythonfmu alone read %20 as a space
 X_OPEN, X_TOGGLE = stroke_limits(configure("chang2021").mechanism.lower)
 
 

@@ -17,7 +17,8 @@
  *    with fmi2Error before Python sees it (Python then checks every field); a state
  *    carries the phase it was taken in, and restoring it puts the guard in that phase;
  *  - pythonfmu gets the resource folder as file:// and the decoded path (it decodes only
- *    %20 itself), so any unpack path works: spaces, %, #, non-ASCII letters;
+ *    %20 itself), so any unpack path works: spaces, %, #, non-ASCII letters; a path that
+ *    holds the text "%20" is handed over as /proc/self/fd/N;
  *  - a String value longer than GUARD_MAX_STRING bytes or holding control characters is
  *    refused (a state must be able to carry every value an instance holds);
  *  - fmi2SetRealInputDerivatives (which pythonfmu 0.7 refuses) sets the slave's hidden
@@ -29,6 +30,7 @@
  */
 #define _GNU_SOURCE  /* dladdr, RTLD_NODELETE */
 #include <dlfcn.h>
+#include <fcntl.h>
 #include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -218,8 +220,20 @@ FMI2_Export fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2St
         return NULL;
     }
     if (!load(cb, name, folder)) return NULL;
-    /* pythonfmu strips "file://" and decodes %20 only: give it the decoded path */
-    snprintf(location, sizeof location, "file://%s", folder);
+    /* pythonfmu strips "file://" and decodes %20 only: give it the decoded path, or, for a
+     * path holding the three characters "%20" (which pythonfmu would turn into a space),
+     * the same folder as /proc/self/fd/N, a descriptor kept open for the process's life */
+    if (strstr(folder, "%20")) {
+        int fd = open(folder, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        if (fd < 0) {
+            cb->logger(cb->componentEnvironment, name, fmi2Error, "logStatusError",
+                       "cannot open the resource folder");
+            return NULL;
+        }
+        snprintf(location, sizeof location, "file:///proc/self/fd/%d", fd);
+    } else {
+        snprintf(location, sizeof location, "file://%s", folder);
+    }
     Guard *g = calloc(1, sizeof *g);
     if (!g) return NULL;
     g->host = *cb;
