@@ -33,8 +33,8 @@ PACKAGE_DIR = ROOT / "toggle"
 DEFAULT_SLAVE = FMU_SRC_DIR / "toggle_clamp_fmu.py"
 #: The project's packages an FMU bundles (the model, and this one's slave support).
 BUNDLED_PACKAGES = ("toggle", "fmu_src")
-#: resources/ file listing the site-packages of the Python the FMU was built with.
-PYTHON_PATHS = "python_paths.txt"
+#: The Python the FMU needs (major.minor): the one it is built with.
+PYTHON_VERSION = f"{sys.version_info.major}.{sys.version_info.minor}"
 
 # SI units: exponents of the FMI base units, and display units as (name, factor)
 # with display value = factor * value.
@@ -175,15 +175,25 @@ _SITE_HEADER = f"""\
 # own, once per fmi2Instantiate, after running this text again: each run keeps one more.
 globals().setdefault("_pythonfmu_dict_refs", []).append(globals())
 
-# A host that embeds Python (a C master) starts without the site-packages of the Python
-# this FMU was built with: append them (the host's own come first).
-import pathlib as _pathlib
+# A host that embeds Python (a C master) starts with the base interpreter's path: add the
+# site-packages of the venv VIRTUAL_ENV names (the guard loaded that venv's Python). No
+# path of the build machine is written into the FMU.
+import os as _os
+import site as _site
 import sys as _sys
 
-_paths = _pathlib.Path(__file__).with_name({PYTHON_PATHS!r})
-for _path in (_paths.read_text().splitlines() if _paths.is_file() else ()):
-    if _path and _path not in _sys.path:
-        _sys.path.append(_path)
+_venv = _os.environ.get("VIRTUAL_ENV")
+if _venv:
+    _site.addsitedir(_os.path.join(_venv, "lib", "python%d.%d" % _sys.version_info[:2],
+                                   "site-packages"))
+try:
+    import casadi as _casadi, numpy as _numpy, scipy as _scipy  # noqa: F401
+except ImportError as _missing:
+    _sys.stderr.write("ToggleClamp.fmu: %s in Python %s at %s: run the master in a venv of "
+                      "CPython {PYTHON_VERSION} with toggle-clamp installed (a master without "
+                      "Python: set VIRTUAL_ENV to it)\\n" % (_missing, _sys.version.split()[0],
+                                                           _sys.prefix))
+    raise
 """
 _IMPORT = re.compile(r"^(\s*)(from|import)\s+(toggle|fmu_src)(?=[\s.])", re.MULTILINE)
 
@@ -243,16 +253,8 @@ def stage_sources(slave_file: Path, preset: str | None, stage: Path) -> tuple[Pa
     script.write_text(f'"""pythonfmu entry point written by toggle build-fmu."""\n{_SITE_HEADER}'
                       f"from fmu_src_{digest}.{slave_file.stem} import {slave_class}"
                       "  # noqa: E402\n", encoding="utf-8")
-    (stage / PYTHON_PATHS).write_text("\n".join(python_paths()) + "\n")
     packages = sorted({stage / f"{relative.parts[0]}_{digest}" for relative in files})
-    return script, [*packages, stage / PYTHON_PATHS]
-
-
-def python_paths() -> list[str]:
-    """This Python's import path inside its installation (standard library, extension
-    modules, site-packages); not the working directory or a project checkout."""
-    prefixes = tuple({sys.prefix, sys.base_prefix})
-    return [p for p in dict.fromkeys(sys.path) if p.startswith(prefixes) and Path(p).is_dir()]
+    return script, packages
 
 
 def preset_table_text(preset: str) -> str:

@@ -26,7 +26,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error, fmi2OK, fmi2Terminated
-from fmu_support import built_fmu, compile_c_host, load_module
+from fmu_support import BARE_ENV, built_fmu, compile_c_host, load_module
 from fmu_support import run_c_host as _run_host
 
 from fmu_src.build import DEFAULT_SLAVE, PACKAGE_DIR
@@ -394,7 +394,7 @@ def test_fmi_compliance_checker_finds_no_problem(fmu: Path, tmp_path: Path, clos
                                                    for a, b in zip(t, x)))
     args = ["-h", "1e-3", "-s", "1.0", "-i", str(inputs)] if closing else []
     run = subprocess.run([checker, "-l", "3", "-e", str(log), "-o", str(out), *args, str(fmu)],
-                         capture_output=True, text=True, timeout=300, env={"PATH": "/usr/bin:/bin"})
+                         capture_output=True, text=True, timeout=300, env=BARE_ENV)
     text = log.read_text()
     assert run.returncode == 0, text
     assert "0 warning(s) and error(s)" in text and "0 Warning(s)" in text and "0 Error(s)" in text

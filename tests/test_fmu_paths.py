@@ -1,8 +1,9 @@
-"""Any unpack path (issue 28): the pythonfmu FMU extracted under a folder whose path holds
-a space, ``%``, ``#``, ``é`` and the text ``%20`` runs in fmpy (a fresh process), in the C host and in the
-FMI Compliance Checker (when FMUCHECK names it). Masters pass the resource folder as a
-percent-encoded file: URI; the guard decodes it and hands pythonfmu (which decodes only
-%20 itself) the plain path."""
+"""Any unpack path (issues 28, 39): the pythonfmu FMU extracted under a folder whose path
+holds a space, ``%``, ``#``, ``é`` and the text ``%20`` runs in fmpy (a fresh process), in
+the C host and in the FMI Compliance Checker (when FMUCHECK names it). Masters pass the
+resource folder as a percent-encoded file: URI; the guard decodes it and hands pythonfmu
+(which decodes only %20 itself) the plain path, or /proc/self/fd/N for a path holding
+"%20"."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import pytest
 from fmpy import extract
-from fmu_support import built_fmu, compile_c_host, run_c_host, run_fresh
+from fmu_support import BARE_ENV, built_fmu, compile_c_host, run_c_host, run_fresh
 
 from toggle.kinematics import stroke_limits
 from toggle.plant import configure
@@ -53,7 +54,7 @@ def test_the_compliance_checker_runs_the_fmu_unpacked_under_an_odd_path(odd_fold
     log, out = work / "check.log", work / "out.csv"
     run = subprocess.run([checker, "-t", str(work), "-l", "3", "-e", str(log), "-o", str(out),
                           str(built_fmu("clamp"))], capture_output=True, text=True, timeout=300,
-                         env={"PATH": "/usr/bin:/bin"})
+                         env=BARE_ENV)
     text = log.read_text()
     assert run.returncode == 0, text
     assert "0 warning(s) and error(s)" in text, text

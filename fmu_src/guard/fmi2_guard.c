@@ -3,8 +3,11 @@
  * The pythonfmu FMU's binary is this guard; pythonfmu's own library sits next to it as
  * pythonfmu-export.so and is loaded on the first fmi2Instantiate. Every call is checked
  * here, then forwarded. What the guard adds (see docs/fmu.md):
- *  - loads the Python the FMU was built with (libpython, RTLD_GLOBAL) when the host has
- *    none, so a C master needs no LD_PRELOAD; in a host that sets no locale it sets
+ *  - loads a Python of the version the FMU was built with (libpython, RTLD_GLOBAL) when
+ *    the host has none, so a C master needs no LD_PRELOAD: the base interpreter of the
+ *    venv VIRTUAL_ENV names (its pyvenv.cfg's home, which becomes PYTHONHOME unless the host
+ *    set one), else GUARD_LIBPYTHON by name on the loader's path; no path of the build
+ *    machine; in a host that sets no locale it sets
  *    LC_CTYPE=C.UTF-8 first, as Python's own start-up does, so any path can be imported;
  *  - error and fatal messages reach the host's logger whatever loggingOn says; other
  *    messages follow loggingOn and the categories; every '%' is escaped once;
@@ -150,13 +153,44 @@ static int utf8_locale(void) {
     return setenv("LC_CTYPE", "C.UTF-8", 1) == 0;
 }
 
+/* libpython of the venv VIRTUAL_ENV names (pyvenv.cfg: "home = <bin>", the library in
+ * <bin>/../lib), else GUARD_LIBPYTHON by name (LD_LIBRARY_PATH, the loader's cache). */
+static void *open_libpython(void) {
+    const char *venv = getenv("VIRTUAL_ENV");
+    char cfg[4096], line[4096], lib[4096 + 64];
+    if (venv && *venv && snprintf(cfg, sizeof cfg, "%s/pyvenv.cfg", venv) < (int)sizeof cfg) {
+        FILE *f = fopen(cfg, "r");
+        while (f && fgets(line, sizeof line, f)) {
+            char *home = line + strspn(line, " \t");
+            if (strncmp(home, "home", 4) != 0) continue;
+            home += 4 + strspn(home + 4, " \t");
+            if (*home != '=') continue;
+            home += 1 + strspn(home + 1, " \t");
+            home[strcspn(home, "\r\n")] = '\0';
+            if (snprintf(lib, sizeof lib, "%s/../lib/" GUARD_LIBPYTHON, home) < (int)sizeof lib) {
+                void *h = dlopen(lib, RTLD_NOW | RTLD_GLOBAL);
+                if (h) {  /* its own standard library, not one found on PATH */
+                    fclose(f);
+                    home[strlen(home) - (strlen(home) > 4 && !strcmp(home + strlen(home) - 4,
+                                                                      "/bin") ? 4 : 0)] = '\0';
+                    if (!getenv("PYTHONHOME")) setenv("PYTHONHOME", home, 1);
+                    return h;
+                }
+            }
+        }
+        if (f) fclose(f);
+    }
+    return dlopen(GUARD_LIBPYTHON, RTLD_NOW | RTLD_GLOBAL);
+}
+
 static int load(const fmi2CallbackFunctions *cb, fmi2String name, const char *resources) {
     char path[4096];
     if (library) return 1;
-    if (!dlsym(RTLD_DEFAULT, "Py_IsInitialized") &&
-        (!utf8_locale() || !dlopen(GUARD_LIBPYTHON, RTLD_NOW | RTLD_GLOBAL))) {
+    if (!dlsym(RTLD_DEFAULT, "Py_IsInitialized") && (!utf8_locale() || !open_libpython())) {
         cb->logger(cb->componentEnvironment, name, fmi2Error, "logStatusError",
-                   "cannot load the Python this FMU was built with (" GUARD_LIBPYTHON ")");
+                   "cannot load Python " GUARD_PYTHON " (" GUARD_LIBPYTHON "): set VIRTUAL_ENV to "
+                   "a venv of CPython " GUARD_PYTHON " with toggle-clamp installed, or put "
+                   GUARD_LIBPYTHON " on the library path");
         return 0;
     }
     if (snprintf(path, sizeof path, "%s/../binaries/" GUARD_PLATFORM "/pythonfmu-export.so",
