@@ -54,7 +54,15 @@ UNITS: dict[str, dict[str, int]] = {
     "N.s/m": {"kg": 1, "s": -1},
     "N.m": {"kg": 1, "m": 2, "s": -2},
     "Pa": {"kg": 1, "m": -1, "s": -2},
+    "1/s": {"s": -1},
 }
+#: The physical quantity of each unit's variables (FMI ``quantity``).
+QUANTITIES = {"s": "Time", "Hz": "Frequency", "m": "Length", "m/s": "Velocity",
+              "m/s2": "Acceleration", "rad": "Angle", "kg": "Mass", "kg.m2": "MomentOfInertia",
+              "N": "Force", "N.s/m": "TranslationalDampingConstant", "N.m": "Torque",
+              "1/s": "Rate"}
+#: The display unit a tool shows by default (FMI ``displayUnit``); one of DISPLAY_UNITS.
+DEFAULT_DISPLAY = {"m": "mm", "m/s": "mm/s", "N": "kN", "rad": "deg"}
 DISPLAY_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
     "m": (("mm", 1e3),),
     "m/s": (("mm/s", 1e3),),
@@ -87,6 +95,18 @@ def unit_definitions(units: Iterable[str]) -> Element:
         for display, factor in DISPLAY_UNITS.get(name, ()):
             SubElement(unit, "DisplayUnit", name=display, factor=number_text(factor))
     return node
+
+
+def real_attributes(unit: str, nominal: float | None = None) -> dict[str, str]:
+    """quantity, displayUnit and nominal of a Real variable of ``unit`` (where it has them)."""
+    out = {}
+    if unit in QUANTITIES:
+        out["quantity"] = QUANTITIES[unit]
+    if unit in DEFAULT_DISPLAY:
+        out["displayUnit"] = DEFAULT_DISPLAY[unit]
+    if nominal is not None:
+        out["nominal"] = number_text(nominal)
+    return out
 
 
 def model_structure(variables: Sequence[Var],
@@ -149,6 +169,8 @@ def extend_model_description(root: Element, variables: Sequence[Var],
             continue
         real = sv.find("Real")
         real.set("unit", var.unit)
+        for attr, value in real_attributes(var.unit, var.nominal).items():
+            real.set(attr, value)
         for attr in ("min", "max"):
             if getattr(var, attr) is not None:
                 real.set(attr, number_text(getattr(var, attr)))

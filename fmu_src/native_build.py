@@ -35,6 +35,7 @@ import numpy as np
 from fmu_src.build import (
     DEFAULT_SLAVE,
     check_variables,
+    real_attributes,
     unit_definitions,
 )
 from fmu_src.build import number_text as _number
@@ -163,6 +164,8 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         f"{_c_array([sys.float_info.max if v.max is None else v.max for v in reals])};",
         "static const double CLAMP_START[CLAMP_N_REAL] = "
         f"{_c_array([v.initial_value for v in reals])};",
+        "static const double CLAMP_STATE_NOMINAL[3] = "
+        f"{_c_array([_nominal(reals, state) for state, _, _ in ME_STATES])};",
         "static const char *const CLAMP_NAMES[CLAMP_N_REAL] = {"
         + ", ".join(c_string(v.name) for v in reals) + "};",
         "static const char *const CLAMP_UNITS[CLAMP_N_REAL] = {"
@@ -170,6 +173,11 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         "#endif", "",
     ]
     return "\n".join(lines)
+
+
+def _nominal(reals: Sequence[Var], name: str) -> float:
+    """A continuous state's nominal: its variable's, 1 for the slip state (a local)."""
+    return next((v.nominal for v in reals if v.name == name and v.nominal is not None), 1.0)
 
 
 def model_name(fmi_version: int = 2, interface: str = "cs") -> str:
@@ -192,6 +200,7 @@ class _Row(NamedTuple):
     unit: str | None
     derivative_of: str | None = None
     description: str = ""
+    bounds: tuple[float, float, float] | None = None  # min, max, nominal of a local
 
 
 def _rows(variables: Sequence[Var], fmi_version: int, me: bool) -> list[_Row]:
@@ -204,7 +213,7 @@ def _rows(variables: Sequence[Var], fmi_version: int, me: bool) -> list[_Row]:
             vr += 1
     if me:
         rows.append(_Row(None, "slip_state", vr, "local", "1", None,
-                         "Slip state z of the pin friction (Dahl), in [-1, 1]"))
+                         "Slip state z of the pin friction (Dahl), in [-1, 1]", (-1.0, 1.0, 1.0)))
         for k, (state, der, unit) in enumerate(ME_STATES):
             rows.append(_Row(None, der, vr + 1 + k, "local", unit, state,
                              f"Time derivative of {state}"))
@@ -304,11 +313,15 @@ def _variability(row: _Row) -> str:
 
 
 def _limits(row: _Row) -> dict[str, str]:
+    """unit, quantity, displayUnit, min, max and nominal of a Real row."""
     out = {"unit": row.unit} if row.unit else {}
     var = row.var
     if var is not None:
         out |= {a: _number(getattr(var, a)) for a in ("min", "max") if getattr(var, a) is not None}
-    return out
+    elif row.bounds is not None:
+        out |= {"min": _number(row.bounds[0]), "max": _number(row.bounds[1])}
+    nominal = var.nominal if var is not None else row.bounds[2] if row.bounds else None
+    return out | (real_attributes(row.unit, nominal) if row.unit else {})
 
 
 def _fmi2_variable(scalars: Element, row: _Row, by_name: dict[str, _Row]) -> None:

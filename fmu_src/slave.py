@@ -89,6 +89,7 @@ class Var:
     max: float | None = None
     variability: str | None = None
     depends_on: tuple[str, ...] | None = None
+    nominal: float | None = None  # the magnitude a master scales its tolerances by
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():

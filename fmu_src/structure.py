@@ -20,7 +20,7 @@ from toggle.plant import PlantConfig, PlantOutputs, plant_outputs
 #: Model Exchange's continuous states: (state, derivative name, derivative unit); x and
 #: velocity are outputs, the slip state and the derivatives are locals after the table.
 ME_STATES = (("x", "der(x)", "m/s"), ("velocity", "der(velocity)", "m/s2"),
-             ("slip_state", "der(slip_state)", None))
+             ("slip_state", "der(slip_state)", "1/s"))
 #: The [dynamics] fields by FMU parameter name, first in the generated functions' ``masses``.
 MASS_FIELDS = {name: field for name, (field, _, _) in DYNAMICS_PARAMETERS.items()}
 #: The drive's inertias, after the masses in the generated functions' ``masses`` input.

@@ -64,6 +64,11 @@ OUTPUTS = (
 )
 
 
+#: Nominal magnitudes of the drive's states (Model Exchange scales its absolute tolerances
+#: by them): 1 mm, so that a master's tolerance resolves a mold's compression of a few um.
+NOMINALS = {"x": 1e-3, "velocity": 0.1}
+
+
 def drive_bandwidth(mech: Mechanism) -> float:
     """The default ``drive_bandwidth`` (Hz) of the FMU of ``mech``: its real drive's.
 
@@ -120,7 +125,8 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
               min=-MAX_ERROR, max=MAX_ERROR) for n in ERRORS),
         Var("x_cmd", "input", "m", "Commanded input-link position", start=x_open, min=x_lo,
             max=x_hi),
-        *(Var(name, "output", unit, text, depends_on=()) for name, unit, text in OUTPUTS),
+        *(Var(name, "output", unit, text, depends_on=(), nominal=NOMINALS.get(name))
+          for name, unit, text in OUTPUTS),
     )
 
 

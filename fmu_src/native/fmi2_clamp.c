@@ -179,8 +179,8 @@ fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t n) {
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real nominal[], size_t n) {
-    (void)c;
-    for (size_t i = 0; i < n; i++) nominal[i] = 1.0;
+    (void)c;  /* the declared nominals of x, velocity and slip_state */
+    for (size_t i = 0; i < n; i++) nominal[i] = i < 3 ? CLAMP_STATE_NOMINAL[i] : 1.0;
     return fmi2OK;
 }
 

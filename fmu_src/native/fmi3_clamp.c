@@ -257,8 +257,9 @@ fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuous
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
                                              size_t nContinuousStates) {
-    (void)instance;
-    for (size_t i = 0; i < nContinuousStates; i++) nominals[i] = 1.0;
+    (void)instance;  /* the declared nominals of x, velocity and slip_state */
+    for (size_t i = 0; i < nContinuousStates; i++)
+        nominals[i] = i < 3 ? CLAMP_STATE_NOMINAL[i] : 1.0;
     return fmi3OK;
 }
 
