@@ -58,3 +58,41 @@ def test_the_compliance_checker_runs_the_fmu_unpacked_under_an_odd_path(odd_fold
     text = log.read_text()
     assert run.returncode == 0, text
     assert "0 warning(s) and error(s)" in text, text
+
+
+def test_the_fmu_holds_no_path_of_the_build_machine():
+    """No file of the FMU names this checkout, this venv or its base Python (issue 39)."""
+    import sys
+    import zipfile
+
+    from fmu_src.build import ROOT
+
+    machine = {str(ROOT), sys.prefix, sys.base_prefix, str(Path.home())} - {"/", ""}
+    with zipfile.ZipFile(built_fmu("clamp")) as zf:
+        for name in zf.namelist():
+            data = zf.read(name)
+            found = [m for m in machine if m.encode() in data]
+            assert not found, (name, found)
+
+
+def test_a_master_without_python_runs_the_fmu_in_another_venv(tmp_path: Path):
+    """The C host with VIRTUAL_ENV naming a second venv (its packages reached through a .pth
+    file, as a fresh venv with the project installed has them) runs; without VIRTUAL_ENV, a
+    Python lacking the packages refuses the instance with one line naming what is missing,
+    and the host gets NULL, not a crash."""
+    import sys
+    import sysconfig
+
+    venv = tmp_path / "second venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
+    site = venv / "lib" / f"python{sys.version_info.major}.{sys.version_info.minor}"
+    (site / "site-packages" / "reach.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    unzipped = Path(extract(str(built_fmu("clamp")), str(tmp_path / "fmu")))
+    host = compile_c_host(tmp_path)
+    run = run_c_host(host, unzipped, 2.5, 1, {"PATH": "/usr/bin:/bin", "VIRTUAL_ENV": str(venv)})
+    assert run.returncode == 0, run.stderr
+    bare = run_c_host(host, unzipped, 2.5, 1, {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path)})
+    assert bare.returncode > 0  # a failed instantiation, not a signal
+    lines = [line for line in bare.stderr.splitlines() if "ToggleClamp.fmu:" in line
+             or "cannot load Python" in line]
+    assert len(lines) == 1 and ("No module named" in lines[0] or "VIRTUAL_ENV" in lines[0])
