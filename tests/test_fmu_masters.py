@@ -166,10 +166,12 @@ def test_fmpy_command_line_refuses_a_bad_parameter_and_names_it(fmu: Path, tmp_p
 
 
 def _ramp_up(slave, refs, steps) -> dict[float, np.ndarray]:
-    """x_cmd = x_open + 0.25 t^2 (constant acceleration 0.5 m/s^2) at the given steps."""
+    """x_cmd = x_open + 0.25 t^2 (constant acceleration 0.5 m/s^2) at the given steps: its
+    value, velocity and acceleration at each step's start (fmi2SetRealInputDerivatives)."""
     t, rows = 0.0, {}
     for h in steps:
-        slave.setReal([refs["x_cmd"]], [X_OPEN + 0.25 * (t + h) ** 2])
+        slave.setReal([refs["x_cmd"]], [X_OPEN + 0.25 * t**2])
+        slave.setRealInputDerivatives([refs["x_cmd"]] * 2, [1, 2], [0.5 * t, 0.5])
         slave.doStep(t, h)
         t += h
         rows[round(t, 9)] = np.array(slave.getReal([refs[n] for n in OUTPUTS]))
@@ -180,7 +182,7 @@ def _ramp_up(slave, refs, steps) -> dict[float, np.ndarray]:
 def test_variable_steps_give_the_fixed_step_results(unzipped: Path, bandwidth: float):
     """Alternating 0.5/1.5 ms steps against 1 ms steps, compared where both land (every
     2 ms): equal to 1e-6 of each output's peak (the command between communication points
-    is the parabola through the last three, exact for this command)."""
+    is the master's polynomial, exact for this command)."""
     results = []
     for steps in ([1e-3] * 300, [0.5e-3, 1.5e-3] * 150):
         slave, refs = start_slave(unzipped, "steps", {"x_cmd": X_OPEN, "x_contact": X_CONTACT,
