@@ -210,8 +210,10 @@ def cost_table(times: dict[str, list[float]], c_us: dict[str, float],
     rows += ["", "| called from C, no fmpy | µs per step | ratio to C trivial |", "|---|---|---|"]
     rows += [f"| {name} | {us:.3f} | {us / c_us['C trivial']:.0f} |" for name, us in c_us.items()]
     rows += ["", "| libcosim, 1 ms step | 1 instance | 2 instances |", "|---|---|---|"]
-    rows += [f"| master {'on one CPU' if pinned else 'free'} | {by[1]:,.0f} steps/s | "
-             f"{by[2]:,.0f} steps/s |" for pinned, by in rates.items()]
+    for pinned, by in rates.items():
+        count = {int(n): rate for n, rate in by.items()}  # JSON keys are text
+        rows.append(f"| master {'on one CPU' if pinned else 'free'} | {count[1]:,.0f} steps/s | "
+                    f"{count[2]:,.0f} steps/s |")
     return "\n".join(rows)
 
 
