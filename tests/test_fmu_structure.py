@@ -85,3 +85,26 @@ def test_the_derived_dependencies_hold_the_physics(derived):
     assert derived.run["der(velocity)"] == ("x", "velocity", "x_cmd")
     assert {"x_cmd", "x_contact", "delta_r8"} <= set(derived.init["clamp_force"])
     assert derived.init["velocity"] == () and derived.init["x"] == ("x_cmd",)
+
+
+@pytest.mark.parametrize(("kind", "fmi_version", "interface"), BUILDS)
+def test_every_real_has_a_unit_and_the_attributes_of_its_quantity(kind, fmi_version, interface):
+    """Every Real a unit (the derivatives included); lengths, speeds and forces a quantity
+    and a display unit (mm, mm/s, kN); x and velocity their nominal; slip_state in
+    [-1, 1]."""
+    fmu = built_fmu("clamp") if kind == "clamp" else native_build(fmi_version, interface)
+    with zipfile.ZipFile(fmu) as zf:
+        root = fromstring(zf.read("modelDescription.xml"))
+    if fmi_version == 2:
+        reals = {sv.get("name"): sv.find("Real").attrib for sv in root.find("ModelVariables")
+                 if sv.find("Real") is not None}
+    else:
+        reals = {v.get("name"): v.attrib for v in root.find("ModelVariables")
+                 if v.tag == "Float64" and v.get("name") != "time"}
+    assert all(a.get("unit") for a in reals.values()), reals
+    for name, display in (("x", "mm"), ("velocity", "mm/s"), ("clamp_force", "kN")):
+        assert reals[name].get("displayUnit") == display and reals[name].get("quantity")
+    assert float(reals["x"]["nominal"]) == 1e-3 and float(reals["velocity"]["nominal"]) == 0.1
+    if interface != "cs":
+        assert (reals["slip_state"]["min"], reals["slip_state"]["max"]) == ("-1.0", "1.0")
+        assert reals["der(slip_state)"]["unit"] == "1/s"
