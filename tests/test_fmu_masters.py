@@ -1,6 +1,6 @@
 """build/ToggleClamp.fmu driven the way other masters drive it (issue 15).
 
-A C host compiled here (dlopen, no Python, no environment variables), fmpy's
+A C host compiled here (dlopen, no Python; PATH and VIRTUAL_ENV only), fmpy's
 high-level and low-level APIs in fresh processes, the fmpy command line, and
 the FMI rules a strict master relies on: error statuses and messages whatever
 the logging state, variable communication steps, serialised states moved
@@ -383,7 +383,7 @@ def test_log_categories_filter_information_messages(unzipped: Path, logging: boo
 def test_fmi_compliance_checker_finds_no_problem(fmu: Path, tmp_path: Path, closing: bool):
     """The default experiment, and a closing stroke from an input file, in the checker
     built from modelica-tools/FMUComplianceChecker (FMUCHECK=path; docs/fmu.md), run with
-    an empty environment: no LD_PRELOAD, no PYTHONPATH."""
+    PATH and VIRTUAL_ENV only: no LD_PRELOAD, no PYTHONPATH."""
     checker = os.environ.get("FMUCHECK")
     if not checker:
         pytest.skip("set FMUCHECK to an fmuCheck.linux64 built from "
