@@ -258,7 +258,12 @@ FMI2_Export fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2St
      * path holding the three characters "%20" (which pythonfmu would turn into a space),
      * the same folder as /proc/self/fd/N, a descriptor kept open for the process's life */
     if (strstr(folder, "%20")) {
-        int fd = open(folder, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        static char opened[4096];  /* the last folder opened: its descriptor is reused */
+        static int fd = -1;
+        if (fd < 0 || strcmp(opened, folder) != 0) {
+            fd = open(folder, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+            snprintf(opened, sizeof opened, "%s", folder);
+        }
         if (fd < 0) {
             cb->logger(cb->componentEnvironment, name, fmi2Error, "logStatusError",
                        "cannot open the resource folder");
