@@ -16,12 +16,16 @@ the FMU (one and two instances run at the same rate, about 17 000 steps/s on
 an idle machine), so it is also measured with the master on one CPU.
 
 Run: python benchmarks/bench_native_fmu.py [--steps N] [--runs R] [--cosim-steps N]
+[--docs docs/fmu.md]: with --docs, the table of FMU costs in that file (between its
+``generated`` markers) is replaced by this run's, the one place the docs quote them.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -184,11 +188,50 @@ def libcosim_rates(fmu: Path, steps: int, runs: int, start: dict[str, float],
     return json.loads(run.stdout.strip().splitlines()[-1])
 
 
+BEGIN = "<!-- generated: python benchmarks/bench_native_fmu.py --docs docs/fmu.md -->"
+END = "<!-- end of generated table -->"
+
+
+def cost_table(times: dict[str, list[float]], c_us: dict[str, float],
+               rates: dict[bool, dict[int, float]], runs: int, steps: int) -> str:
+    """The markdown table of this run: fmpy, from C, libcosim; ratios to its baselines."""
+    plain, c_base = (statistics.median(times[k]) for k in ("plain pythonfmu trivial",
+                                                           "C trivial"))
+    load = os.getloadavg()[0]
+    rows = [f"Measured {datetime.date.today()} on {os.cpu_count()} CPUs, load average "
+            f"{load:.1f}; medians of {runs} interleaved runs of {steps} steps (fmpy), 3 x 1e6 "
+            "steps (from C). Ratios are within this run; absolute figures vary 1.5-2x with "
+            "the load.", "",
+            "| FMU | µs per step in fmpy | ratio to plain pythonfmu trivial | ratio to C trivial |",
+            "|---|---|---|---|"]
+    for name, values in times.items():
+        us = statistics.median(values)
+        rows.append(f"| {name} | {us:.1f} | {us / plain:.2f} | {us / c_base:.2f} |")
+    rows += ["", "| called from C, no fmpy | µs per step | ratio to C trivial |", "|---|---|---|"]
+    rows += [f"| {name} | {us:.3f} | {us / c_us['C trivial']:.0f} |" for name, us in c_us.items()]
+    rows += ["", "| libcosim, 1 ms step | 1 instance | 2 instances |", "|---|---|---|"]
+    for pinned, by in rates.items():
+        count = {int(n): rate for n, rate in by.items()}  # JSON keys are text
+        rows.append(f"| master {'on one CPU' if pinned else 'free'} | {count[1]:,.0f} steps/s | "
+                    f"{count[2]:,.0f} steps/s |")
+    return "\n".join(rows)
+
+
+def write_docs(path: Path, table: str) -> None:
+    """Replace the table between BEGIN and END in ``path``."""
+    text = path.read_text(encoding="utf-8")
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"{path}: no {BEGIN} ... {END} block")
+    head, rest = text.split(BEGIN, 1)
+    path.write_text(f"{head}{BEGIN}\n{table}\n{END}{rest.split(END, 1)[1]}", encoding="utf-8")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=2000, help="fmpy steps per run")
     parser.add_argument("--runs", type=int, default=7, help="runs per case (median taken)")
     parser.add_argument("--cosim-steps", type=int, default=200_000, help="libcosim steps per run")
+    parser.add_argument("--docs", type=Path, help="write the table into this markdown file")
     args = parser.parse_args()
     inputs, start = clamp_case()
     outputs = list(PlantOutputs._fields)
@@ -242,6 +285,9 @@ def main() -> None:
         for n, rate in by_count.items():
             print(f"libcosim{' on one CPU' if pinned else ''}, {n} native instance(s), 1 ms "
                   f"step: {rate:,.0f} steps/s (median of {args.runs} runs x {args.cosim_steps})")
+    if args.docs:
+        write_docs(args.docs, cost_table(times, c_us, rates, args.runs, args.steps))
+        print(f"wrote the table into {args.docs}")
 
 
 if __name__ == "__main__":

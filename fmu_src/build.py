@@ -20,11 +20,11 @@ import subprocess
 import sys
 import tempfile
 import zipfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement
 
-from fmu_src.slave import Var
+from fmu_src.slave import Var, hidden_names
 
 #: This package's folder, and the project's root (the model package toggle/ beside it).
 FMU_SRC_DIR = Path(__file__).resolve().parent
@@ -33,8 +33,8 @@ PACKAGE_DIR = ROOT / "toggle"
 DEFAULT_SLAVE = FMU_SRC_DIR / "toggle_clamp_fmu.py"
 #: The project's packages an FMU bundles (the model, and this one's slave support).
 BUNDLED_PACKAGES = ("toggle", "fmu_src")
-#: resources/ file listing the site-packages of the Python the FMU was built with.
-PYTHON_PATHS = "python_paths.txt"
+#: The Python the FMU needs (major.minor): the one it is built with.
+PYTHON_VERSION = f"{sys.version_info.major}.{sys.version_info.minor}"
 
 # SI units: exponents of the FMI base units, and display units as (name, factor)
 # with display value = factor * value.
@@ -54,7 +54,15 @@ UNITS: dict[str, dict[str, int]] = {
     "N.s/m": {"kg": 1, "s": -1},
     "N.m": {"kg": 1, "m": 2, "s": -2},
     "Pa": {"kg": 1, "m": -1, "s": -2},
+    "1/s": {"s": -1},
 }
+#: The physical quantity of each unit's variables (FMI ``quantity``).
+QUANTITIES = {"s": "Time", "Hz": "Frequency", "m": "Length", "m/s": "Velocity",
+              "m/s2": "Acceleration", "rad": "Angle", "kg": "Mass", "kg.m2": "MomentOfInertia",
+              "N": "Force", "N.s/m": "TranslationalDampingConstant", "N.m": "Torque",
+              "1/s": "Rate"}
+#: The display unit a tool shows by default (FMI ``displayUnit``); one of DISPLAY_UNITS.
+DEFAULT_DISPLAY = {"m": "mm", "m/s": "mm/s", "N": "kN", "rad": "deg"}
 DISPLAY_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
     "m": (("mm", 1e3),),
     "m/s": (("mm/s", 1e3),),
@@ -89,8 +97,22 @@ def unit_definitions(units: Iterable[str]) -> Element:
     return node
 
 
-def model_structure(variables: Sequence[Var]) -> Element:
-    """Outputs with their direct input dependencies; InitialUnknowns = all outputs."""
+def real_attributes(unit: str, nominal: float | None = None) -> dict[str, str]:
+    """quantity, displayUnit and nominal of a Real variable of ``unit`` (where it has them)."""
+    out = {}
+    if unit in QUANTITIES:
+        out["quantity"] = QUANTITIES[unit]
+    if unit in DEFAULT_DISPLAY:
+        out["displayUnit"] = DEFAULT_DISPLAY[unit]
+    if nominal is not None:
+        out["nominal"] = number_text(nominal)
+    return out
+
+
+def model_structure(variables: Sequence[Var],
+                    initial: Mapping[str, Sequence[str]] | None = None) -> Element:
+    """Outputs with their direct input dependencies; InitialUnknowns = all outputs, with
+    the inputs and parameters each depends on in ``initial`` (none given: every known)."""
     index = {v.name: i + 1 for i, v in enumerate(variables)}  # 1-based ModelVariables order
     node = Element("ModelStructure")
     outputs = [v for v in variables if v.causality == "output"]
@@ -104,7 +126,10 @@ def model_structure(variables: Sequence[Var]) -> Element:
         SubElement(out_node, "Unknown", attrib)
     init_node = SubElement(node, "InitialUnknowns")
     for var in outputs:  # no dependencies attribute: may depend on every known at init
-        SubElement(init_node, "Unknown", index=str(index[var.name]))
+        attrib = {"index": str(index[var.name])}
+        if initial is not None:
+            attrib["dependencies"] = " ".join(str(index[n]) for n in initial[var.name])
+        SubElement(init_node, "Unknown", attrib)
     return node
 
 
@@ -123,13 +148,19 @@ def check_variables(variables: Sequence[Var]) -> None:
             raise ValueError(f"{var.name}: depends_on names non-inputs {sorted(unknown)}")
 
 
-def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
-    """Complete pythonfmu's modelDescription tree in place from the variable table."""
+def extend_model_description(root: Element, variables: Sequence[Var],
+                             initial: Mapping[str, Sequence[str]] | None = None) -> None:
+    """Complete pythonfmu's modelDescription tree in place from the variable table
+    (``initial``: the initial unknowns' dependencies, see :func:`model_structure`)."""
     check_variables(variables)
     root.set("version", project_version())
     root.set("copyright", "Copyright (c) the toggle-clamp authors")
     root.set("license", "MIT")
     scalars = root.find("ModelVariables")
+    hidden = hidden_names(variables)  # registered after the table; the guard sets them
+    for sv in list(scalars)[len(variables):]:
+        if sv.get("name") in hidden:
+            scalars.remove(sv)
     names = [sv.get("name") for sv in scalars]
     if names != [v.name for v in variables]:
         raise ValueError(f"registered variables {names} differ from the table")
@@ -138,6 +169,8 @@ def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
             continue
         real = sv.find("Real")
         real.set("unit", var.unit)
+        for attr, value in real_attributes(var.unit, var.nominal).items():
+            real.set(attr, value)
         for attr in ("min", "max"):
             if getattr(var, attr) is not None:
                 real.set(attr, number_text(getattr(var, attr)))
@@ -149,11 +182,14 @@ def extend_model_description(root: Element, variables: Sequence[Var]) -> None:
     cosim = root.find("CoSimulation")
     cosim.set("canGetAndSetFMUstate", "true")
     cosim.set("canSerializeFMUstate", "true")
+    # the guard passes fmi2SetRealInputDerivatives on (fmu_src.slave, hidden variables)
+    cosim.set("canInterpolateInputs", "true")
+    cosim.set("maxOutputDerivativeOrder", "0")
     units = {v.unit for v in variables if not v.is_string}
     root.insert(list(root).index(cosim) + 1, unit_definitions(units))
 
     root.remove(root.find("ModelStructure"))
-    root.append(model_structure(variables))
+    root.append(model_structure(variables, initial))
 
 
 _SITE_HEADER = f"""\
@@ -161,15 +197,25 @@ _SITE_HEADER = f"""\
 # own, once per fmi2Instantiate, after running this text again: each run keeps one more.
 globals().setdefault("_pythonfmu_dict_refs", []).append(globals())
 
-# A host that embeds Python (a C master) starts without the site-packages of the Python
-# this FMU was built with: append them (the host's own come first).
-import pathlib as _pathlib
+# A host that embeds Python (a C master) starts with the base interpreter's path: add the
+# site-packages of the venv VIRTUAL_ENV names (the guard loaded that venv's Python). No
+# path of the build machine is written into the FMU.
+import os as _os
+import site as _site
 import sys as _sys
 
-_paths = _pathlib.Path(__file__).with_name({PYTHON_PATHS!r})
-for _path in (_paths.read_text().splitlines() if _paths.is_file() else ()):
-    if _path and _path not in _sys.path:
-        _sys.path.append(_path)
+_venv = _os.environ.get("VIRTUAL_ENV")
+if _venv:
+    _site.addsitedir(_os.path.join(_venv, "lib", "python%d.%d" % _sys.version_info[:2],
+                                   "site-packages"))
+try:
+    import casadi as _casadi, numpy as _numpy, scipy as _scipy  # noqa: F401
+except ImportError as _missing:
+    _sys.stderr.write("ToggleClamp.fmu: %s in Python %s at %s: run the master in a venv of "
+                      "CPython {PYTHON_VERSION} with toggle-clamp installed (a master without "
+                      "Python: set VIRTUAL_ENV to it)\\n" % (_missing, _sys.version.split()[0],
+                                                           _sys.prefix))
+    raise
 """
 _IMPORT = re.compile(r"^(\s*)(from|import)\s+(toggle|fmu_src)(?=[\s.])", re.MULTILINE)
 
@@ -229,16 +275,8 @@ def stage_sources(slave_file: Path, preset: str | None, stage: Path) -> tuple[Pa
     script.write_text(f'"""pythonfmu entry point written by toggle build-fmu."""\n{_SITE_HEADER}'
                       f"from fmu_src_{digest}.{slave_file.stem} import {slave_class}"
                       "  # noqa: E402\n", encoding="utf-8")
-    (stage / PYTHON_PATHS).write_text("\n".join(python_paths()) + "\n")
     packages = sorted({stage / f"{relative.parts[0]}_{digest}" for relative in files})
-    return script, [*packages, stage / PYTHON_PATHS]
-
-
-def python_paths() -> list[str]:
-    """This Python's import path inside its installation (standard library, extension
-    modules, site-packages); not the working directory or a project checkout."""
-    prefixes = tuple({sys.prefix, sys.base_prefix})
-    return [p for p in dict.fromkeys(sys.path) if p.startswith(prefixes) and Path(p).is_dir()]
+    return script, packages
 
 
 def preset_table_text(preset: str) -> str:

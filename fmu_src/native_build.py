@@ -35,26 +35,33 @@ import numpy as np
 from fmu_src.build import (
     DEFAULT_SLAVE,
     check_variables,
+    real_attributes,
     unit_definitions,
 )
 from fmu_src.build import number_text as _number
 from fmu_src.c_code import c_string, fmi_headers
 from fmu_src.slave import Var
+from fmu_src.structure import (
+    DRIVE_FIELDS,
+    MASS_FIELDS,
+    ME_STATES,
+    N_MASSES,
+    Dependencies,
+    plant_functions,
+    structure_dependencies,
+)
 from toggle.kinematics import half_pose
 from toggle.params import (
     DIMENSIONS,
-    DYNAMICS_PARAMETERS,
     HALVES,
     PAPER_NAMES,
     load_preset,
-    symbolic_copy,
 )
 from toggle.plant import (
     NO_MOLD_TOLERANCE,
     PlantConfig,
     PlantOutputs,
     configure,
-    plant_outputs,
 )
 
 MODEL = "ToggleClampNative"
@@ -75,75 +82,9 @@ PRESET_VR = {2: 0, 3: 1000}
 #: drive_bandwidth's start value in a Model Exchange build when the table's is 0, Hz
 ME_BANDWIDTH = 20.0
 TIME_VR = 1001
-#: Model Exchange's continuous states: (state, derivative name, derivative unit); x and
-#: velocity are outputs, the slip state and the derivatives are locals after the table.
-ME_STATES = (("x", "der(x)", "m/s"), ("velocity", "der(velocity)", "m/s2"),
-             ("slip_state", "der(slip_state)", None))
-#: The [dynamics] fields by FMU parameter name, first in the generated functions' ``masses``.
-MASS_FIELDS = {name: field for name, (field, _, _) in DYNAMICS_PARAMETERS.items()}
-#: The drive's inertias, after the masses in the generated functions' ``masses`` input.
-DRIVE_FIELDS = ("rotor_inertia", "screw_inertia")
-N_MASSES = len(MASS_FIELDS) + len(DRIVE_FIELDS)
-#: Names of the generated functions, indexed by (mold, unequal halves) in the C wrapper.
-VARIANTS = ("tgc_free_equal", "tgc_free_unequal", "tgc_mold_equal", "tgc_mold_unequal")
 CFLAGS = ("-std=c99", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror", "-fvisibility=hidden")
 #: CasADi's generated functions all take (arg, res, iw, w, mem), used or not.
 GENERATED_CFLAGS = ("-Wno-unused-parameter",)
-
-
-class _SymbolicHalf(NamedTuple):
-    """Eight symbolic dimensions of one half, in :data:`toggle.params.DIMENSIONS` order.
-
-    Two halves are equal only if they are the same object, so the plant's
-    ``Mechanism.symmetric`` decides between the generated variants.
-    """
-
-    r1: Any
-    r2: Any
-    r3: Any
-    r4a: Any
-    r4b: Any
-    r4c: Any
-    r5: Any
-    e: Any
-
-    def as_tuple(self) -> tuple[Any, ...]:
-        return tuple(self)
-
-    def __eq__(self, other: object) -> bool:
-        return self is other
-
-    def __hash__(self) -> int:
-        return id(self)
-
-
-def plant_functions(cfg: PlantConfig) -> list[ca.Function]:
-    """The plant as CasADi functions (xvaz[4], lower[8], upper[8], mu, masses, x_contact);
-    xvaz: position, velocity, acceleration and the pin friction's slip state; masses: the
-    fields of :data:`MASS_FIELDS`, then the drive's inertias (:data:`DRIVE_FIELDS`)."""
-    xva = ca.SX.sym("xvaz", 4)
-    p_lower, p_upper = (ca.SX.sym(h, len(DIMENSIONS)) for h in HALVES)
-    mu, masses, x_contact = (ca.SX.sym("mu"), ca.SX.sym("masses", N_MASSES),
-                             ca.SX.sym("x_contact"))
-    lower = _SymbolicHalf(*ca.vertsplit(p_lower))
-    values = ca.vertsplit(masses)
-    dynamics = symbolic_copy(cfg.dynamics, **dict(zip(MASS_FIELDS.values(), values)))
-    drive = symbolic_copy(cfg.mechanism.drive, **dict(zip(DRIVE_FIELDS,
-                                                         values[len(MASS_FIELDS):])))
-    functions = []
-    for name in VARIANTS:
-        upper = lower if name.endswith("_equal") else _SymbolicHalf(*ca.vertsplit(p_upper))
-        mech = dataclasses.replace(cfg.mechanism, lower=lower, upper=upper, dynamics=dynamics,
-                                   drive=drive)
-        mold = "_mold" in name  # the no-mold variant ignores its x_contact input
-        sym_cfg = symbolic_copy(cfg, mechanism=mech, mu=mu, x_contact=None)
-        outs = plant_outputs(xva[0], xva[1], xva[2], sym_cfg, x_contact if mold else None,
-                             slip_state=xva[3])
-        functions.append(ca.Function(
-            name, [xva, p_lower, p_upper, mu, masses, x_contact],
-            [ca.vertcat(*[ca.SX(o) for o in outs])],
-            ["xvaz", "lower", "upper", "mu", "masses", "x_contact"], ["y"], {"cse": True}))
-    return functions
 
 
 def geometry_function() -> ca.Function:
@@ -223,6 +164,8 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         f"{_c_array([sys.float_info.max if v.max is None else v.max for v in reals])};",
         "static const double CLAMP_START[CLAMP_N_REAL] = "
         f"{_c_array([v.initial_value for v in reals])};",
+        "static const double CLAMP_STATE_NOMINAL[3] = "
+        f"{_c_array([_nominal(reals, state) for state, _, _ in ME_STATES])};",
         "static const char *const CLAMP_NAMES[CLAMP_N_REAL] = {"
         + ", ".join(c_string(v.name) for v in reals) + "};",
         "static const char *const CLAMP_UNITS[CLAMP_N_REAL] = {"
@@ -230,6 +173,11 @@ def model_header(cfg: PlantConfig, preset: str, variables: Sequence[Var], guid: 
         "#endif", "",
     ]
     return "\n".join(lines)
+
+
+def _nominal(reals: Sequence[Var], name: str) -> float:
+    """A continuous state's nominal: its variable's, 1 for the slip state (a local)."""
+    return next((v.nominal for v in reals if v.name == name and v.nominal is not None), 1.0)
 
 
 def model_name(fmi_version: int = 2, interface: str = "cs") -> str:
@@ -252,6 +200,7 @@ class _Row(NamedTuple):
     unit: str | None
     derivative_of: str | None = None
     description: str = ""
+    bounds: tuple[float, float, float] | None = None  # min, max, nominal of a local
 
 
 def _rows(variables: Sequence[Var], fmi_version: int, me: bool) -> list[_Row]:
@@ -264,7 +213,7 @@ def _rows(variables: Sequence[Var], fmi_version: int, me: bool) -> list[_Row]:
             vr += 1
     if me:
         rows.append(_Row(None, "slip_state", vr, "local", "1", None,
-                         "Slip state z of the pin friction (Dahl), in [-1, 1]"))
+                         "Slip state z of the pin friction (Dahl), in [-1, 1]", (-1.0, 1.0, 1.0)))
         for k, (state, der, unit) in enumerate(ME_STATES):
             rows.append(_Row(None, der, vr + 1 + k, "local", unit, state,
                              f"Time derivative of {state}"))
@@ -322,9 +271,14 @@ def _source_files(node: Element, sources: Sequence[str]) -> None:
 
 def model_description(variables: Sequence[Var], guid: str, sources: Sequence[str],
                       description: str, step_size: float, stop_time: float,
-                      fmi_version: int = 2, interface: str = "cs") -> bytes:
+                      fmi_version: int = 2, interface: str = "cs",
+                      dependencies: Dependencies | None = None) -> bytes:
     """modelDescription.xml of the native FMU: the pythonfmu FMU's variables; with Model
-    Exchange also the slip state and the derivatives of the three continuous states."""
+    Exchange also the slip state and the derivatives of the three continuous states.
+    ``dependencies``: ModelStructure's (default: :func:`structure_dependencies` of the
+    chang2021 plant; the structure is that of every preset)."""
+    if dependencies is None:
+        dependencies = structure_dependencies(configure("chang2021"))
     check_variables(variables)
     name = model_name(fmi_version, interface)
     me = interface in ("me", "both")
@@ -346,7 +300,8 @@ def model_description(variables: Sequence[Var], guid: str, sources: Sequence[str
                    description="Simulation time", unit="s")
     for row in rows:
         (_fmi2_variable if fmi_version == 2 else _fmi3_variable)(scalars, row, by_name)
-    root.append((_fmi2_structure if fmi_version == 2 else _fmi3_structure)(rows, me))
+    root.append((_fmi2_structure if fmi_version == 2 else _fmi3_structure)(rows, me,
+                                                                          dependencies))
     indent(root, "  ")
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"
 
@@ -358,11 +313,15 @@ def _variability(row: _Row) -> str:
 
 
 def _limits(row: _Row) -> dict[str, str]:
+    """unit, quantity, displayUnit, min, max and nominal of a Real row."""
     out = {"unit": row.unit} if row.unit else {}
     var = row.var
     if var is not None:
         out |= {a: _number(getattr(var, a)) for a in ("min", "max") if getattr(var, a) is not None}
-    return out
+    elif row.bounds is not None:
+        out |= {"min": _number(row.bounds[0]), "max": _number(row.bounds[1])}
+    nominal = var.nominal if var is not None else row.bounds[2] if row.bounds else None
+    return out | (real_attributes(row.unit, nominal) if row.unit else {})
 
 
 def _fmi2_variable(scalars: Element, row: _Row, by_name: dict[str, _Row]) -> None:
@@ -401,40 +360,62 @@ def _fmi3_variable(scalars: Element, row: _Row, by_name: dict[str, _Row]) -> Non
     SubElement(scalars, "Float64", attrib)
 
 
-def _fmi2_structure(rows: Sequence[_Row], me: bool) -> Element:
-    """Outputs (CS only: no direct dependency on x_cmd; with Model Exchange the outputs
-    depend on the states and x_cmd, left undeclared), Derivatives, InitialUnknowns."""
-    index = {r.name: i + 1 for i, r in enumerate(rows)}
+def _unknowns(rows: Sequence[_Row], me: bool) -> tuple[list[_Row], list[_Row], list[_Row]]:
+    """The outputs, the state derivatives (Model Exchange) and the initial unknowns."""
     outputs = [r for r in rows if r.causality == "output"]
-    derivatives = [r for r in rows if r.derivative_of]
+    derivatives = [r for r in rows if r.derivative_of] if me else []
+    initial = [r for r in rows if r.causality == "output" or (me and r.causality == "local")]
+    return outputs, derivatives, initial
+
+
+def _run_dependencies(row: _Row, me: bool, deps: Dependencies) -> tuple[str, ...]:
+    """An output's or derivative's direct dependencies on states and input: in
+    Co-Simulation none (the outputs are computed in doStep), with Model Exchange the
+    sparsity's (the acceleration, forces and torque depend on x_cmd through the lag)."""
+    return deps.run[row.name] if me else ()
+
+
+def _fmi2_structure(rows: Sequence[_Row], me: bool, deps: Dependencies) -> Element:
+    """Outputs, Derivatives and InitialUnknowns with their dependencies (indices)."""
+    index = {r.name: i + 1 for i, r in enumerate(rows)}
+    # a dependency on a state is one on the state variable (x, velocity, slip_state)
+    outputs, derivatives, initial = _unknowns(rows, me)
     node = Element("ModelStructure")
+
+    def unknown(parent: Element, row: _Row, names: Sequence[str]) -> None:
+        SubElement(parent, "Unknown", index=str(index[row.name]),
+                   dependencies=" ".join(str(index[n]) for n in names))
+
     out_node = SubElement(node, "Outputs")
     for row in outputs:
-        SubElement(out_node, "Unknown", {"index": str(index[row.name])}
-                   | ({} if me else {"dependencies": ""}))
+        unknown(out_node, row, _run_dependencies(row, me, deps))
     if me:
         der_node = SubElement(node, "Derivatives")
         for row in derivatives:
-            SubElement(der_node, "Unknown", index=str(index[row.name]))
+            unknown(der_node, row, deps.run[row.name])
     init_node = SubElement(node, "InitialUnknowns")
-    unknowns = outputs + ([by for by in rows if by.causality == "local"] if me else [])
-    for row in sorted(unknowns, key=lambda r: index[r.name]):
-        SubElement(init_node, "Unknown", index=str(index[row.name]))
+    for row in sorted(initial, key=lambda r: index[r.name]):
+        unknown(init_node, row, deps.init[row.name])
     return node
 
 
-def _fmi3_structure(rows: Sequence[_Row], me: bool) -> Element:
+def _fmi3_structure(rows: Sequence[_Row], me: bool, deps: Dependencies) -> Element:
+    """Output, ContinuousStateDerivative and InitialUnknown with their dependencies
+    (value references)."""
+    vr = {r.name: r.vr for r in rows}
+    outputs, derivatives, initial = _unknowns(rows, me)
     node = Element("ModelStructure")
-    for row in rows:
-        if row.causality == "output":
-            SubElement(node, "Output", {"valueReference": str(row.vr)}
-                       | ({} if me else {"dependencies": ""}))
-    for row in rows:
-        if row.derivative_of and me:
-            SubElement(node, "ContinuousStateDerivative", valueReference=str(row.vr))
-    for row in rows:
-        if row.causality == "output" or (me and row.causality == "local"):
-            SubElement(node, "InitialUnknown", valueReference=str(row.vr))
+
+    def unknown(tag: str, row: _Row, names: Sequence[str]) -> None:
+        SubElement(node, tag, valueReference=str(row.vr),
+                   dependencies=" ".join(str(vr[n]) for n in names))
+
+    for row in outputs:
+        unknown("Output", row, _run_dependencies(row, me, deps))
+    for row in derivatives:
+        unknown("ContinuousStateDerivative", row, deps.run[row.name])
+    for row in initial:
+        unknown("InitialUnknown", row, deps.init[row.name])
     return node
 
 
@@ -546,10 +527,11 @@ def build_native_fmu(out_dir: Path, preset: str = "chang2021", fmi_version: int 
         library = Path(tmp) / f"{name}.so"
         compile_library(src, sources, library, fmi_version)
         stop = experiment.stop_time if math.isfinite(experiment.stop_time) else 10.0
+        dependencies = structure_dependencies(configure(preset))
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
             zf.writestr("modelDescription.xml", model_description(
                 variables, guid, sources, description, experiment.step_size, stop,
-                fmi_version, interface))
+                fmi_version, interface, dependencies))
             zf.write(library, f"binaries/{platform}/{name}.so")
             for path in sorted(src.iterdir()):
                 zf.write(path, f"sources/{path.name}")

@@ -26,7 +26,13 @@ variables. The base class supplies what pythonfmu 0.7 does not:
   frees everything it holds at once (no reference cycle left for the
   garbage collector to find at interpreter exit);
 * units, descriptions, min/max and ModelStructure dependencies reach
-  modelDescription.xml (see :mod:`fmu_src.build`).
+  modelDescription.xml (see :mod:`fmu_src.build`);
+* input derivatives (FMI 2.0 ``fmi2SetRealInputDerivatives``, which pythonfmu 0.7
+  does not pass on): each Real input has two hidden Real variables after the
+  table (value references n + 2 i and n + 2 i + 1 for the i-th input, orders 1
+  and 2), absent from modelDescription.xml; the FMI guard sets them when the
+  master calls fmi2SetRealInputDerivatives. :meth:`DeclaredSlave.input_derivative`
+  reads them; they apply to the next step only (FMI 2.0 section 4.2.2).
 
 State convention: attributes that :meth:`step` changes must be rebound, not
 mutated in place (floats, tuples, frozen dataclasses), so the per-step
@@ -47,7 +53,20 @@ from pythonfmu.enums import Fmi2Status
 from fmu_src import state as fmu_state
 
 _DEFAULT_VARIABILITY = {"parameter": "fixed", "input": "continuous", "output": "continuous"}
-_STATE_KEYS = frozenset({"fmu", "values", "phase", "failure", "model"})
+_STATE_KEYS = frozenset({"fmu", "values", "phase", "failure", "model", "derivatives"})
+#: Orders of an input's derivatives a master may set (fmi2SetRealInputDerivatives).
+DERIVATIVE_ORDERS = (1, 2)
+
+
+def derivative_name(name: str, order: int) -> str:
+    """The hidden variable that carries input ``name``'s derivative of ``order``."""
+    return f"der{order}_{name}"
+
+
+def hidden_names(variables: tuple[Var, ...] | list[Var]) -> list[str]:
+    """The hidden derivative variables registered after the table, in value-reference order."""
+    return [derivative_name(v.name, k) for v in variables
+            if v.causality == "input" and not v.is_string for k in DERIVATIVE_ORDERS]
 
 
 @dataclass(frozen=True)
@@ -70,6 +89,7 @@ class Var:
     max: float | None = None
     variability: str | None = None
     depends_on: tuple[str, ...] | None = None
+    nominal: float | None = None  # the magnitude a master scales its tolerances by
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():
@@ -136,10 +156,17 @@ class DeclaredSlave(Fmi2Slave):
         self._outputs = tuple(v.name for v in self.VARIABLES if v.causality == "output")
         self._rows = tuple((v.name, v.is_string, v.causality) for v in self.VARIABLES)
         self._names = frozenset(v.name for v in self.VARIABLES)
+        self._derivatives: dict[str, float] = {}  # hidden name -> value, for the next step
         owner = weakref.ref(self)
         for var in self.VARIABLES:
             setattr(self, var.name, var.initial_value)
             self.register_variable(var.to_pythonfmu(owner))
+        for name in hidden_names(self.VARIABLES):
+            self.register_variable(Real(
+                name, causality=Fmi2Causality.local, variability=Fmi2Variability.continuous,
+                description="hidden: an input derivative set by the FMI guard",
+                getter=lambda n=name: owner()._derivatives.get(n, 0.0),
+                setter=lambda value, n=name: owner()._derivatives.__setitem__(n, float(value))))
 
     # ---- hooks for subclasses -------------------------------------------------
     def initialize(self) -> None:
@@ -158,6 +185,11 @@ class DeclaredSlave(Fmi2Slave):
         and the parameters checked); raise :class:`~fmu_src.state.StateError` naming a
         field no initialised instance could hold."""
         fmu_state.keys(state, frozenset(), "the model state")
+
+    def input_derivative(self, name: str, order: int) -> float | None:
+        """The master's derivative of input ``name`` of ``order`` at the step's start, or
+        None if it set none for this step."""
+        return self._derivatives.get(derivative_name(name, order))
 
     # ---- pythonfmu entry points (never raise) ----------------------------------
     def _set(self, name: str, value: Any) -> None:
@@ -207,6 +239,7 @@ class DeclaredSlave(Fmi2Slave):
                 self.__dict__.update(snapshot)
             self.log(f"step at t={current_time:g} s rejected: {exc}", Fmi2Status.error)
             return False
+        self._derivatives = {}  # they applied to this step
         return True
 
     def terminate(self) -> None:
@@ -243,7 +276,8 @@ class DeclaredSlave(Fmi2Slave):
                            else fmu_state.encode_real(getattr(self, v.name))
                            for v in self.VARIABLES},
                 "phase": self._phase, "failure": self.failure,
-                "model": self.model_state() if self._ready else None}
+                "model": self.model_state() if self._ready else None,
+                "derivatives": dict(self._derivatives)}
 
     def _set_fmu_state(self, state: dict[str, Any] | fmu_state.StateError) -> None:
         snapshot = dict(self.__dict__)
@@ -282,6 +316,12 @@ class DeclaredSlave(Fmi2Slave):
             setattr(self, name, fmu_state.text(raw, name) if is_string else
                     fmu_state.decode_real(raw, name, finite_only=causality == "output"
                                           or ready and causality == "parameter"))
+        derivatives = state["derivatives"]
+        allowed = frozenset(hidden_names(self.VARIABLES))
+        if not (isinstance(derivatives, dict) and derivatives.keys() <= allowed):
+            raise fmu_state.StateError("the state's derivatives must be an object with keys "
+                                       f"among {sorted(allowed)}")
+        self._derivatives = {k: fmu_state.finite(v, k) for k, v in derivatives.items()}
         self._phase, self.failure, self._ready = phase, failure, ready
         if ready:
             self._check_ranges(("parameter",))  # as exitInitializationMode checked them
@@ -307,5 +347,10 @@ class DeclaredSlave(Fmi2Slave):
         # build time only, in the building Python: by a name the bundling leaves alone
         fmu_build = importlib.import_module("fmu_src.build")
         root = super().to_xml(model_options or {})
-        fmu_build.extend_model_description(root, self.VARIABLES)
+        fmu_build.extend_model_description(root, self.VARIABLES, self.initial_dependencies())
         return root
+
+    def initial_dependencies(self) -> dict[str, tuple[str, ...]] | None:
+        """Build time: each output's dependencies in Initialization Mode (inputs and
+        parameters), or None for "every known"."""
+        return None

@@ -35,7 +35,7 @@ from toggle.plant import (
     HystereticPlant,
     PlantConfig,
     configure,
-    follow,
+    drive_step,
 )
 
 _PRESET_FILE = Path(__file__).with_name("preset.toml")
@@ -62,6 +62,11 @@ OUTPUTS = (
     ("motor_torque", "N.m", "Drive motor torque: thrust through ball screw and belt, and the "
      "rotor's and screw's inertia"),
 )
+
+
+#: Nominal magnitudes of the drive's states (Model Exchange scales its absolute tolerances
+#: by them): 1 mm, so that a master's tolerance resolves a mold's compression of a few um.
+NOMINALS = {"x": 1e-3, "velocity": 0.1}
 
 
 def drive_bandwidth(mech: Mechanism) -> float:
@@ -120,7 +125,8 @@ def variables(mech: Mechanism) -> tuple[Var, ...]:
               min=-MAX_ERROR, max=MAX_ERROR) for n in ERRORS),
         Var("x_cmd", "input", "m", "Commanded input-link position", start=x_open, min=x_lo,
             max=x_hi),
-        *(Var(name, "output", unit, text, depends_on=()) for name, unit, text in OUTPUTS),
+        *(Var(name, "output", unit, text, depends_on=(), nominal=NOMINALS.get(name))
+          for name, unit, text in OUTPUTS),
     )
 
 
@@ -163,9 +169,20 @@ class ToggleClamp(DeclaredSlave):
 
     def step(self, current_time: float, step_size: float) -> None:
         self._plant.plant.check_input(self.x_cmd)  # a position error first, not a speed
-        drive = follow(self._drive, self.x_cmd, step_size, self.drive_bandwidth,
-                       self.drive_damping)
+        # x_cmd and its derivatives are the master's at the step's start (FMI 2.0 4.2.2)
+        drive = drive_step(self._drive, self.x_cmd, step_size, self.drive_bandwidth,
+                           self.drive_damping, self.input_derivative("x_cmd", 1),
+                           self.input_derivative("x_cmd", 2))
         self._publish(drive)
+
+    def initial_dependencies(self) -> dict[str, tuple[str, ...]]:
+        """From CasADi's sparsity of the plant (fmu_src.structure), as the native build's."""
+        import importlib
+
+        # build time only, in the building Python: by a name the bundling leaves alone
+        structure = importlib.import_module("fmu_src.structure")
+        init = structure.structure_dependencies(configure(MECHANISM)).init
+        return {v.name: init[v.name] for v in self.VARIABLES if v.causality == "output"}
 
     def state_identity(self) -> str:
         return f"ToggleClamp {MECHANISM.name}"

@@ -158,10 +158,15 @@ def compile_c_host(folder: Path) -> Path:
     return host
 
 
-def run_c_host(c_host: Path, unzipped: Path, m_platen: float, loads: int
-               ) -> subprocess.CompletedProcess:
-    """The C host on an extracted FMU (resources given as a file: URI), with an empty
-    environment: ``loads`` times instantiate, set m_platen, 500 steps of a ramp, free."""
+#: A master without Python: an environment with PATH and the venv the pythonfmu FMU runs
+#: in (docs/fmu.md), nothing else (no LD_PRELOAD, no PYTHONPATH).
+BARE_ENV = {"PATH": "/usr/bin:/bin", "VIRTUAL_ENV": sys.prefix}
+
+
+def run_c_host(c_host: Path, unzipped: Path, m_platen: float, loads: int,
+               env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """The C host on an extracted FMU (resources given as a file: URI), in ``env`` (default
+    :data:`BARE_ENV`): ``loads`` times instantiate, set m_platen, 500 steps of a ramp, free."""
     from fmpy import read_model_description
 
     md = read_model_description(str(unzipped))
@@ -171,7 +176,7 @@ def run_c_host(c_host: Path, unzipped: Path, m_platen: float, loads: int
         [str(c_host), str(library), md.guid, (unzipped / "resources").as_uri(),
          *(str(refs[n]) for n in ("x_cmd", "input_force", "m_platen")), repr(m_platen),
          str(loads)],
-        capture_output=True, text=True, timeout=120, env={"PATH": "/usr/bin:/bin"})
+        capture_output=True, text=True, timeout=120, env=BARE_ENV if env is None else env)
 
 
 def run_steps(slave, refs: Mapping[str, int], commands_and_steps, read, t: float = 0.0

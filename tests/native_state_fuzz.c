@@ -184,7 +184,7 @@ static const double SPECIAL[] = {NAN, INFINITY, -INFINITY, 1e308, -1e308, -3.0, 
                                  1e-300, 5e-3, -5e-3, 0.09, 1.0, 11.0, 2e4};
 
 static void mutate_double(unsigned char *b) {
-    size_t first = offsetof(CoreState, r), n = (offsetof(CoreState, checksum) - first) / 8;
+    size_t first = offsetof(CoreState, time), n = (offsetof(CoreState, checksum) - first) / 8;
     double *slot = (double *)(b + first) + below((unsigned)n), v = *slot;
     switch (below(4)) {
     case 0: *slot = SPECIAL[below(sizeof SPECIAL / sizeof SPECIAL[0])]; break;
@@ -196,7 +196,7 @@ static void mutate_double(unsigned char *b) {
 
 static void mutate_int(unsigned char *b) {
     static const int32_t values[] = {-1, 0, 1, 2, 3, 4, 5, 6, 7, INT32_MAX, INT32_MIN, 255};
-    int32_t *slot = (int32_t *)b + below(offsetof(CoreState, r) / 4);
+    int32_t *slot = (int32_t *)b + below(offsetof(CoreState, time) / 4);
     *slot = below(4) ? values[below(sizeof values / sizeof values[0])] : (int32_t)next_u64();
 }
 

@@ -37,7 +37,7 @@ from fmu_src.host import start_slave
 from toggle.drive import motor_torque
 from toggle.kinematics import stroke_limits
 from toggle.params import DYNAMICS_PARAMETERS, Dynamics, dynamics_fields, dynamics_parameters
-from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
+from toggle.plant import DriveState, PlantOutputs, configure, drive_step, plant_outputs
 
 SLAVE = load_module(DEFAULT_SLAVE, "toggle_clamp_fmu_inproc").ToggleClamp
 DOC = Path(__file__).resolve().parents[1] / "docs" / "fmu.md"
@@ -264,7 +264,7 @@ def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: f
     close_slave(slave)
     drive = DriveState.at_rest(X_OPEN)
     for (x_cmd, h), got in zip(steps, out, strict=True):
-        drive = follow(drive, x_cmd, h, bandwidth, 0.7)
+        drive = drive_step(drive, x_cmd, h, bandwidth, 0.7)
         assert (got["x"], got["velocity"], got["acceleration"]) == pytest.approx(
             tuple(drive[:3]), rel=1e-12, abs=1e-15)
     columns = {n: [o[n] for o in out] for n in OUTPUTS}

@@ -1,6 +1,6 @@
 """build/ToggleClamp.fmu driven the way other masters drive it (issue 15).
 
-A C host compiled here (dlopen, no Python, no environment variables), fmpy's
+A C host compiled here (dlopen, no Python; PATH and VIRTUAL_ENV only), fmpy's
 high-level and low-level APIs in fresh processes, the fmpy command line, and
 the FMI rules a strict master relies on: error statuses and messages whatever
 the logging state, variable communication steps, serialised states moved
@@ -26,13 +26,13 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error, fmi2OK, fmi2Terminated
-from fmu_support import built_fmu, compile_c_host, load_module
+from fmu_support import BARE_ENV, built_fmu, compile_c_host, load_module
 from fmu_support import run_c_host as _run_host
 
 from fmu_src.build import DEFAULT_SLAVE, PACKAGE_DIR
 from fmu_src.host import start_slave
 from toggle.kinematics import stroke_limits
-from toggle.plant import DriveState, configure, follow, plant_outputs
+from toggle.plant import DriveState, configure, drive_step, plant_outputs
 
 pytestmark = pytest.mark.real_time
 
@@ -81,7 +81,7 @@ def test_c_host_loads_the_fmu_twice_and_exits_cleanly(c_host: Path, unzipped: Pa
     then exit: status 0 every run (pythonfmu alone crashed at exit in every C host)."""
     drive = DriveState.at_rest(-3.4386e-3)
     for k in range(1, 501):  # the host's ramp, in the same floating-point operations, through
-        drive = follow(drive, -3.4386e-3 + (0.04 + 3.4386e-3) * k / 500.0, 1e-3,
+        drive = drive_step(drive, -3.4386e-3 + (0.04 + 3.4386e-3) * k / 500.0, 1e-3,
                        DEFAULT_BANDWIDTH, 0.7)  # the default drive lag
     want = float(plant_outputs(drive.x, drive.v, drive.a, configure("chang2021")).input_force)
     for _ in range(int(os.environ.get("FMU_HOST_RUNS", "2"))):
@@ -166,10 +166,12 @@ def test_fmpy_command_line_refuses_a_bad_parameter_and_names_it(fmu: Path, tmp_p
 
 
 def _ramp_up(slave, refs, steps) -> dict[float, np.ndarray]:
-    """x_cmd = x_open + 0.25 t^2 (constant acceleration 0.5 m/s^2) at the given steps."""
+    """x_cmd = x_open + 0.25 t^2 (constant acceleration 0.5 m/s^2) at the given steps: its
+    value, velocity and acceleration at each step's start (fmi2SetRealInputDerivatives)."""
     t, rows = 0.0, {}
     for h in steps:
-        slave.setReal([refs["x_cmd"]], [X_OPEN + 0.25 * (t + h) ** 2])
+        slave.setReal([refs["x_cmd"]], [X_OPEN + 0.25 * t**2])
+        slave.setRealInputDerivatives([refs["x_cmd"]] * 2, [1, 2], [0.5 * t, 0.5])
         slave.doStep(t, h)
         t += h
         rows[round(t, 9)] = np.array(slave.getReal([refs[n] for n in OUTPUTS]))
@@ -180,7 +182,7 @@ def _ramp_up(slave, refs, steps) -> dict[float, np.ndarray]:
 def test_variable_steps_give_the_fixed_step_results(unzipped: Path, bandwidth: float):
     """Alternating 0.5/1.5 ms steps against 1 ms steps, compared where both land (every
     2 ms): equal to 1e-6 of each output's peak (the command between communication points
-    is the parabola through the last three, exact for this command)."""
+    is the master's polynomial, exact for this command)."""
     results = []
     for steps in ([1e-3] * 300, [0.5e-3, 1.5e-3] * 150):
         slave, refs = start_slave(unzipped, "steps", {"x_cmd": X_OPEN, "x_contact": X_CONTACT,
@@ -381,7 +383,7 @@ def test_log_categories_filter_information_messages(unzipped: Path, logging: boo
 def test_fmi_compliance_checker_finds_no_problem(fmu: Path, tmp_path: Path, closing: bool):
     """The default experiment, and a closing stroke from an input file, in the checker
     built from modelica-tools/FMUComplianceChecker (FMUCHECK=path; docs/fmu.md), run with
-    an empty environment: no LD_PRELOAD, no PYTHONPATH."""
+    PATH and VIRTUAL_ENV only: no LD_PRELOAD, no PYTHONPATH."""
     checker = os.environ.get("FMUCHECK")
     if not checker:
         pytest.skip("set FMUCHECK to an fmuCheck.linux64 built from "
@@ -394,14 +396,14 @@ def test_fmi_compliance_checker_finds_no_problem(fmu: Path, tmp_path: Path, clos
                                                    for a, b in zip(t, x)))
     args = ["-h", "1e-3", "-s", "1.0", "-i", str(inputs)] if closing else []
     run = subprocess.run([checker, "-l", "3", "-e", str(log), "-o", str(out), *args, str(fmu)],
-                         capture_output=True, text=True, timeout=300, env={"PATH": "/usr/bin:/bin"})
+                         capture_output=True, text=True, timeout=300, env=BARE_ENV)
     text = log.read_text()
     assert run.returncode == 0, text
     assert "0 warning(s) and error(s)" in text and "0 Warning(s)" in text and "0 Error(s)" in text
     result = np.genfromtxt(out, delimiter=",", names=True)
     drive = DriveState.at_rest(X_OPEN)  # the default drive lag, x_cmd(t) set before each step
     for x_cmd in x[:-1] if closing else ():
-        drive = follow(drive, float(x_cmd), 1e-3, DEFAULT_BANDWIDTH, 0.7)
+        drive = drive_step(drive, float(x_cmd), 1e-3, DEFAULT_BANDWIDTH, 0.7)
     assert result["x"][-1] == pytest.approx(drive.x, abs=1e-9)
     assert result["x"][-1] == pytest.approx(X_TOGGLE if closing else X_OPEN, abs=1e-4)
 

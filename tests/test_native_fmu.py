@@ -2,7 +2,7 @@
 
 Checked against the pythonfmu ToggleClamp (same variables; every output to 1e-9
 relative over a closing and opening stroke with mold contact), against
-:func:`toggle.plant.follow` (variable steps), for its state, reset and error
+:func:`toggle.plant.drive_step` (variable steps), for its state, reset and error
 handling, and in four masters: fmpy, libcosim (two instances), Ecos (with the Python FMU
 twice in its process) and a C host compiled here that loads the binary with dlopen and no
 Python environment.
@@ -40,7 +40,7 @@ from fmu_src.native_build import slave_variables
 from toggle.drive import motor_torque
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError
-from toggle.plant import DriveState, PlantOutputs, configure, follow, plant_outputs
+from toggle.plant import DriveState, PlantOutputs, configure, drive_step, plant_outputs
 
 VARIABLES = slave_variables()[0]
 DEFAULT_BANDWIDTH = next(v.start for v in VARIABLES if v.name == "drive_bandwidth")  # Hz
@@ -296,7 +296,7 @@ def test_variable_step_sizes_follow_the_drive_model(unzipped: Path, bandwidth: f
     close_slave(slave)
     drive = DriveState.at_rest(X_OPEN)
     for (x_cmd, h), got in zip(steps, out, strict=True):
-        drive = follow(drive, x_cmd, h, bandwidth, 0.7)
+        drive = drive_step(drive, x_cmd, h, bandwidth, 0.7)
         assert got[:3] == pytest.approx(tuple(drive[:3]), rel=1e-12, abs=1e-12)  # a: w^2 (u - x)
         assert got == pytest.approx(list(_reference(*got[:3], X_CONTACT)), rel=REL, abs=1e-12)
 
@@ -436,7 +436,7 @@ def test_a_c_host_runs_the_binary_without_python(native: Path, unzipped: Path, t
     assert run.returncode == 0, run.stderr
     drive = DriveState.at_rest(-3.4386e-3)
     for k in range(1, 501):  # the host's ramp, in the same floating-point operations
-        drive = follow(drive, -3.4386e-3 + (0.04 + 3.4386e-3) * k / 500.0, 1e-3,
+        drive = drive_step(drive, -3.4386e-3 + (0.04 + 3.4386e-3) * k / 500.0, 1e-3,
                        DEFAULT_BANDWIDTH, 0.7)  # the default drive lag: the host sets none
     cfg = configure("chang2021", masses={"platen": 4.0})
     want = float(plant_outputs(drive.x, drive.v, drive.a, cfg).input_force)

@@ -438,26 +438,67 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
     if bandwidth <= 0:  # a command that stops is not read as a reversal (nor doubles back)
         x, v, a = x_cmd, min(max(du1, min(0.0, 2 * rate)), max(0.0, 2 * rate)), curvature
     else:
-        # x_p = u - k1 u' + k2 u'' solves x'' + 2 zeta w x' + w^2 x = w^2 u for a parabola
-        # u; the deviation from it decays as exp(A h)
-        w = 2 * math.pi * bandwidth
-        k1, k2 = 2 * damping / w, (4 * damping * damping - 1) / (w * w)
-        du0 = rate - curvature * h / 2
-        e0 = state.x - (state.u - k1 * du0 + k2 * curvature)
-        e1 = state.v - (du0 - k1 * curvature)
-        p00, p01, p10, p11 = lag_transition(w, damping, h)
-        x = x_cmd - k1 * du1 + k2 * curvature + p00 * e0 + p01 * e1
-        v = du1 - k1 * curvature + p10 * e0 + p11 * e1
-        a = w * w * (x_cmd - x) - 2 * damping * w * v
+        x, v, a = _lag_response(state, state.u, rate - curvature * h / 2, curvature, h,
+                                bandwidth, damping)
+    _check_motion(x_cmd, h, v, a, bandwidth)
+    return DriveState(x, v, a, x_cmd, rate, h)
+
+
+def _lag_response(state: DriveState, u0: float, du0: float, ddu: float, h: float,
+                  bandwidth: float, damping: float) -> tuple[float, float, float]:
+    """(x, v, a) after h of the second-order lag driven by the parabola u0 + du0 t + ddu t^2/2.
+
+    x_p = u - k1 u' + k2 u'' solves x'' + 2 zeta w x' + w^2 x = w^2 u for a parabola u; the
+    deviation from it decays as exp(A h), so the step is exact for that command.
+    """
+    w = 2 * math.pi * bandwidth
+    k1, k2 = 2 * damping / w, (4 * damping * damping - 1) / (w * w)
+    u1, du1 = u0 + du0 * h + ddu * h * h / 2, du0 + ddu * h
+    e0 = state.x - (u0 - k1 * du0 + k2 * ddu)
+    e1 = state.v - (du0 - k1 * ddu)
+    p00, p01, p10, p11 = lag_transition(w, damping, h)
+    x = u1 - k1 * du1 + k2 * ddu + p00 * e0 + p01 * e1
+    v = du1 - k1 * ddu + p10 * e0 + p11 * e1
+    return x, v, w * w * (u1 - x) - 2 * damping * w * v
+
+
+def _check_motion(x_cmd: float, h: float, v: float, a: float, bandwidth: float) -> None:
     if not (abs(v) <= MAX_INPUT_SPEED and abs(a) <= MAX_INPUT_ACCELERATION):
         raise PlantError(
             f"the command x_cmd = {x_cmd:.6g} m after {h:.6g} s asks for {v:.3g} m/s and "
             f"{a:.3g} m/s^2; an input link moves within {MAX_INPUT_SPEED:g} m/s and "
             f"{MAX_INPUT_ACCELERATION:g} m/s^2" + _bandwidth_hint(bandwidth))
-    return DriveState(x, v, a, x_cmd, rate, h)
+
+
+def drive_step(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
+               damping: float = 0.7, du: float | None = None,
+               ddu: float | None = None) -> DriveState:
+    """Advance the drive over [t, t + h] as an FMI master means it (FMI 2.0 section 4.2.2).
+
+    ``x_cmd`` is the command at the step's start t, ``du`` and ``ddu`` its first and second
+    derivatives there (None: not given, taken as 0); over the step the command is the
+    polynomial x_cmd + du s + ddu s^2 / 2 (without derivatives x_cmd held), and the lag
+    (``bandwidth`` > 0 Hz) is solved exactly for it. The ideal drive (``bandwidth`` 0) is
+    at the polynomial's end; without derivatives at the held x_cmd, its velocity and
+    acceleration then the command's as :func:`follow` reads them off the last three
+    commands (a position source's forces need them; a held input has none). The
+    command's bookkeeping (last command, slope, step) is :func:`follow`'s.
+    """
+    if du is None and ddu is None and bandwidth <= 0:
+        return follow(state, x_cmd, h)
+    if not (h > 0 and math.isfinite(h)):
+        raise PlantError(f"step size must be > 0, got {h!r} s")
+    d1, d2 = du or 0.0, ddu or 0.0
+    if bandwidth <= 0:
+        x, v, a = x_cmd + d1 * h + d2 * h * h / 2, d1 + d2 * h, d2
+    else:
+        x, v, a = _lag_response(state, x_cmd, d1, d2, h, bandwidth, damping)
+    _check_motion(x_cmd, h, v, a, bandwidth)
+    return DriveState(x, v, a, x_cmd, (x_cmd - state.u) / h, h)
 
 
 __all__ = [
     "AssemblyError", "CompiledPlant", "DriveState", "HystereticPlant", "PlantConfig",
-    "PlantError", "PlantOutputs", "configure", "follow", "plant_outputs", "with_errors",
+    "PlantError", "PlantOutputs", "configure", "drive_step", "follow", "plant_outputs",
+    "with_errors",
 ]

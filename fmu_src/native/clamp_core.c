@@ -253,7 +253,6 @@ void core_reset(Core *c) {
     memcpy(c->s.r, CLAMP_START, sizeof c->s.r);
     c->s.phase = PHASE_INSTANTIATED;
     c->stale = 1;
-    c->time = 0;
     c->failure[0] = '\0';
 }
 
@@ -311,41 +310,50 @@ static double advance_slip(double z, double dx) {
     return target - (target - z) * exp(-fabs(dx) / CLAMP_SLIP_DISTANCE);
 }
 
-/* The drive's motion after a step h toward u (toggle.plant.follow). The command over the
- * step is the parabola through the last three commands, unless the master gave x_cmd's
- * velocity or acceleration at the step's end (the point x_cmd applies to): then the
- * parabola with those. 0 if the result asks for more than MAX_SPEED or MAX_ACCELERATION. */
+/* exp(A h) of the lag for (bandwidth, damping, h), cached. */
+static const double *lag_matrix(Core *c, double bw, double zeta, double h) {
+    if (c->lag_key[0] != bw || c->lag_key[1] != zeta || c->lag_key[2] != h) {
+        drive_lag_transition(2.0 * PI * bw, zeta, h, c->lag);
+        c->lag_key[0] = bw; c->lag_key[1] = zeta; c->lag_key[2] = h;
+    }
+    return c->lag;
+}
+
+/* The drive's motion after a step h from the instance's drive state, the command over the
+ * step being the parabola u0 + du0 s + ddu s^2 / 2 (toggle.plant drive_step/follow). */
+static void respond(Core *c, double u0, double du0, double ddu, double h, double out[3]) {
+    const CoreState *s = &c->s;
+    double bw = s->r[VR_BANDWIDTH], zeta = s->r[VR_DAMPING], w = 2.0 * PI * bw;
+    const double *p = lag_matrix(c, bw, zeta, h), *d = s->drive;
+    /* exact for the parabola: the deviation from x_p = u - k1 u' + k2 u'' decays as exp(A h) */
+    double k1 = 2 * zeta / w, k2 = (4 * zeta * zeta - 1) / (w * w);
+    double u1 = u0 + du0 * h + ddu * h * h / 2, du1 = du0 + ddu * h;
+    double e0 = d[0] - (u0 - k1 * du0 + k2 * ddu), e1 = d[1] - (du0 - k1 * ddu);
+    out[0] = u1 - k1 * du1 + k2 * ddu + p[0] * e0 + p[1] * e1;
+    out[1] = du1 - k1 * ddu + p[2] * e0 + p[3] * e1;
+    out[2] = w * w * (u1 - out[0]) - 2.0 * zeta * w * out[1];
+}
+
+/* The drive's motion after the step [t, t + h] (toggle.plant.drive_step): u is x_cmd at
+ * t, the master's derivatives (if given) are its derivatives at t, and over the step the
+ * command is that polynomial (u held without derivatives). The ideal drive without
+ * derivatives is at u, with the velocity and acceleration of the parabola through the last
+ * three commands (toggle.plant.follow). 0 if the motion exceeds MAX_SPEED or
+ * MAX_ACCELERATION. */
 static int follow(Core *c, double u, double h, double out[6]) {
     const CoreState *s = &c->s;
-    double bw = s->r[VR_BANDWIDTH], zeta = s->r[VR_DAMPING];
     const double *d = s->drive;
-    double rate = (u - d[3]) / h, curvature, du1, u0 = d[3];
-    if (s->der_given[1]) curvature = s->der[1];
-    else if (s->der_given[0]) curvature = 2 * (s->der[0] - rate) / h;
-    else curvature = 2 * (rate - d[4]) / (d[5] + h);
-    du1 = s->der_given[0] ? s->der[0] : rate + curvature * h / 2;
-    if (s->der_given[0] && s->der_given[1]) u0 = u - du1 * h + curvature * h * h / 2;
-    if (bw <= 0) {
-        out[0] = u; out[2] = curvature;
-        if (s->der_given[0]) out[1] = du1;  /* the master's velocity is exact */
-        else {  /* a stop is not read as a reversal */
-            double lo = fmin(0.0, 2 * rate), hi = fmax(0.0, 2 * rate);
-            out[1] = fmin(fmax(du1, lo), hi);
-        }
-    } else {
-        double w = 2.0 * PI * bw, *p = c->lag;
-        if (c->lag_key[0] != bw || c->lag_key[1] != zeta || c->lag_key[2] != h) {
-            drive_lag_transition(w, zeta, h, c->lag);
-            c->lag_key[0] = bw; c->lag_key[1] = zeta; c->lag_key[2] = h;
-        }
-        /* exact for the parabola command: the deviation from x_p = u - k1 u' + k2 u''
-         * decays as exp(A h) */
-        double k1 = 2 * zeta / w, k2 = (4 * zeta * zeta - 1) / (w * w);
-        double du0 = du1 - curvature * h;
-        double e0 = d[0] - (u0 - k1 * du0 + k2 * curvature), e1 = d[1] - (du0 - k1 * curvature);
-        out[0] = u - k1 * du1 + k2 * curvature + p[0] * e0 + p[1] * e1;
-        out[1] = du1 - k1 * curvature + p[2] * e0 + p[3] * e1;
-        out[2] = w * w * (u - out[0]) - 2.0 * zeta * w * out[1];
+    double bw = s->r[VR_BANDWIDTH], rate = (u - d[3]) / h;
+    int given = s->der_given[0] || s->der_given[1];
+    double d1 = s->der_given[0] ? s->der[0] : 0.0, d2 = s->der_given[1] ? s->der[1] : 0.0;
+    if (bw > 0) {
+        respond(c, u, d1, d2, h, out);
+    } else if (given) {
+        out[0] = u + d1 * h + d2 * h * h / 2; out[1] = d1 + d2 * h; out[2] = d2;
+    } else {  /* a stop is not read as a reversal (nor doubles back) */
+        double curvature = 2 * (rate - d[4]) / (d[5] + h), du1 = rate + curvature * h / 2;
+        double lo = fmin(0.0, 2 * rate), hi = fmax(0.0, 2 * rate);
+        out[0] = u; out[1] = fmin(fmax(du1, lo), hi); out[2] = curvature;
     }
     out[3] = u; out[4] = rate; out[5] = h;
     return fabs(out[1]) <= MAX_SPEED && fabs(out[2]) <= MAX_ACCELERATION;
@@ -402,6 +410,7 @@ int core_step(Core *c, double t, double h) {
     memcpy(s->drive, drive, sizeof drive);
     s->slip[0] = drive[0]; s->slip[1] = xvaz[3];
     memcpy(&s->r[VR_OUT0], y, sizeof y);
+    s->time = t + h;
     s->der_given[0] = s->der_given[1] = 0;  /* derivatives apply to one step */
     s->der[0] = s->der[1] = 0;
     return CORE_OK;
@@ -624,6 +633,7 @@ static const char *state_problem(Core *c, const CoreState *s) {
             (!s->der_given[k] && s->der[k] != 0))
             return "x_cmd's derivatives invalid";
     if (!all_finite(&s->r[VR_OUT0], CLAMP_N_OUT)) return "a non-finite output";
+    if (!isfinite(s->time)) return "a non-finite time";
     if (!s->initialised) {  /* the values set so far, checked when initialisation ends */
         if (s->phase == PHASE_STEPPING) return "a stepping state without initialisation";
         if (s->mold || s->unequal || !zero_between(s, offsetof(CoreState, drive), offsetof(CoreState, der)) ||
@@ -657,7 +667,6 @@ static const char *state_problem(Core *c, const CoreState *s) {
     if (!(fabs(dr[1]) <= MAX_SPEED)) return "a drive velocity beyond 10 m/s";
     if (s->me) return NULL;  /* outputs follow the states and x_cmd; recomputed when read */
     if (!(fabs(dr[2]) <= MAX_ACCELERATION)) return "a drive acceleration beyond 10000 m/s^2";
-    if (s->r[VR_BANDWIDTH] <= 0 && dr[0] != dr[3]) return "an ideal drive away from its command";
     double y[CLAMP_N_OUT], xvaz[4] = {dr[0], dr[1], dr[2], s->slip[1]};
     if (!plant(c, s, xvaz, y) || memcmp(y, &s->r[VR_OUT0], sizeof y) != 0)
         return "outputs that are not the plant's at the state's motion";

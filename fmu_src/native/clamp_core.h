@@ -39,6 +39,8 @@ typedef struct {
     int32_t mold, unequal;
     int32_t der_given[2]; /* x_cmd's 1st / 2nd derivative set for the next step */
     int32_t spare;        /* 0 */
+    double time;          /* the instance's time: Co-Simulation's last communication point,
+                           * Model Exchange's as the master set it (FMI 3.0's `time`) */
     double r[CLAMP_N_REAL];  /* every Real variable of the table, by value reference */
     double drive[6];  /* x, v, a of the input link; last command, its mean slope, last step */
     double slip[2];   /* position of the last slip update and the slip state z */
@@ -47,7 +49,7 @@ typedef struct {
     uint64_t checksum; /* FNV-1a of everything before it */
 } CoreState;
 
-#define CORE_STATE_VERSION 7u
+#define CORE_STATE_VERSION 8u
 
 #define CORE_DERIVED_CACHE 4
 
@@ -59,7 +61,6 @@ typedef struct {
     void *log_env;
     int logging;  /* deliver messages below error level */
     int stale;    /* outputs not computed from the values set since */
-    double time;  /* Model Exchange: the time set by the master */
     char failure[512]; /* why the last initialisation failed */
     casadi_int iw[CLAMP_SZ_IW + 1];
     double w[CLAMP_SZ_W + 1];

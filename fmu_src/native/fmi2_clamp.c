@@ -69,7 +69,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n,
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_defined, fmi2Real tol,
                                fmi2Real start, fmi2Boolean stop_defined, fmi2Real stop) {
     (void)tol_defined; (void)tol; (void)stop_defined; (void)stop;
-    CORE(c)->time = start;
+    CORE(c)->s.time = start;
     return fmi2OK;
 }
 
@@ -156,7 +156,7 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean no_set_prior
 }
 
 fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) {
-    CORE(c)->time = time;
+    CORE(c)->s.time = time;
     return fmi2OK;
 }
 
@@ -179,8 +179,8 @@ fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t n) {
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real nominal[], size_t n) {
-    (void)c;
-    for (size_t i = 0; i < n; i++) nominal[i] = 1.0;
+    (void)c;  /* the declared nominals of x, velocity and slip_state */
+    for (size_t i = 0; i < n; i++) nominal[i] = i < 3 ? CLAMP_STATE_NOMINAL[i] : 1.0;
     return fmi2OK;
 }
 

@@ -1,7 +1,7 @@
 /* FMI 3.0 Co-Simulation and Model Exchange API of the toggle clamp: a thin layer over
  * clamp_core.c, the core under the FMI 2.0 API too. Co-Simulation steps exactly as FMI 2.0
- * Co-Simulation does, except that FMI 3.0 has no equivalent of fmi2SetRealInputDerivatives:
- * the command over a step is always the parabola through the last three commands. Value
+ * Co-Simulation does without input derivatives (FMI 3.0 has no fmi2SetRealInputDerivatives):
+ * x_cmd set before fmi3DoStep(t, h) is the command at t, held over the step. Value
  * references: the Float64 variables from 0 as in FMI 2.0, preset CLAMP_VR_PRESET, time
  * TIME_VR. One allocation per instance and per saved state, none per step. */
 #include <stdio.h>
@@ -13,14 +13,19 @@
 
 #define TIME_VR 1001u
 
+/* Model Exchange's modes after initialisation (FMI 3.0 section 3.2): Event Mode first. */
+typedef enum { MODE_EVENT, MODE_CONTINUOUS } MeMode;
+
 typedef struct {
     Core core;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
+    MeMode mode;
 } Instance;
 
 static void deliver(void *env, int error, const char *msg) {
     Instance *c = env;
+    if (!c->log) return;  /* FMI 3.0 allows a NULL logMessage */
     c->log(c->env, error ? fmi3Error : fmi3OK, error ? "logStatusError" : "logAll", msg);
 }
 
@@ -37,9 +42,8 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 static Instance *instantiate(fmi3String name, fmi3String token, int me, fmi3Boolean logging,
                              fmi3InstanceEnvironment env, fmi3LogMessageCallback log) {
     (void)name;  /* the FMU reads no file: any resource path works */
-    if (!log) return NULL;
     if (!token || strcmp(token, CLAMP_GUID) != 0 || !(me ? CLAMP_HAS_ME : CLAMP_HAS_CS)) {
-        log(env, fmi3Error, "logStatusError", !token || strcmp(token, CLAMP_GUID)
+        if (log) log(env, fmi3Error, "logStatusError", !token || strcmp(token, CLAMP_GUID)
             ? "instantiation token mismatch" : "this FMU does not declare that interface");
         return NULL;
     }
@@ -67,9 +71,15 @@ fmi3Instance fmi3InstantiateCoSimulation(
     fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
     size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
     fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate) {
-    (void)resourcePath; (void)visible; (void)eventModeUsed; (void)earlyReturnAllowed;
+    (void)resourcePath; (void)visible; (void)earlyReturnAllowed;
     (void)requiredIntermediateVariables; (void)nRequiredIntermediateVariables;
     (void)intermediateUpdate;
+    if (eventModeUsed) {  /* only for an FMU with hasEventMode="true" */
+        if (logMessage)
+            logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                       "eventModeUsed: this FMU has no Event Mode (hasEventMode=\"false\")");
+        return NULL;
+    }
     return instantiate(instanceName, instantiationToken, 0, loggingOn, instanceEnvironment,
                        logMessage);
 }
@@ -98,15 +108,39 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
                                        fmi3Float64 tolerance, fmi3Float64 startTime,
                                        fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
     (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
-    CORE(instance)->time = startTime;
+    CORE(instance)->s.time = startTime;
     return status(core_enter_initialisation(CORE(instance)));
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
+    ((Instance *)instance)->mode = MODE_EVENT;  /* Model Exchange enters Event Mode */
     return status(core_exit_initialisation(CORE(instance)));
 }
 
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) { (void)instance; return fmi3OK; }
+/* Model Exchange: 1 if the instance is initialised and in `mode`, else an error is logged. */
+static int in_mode(fmi3Instance instance, MeMode mode, const char *who) {
+    Core *c = CORE(instance);
+    if (!c->s.me) {
+        core_say(c, 1, "fmi3%s: a Co-Simulation instance (hasEventMode=\"false\": it has no "
+                 "Event Mode)", who);
+        return 0;
+    }
+    if (c->s.phase != PHASE_STEPPING || ((Instance *)instance)->mode != mode) {
+        core_say(c, 1, "fmi3%s: only in %s", who, mode == MODE_EVENT ? "Event Mode"
+                 : "Continuous-Time Mode");
+        return 0;
+    }
+    return 1;
+}
+
+fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
+    Core *c = CORE(instance);
+    if (c->s.me && c->s.phase == PHASE_STEPPING) {  /* from Continuous-Time Mode, or again */
+        ((Instance *)instance)->mode = MODE_EVENT;
+        return fmi3OK;
+    }
+    return in_mode(instance, MODE_EVENT, "EnterEventMode") ? fmi3OK : fmi3Error;
+}
 fmi3Status fmi3Terminate(fmi3Instance instance) { return status(core_terminate(CORE(instance))); }
 
 fmi3Status fmi3Reset(fmi3Instance instance) {
@@ -118,7 +152,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           size_t nValueReferences, fmi3Float64 values[], size_t nValues) {
     if (nValues != nValueReferences) return unsupported(instance, "GetFloat64 of arrays");
     for (size_t i = 0; i < nValueReferences; i++) {
-        if (valueReferences[i] == TIME_VR) values[i] = CORE(instance)->time;
+        if (valueReferences[i] == TIME_VR) values[i] = CORE(instance)->s.time;
         else if (core_get_real(CORE(instance), &valueReferences[i], 1, &values[i]) != CORE_OK)
             return fmi3Error;
     }
@@ -158,7 +192,6 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     *terminateSimulation = fmi3False;
     *earlyReturn = fmi3False;
     *lastSuccessfulTime = currentCommunicationPoint + (ok == CORE_OK ? communicationStepSize : 0);
-    if (ok == CORE_OK) CORE(instance)->time = *lastSuccessfulTime;
     return status(ok);
 }
 
@@ -170,7 +203,8 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
                                     fmi3Boolean *valuesOfContinuousStatesChanged,
                                     fmi3Boolean *nextEventTimeDefined,
                                     fmi3Float64 *nextEventTime) {
-    (void)instance;  /* no events, no discrete states */
+    if (!in_mode(instance, MODE_EVENT, "UpdateDiscreteStates")) return fmi3Error;
+    /* no events, no discrete states */
     *discreteStatesNeedUpdate = *terminateSimulation = fmi3False;
     *nominalsOfContinuousStatesChanged = *valuesOfContinuousStatesChanged = fmi3False;
     *nextEventTimeDefined = fmi3False;
@@ -178,19 +212,24 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     return fmi3OK;
 }
 
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) { (void)instance; return fmi3OK; }
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
+    if (!in_mode(instance, MODE_EVENT, "EnterContinuousTimeMode")) return fmi3Error;
+    ((Instance *)instance)->mode = MODE_CONTINUOUS;
+    return fmi3OK;
+}
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
                                        fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode,
                                        fmi3Boolean *terminateSimulation) {
-    (void)instance; (void)noSetFMUStatePriorToCurrentPoint;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!in_mode(instance, MODE_CONTINUOUS, "CompletedIntegratorStep")) return fmi3Error;
     *enterEventMode = *terminateSimulation = fmi3False;
     return fmi3OK;
 }
 
 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
-    CORE(instance)->time = time;
+    CORE(instance)->s.time = time;
     return fmi3OK;
 }
 
@@ -218,8 +257,9 @@ fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuous
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
                                              size_t nContinuousStates) {
-    (void)instance;
-    for (size_t i = 0; i < nContinuousStates; i++) nominals[i] = 1.0;
+    (void)instance;  /* the declared nominals of x, velocity and slip_state */
+    for (size_t i = 0; i < nContinuousStates; i++)
+        nominals[i] = i < 3 ? CLAMP_STATE_NOMINAL[i] : 1.0;
     return fmi3OK;
 }
 
