@@ -773,8 +773,9 @@ class SerialLink:
         out: list[p.Telemetry] = []
         deadline = time.monotonic() + self._stop_time()
         while True:
-            try:
-                item = self._queue.get(timeout=0.02)
+            try:  # a rig that is gone sends no more: take what is queued, do not wait
+                item = (self._queue.get_nowait() if self._gone()
+                        else self._queue.get(timeout=0.02))
             except queue.Empty:
                 if self._gone() or time.monotonic() > deadline or self._ser is None:
                     return out

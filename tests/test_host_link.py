@@ -92,6 +92,9 @@ class FakeMcu:
         self.close()
 
     def close(self) -> None:
+        """Stop serving and close the pty; idempotent."""
+        if self._stop.is_set():
+            return
         self._stop.set()
         self._thread.join(timeout=2.0)
         for fd in (self.master, self.slave):
@@ -311,30 +314,41 @@ def test_a_deaf_rig_gets_one_stop_sequence_and_is_left_at_once(
     assert closed - failure < 0.25, f"{(closed - failure) * 1e3:.0f} ms"
 
 
-def test_a_deaf_rig_ends_hil_run_with_one_stop_sequence(fake: Callable[..., FakeMcu],
-                                                       tmp_path) -> None:
-    """The same through ``hil run --real``, as a user runs it, counted on the rig side."""
-    mcu = fake(deaf_at_start=1, deaf_after=300)
-    host = Host("run", "--real", "--port", mcu.port, "--out", str(tmp_path / "run"), *SHORT_RUN)
-    while host.proc.poll() is None:
-        time.sleep(0.001)
-    exited = time.monotonic()
-    code, stdout, stderr = host.finish()
-    assert code == 1 and "no telemetry for" in stderr and "Traceback" not in stderr, stderr
-    frames = mcu.after_deaf()
-    kinds = [r.kind for r in frames]
-    assert kinds[-ESTOP_REPEATS:] == [p.MsgType.ESTOP] * ESTOP_REPEATS, kinds
-    assert set(kinds[:-ESTOP_REPEATS]) == {p.MsgType.STOP}, kinds
-    assert STOP_ATTEMPTS <= len(kinds) - ESTOP_REPEATS <= STOP_ATTEMPTS + 2, kinds
-    # the first STOP is sent when the host's watchdog trips (100 ms after the last sample);
-    # its last frame (heartbeats included: they stop when the port closes) follows within
-    # 250 ms, and the process has summarised the run and exited soon after (its interpreter
-    # takes 80-150 ms to shut down here)
-    failed = frames[0].time
-    left = mcu.after_deaf(heartbeats=True)[-1].time - failed
-    assert left < 0.25, f"{left * 1e3:.0f} ms"
-    assert exited - failed < 0.6, f"{(exited - failed) * 1e3:.0f} ms"
-    assert "cycles complete" in stdout  # what was measured is still recorded and summarised
+#: Runs of ``hil run --real`` against a deaf rig in the exit-time test (issue 35: 10 of 10).
+DEAF_RUNS = 10
+
+
+def test_a_deaf_rig_ends_hil_run_with_one_stop_sequence_and_a_quick_exit(
+        fake: Callable[..., FakeMcu], tmp_path) -> None:
+    """The same through ``hil run --real``, as a user runs it, counted on the rig side, 10
+    times: the process ends within 250 ms of giving up (its first STOP, sent when its
+    watchdog trips 100 ms after the last sample), files written and run summarised. It took
+    0.8-0.98 s (issue 35): the interpreter's teardown of numpy, scipy, CasADi and fmpy after
+    main() returned was 110-200 ms of it (hil.cli.entry now ends the process at once)."""
+    exits = []
+    for run in range(DEAF_RUNS):
+        mcu = fake(deaf_at_start=1, deaf_after=300)
+        host = Host("run", "--real", "--port", mcu.port, "--out", str(tmp_path / f"run{run}"),
+                    *SHORT_RUN)
+        while host.proc.poll() is None:
+            time.sleep(0.001)
+        exited = time.monotonic()
+        code, stdout, stderr = host.finish()
+        assert code == 1 and "no telemetry for" in stderr and "Traceback" not in stderr, stderr
+        frames = mcu.after_deaf()
+        kinds = [r.kind for r in frames]
+        assert kinds[-ESTOP_REPEATS:] == [p.MsgType.ESTOP] * ESTOP_REPEATS, kinds
+        assert set(kinds[:-ESTOP_REPEATS]) == {p.MsgType.STOP}, kinds
+        assert STOP_ATTEMPTS <= len(kinds) - ESTOP_REPEATS <= STOP_ATTEMPTS + 2, kinds
+        assert "cycles complete" in stdout  # what was measured is still recorded, summarised
+        assert (tmp_path / f"run{run}" / "summary.json").is_file()
+        failed = frames[0].time
+        # its last frame, heartbeats included (they stop when the port closes)
+        left = mcu.after_deaf(heartbeats=True)[-1].time - failed
+        exits.append((left, exited - failed))
+        mcu.close()
+    text = ", ".join(f"{a * 1e3:.0f}/{b * 1e3:.0f}" for a, b in exits)
+    assert all(b < 0.25 for _, b in exits), f"last frame/exit after the first STOP, ms: {text}"
 
 
 def test_samples_across_the_u32_wrap_are_each_recorded_once(
