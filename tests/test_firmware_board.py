@@ -71,6 +71,20 @@ def test_nucleo_image_links_and_fits() -> None:
     assert list((NUCLEO_OUT / "obj").glob("*.su")), "no -fstack-usage output"
 
 
+def test_the_probe_image_links(tmp_path: Path) -> None:
+    """``make -C firmware/board probe`` links (issue 35: gcc made startup.c's .data copy and
+    .bss clear into memcpy and memset calls, unresolved under -nostdlib)."""
+    _skip_unless(need_qemu=False)
+    result = subprocess.run(["make", "-s", "-C", str(BOARD_DIR), "probe", f"BUILD={tmp_path}"],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout + result.stderr
+    elf = tmp_path / "board-probe" / "probe.elf"
+    symbols = subprocess.run(["arm-none-eabi-nm", str(elf)], capture_output=True, text=True,
+                             check=True).stdout.split()
+    assert {"Reset_Handler", "memcpy", "memset"} <= set(symbols)
+    assert _section_sizes(elf)[".text"] > 0
+
+
 class _Port:
     """The host's end of the pty: frames out, messages in."""
 
