@@ -171,7 +171,7 @@ def test_short_stall_is_caught_by_the_mcu_clock_not_by_host_timing(
     # 50 ms is below the host's 100 ms silence watchdog: the MCU's own timestamps show it
     faults = FaultPlan(stall_at=0.05, stall_for=0.05)
     emulator, link, samples, error = fail_by_injection(rig, faults, "stall")
-    assert link.telemetry_timeout == pytest.approx(0.1)
+    assert link.telemetry_timeout >= 0.1  # measured at open: 100 ms on an idle machine
     assert isinstance(error, RigStalledError) and "stalled" in str(error)
     assert "50.0 ms" in str(error) or "51.0 ms" in str(error)
     stop_rx = emulator.log.first_command(p.MsgType.STOP, after=emulator.log.injected["stall"])
@@ -184,7 +184,8 @@ def test_long_stall_trips_the_host_watchdog(rig: Callable[..., Rig]) -> None:
     emulator, link, samples, error = fail_by_injection(rig, faults, "stall")
     assert isinstance(error, LinkTimeoutError) and "no telemetry" in str(error)
     silence = link.stats.failed_at - samples[-1].rx_time
-    assert 0.1 <= silence <= 0.1 + 0.05  # the watchdog, plus scheduling on a loaded machine
+    # the watchdog (measured at open: 100 ms or more), plus scheduling on a loaded machine
+    assert 0.1 <= link.telemetry_timeout <= silence <= link.telemetry_timeout + 0.05
     assert wait_for(lambda: emulator.mcu.state in (p.State.IDLE, p.State.ESTOP))
 
 
