@@ -55,8 +55,13 @@ MOVING_STATES = (p.State.RUNNING, p.State.STOPPING)
 #: Waits for the HELLO that opens a session, s: an emulated MCU on a loaded machine answers
 #: in up to hundreds of ms (the timeouts are measured only once it answers), 1.8 s in all.
 HANDSHAKE_WAITS = (ACK_TIMEOUT_MIN, 0.04, 0.08, 0.16, *[ACK_TIMEOUT_MAX] * 6)
-#: HELLO round trips measured at the start of a session (LinkTiming).
+#: HELLO round trips measured at the start of a session (LinkTiming), each HELLO padded to
+#: the payload of a full chunk (receivers ignore the extra bytes, section 2): an emulated
+#: UART that takes one byte at a time (QEMU's) answers a long frame the later.
 PROBE_ROUND_TRIPS = 5
+PROBE_PAYLOAD = 6 + 8 * p.MAX_CHUNK_POINTS
+#: Longest wait for a probe's answer, s.
+PROBE_WAIT = ACK_TIMEOUT_MAX
 #: Telemetry measured at the start of a session: at least this long (wall clock, s) and
 #: this many samples, at most PROBE_LONGEST s.
 PROBE_WINDOW, PROBE_SAMPLES, PROBE_LONGEST = 0.25, 20, 2.0
@@ -334,9 +339,9 @@ class SerialLink:
         try:
             self._handshake()
             self.status = self._wait_status()
-            self._measure_link()
             self.faults_at_open = p.Fault(self.status.faults)
             self._known_faults = int(self.faults_at_open)
+            self._measure_link()
             if config is not None:
                 self.configure(config)
         except BaseException:
@@ -442,29 +447,27 @@ class SerialLink:
         """Measure the link (:class:`LinkTiming`) and take the timeouts not given from it:
         the telemetry that arrives until PROBE_WINDOW s and PROBE_SAMPLES samples are in,
         and meanwhile PROBE_ROUND_TRIPS more HELLOs spread over the window, each sent once
-        (one that gets no answer within the handshake's longest wait is not counted; the
-        HELLOs also keep the MCU's heartbeat watchdog fed, heartbeats or not)."""
+        (one without an answer within PROBE_WAIT counts as PROBE_WAIT; the HELLOs also keep
+        the MCU's heartbeat watchdog fed, heartbeats or not), each as long as a full chunk
+        (PROBE_PAYLOAD)."""
         trips: list[float] = []
         samples: list[p.Telemetry] = [self.status]
         began = time.monotonic()
-        probes, spacing = 0, PROBE_WINDOW / PROBE_ROUND_TRIPS
+        spacing = PROBE_WINDOW / PROBE_ROUND_TRIPS
         while True:
             now = time.monotonic()
-            if probes < 2 * PROBE_ROUND_TRIPS and len(trips) < PROBE_ROUND_TRIPS and (
-                    now >= began + probes * spacing):
-                probes += 1
+            if len(trips) < PROBE_ROUND_TRIPS and now >= began + len(trips) * spacing:
                 trip = self._round_trip(p.Hello(p.PROTO_MAJOR, p.PROTO_MINOR,
-                                                random.getrandbits(32)), max(HANDSHAKE_WAITS))
-                if trip is not None:
-                    trips.append(trip)
+                                                random.getrandbits(32)), PROBE_WAIT)
+                trips.append(PROBE_WAIT if trip is None else trip)  # at least that slow
                 continue
             samples += self.drain()
             window = samples[-1].rx_time - samples[0].rx_time
             if ((window >= PROBE_WINDOW and len(samples) >= PROBE_SAMPLES
                  and len(trips) == PROBE_ROUND_TRIPS) or now - began > PROBE_LONGEST):
                 break
-            if self._failure is not None:
-                raise self._failure
+            if self._failure is not None and not isinstance(self._failure, RigFaultError):
+                raise self._failure  # (a fault latched at open is the caller's to judge)
             time.sleep(0.005)
         self.status = self.status if not samples else samples[-1]
         mcu = sum(((b.t_us - a.t_us) & 0xFFFFFFFF) * 1e-6 for a, b in zip(samples, samples[1:]))
@@ -478,13 +481,15 @@ class SerialLink:
         self._silence.timeout = self.telemetry_timeout
 
     def _round_trip(self, msg: p.Message, wait: float) -> float | None:
-        """Send ``msg`` once (a new seq) and wait up to ``wait`` s for its answer: the round
-        trip, s, or None without an answer (or when the host itself ran late)."""
+        """Send ``msg`` once (a new seq), its payload padded to PROBE_PAYLOAD bytes, and
+        wait up to ``wait`` s for its answer: the round trip, s, or None without one."""
+        payload = msg.pack()
+        payload += b"\x55" * max(0, PROBE_PAYLOAD - len(payload))
         with self._cmd_lock:
             seq = self._next_seq()
             pending = self._pending[seq] = _Pending()
             try:
-                self._write(p.encode_message(msg, seq, p.FLAG_ACK_REQ))
+                self._write(p.encode_frame(p.Frame(msg.TYPE, p.FLAG_ACK_REQ, seq, payload)))
                 sent = time.monotonic()
                 answered = pending.event.wait(wait)
                 trip = time.monotonic() - sent
