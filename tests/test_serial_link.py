@@ -330,3 +330,31 @@ def test_config_keeps_or_replaces_the_load_cell_calibration(rig: Callable[..., R
     assert link.scaling.load_gain_n == emulator.mcu.cfg.load_gain_n == 0.000244140625
     with pytest.raises(CommandError, match="BAD_VALUE"):
         link.configure(p.Config(steps_min=10, steps_max=0))
+
+
+@pytest.mark.parametrize("given", [None, 777])
+def test_homing_runs_under_the_sessions_heartbeat_timeout(given: int | None,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 35: homing sent its CONFIG with the default 250 ms and the run's came after it,
+    so `hil run --heartbeat-ms 1000` did not cover homing. Every CONFIG of the session, the
+    first (homing's) included, carries the session's timeout: as given, else as measured."""
+    from hil.backends import RigPlant, RigSetup
+    from hil.rig_physics import ClampPhysics
+
+    sent: list[p.Config] = []
+    configure = SerialLink.configure
+    monkeypatch.setattr(SerialLink, "configure",
+                        lambda link, cfg: (sent.append(cfg), configure(link, cfg))[1])
+    setup = RigSetup()
+    emulator = RigEmulator(ClampPhysics(setup.preset), RigHardware(x_origin=setup.stroke[0]))
+    try:
+        plant = RigPlant(emulator.start(), realtime=False, heartbeat_ms=given)
+        plant.configure(setup)
+        with plant:
+            assert plant.homed_distance is not None  # it booted unreferenced: it homed
+            expected = given or plant.link.timing.heartbeat_timeout_ms
+            assert plant.link.heartbeat_timeout_ms == expected
+            assert emulator.mcu.cfg.heartbeat_timeout_ms == expected
+    finally:
+        emulator.close()
+    assert len(sent) == 2 and [c.heartbeat_timeout_ms for c in sent] == [expected] * 2
