@@ -53,8 +53,8 @@ STANDSTILL_MARGIN = 1.0
 #: States in which the table may still move.
 MOVING_STATES = (p.State.RUNNING, p.State.STOPPING)
 #: Waits for the HELLO that opens a session, s: an emulated MCU on a loaded machine answers
-#: in up to hundreds of ms (the timeouts are measured only once it answers), 1.8 s in all.
-HANDSHAKE_WAITS = (ACK_TIMEOUT_MIN, 0.04, 0.08, 0.16, *[ACK_TIMEOUT_MAX] * 6)
+#: in up to hundreds of ms (the timeouts are measured only once it answers), 1.6 s in all.
+HANDSHAKE_WAITS = (ACK_TIMEOUT_MIN, 0.04, 0.08, 0.16, 0.32, ACK_TIMEOUT_MAX, ACK_TIMEOUT_MAX)
 #: HELLO round trips measured at the start of a session (LinkTiming), each HELLO padded to
 #: the payload of a full chunk (receivers ignore the extra bytes, section 2): an emulated
 #: UART that takes one byte at a time (QEMU's) answers a long frame the later.
