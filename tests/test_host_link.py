@@ -64,6 +64,7 @@ class FakeMcu:
     deaf_after: int = 0  # ... or this many samples of that run later
     deaf_at_chunk: int | None = None  # deaf on a chunk whose first_index >= this (unanswered)
     boot_id: int = 0x5EED_F00D
+    wall_period: float = 1e-3  # wall-clock s per period: above 1 ms its clock runs slow
 
     def __post_init__(self) -> None:
         self.master, self.slave = os.openpty()
@@ -112,7 +113,7 @@ class FakeMcu:
     # --- the MCU ------------------------------------------------------------------------
 
     def _serve(self) -> None:
-        period, next_tick = 1e-3, time.monotonic()
+        period, next_tick = self.wall_period, time.monotonic()
         while not self._stop.is_set():
             readable, _, _ = select.select([self.master], [], [],
                                            max(0.0, min(next_tick - time.monotonic(), 0.01)))
@@ -460,3 +461,24 @@ def test_the_reader_restarts_the_silence_count_when_it_wakes_late(
                 link.next_sample(timeout=2.0)
         assert link.stats.host_late >= 1
         assert link.stats.failed_at - woke[0] >= 0.2
+
+
+@pytest.mark.parametrize(("wall_period", "points"), [(3e-3, 200), (0.12, 20)])
+def test_an_mcu_whose_clock_runs_slow_gets_watchdogs_on_its_clock(
+        wall_period: float, points: int, fake: Callable[..., FakeMcu]) -> None:
+    """An emulator may run its MCU slower than the wall clock if it reports its own time
+    (docs/rig-protocol.md, section 7, "Emulated MCUs"): here 1000 us of t_us per 3 ms, and
+    per 120 ms (a sample every 120 ms tripped the host's 100 ms watchdog). The host
+    measures the rate at open and waits 100 ms of the MCU's clock for telemetry, at most
+    1 s; a run at that pace completes without a false stall."""
+    mcu = fake(wall_period=wall_period)
+    with SerialLink(mcu.port) as link:
+        link.open()
+        timing = link.timing
+        assert timing.clock_rate == pytest.approx(1e-3 / wall_period, rel=0.3), timing
+        assert link.telemetry_timeout >= min(0.1 / timing.clock_rate * 0.99, 1.0)
+        assert link.telemetry_timeout > wall_period
+        assert link.heartbeat_timeout_ms >= link.telemetry_timeout * 1e3
+        samples = list(link.run_trajectory(ramp(points)))
+        assert samples[-1].exec_index == points and link.failure is None
+        assert link.stats.lost_samples == 0
