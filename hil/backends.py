@@ -385,8 +385,10 @@ class RigPlant(Plant):
                  notify: Callable[[str], None] | None = None) -> None:
         super().__init__()
         self.port = port
-        self.ack_timeout = ack_timeout  # None: the protocol's 20 ms
-        self.heartbeat_ms = heartbeat_ms  # None: the protocol's 250 ms
+        # None: measured from the link when the session opens (hil.link_timing), within
+        # bounds; the protocol's 20 ms, 100 ms and 250 ms on a rig's idle link
+        self.ack_timeout = ack_timeout
+        self.heartbeat_ms = heartbeat_ms
         self.realtime = realtime
         self.telemetry_timeout = telemetry_timeout
         self.notify = notify or (lambda _msg: None)
@@ -408,13 +410,18 @@ class RigPlant(Plant):
         nominal = load_preset(s.preset)
         self._L0 = float(output_position(self._x0, nominal.lower))
         self._nominal = nominal
-        self._link = link = SerialLink(self.port, realtime=self.realtime,
-                                       telemetry_timeout=self.telemetry_timeout,
-                                       point_period_us=round(s.period * 1e6),
-                                       **({} if self.ack_timeout is None
-                                          else {"ack_timeout": self.ack_timeout}))
+        self._link = link = SerialLink(
+            self.port, realtime=self.realtime, telemetry_timeout=self.telemetry_timeout,
+            point_period_us=round(s.period * 1e6), ack_timeout=self.ack_timeout,
+            heartbeat_timeout_ms=None if self.heartbeat_ms is None else round(self.heartbeat_ms))
         try:
             link.open()
+            if link.timing is not None and not link.timing.is_nominal:
+                self.notify(f"the link is slower than a rig's ({link.timing.text()}): ACK "
+                            f"timeout {link.ack_timeout * 1e3:.0f} ms, telemetry watchdog "
+                            f"{link.telemetry_timeout * 1e3:.0f} ms, the MCU's heartbeat "
+                            f"timeout {link.heartbeat_timeout_ms} ms (docs/rig-protocol.md, "
+                            f"section 7)")
             if link.faults_at_open:
                 raise RunStoppedError(
                     f"the rig at {self.port} has a latched fault from an earlier session: "
@@ -427,12 +434,9 @@ class RigPlant(Plant):
                 self.homed_distance = home(link)
             sc = link.scaling
             lo, hi = s.travel_limits
-            link.configure(p.Config(
-                force_limit_n=s.force_limit,
-                steps_min=sc.steps(lo, self._x0), steps_max=sc.steps(hi, self._x0),
-                **({} if self.heartbeat_ms is None
-                   else {"heartbeat_timeout_ms": round(self.heartbeat_ms)}),
-            ))
+            link.configure(link.config_for(force_limit_n=s.force_limit,
+                                           steps_min=sc.steps(lo, self._x0),
+                                           steps_max=sc.steps(hi, self._x0)))
         except RigError as exc:
             link.close()
             self._link = None
@@ -511,8 +515,9 @@ class RigPlant(Plant):
                         firmware=f"{i.fw_version >> 8}.{i.fw_version & 0xFF}",
                         boot_id=f"{i.boot_id:#010x}", telemetry_hz=i.telemetry_hz,
                         homed_distance=self.homed_distance,
-                        watchdog_s=link.telemetry_timeout,
-                        mcu_heartbeat_timeout_s=link.config.heartbeat_timeout_ms * 1e-3)
+                        watchdog_s=link.telemetry_timeout, ack_timeout_s=link.ack_timeout,
+                        mcu_heartbeat_timeout_s=link.config.heartbeat_timeout_ms * 1e-3,
+                        link_timing=None if link.timing is None else link.timing.describe())
         return info
 
     def link_report(self) -> dict[str, object]:

@@ -42,7 +42,7 @@ VERSION_SCRIPT = "{ global: rigfw_*; local: *; };\n"
 #: The firmware's compile-time constants (rig_core.h) that a RigHardware must match.
 CORE_CONSTANTS = {"telemetry_hz": 1000, "buffer_capacity": 2048, "step_nm": 200,
                   "enc_nm": 1000, "adc_min": -8_388_608, "adc_max": 8_388_607,
-                  "fw_version": 0x0101}
+                  "fw_version": 0x0102}
 TX_CHUNK = 4096  # RIG_TX_FIFO_BYTES: one call empties the FIFO
 
 

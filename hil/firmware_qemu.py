@@ -31,6 +31,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
 
+from hil import protocol as p
 from hil.backends import RigSetup
 from hil.firmware import (
     CORE_DIR,
@@ -40,6 +41,7 @@ from hil.firmware import (
     fmu_start_values,
 )
 from hil.mcu_model import RigHardware
+from hil.realtime import set_realtime
 from hil.rig_physics import ClampPhysics
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -49,6 +51,14 @@ QEMU = "qemu-system-arm"
 MACHINE = "netduinoplus2"
 #: Where the image reads the launcher's random seed word (board_qemu.c, qemu_f405.ld).
 SEED_ADDR = 0x2001FFF0
+#: SCHED_FIFO priority of QEMU's threads (when permitted): the emulated MCU is real-time
+#: hardware, like the Python emulator's serving thread; below the relay and the host's
+#: reader (hil.realtime.REALTIME_PRIORITY), which preempt it.
+QEMU_PRIORITY = 10
+#: Bytes of the guest's the relay holds while the host does not read the pty (0.75 s of
+#: telemetry); the pty itself holds about 4 KiB (0.1 s), and a host stalled longer on a
+#: loaded machine lost 153 samples.
+RELAY_BACKLOG = 32 * 1024
 #: Debian packages of the tools, by the program each provides.
 PACKAGES = {"arm-none-eabi-gcc": "gcc-arm-none-eabi",
             "arm-none-eabi-newlib": "libnewlib-arm-none-eabi",
@@ -199,6 +209,17 @@ def build_qemu_image(setup: RigSetup, hw: RigHardware, seed: int) -> Path:
     return elf
 
 
+def _fifo_threads(pid: int, priority: int) -> bool:
+    """Make every thread of process ``pid`` SCHED_FIFO at ``priority`` (threads it starts
+    later inherit it); False when the OS does not permit it."""
+    try:
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            os.sched_setscheduler(int(tid), os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError, ValueError):
+        return False
+    return True
+
+
 def symbol_address(elf: Path, name: str) -> int:
     """The address of a global symbol of the image (arm-none-eabi-nm)."""
     out = subprocess.run(["arm-none-eabi-nm", str(elf)], capture_output=True, text=True,
@@ -218,11 +239,17 @@ class QemuRig:
     the image's RAM (the boot id: the F405 model has no RNG). ``icount``: run with
     ``-icount shift=0`` (one instruction per ns of virtual time: the tick measurement of
     docs/firmware.md); ``monitor``: open QEMU's monitor on a private socket for
-    :meth:`read_words`.
+    :meth:`read_words`. :attr:`port` is published only once the guest's firmware answered
+    a HELLO (its session then ended with BYE): it boots in 1.2-1.8 s, and a host that
+    opened the port before lost its first HELLOs. ``answer_timeout`` bounds that wait (s).
+    ``realtime``: QEMU's threads run SCHED_FIFO at QEMU_PRIORITY when the OS permits it
+    (:attr:`realtime` says whether it did), so a loaded machine slows the guest's clock
+    less; what it still slows, the guest's own clock shows (docs/rig-protocol.md, section 7).
     """
 
     def __init__(self, elf: Path, *, icount: bool = False, monitor: bool = False,
-                 timeout: float = 10.0) -> None:
+                 timeout: float = 10.0, answer_timeout: float = 60.0,
+                 realtime: bool = True) -> None:
         missing = qemu_available()
         if missing:
             raise RuntimeError(f"running the QEMU image needs the Debian packages: "
@@ -252,8 +279,11 @@ class QemuRig:
         self._reader.start()
         self._master = self._slave = -1
         self._stop = threading.Event()
+        self.realtime = False
         try:
             self._serial = self._connect(timeout)
+            self.realtime = realtime and _fifo_threads(self._proc.pid, QEMU_PRIORITY)
+            self._await_guest(answer_timeout)
             self._master, self._slave = os.openpty()
             tty.setraw(self._slave)  # no echo, no line editing, no CR/LF translation
             os.set_blocking(self._master, False)
@@ -261,7 +291,7 @@ class QemuRig:
         except BaseException:
             self.close()
             raise
-        self.dropped = 0  # bytes of the MCU's that no host read (a full pty, as a UART)
+        self.dropped = 0  # bytes of the MCU's beyond the relay's backlog (_pump)
         self._relay = threading.Thread(target=self._pump, name="qemu-serial", daemon=True)
         self._relay.start()
 
@@ -281,11 +311,55 @@ class QemuRig:
                                        + " | ".join(self._output[-5:])) from None
                 time.sleep(0.02)
 
+    def _await_guest(self, timeout: float) -> None:
+        """Return once the guest's firmware answered a HELLO and then a BYE on QEMU's
+        serial socket (the BYE ends the session the HELLO opened, so no heartbeat watchdog
+        is left armed for the host to find latched). Each is sent every 100 ms until its
+        answer: bytes sent before the firmware enabled its USART are lost."""
+        sock, decoder = self._serial, p.FrameDecoder()
+        deadline = time.monotonic() + timeout
+        nonce = secrets.randbits(32)
+        for seq, msg in ((1, p.Hello(host_nonce=nonce)), (2, p.Bye())):
+            wire = b"\x00" + p.encode_message(msg, seq, p.FLAG_ACK_REQ)
+            answered = False
+            while not answered:
+                if time.monotonic() > deadline or self._proc.poll() is not None:
+                    state = "running" if self.running else "ended"
+                    raise RuntimeError(f"the QEMU image did not answer {msg.TYPE.name} within "
+                                       f"{timeout:g} s (QEMU {state}): "
+                                       + " | ".join(self._output[-5:]))
+                sock.sendall(wire)
+                resend = min(time.monotonic() + 0.1, deadline)
+                while not answered and (left := resend - time.monotonic()) > 0:
+                    if not select.select([sock], [], [], left)[0]:
+                        continue
+                    data = sock.recv(65536)
+                    if not data:
+                        raise RuntimeError("QEMU closed its serial socket before the guest "
+                                           "answered")
+                    for frame in decoder.feed(data):
+                        with contextlib.suppress(p.MessageError):
+                            reply = p.parse_message(frame)
+                            answered = answered or (
+                                isinstance(reply, (p.Ack, p.HelloReply))
+                                and reply.acked_seq == seq
+                                and getattr(reply, "host_nonce", nonce) == nonce)
+
     def _pump(self) -> None:
-        """Relay bytes between QEMU's USART and the pty until close() or QEMU ends."""
+        """Relay bytes between QEMU's USART and the pty until close() or QEMU ends; SCHED_FIFO
+        when the OS permits it (it blocks in select() between bytes, so it cannot starve
+        the machine), so a loaded machine does not hold back the guest's link.
+
+        What the pty does not take at once (a host that is itself not running reads
+        nothing) waits in a backlog of up to RELAY_BACKLOG bytes, as a USB serial port's
+        buffers hold it; beyond that the guest's bytes are dropped (:attr:`dropped`).
+        """
+        set_realtime()
         sock, master = self._serial, self._master
+        backlog = bytearray()
         while not self._stop.is_set():
-            readable, _, _ = select.select([sock, master], [], [], 0.1)
+            readable, writable, _ = select.select([sock, master], [master] if backlog else [],
+                                                  [], 0.1)
             if sock in readable:
                 try:
                     data = sock.recv(65536)
@@ -293,11 +367,13 @@ class QemuRig:
                     data = b""
                 if not data:
                     return  # QEMU ended
-                try:
-                    written = os.write(master, data)
-                except (BlockingIOError, OSError):
-                    written = 0
-                self.dropped += len(data) - written
+                room = RELAY_BACKLOG - len(backlog)
+                backlog += data[:room]
+                self.dropped += max(0, len(data) - room)
+                writable = [master]
+            if backlog and master in writable:
+                with contextlib.suppress(BlockingIOError, OSError):
+                    del backlog[:os.write(master, backlog)]
             if master in readable:
                 try:
                     data = os.read(master, 65536)

@@ -71,15 +71,16 @@ def home(link: SerialLink) -> float:
 
     Back at SEARCH_SPEED until the switch is active, then forward at FINE_SPEED until it
     releases; that edge becomes step 0 and encoder count 0 (SET_POSITION). The travel
-    limits are widened around the unreferenced position for the search; configure the
-    run's limits afterwards.
+    limits are widened around the unreferenced position for the search (with the session's
+    heartbeat timeout, :meth:`SerialLink.config_for`); configure the run's limits
+    afterwards.
     """
     sc, status = link.scaling, link.status
     span = round(SEARCH_RANGE / sc.step_m)
     enc_span = round(SEARCH_RANGE / sc.enc_m)
-    link.configure(p.Config(steps_min=status.steps - span, steps_max=status.steps + span,
-                            enc_min=status.enc - enc_span, enc_max=status.enc + enc_span,
-                            following_error_counts=enc_span))
+    link.configure(link.config_for(steps_min=status.steps - span, steps_max=status.steps + span,
+                                   enc_min=status.enc - enc_span, enc_max=status.enc + enc_span,
+                                   following_error_counts=enc_span))
     origin = status.steps
     if not status.flags & p.TelemetryFlag.HOME_SWITCH:
         _move_until(link, -1, SEARCH_SPEED, switch=True)

@@ -16,7 +16,7 @@ import operator
 import random
 import secrets
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -59,7 +59,7 @@ class RigHardware:
     load_noise_n: float = 0.2  # rms noise of the load cell and amplifier
     x_origin: float = 0.0  # input position (m) at step count 0 at power-on
     home_x: float | None = None  # reference switch active at x <= home_x (default x_origin)
-    fw_version: int = 0x0101
+    fw_version: int = 0x0102
 
     @property
     def period(self) -> float:
@@ -262,6 +262,11 @@ class McuModel:
         if not (msg.steps_min <= self.steps <= msg.steps_max
                 and msg.enc_min <= self.enc <= msg.enc_max):
             return p.Result.OUT_OF_LIMITS  # limits that exclude the present position
+        # 1.2: the buffered points must obey the new limits too (rule 7 of TRAJ_CHUNK), or
+        # the CONFIG is refused and nothing changes
+        refused = self._points_refused(msg, self.steps, self.points)
+        if refused != p.Result.OK:
+            return refused
         if msg.load_gain_n == 0:  # keep the stored calibration
             msg = dataclasses.replace(msg, load_offset=self.cfg.load_offset,
                                       load_gain_n=self.cfg.load_gain_n)
@@ -282,15 +287,26 @@ class McuModel:
         if len(msg.points) > self._free():
             return p.Result.NO_SPACE
         prev = self.points[-1][0] if self.points else self.steps
-        for steps, _ in msg.points:
-            if not self.cfg.steps_min <= steps <= self.cfg.steps_max:
-                return p.Result.OUT_OF_LIMITS
-            if abs(steps - prev) > self.cfg.max_step_delta:
-                return p.Result.BAD_VALUE
-            prev = steps
+        refused = self._points_refused(self.cfg, prev, msg.points)
+        if refused != p.Result.OK:
+            return refused
         self.points.extend(msg.points)
         self.next_index += len(msg.points)
         self.final_received = msg.final
+        return p.Result.OK
+
+    @staticmethod
+    def _points_refused(cfg: p.Config, prev: int,
+                        points: Iterable[tuple[int, int]]) -> p.Result:
+        """Rule 7 of TRAJ_CHUNK under ``cfg``, from step count ``prev``: OUT_OF_LIMITS for a
+        point outside [steps_min, steps_max], BAD_VALUE for a jump above max_step_delta,
+        the first failure in order; OK when every point passes."""
+        for steps, _ in points:
+            if not cfg.steps_min <= steps <= cfg.steps_max:
+                return p.Result.OUT_OF_LIMITS
+            if abs(steps - prev) > cfg.max_step_delta:
+                return p.Result.BAD_VALUE
+            prev = steps
         return p.Result.OK
 
     def _start(self, _msg: p.Start) -> p.Result:

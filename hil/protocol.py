@@ -17,7 +17,9 @@ from enum import IntEnum, IntFlag
 from typing import ClassVar, TypeVar
 
 PROTO_MAJOR = 1
-PROTO_MINOR = 1  # 1.1: telemetry flags HOME_SWITCH and REFERENCED; extension rule
+#: 1.1: telemetry flags HOME_SWITCH and REFERENCED, the extension rule; 1.2: CONFIG re-checks
+#: the buffered trajectory points against its limits (docs/rig-protocol.md, section 5).
+PROTO_MINOR = 2
 
 HEADER = struct.Struct("<BBH")
 CRC = struct.Struct("<H")

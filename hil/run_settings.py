@@ -96,16 +96,18 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
                         f"at most its {LOAD_CELL_RANGE:g}; the simulated rig of a larger "
                         f"clamp, such as lin2003_sm55, needs more)")
     p.add_argument("--watchdog-ms", type=float, default=None, dest="watchdog_ms",
-                   help="host watchdog on telemetry silence, ms (default 100; the MCU's own "
-                        "limits and heartbeat watchdog are the hard stops)")
+                   help="host watchdog on telemetry silence, ms (default: measured from the "
+                        "link when the session opens, 100 on a rig's idle link, at most 1000; "
+                        "the MCU's own limits and heartbeat watchdog are the hard stops)")
     p.add_argument("--ack-ms", type=float, default=None, dest="ack_ms",
                    help="with --real: the host's wait for each ACK before it retransmits, ms "
-                        "(default 20, for a 921 600-baud UART or USB; the firmware in QEMU "
-                        "takes a byte about every 50 us, a full chunk in ~15 ms: give 100)")
+                        "(default: measured from the link when the session opens and followed "
+                        "during it, 20 on a rig's UART or USB, at most 500)")
     p.add_argument("--heartbeat-ms", type=float, default=None, dest="heartbeat_ms",
                    help="with --real: the MCU's heartbeat watchdog, ms: it stops the rig when "
-                        "the host is silent this long (default 250; at least 50, at most 1000; "
-                        "the host sends a heartbeat every 20 ms)")
+                        "the host is silent this long, from the first CONFIG (homing's) on "
+                        "(default: measured from the link, 250 on a rig's idle link; at least "
+                        "50, at most 1000; the host sends a heartbeat every 20 ms)")
     p.add_argument("--max-duration", type=float, default=None, dest="max_duration",
                    help=f"refuse runs longer than this, s (default "
                         f"{RUN_DEFAULTS['max_duration']:g})")

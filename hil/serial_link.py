@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import serial
 
 from hil import protocol as p
+from hil.link_timing import ACK_TIMEOUT_MAX, ACK_TIMEOUT_MIN, WATCHDOG_MAX, AckTimer, LinkTiming
 from hil.realtime import set_realtime
 
 ESTOP_REPEATS = 3  # an emergency stop is sent this many times back to back
@@ -51,6 +52,19 @@ LATE_RETRIES = 20
 STANDSTILL_MARGIN = 1.0
 #: States in which the table may still move.
 MOVING_STATES = (p.State.RUNNING, p.State.STOPPING)
+#: Waits for the HELLO that opens a session, s: an emulated MCU on a loaded machine answers
+#: in up to hundreds of ms (the timeouts are measured only once it answers), 1.6 s in all.
+HANDSHAKE_WAITS = (ACK_TIMEOUT_MIN, 0.04, 0.08, 0.16, 0.32, ACK_TIMEOUT_MAX, ACK_TIMEOUT_MAX)
+#: HELLO round trips measured at the start of a session (LinkTiming), each HELLO padded to
+#: the payload of a full chunk (receivers ignore the extra bytes, section 2): an emulated
+#: UART that takes one byte at a time (QEMU's) answers a long frame the later.
+PROBE_ROUND_TRIPS = 5
+PROBE_PAYLOAD = 6 + 8 * p.MAX_CHUNK_POINTS
+#: Longest wait for a probe's answer, s.
+PROBE_WAIT = ACK_TIMEOUT_MAX
+#: Telemetry measured at the start of a session: at least this long (wall clock, s) and
+#: this many samples, at most PROBE_LONGEST s.
+PROBE_WINDOW, PROBE_SAMPLES, PROBE_LONGEST = 0.25, 20, 2.0
 
 
 def sample_distance(sample: int, ref: int) -> int:
@@ -235,26 +249,35 @@ class SerialLink:
         url: str,
         *,
         baudrate: int = 921_600,
-        ack_timeout: float = 0.02,
+        ack_timeout: float | None = None,
         retries: int = 5,
         heartbeat_period: float | None = 0.02,
         telemetry_timeout: float | None = None,
+        heartbeat_timeout_ms: int | None = None,
         clock_slack: float = DEFAULT_CLOCK_SLACK,
         queue_size: int = 100_000,
         realtime: bool = False,
         clear_faults_on_close: bool = True,
         point_period_us: int = HOST_POINT_PERIOD_US,
     ) -> None:
-        """``telemetry_timeout`` (default DEFAULT_TELEMETRY_TIMEOUT) bounds the silence of
-        the telemetry at the host; ``clock_slack`` bounds the MCU-clock jump between
-        received samples beyond their sample distance; ``heartbeat_period`` None sends no
+        """``ack_timeout`` (s), ``telemetry_timeout`` (s, the silence of the telemetry at the
+        host) and ``heartbeat_timeout_ms`` (the MCU's watchdog, in the CONFIGs of
+        :meth:`config_for`) are measured from the link when the session opens
+        (:class:`hil.link_timing.LinkTiming`) unless given; ``clock_slack`` bounds the
+        MCU-clock jump between received samples beyond their sample distance;
+        ``heartbeat_period`` None sends no
         heartbeats (only to test the MCU's watchdog); ``realtime`` asks for SCHED_FIFO
         scheduling of the reader thread (best effort); ``clear_faults_on_close`` clears,
         at the end of the session, faults that latched during it (never ESTOP, never a
         fault found latched at open); ``point_period_us`` is the period the host plans
         with: an MCU that runs another is refused at the handshake."""
         self.url, self.baudrate = url, baudrate
-        self.ack_timeout, self.retries = ack_timeout, retries
+        self.retries = retries
+        self._ack_fixed = ack_timeout is not None
+        self.ack_timeout = ack_timeout if ack_timeout is not None else ACK_TIMEOUT_MIN
+        self._ack_timer: AckTimer | None = None  # follows the round trips once measured
+        self._heartbeat_timeout_ms = heartbeat_timeout_ms
+        self.timing: LinkTiming | None = None  # measured at open
         self.heartbeat_period = heartbeat_period
         self.realtime = realtime
         self.clock_slack = clock_slack
@@ -262,6 +285,7 @@ class SerialLink:
         self.point_period_us = point_period_us
         self._telemetry_timeout = telemetry_timeout
         self._silence = SilenceWatchdog(self.telemetry_timeout)
+        self._clock_rate = 1.0  # the MCU's clock against the host's, once measured
         self.stats = LinkStats()
         self.decoder = p.FrameDecoder()
         self.info: p.HelloReply | None = None
@@ -308,6 +332,8 @@ class SerialLink:
         self._ser.reset_input_buffer()
         with contextlib.suppress(serial.SerialException, OSError):
             self._ser.write(b"\x00")  # resynchronise the MCU's receiver (section 2)
+        if self._telemetry_timeout is None:
+            self._silence.timeout = WATCHDOG_MAX  # until the link is measured
         self._reader = threading.Thread(target=self._read_loop, name="rig-reader", daemon=True)
         self._reader.start()
         try:
@@ -315,6 +341,7 @@ class SerialLink:
             self.status = self._wait_status()
             self.faults_at_open = p.Fault(self.status.faults)
             self._known_faults = int(self.faults_at_open)
+            self._measure_link()
             if config is not None:
                 self.configure(config)
         except BaseException:
@@ -341,7 +368,8 @@ class SerialLink:
         deadline = time.monotonic() + 2.0
         while True:
             try:
-                reply = self.command(p.Hello(p.PROTO_MAJOR, p.PROTO_MINOR, nonce), check=False)
+                reply = self.command(p.Hello(p.PROTO_MAJOR, p.PROTO_MINOR, nonce), check=False,
+                                     waits=None if self._ack_fixed else HANDSHAKE_WAITS)
             except CommandError as exc:
                 raise HandshakeError(f"no answer to HELLO on {self.url}: {exc}") from exc
             if reply.result == p.Result.BAD_STATE and time.monotonic() < deadline:
@@ -391,10 +419,92 @@ class SerialLink:
 
     @property
     def telemetry_timeout(self) -> float:
-        """Host watchdog: longest allowed silence of the telemetry stream, s."""
+        """Host watchdog: longest allowed silence of the telemetry stream, s (as given, else
+        as measured at open, else DEFAULT_TELEMETRY_TIMEOUT)."""
         if self._telemetry_timeout is not None:
             return self._telemetry_timeout
+        if self.timing is not None:
+            return self.timing.telemetry_timeout
         return DEFAULT_TELEMETRY_TIMEOUT
+
+    @property
+    def heartbeat_timeout_ms(self) -> int:
+        """The MCU's heartbeat watchdog this session asks for, ms of the MCU's clock (as
+        given, else as measured at open, else the protocol's 250 ms)."""
+        if self._heartbeat_timeout_ms is not None:
+            return self._heartbeat_timeout_ms
+        if self.timing is not None:
+            return self.timing.heartbeat_timeout_ms
+        return p.Config.heartbeat_timeout_ms
+
+    def config_for(self, **limits: float) -> p.Config:
+        """A CONFIG of ``limits`` (p.Config's fields) with this session's heartbeat timeout:
+        every CONFIG of a session, homing's included, keeps the MCU's watchdog as measured
+        (or given)."""
+        return p.Config(**{"heartbeat_timeout_ms": self.heartbeat_timeout_ms, **limits})
+
+    def _measure_link(self) -> None:
+        """Measure the link (:class:`LinkTiming`) and take the timeouts not given from it:
+        the telemetry that arrives until PROBE_WINDOW s and PROBE_SAMPLES samples are in,
+        and meanwhile PROBE_ROUND_TRIPS more HELLOs spread over the window, each sent once
+        (one without an answer within PROBE_WAIT counts as PROBE_WAIT; the HELLOs also keep
+        the MCU's heartbeat watchdog fed, heartbeats or not), each as long as a full chunk
+        (PROBE_PAYLOAD)."""
+        trips: list[float] = []
+        samples: list[p.Telemetry] = [self.status]
+        began = time.monotonic()
+        spacing = PROBE_WINDOW / PROBE_ROUND_TRIPS
+        while True:
+            now = time.monotonic()
+            if len(trips) < PROBE_ROUND_TRIPS and now >= began + len(trips) * spacing:
+                trip = self._round_trip(p.Hello(p.PROTO_MAJOR, p.PROTO_MINOR,
+                                                random.getrandbits(32)), PROBE_WAIT)
+                trips.append(PROBE_WAIT if trip is None else trip)  # at least that slow
+                continue
+            samples += self.drain()
+            window = samples[-1].rx_time - samples[0].rx_time
+            if ((window >= PROBE_WINDOW and len(samples) >= PROBE_SAMPLES
+                 and len(trips) == PROBE_ROUND_TRIPS) or now - began > PROBE_LONGEST):
+                break
+            if self._failure is not None and not isinstance(self._failure, RigFaultError):
+                raise self._failure  # (a fault latched at open is the caller's to judge)
+            time.sleep(0.005)
+        self.status = self.status if not samples else samples[-1]
+        mcu = sum(((b.t_us - a.t_us) & 0xFFFFFFFF) * 1e-6 for a, b in zip(samples, samples[1:]))
+        gaps = [b.rx_time - a.rx_time for a, b in zip(samples, samples[1:])]
+        self.timing = timing = LinkTiming(tuple(trips), mcu / window if window > 0 else 1.0,
+                                          max(gaps, default=0.0), window, len(samples))
+        self._clock_rate = timing.rate
+        if not self._ack_fixed:
+            self.ack_timeout = timing.ack_timeout
+            self._ack_timer = AckTimer(self.ack_timeout)
+        self._silence.timeout = self.telemetry_timeout
+
+    def _round_trip(self, msg: p.Message, wait: float) -> float | None:
+        """Send ``msg`` once (a new seq), its payload padded to PROBE_PAYLOAD bytes, and
+        wait up to ``wait`` s for its answer: the round trip, s, or None without one."""
+        payload = msg.pack()
+        payload += b"\x55" * max(0, PROBE_PAYLOAD - len(payload))
+        with self._cmd_lock:
+            seq = self._next_seq()
+            pending = self._pending[seq] = _Pending()
+            try:
+                self._write(p.encode_frame(p.Frame(msg.TYPE, p.FLAG_ACK_REQ, seq, payload)))
+                sent = time.monotonic()
+                answered = pending.event.wait(wait)
+                trip = time.monotonic() - sent
+            finally:
+                del self._pending[seq]
+        if not answered:
+            return None
+        reply = pending.reply
+        if isinstance(reply, p.HelloReply) and reply.boot_id != self.info.boot_id:
+            raise RigResetError(f"MCU reset during the handshake: boot id "
+                                f"{self.info.boot_id:#010x}, then {reply.boot_id:#010x}")
+        if reply.result != p.Result.OK:
+            raise HandshakeError(f"rig refused a HELLO of the session's measurement: "
+                                 f"{p.Result(reply.result).name}")
+        return trip
 
     def close(self) -> None:
         """End the session cleanly and close the port; never raises, idempotent.
@@ -427,10 +537,15 @@ class SerialLink:
 
     # --- commands -------------------------------------------------------------------------
 
-    def command(self, msg: p.Message, *, check: bool = True,
-                retries: int | None = None) -> p.Ack | p.HelloReply:
-        """Send ``msg``, wait for its ACK, retransmit on timeout; CommandError on NAK."""
-        retries = self.retries if retries is None else retries
+    def command(self, msg: p.Message, *, check: bool = True, retries: int | None = None,
+                waits: Sequence[float] | None = None) -> p.Ack | p.HelloReply:
+        """Send ``msg``, wait for its ACK, retransmit on timeout; CommandError on NAK.
+
+        Each attempt waits ``ack_timeout`` (or the next of ``waits``, whose length then
+        gives the attempts). An acknowledged command's round trip, from its first attempt,
+        adjusts a measured ACK timeout (:class:`hil.link_timing.AckTimer`)."""
+        retries = (self.retries if waits is None else len(waits) - 1) if retries is None \
+            else retries
         with self._cmd_lock:
             seq = self._next_seq()
             pending = self._pending[seq] = _Pending()
@@ -441,12 +556,17 @@ class SerialLink:
                     flags = p.FLAG_ACK_REQ | (p.FLAG_RETRY if attempt or late else 0)
                     self._write(p.encode_message(msg, seq, flags))
                     sent = time.monotonic()
-                    if pending.event.wait(self.ack_timeout):
+                    wait = self.ack_timeout if waits is None else waits[min(attempt,
+                                                                            len(waits) - 1)]
+                    if pending.event.wait(wait):
+                        if self._ack_timer is not None and not late:
+                            self._ack_timer.add(time.monotonic() - began)
+                            self.ack_timeout = self._ack_timer.timeout
                         break
                     if isinstance(self._failure, LinkLostError):
                         raise self._failure
                     self.stats.retransmissions += 1
-                    if (time.monotonic() - sent > self.ack_timeout + HOST_LATE
+                    if (time.monotonic() - sent > wait + HOST_LATE
                             and late < LATE_RETRIES):
                         late += 1  # the host itself was not running: not the rig's fault
                         self.stats.late_attempts += 1
@@ -625,10 +745,11 @@ class SerialLink:
         return self._unresponsive or isinstance(self._failure, (LinkLostError, RigResetError))
 
     def _stop_time(self) -> float:
-        """Longest stop ramp at the configured deceleration plus STANDSTILL_MARGIN, s."""
+        """Longest stop ramp at the configured deceleration plus STANDSTILL_MARGIN, s of the
+        wall clock (longer when the MCU's clock runs slow)."""
         cfg = self.config
         v = cfg.max_step_delta * (self.info.telemetry_hz if self.info else 1000)
-        return v / cfg.decel_steps_s2 + STANDSTILL_MARGIN
+        return (v / cfg.decel_steps_s2 + STANDSTILL_MARGIN) / self._clock_rate
 
     def _end_session(self) -> None:
         """After a stop: wait for the standstill, clear this session's faults, BYE."""
@@ -652,7 +773,7 @@ class SerialLink:
         ack = self.command(p.ClearFault(), check=False)
         if ack.result != p.Result.OK:
             return False
-        deadline = time.monotonic() + 0.05
+        deadline = time.monotonic() + 0.05 / self._clock_rate
         while time.monotonic() < deadline:
             status = self.status
             if status is not None and sample_distance(status.sample, ack.sample) > 0:
@@ -773,8 +894,9 @@ class SerialLink:
         out: list[p.Telemetry] = []
         deadline = time.monotonic() + self._stop_time()
         while True:
-            try:
-                item = self._queue.get(timeout=0.02)
+            try:  # a rig that is gone sends no more: take what is queued, do not wait
+                item = (self._queue.get_nowait() if self._gone()
+                        else self._queue.get(timeout=0.02))
             except queue.Empty:
                 if self._gone() or time.monotonic() > deadline or self._ser is None:
                     return out

@@ -11,6 +11,7 @@ job, 3 cycles: 18602 samples on both, stroke 44.9870 mm on both; docs/firmware.m
 from __future__ import annotations
 
 import csv
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -22,34 +23,39 @@ from hil.firmware_qemu import qemu_available
 
 pytestmark = pytest.mark.alone
 
-# QEMU's UART takes a byte about every 50 us; QEMU's clock runs on while a loaded machine
-# (the suite's other worker, QEMU's own thread) holds back the relay: 1 s of heartbeat
-# watchdog, where a gap of 251 ms once stopped the run at the default 250 ms
-RUN = (*SHORT_RUN, "--ack-ms", "100", "--heartbeat-ms", "1000")
+#: The plain run: no --ack-ms, --watchdog-ms or --heartbeat-ms; the host measures the link
+#: (issue 35: the QEMU run needed --ack-ms 100 --heartbeat-ms 1000 by hand).
+RUN = SHORT_RUN
+#: Default jobs in the CPU-hog test (issue 35: 3 of 3); HIL_QEMU_JOBS=1 for a quicker look.
+JOBS = int(os.environ.get("HIL_QEMU_JOBS", "3"))
 
 
-def _run_on(emulate: list[str], out: Path) -> list[dict[str, str]]:
+def _run_on(emulate: list[str], out: Path, run: tuple[str, ...] = RUN,
+            cycles: int = 1) -> tuple[list[dict[str, str]], str]:
+    """``hil run --real`` against a fresh ``hil emulate`` (so unreferenced: it homes);
+    the samples and the run's stderr."""
     proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "emulate", *emulate],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         port = proc.stdout.readline().strip()
         assert port.startswith("/dev/"), proc.stderr.read()
-        code, stdout, stderr = hil("run", "--real", "--port", port, "--out", str(out), *RUN)
-        assert code == 0 and "1 of 1 cycles complete" in stdout, stderr
+        code, stdout, stderr = hil("run", "--real", "--port", port, "--out", str(out), *run,
+                                   timeout=600.0)
+        assert code == 0 and f"{cycles} of {cycles} cycles complete" in stdout, stderr
     finally:
         proc.terminate()
         proc.wait(timeout=20)
     assert proc.returncode == 0  # SIGTERM ends the emulator cleanly (QEMU with it)
     with (out / "samples.csv").open(newline="") as fh:
-        return list(csv.DictReader(fh))
+        return list(csv.DictReader(fh)), stderr
 
 
 def test_the_qemu_build_runs_the_job_as_the_host_build(tmp_path: Path) -> None:
     missing = qemu_available()
     if missing:
         pytest.skip(f"needs the Debian packages: {' '.join(missing)}")
-    qemu = _run_on(["--firmware", "--qemu"], tmp_path / "qemu")
-    host = _run_on(["--firmware"], tmp_path / "host")
+    qemu, _ = _run_on(["--firmware", "--qemu"], tmp_path / "qemu")
+    host, _ = _run_on(["--firmware"], tmp_path / "host")
     assert len(qemu) == len(host) > 2000
     assert [r["platen [m]"] for r in qemu] == [r["platen [m]"] for r in host]
     assert [r["x_cmd [m]"] for r in qemu] == [r["x_cmd [m]"] for r in host]
@@ -57,3 +63,23 @@ def test_the_qemu_build_runs_the_job_as_the_host_build(tmp_path: Path) -> None:
     assert rms[0] == pytest.approx(rms[1], rel=0.01)
     assert not subprocess.run(["pgrep", "-f", "qemu-system-arm -M netduinoplus2"],
                               capture_output=True).stdout  # no QEMU left behind
+
+
+def test_the_default_job_on_qemu_beside_a_cpu_hog(tmp_path: Path) -> None:
+    """Issue 35's acceptance: the plain ``hil run --real --port PTY`` (the default job: the
+    planned profile, 3 cycles) on ``hil emulate --firmware --qemu`` with one CPU hog
+    running, homing included (each job a freshly booted, unreferenced rig), JOBS of JOBS.
+    It failed in homing (chunk ACKs of 67-408 ms, HEARTBEAT_LOST at 251 ms)."""
+    missing = qemu_available()
+    if missing:
+        pytest.skip(f"needs the Debian packages: {' '.join(missing)}")
+    hog = subprocess.Popen([sys.executable, "-c", "while 1: pass"])
+    try:
+        for job in range(JOBS):
+            rows, stderr = _run_on(["--firmware", "--qemu"], tmp_path / f"job{job}",
+                                   run=("--quiet",), cycles=3)
+            assert "homing at its home switch" in stderr, stderr
+            assert len(rows) > 18000, len(rows)
+    finally:
+        hog.kill()
+        hog.wait()

@@ -67,6 +67,9 @@ class Case:
     clear_first: bool = False  # the fault needs the operator (`hil rig clear`) before reuse
     completes: bool = False  # link noise: the motion completes; the run fails on its data
     in_flight: int = 0  # samples the host may never read (written just before a hang-up)
+    # timeouts fixed by hand where the case is timed against them (the host measures them
+    # from the link otherwise, longer on a loaded machine: docs/rig-protocol.md, section 7)
+    args: tuple[str, ...] = ()
 
 
 NOISE = dict(seed=7, noise_until=2.0)
@@ -82,8 +85,9 @@ CASES = {
     # operator clears, and closes without reading on: samples the rig wrote after the
     # host's last read are never read
     "long stall": Case(r"no telemetry for", FaultPlan(stall_at=AT, stall_for=0.4),
-                       clear_first=True, in_flight=3),
-    "heartbeat loss": Case(r"HEARTBEAT_LOST", action=freeze),
+                       clear_first=True, in_flight=3,
+                       args=("--watchdog-ms", "100", "--ack-ms", "20")),
+    "heartbeat loss": Case(r"HEARTBEAT_LOST", action=freeze, args=("--heartbeat-ms", "250")),
     "MCU reset": Case(r"MCU reset detected", FaultPlan(reset_at=AT)),
     # a hang-up discards what is in flight in the pty: the last few written samples
     "disconnect": Case(r"disconnected", FaultPlan(disconnect_at=AT, reconnect_after=0.3),
@@ -117,7 +121,8 @@ def test_fault_stops_records_exactly_and_leaves_the_rig_reusable(name: str, mcu:
     case = CASES[name]
     out = tmp_path / "run"
     with spawn(case.faults, firmware=mcu == "firmware") as emu:
-        host = Host("run", "--real", "--port", emu.port, "--out", str(out), *SHORT_RUN)
+        host = Host("run", "--real", "--port", emu.port, "--out", str(out), *SHORT_RUN,
+                    *case.args)
         if case.action is not None:
             case.action(host)
         code, stdout, stderr = host.finish()

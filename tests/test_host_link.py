@@ -64,6 +64,7 @@ class FakeMcu:
     deaf_after: int = 0  # ... or this many samples of that run later
     deaf_at_chunk: int | None = None  # deaf on a chunk whose first_index >= this (unanswered)
     boot_id: int = 0x5EED_F00D
+    wall_period: float = 1e-3  # wall-clock s per period: above 1 ms its clock runs slow
 
     def __post_init__(self) -> None:
         self.master, self.slave = os.openpty()
@@ -92,6 +93,9 @@ class FakeMcu:
         self.close()
 
     def close(self) -> None:
+        """Stop serving and close the pty; idempotent."""
+        if self._stop.is_set():
+            return
         self._stop.set()
         self._thread.join(timeout=2.0)
         for fd in (self.master, self.slave):
@@ -109,7 +113,7 @@ class FakeMcu:
     # --- the MCU ------------------------------------------------------------------------
 
     def _serve(self) -> None:
-        period, next_tick = 1e-3, time.monotonic()
+        period, next_tick = self.wall_period, time.monotonic()
         while not self._stop.is_set():
             readable, _, _ = select.select([self.master], [], [],
                                            max(0.0, min(next_tick - time.monotonic(), 0.01)))
@@ -239,6 +243,15 @@ def fake() -> Iterator[Callable[..., FakeMcu]]:
         mcu.close()
 
 
+def wait_for(condition: Callable[[], bool], timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
+
+
 def ramp(n: int, rate: int = 20) -> list[tuple[int, int]]:
     return [(i * rate, p.NO_CHECK) for i in range(n)]
 
@@ -311,37 +324,51 @@ def test_a_deaf_rig_gets_one_stop_sequence_and_is_left_at_once(
     assert closed - failure < 0.25, f"{(closed - failure) * 1e3:.0f} ms"
 
 
-def test_a_deaf_rig_ends_hil_run_with_one_stop_sequence(fake: Callable[..., FakeMcu],
-                                                       tmp_path) -> None:
-    """The same through ``hil run --real``, as a user runs it, counted on the rig side."""
-    mcu = fake(deaf_at_start=1, deaf_after=300)
-    host = Host("run", "--real", "--port", mcu.port, "--out", str(tmp_path / "run"), *SHORT_RUN)
-    while host.proc.poll() is None:
-        time.sleep(0.001)
-    exited = time.monotonic()
-    code, stdout, stderr = host.finish()
-    assert code == 1 and "no telemetry for" in stderr and "Traceback" not in stderr, stderr
-    frames = mcu.after_deaf()
-    kinds = [r.kind for r in frames]
-    assert kinds[-ESTOP_REPEATS:] == [p.MsgType.ESTOP] * ESTOP_REPEATS, kinds
-    assert set(kinds[:-ESTOP_REPEATS]) == {p.MsgType.STOP}, kinds
-    assert STOP_ATTEMPTS <= len(kinds) - ESTOP_REPEATS <= STOP_ATTEMPTS + 2, kinds
-    # the first STOP is sent when the host's watchdog trips (100 ms after the last sample);
-    # its last frame (heartbeats included: they stop when the port closes) follows within
-    # 250 ms, and the process has summarised the run and exited soon after (its interpreter
-    # takes 80-150 ms to shut down here)
-    failed = frames[0].time
-    left = mcu.after_deaf(heartbeats=True)[-1].time - failed
-    assert left < 0.25, f"{left * 1e3:.0f} ms"
-    assert exited - failed < 0.6, f"{(exited - failed) * 1e3:.0f} ms"
-    assert "cycles complete" in stdout  # what was measured is still recorded and summarised
+#: Runs of ``hil run --real`` against a deaf rig in the exit-time test (issue 35: 10 of 10).
+DEAF_RUNS = 10
+
+
+def test_a_deaf_rig_ends_hil_run_with_one_stop_sequence_and_a_quick_exit(
+        fake: Callable[..., FakeMcu], tmp_path) -> None:
+    """The same through ``hil run --real``, as a user runs it, counted on the rig side, 10
+    times: the process ends within 250 ms of giving up on the rig (its first ESTOP: its
+    watchdog tripped, it sent the STOPs of the stop sequence, one ACK timeout apart, and no
+    answer came), files written and run summarised. It took 0.8-0.98 s (issue 35): the
+    interpreter's teardown of numpy, scipy, CasADi and fmpy after main() returned was
+    110-200 ms of it (hil.cli.entry now ends the process at once)."""
+    exits = []
+    for run in range(DEAF_RUNS):
+        mcu = fake(deaf_at_start=1, deaf_after=300)
+        host = Host("run", "--real", "--port", mcu.port, "--out", str(tmp_path / f"run{run}"),
+                    *SHORT_RUN)
+        while host.proc.poll() is None:
+            time.sleep(0.001)
+        exited = time.monotonic()
+        code, stdout, stderr = host.finish()
+        assert code == 1 and "no telemetry for" in stderr and "Traceback" not in stderr, stderr
+        # the process may end before the fake MCU's thread read its last frames
+        wait_for(lambda m=mcu: p.MsgType.ESTOP in [r.kind for r in m.after_deaf()], 1.0)
+        time.sleep(0.05)
+        frames = mcu.after_deaf()
+        kinds = [r.kind for r in frames]
+        assert kinds[-ESTOP_REPEATS:] == [p.MsgType.ESTOP] * ESTOP_REPEATS, kinds
+        assert set(kinds[:-ESTOP_REPEATS]) == {p.MsgType.STOP}, kinds
+        assert STOP_ATTEMPTS <= len(kinds) - ESTOP_REPEATS <= STOP_ATTEMPTS + 2, kinds
+        assert "cycles complete" in stdout  # what was measured is still recorded, summarised
+        assert (tmp_path / f"run{run}" / "summary.json").is_file()
+        gave_up = next(r.time for r in frames if r.kind == p.MsgType.ESTOP)
+        exits.append((gave_up - frames[0].time, exited - gave_up))
+        mcu.close()
+    text = ", ".join(f"{a * 1e3:.0f}/{b * 1e3:.0f}" for a, b in exits)
+    assert all(b < 0.25 for _, b in exits), (f"first STOP to first ESTOP / first ESTOP to "
+                                             f"the process's exit, ms: {text}")
 
 
 def test_samples_across_the_u32_wrap_are_each_recorded_once(
         fake: Callable[..., FakeMcu]) -> None:
     """After 49.7 days of MCU uptime the u32 sample counter wraps (2**32 - 1 -> 0): RFC 1982
     serial order, not integer order (every sample after the wrap was a 'duplicate')."""
-    mcu = fake(sample_at_hello=U32 - 700)
+    mcu = fake(sample_at_hello=U32 - 1400)  # the session's link measurement takes ~0.3 s
     plant = RigPlant(mcu.port, realtime=False)
     plant.configure(RigSetup())
     with plant:
@@ -349,7 +376,7 @@ def test_samples_across_the_u32_wrap_are_each_recorded_once(
         stats = plant.link.stats
         assert (stats.duplicates, stats.lost_samples) == (0, 0)
     first = samples[0].index
-    assert first > U32 - 700 and samples[-1].index < 1000  # the wrap is inside the run
+    assert first > U32 - 1400 and samples[-1].index < 1500  # the wrap is inside the run
     assert [s.index for s in samples] == [(first + i) % U32 for i in range(1501)]
     assert [s.t for s in samples] == pytest.approx([i * 1e-3 for i in range(1501)])
     assert samples[-1].status == "ok"
@@ -434,3 +461,24 @@ def test_the_reader_restarts_the_silence_count_when_it_wakes_late(
                 link.next_sample(timeout=2.0)
         assert link.stats.host_late >= 1
         assert link.stats.failed_at - woke[0] >= 0.2
+
+
+@pytest.mark.parametrize(("wall_period", "points"), [(3e-3, 200), (0.12, 20)])
+def test_an_mcu_whose_clock_runs_slow_gets_watchdogs_on_its_clock(
+        wall_period: float, points: int, fake: Callable[..., FakeMcu]) -> None:
+    """An emulator may run its MCU slower than the wall clock if it reports its own time
+    (docs/rig-protocol.md, section 7, "Emulated MCUs"): here 1000 us of t_us per 3 ms, and
+    per 120 ms (a sample every 120 ms tripped the host's 100 ms watchdog). The host
+    measures the rate at open and waits 100 ms of the MCU's clock for telemetry, at most
+    1 s; a run at that pace completes without a false stall."""
+    mcu = fake(wall_period=wall_period)
+    with SerialLink(mcu.port) as link:
+        link.open()
+        timing = link.timing
+        assert timing.clock_rate == pytest.approx(1e-3 / wall_period, rel=0.3), timing
+        assert link.telemetry_timeout >= min(0.1 / timing.clock_rate * 0.99, 1.0)
+        assert link.telemetry_timeout > wall_period
+        assert link.heartbeat_timeout_ms >= link.telemetry_timeout * 1e3
+        samples = list(link.run_trajectory(ramp(points)))
+        assert samples[-1].exec_index == points and link.failure is None
+        assert link.stats.lost_samples == 0

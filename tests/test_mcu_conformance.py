@@ -458,3 +458,34 @@ def test_repeated_estops_latch_once_and_a_stop_from_rest_stays_put(kind: str) ->
 def test_a_deceleration_that_never_stops_is_refused(bench: Bench) -> None:
     assert bench.ack(p.Config(decel_steps_s2=7.0)).result == p.Result.BAD_VALUE
     assert bench.ack(p.Config(decel_steps_s2=8.0)).result == p.Result.OK
+
+
+def config_after_upload(kind: str) -> list[tuple[str, p.Result]]:
+    """Issue 35's case: 4000-step jumps buffered under max_step_delta 5000, then CONFIGs
+    that the buffered points break (a smaller max_step_delta, narrower travel) and one they
+    obey; (what was sent, the answer) in order, and the first run sample's steps."""
+    b = Bench(kind).session(max_step_delta=5000)
+    b.load([(4000, p.NO_CHECK), (8000, p.NO_CHECK), (12000, p.NO_CHECK)])
+    cases = {"max_step_delta 250": dict(max_step_delta=250),
+             "max_step_delta 3999 (point 0 from the table)": dict(max_step_delta=3999),
+             "steps_max 11999": dict(max_step_delta=5000, steps_max=11_999),
+             "max_step_delta 4000, steps_max 12000": dict(max_step_delta=4000,
+                                                          steps_max=12_000)}
+    answers = [(name, p.Result(b.ack(p.Config(stuck_samples=60_000, **cfg)).result))
+               for name, cfg in cases.items()]
+    assert b.ack(p.Start()).result == p.Result.OK
+    answers.append(("first run sample's steps", b.tick().steps))
+    return answers
+
+
+def test_a_config_re_checks_the_buffered_points(kind: str) -> None:
+    """Version 1.2 (docs/rig-protocol.md, section 5): a CONFIG whose limits a buffered point
+    breaks is refused as that chunk would be, and nothing changes."""
+    answers = dict(config_after_upload(kind))
+    assert list(answers.values()) == [p.Result.BAD_VALUE, p.Result.BAD_VALUE,
+                                      p.Result.OUT_OF_LIMITS, p.Result.OK, 4000], answers
+
+
+@pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")
+def test_the_config_re_check_is_the_same_on_both() -> None:
+    assert config_after_upload("model") == config_after_upload("firmware")

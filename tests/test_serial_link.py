@@ -171,7 +171,7 @@ def test_short_stall_is_caught_by_the_mcu_clock_not_by_host_timing(
     # 50 ms is below the host's 100 ms silence watchdog: the MCU's own timestamps show it
     faults = FaultPlan(stall_at=0.05, stall_for=0.05)
     emulator, link, samples, error = fail_by_injection(rig, faults, "stall")
-    assert link.telemetry_timeout == pytest.approx(0.1)
+    assert link.telemetry_timeout >= 0.1  # measured at open: 100 ms on an idle machine
     assert isinstance(error, RigStalledError) and "stalled" in str(error)
     assert "50.0 ms" in str(error) or "51.0 ms" in str(error)
     stop_rx = emulator.log.first_command(p.MsgType.STOP, after=emulator.log.injected["stall"])
@@ -184,7 +184,8 @@ def test_long_stall_trips_the_host_watchdog(rig: Callable[..., Rig]) -> None:
     emulator, link, samples, error = fail_by_injection(rig, faults, "stall")
     assert isinstance(error, LinkTimeoutError) and "no telemetry" in str(error)
     silence = link.stats.failed_at - samples[-1].rx_time
-    assert 0.1 <= silence <= 0.1 + 0.05  # the watchdog, plus scheduling on a loaded machine
+    # the watchdog (measured at open: 100 ms or more), plus scheduling on a loaded machine
+    assert 0.1 <= link.telemetry_timeout <= silence <= link.telemetry_timeout + 0.05
     assert wait_for(lambda: emulator.mcu.state in (p.State.IDLE, p.State.ESTOP))
 
 
@@ -329,3 +330,31 @@ def test_config_keeps_or_replaces_the_load_cell_calibration(rig: Callable[..., R
     assert link.scaling.load_gain_n == emulator.mcu.cfg.load_gain_n == 0.000244140625
     with pytest.raises(CommandError, match="BAD_VALUE"):
         link.configure(p.Config(steps_min=10, steps_max=0))
+
+
+@pytest.mark.parametrize("given", [None, 777])
+def test_homing_runs_under_the_sessions_heartbeat_timeout(given: int | None,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 35: homing sent its CONFIG with the default 250 ms and the run's came after it,
+    so `hil run --heartbeat-ms 1000` did not cover homing. Every CONFIG of the session, the
+    first (homing's) included, carries the session's timeout: as given, else as measured."""
+    from hil.backends import RigPlant, RigSetup
+    from hil.rig_physics import ClampPhysics
+
+    sent: list[p.Config] = []
+    configure = SerialLink.configure
+    monkeypatch.setattr(SerialLink, "configure",
+                        lambda link, cfg: (sent.append(cfg), configure(link, cfg))[1])
+    setup = RigSetup()
+    emulator = RigEmulator(ClampPhysics(setup.preset), RigHardware(x_origin=setup.stroke[0]))
+    try:
+        plant = RigPlant(emulator.start(), realtime=False, heartbeat_ms=given)
+        plant.configure(setup)
+        with plant:
+            assert plant.homed_distance is not None  # it booted unreferenced: it homed
+            expected = given or plant.link.timing.heartbeat_timeout_ms
+            assert plant.link.heartbeat_timeout_ms == expected
+            assert emulator.mcu.cfg.heartbeat_timeout_ms == expected
+    finally:
+        emulator.close()
+    assert len(sent) == 2 and [c.heartbeat_timeout_ms for c in sent] == [expected] * 2

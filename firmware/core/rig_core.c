@@ -409,6 +409,32 @@ static void cmd_hello(rig_mcu *m, const rig_msg_hello *h, uint16_t seq, reply_bu
     r->len = (uint8_t)rig_wire_put_hello_reply(r->payload, &hr);
 }
 
+/* Rule 7 of TRAJ_CHUNK for one point under the limits c, after the point (or position)
+ * *prev: OUT_OF_LIMITS outside [steps_min, steps_max], BAD_VALUE for a jump above
+ * max_step_delta, else RIG_OK and *prev becomes the point. */
+static uint8_t point_rule(int32_t steps_min, int32_t steps_max, uint16_t max_step_delta,
+                          int64_t *prev, int32_t s) {
+    if (s < steps_min || s > steps_max) return RIG_OUT_OF_LIMITS;
+    int64_t d = (int64_t)s - *prev;
+    if (d < 0) d = -d;
+    if (d > (int64_t)max_step_delta) return RIG_BAD_VALUE;
+    *prev = s;
+    return RIG_OK;
+}
+
+/* Version 1.2: a CONFIG re-checks every buffered point (from the present position: in
+ * IDLE the buffer holds a trajectory from its point 0) against its new limits. */
+static uint8_t buffered_points_rule(const rig_mcu *m, const rig_msg_config *c) {
+    int64_t prev = m->steps;
+    for (uint32_t k = 0; k < m->pt_count; k++) {
+        uint32_t slot = (m->pt_head + k) & (RIG_BUFFER_CAPACITY - 1u);
+        uint8_t r = point_rule(c->steps_min, c->steps_max, c->max_step_delta, &prev,
+                               m->points[slot].steps);
+        if (r != RIG_OK) return r;
+    }
+    return RIG_OK;
+}
+
 static uint8_t cmd_config(rig_mcu *m, const rig_msg_config *c) {
     if (m->state != RIG_STATE_IDLE) return RIG_BAD_STATE;
     bool valid = c->force_limit_n > 0.0f && c->steps_min < c->steps_max &&
@@ -423,6 +449,8 @@ static uint8_t cmd_config(rig_mcu *m, const rig_msg_config *c) {
           m->enc <= c->enc_max)) {
         return RIG_OUT_OF_LIMITS; /* limits that exclude the present position */
     }
+    uint8_t buffered = buffered_points_rule(m, c); /* refused: nothing changes */
+    if (buffered != RIG_OK) return buffered;
     rig_config n;
     n.force_limit_n = c->force_limit_n;
     n.steps_min = c->steps_min;
@@ -468,11 +496,9 @@ static uint8_t cmd_chunk(rig_mcu *m, const uint8_t *payload, const rig_msg_chunk
         int32_t s, e;
         rig_wire_get_point(payload, k, &s, &e);
         (void)e;
-        if (s < m->cfg.steps_min || s > m->cfg.steps_max) return RIG_OUT_OF_LIMITS;
-        int64_t d = (int64_t)s - prev;
-        if (d < 0) d = -d;
-        if (d > (int64_t)m->cfg.max_step_delta) return RIG_BAD_VALUE;
-        prev = s;
+        uint8_t r = point_rule(m->cfg.steps_min, m->cfg.steps_max, m->cfg.max_step_delta,
+                               &prev, s);
+        if (r != RIG_OK) return r;
     }
     for (unsigned k = 0; k < h->n; k++) {
         uint32_t slot = (m->pt_head + m->pt_count) & (RIG_BUFFER_CAPACITY - 1u);

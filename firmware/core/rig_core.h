@@ -1,4 +1,4 @@
-/* The rig firmware's portable core: docs/rig-protocol.md (version 1.1) in C11, with no
+/* The rig firmware's portable core: docs/rig-protocol.md (version 1.2) in C11, with no
  * hardware access (that is rig_hal.h) and no heap: the whole MCU is one rig_mcu that the
  * board allocates statically.
  *
@@ -20,8 +20,8 @@
 #include "rig_hal.h"
 
 #define RIG_PROTO_MAJOR 1u
-#define RIG_PROTO_MINOR 1u
-#define RIG_FW_VERSION 0x0101u
+#define RIG_PROTO_MINOR 2u
+#define RIG_FW_VERSION 0x0102u
 #define RIG_TELEMETRY_HZ 1000u
 #define RIG_POINT_PERIOD_US 1000u
 #define RIG_MAX_CHUNK_POINTS 30u

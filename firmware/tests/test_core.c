@@ -259,7 +259,7 @@ static void test_example_hello_wire(void) {
     CHECK_EQ(hr.boot_id, 0x5EED0001u);
     CHECK_EQ(hr.buffer_capacity, 2048);
     CHECK_EQ(hr.max_chunk_points, 30);
-    CHECK_EQ(hr.fw_version, 0x0101);
+    CHECK_EQ(hr.fw_version, RIG_FW_VERSION);
     CHECK_EQ(hr.load_offset, 1500);
     CHECK(hr.load_gain_n == 1e-4f);
     CHECK_EQ(hr.adc_min, -8388608);
@@ -1002,6 +1002,41 @@ static void test_config_rules(void) {
     CHECK_EQ(ack_of(0).state, RIG_STATE_BOOT);
 }
 
+/* Version 1.2: a CONFIG re-checks the buffered points against its limits (issue 35: a
+ * CONFIG of max_step_delta 250 after 4000-step jumps were buffered let them run). */
+static void test_config_rechecks_buffered_points(void) {
+    session();
+    rig_msg_config c = default_cfg();
+    c.max_step_delta = 5000;
+    CHECK_EQ(config(&c), RIG_OK);
+    int32_t jumps[3] = {4000, 8000, 12000}; /* the first from the present position, 0 */
+    CHECK_EQ(chunk(0, RIG_CHUNK_FINAL, jumps, 3), RIG_OK);
+    c.max_step_delta = 250;
+    CHECK_EQ(config(&c), RIG_BAD_VALUE);
+    CHECK_EQ(M.cfg.max_step_delta, 5000); /* refused: nothing changed */
+    c.max_step_delta = 3999;              /* point 0 is 4000 steps from the table */
+    CHECK_EQ(config(&c), RIG_BAD_VALUE);
+    c.max_step_delta = 5000;
+    c.steps_max = 11999; /* narrowed travel: the last point is outside */
+    CHECK_EQ(config(&c), RIG_OUT_OF_LIMITS);
+    CHECK_EQ(M.cfg.steps_max, 400000);
+    c.steps_max = 12000;
+    c.max_step_delta = 4000; /* every point still passes: accepted */
+    CHECK_EQ(config(&c), RIG_OK);
+    CHECK_EQ(M.cfg.max_step_delta, 4000);
+    CHECK_EQ(M.pt_count, 3);
+    /* the run obeys what the MCU accepted */
+    CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+    rig_msg_telemetry tel = ticks(1);
+    CHECK_EQ(tel.steps, 4000);
+    tel = ticks(3);
+    CHECK_EQ(tel.state, RIG_STATE_IDLE);
+    CHECK_EQ(tel.faults, 0);
+    /* with the buffer empty only the present position counts */
+    c.max_step_delta = 250;
+    CHECK_EQ(config(&c), RIG_OK);
+}
+
 static void test_telemetry_every_state_and_tx_fifo(void) {
     boot();
     for (int i = 0; i < 3; i++) {
@@ -1108,6 +1143,7 @@ static const test_case tests[] = {
     T(test_heartbeat_loss_running),
     T(test_estop_and_driver),
     T(test_config_rules),
+    T(test_config_rechecks_buffered_points),
     T(test_telemetry_every_state_and_tx_fifo),
     T(test_set_position_and_bye),
 };
