@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 from controllers import cam
 from controllers.limits import drive_limits
-from controllers.planner import default_duration, plan_config, planner_for
+from controllers.planner import default_duration, planner_for
+from controllers.plans import plan_config
 from controllers.profiles import s_curve
 from fmu_src.build import build_fmu
 from toggle.elastics import clamp_stroke

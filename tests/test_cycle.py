@@ -12,7 +12,8 @@ import pytest
 from hil_host import hil, recorded_samples, sent_samples
 
 from controllers.limits import drive_limits
-from controllers.planner import default_duration, plan_config, planner_for
+from controllers.planner import default_duration, planner_for
+from controllers.plans import plan_config
 from controllers.profiles import read_profile_csv, read_profile_settings
 from hil.backends import RigSetup
 from hil.cli import main as hil_main

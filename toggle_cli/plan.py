@@ -21,22 +21,23 @@ from controllers.cycle import MoldingCycle
 from controllers.duty import check_motor, motor_duty
 from controllers.limits import DriveLimits, drive_limits
 from controllers.planner import (
-    CONTACT_SPEED,
-    INTERVALS,
-    OBJECTIVES,
-    PROTECT_FRACTION,
     ClampPlanner,
-    Plan,
-    Protection,
-    baseline_stroke,
-    baselines,
     best_plan,
     default_duration,
-    plan_config,
     planner_for,
     trade_off_curve,
 )
+from controllers.plans import (
+    CONTACT_SPEED,
+    INTERVALS,
+    PROTECT_FRACTION,
+    Plan,
+    Protection,
+    plan_config,
+)
 from controllers.profiles import predict, read_profile_csv, write_profile_csv
+from controllers.stroke_problem import OBJECTIVES
+from controllers.stroke_reports import baseline_stroke, baselines
 from toggle.args import integer, number, path, positive
 from toggle.drive import motor_torque
 from toggle.elastics import clamp_stroke
