@@ -14,9 +14,10 @@ The problem, built with CasADi through the plant's own equations
   with the mold; the two agree up to contact, so this is the FMU's model;
 * objective the peak input force (epigraph variable s, |F| <= s at the nodes
   and interval midpoints, plus a small weight on the squared jerk to make the
-  optimum unique), the integral of F^2, or the integral of the squared motor torque
-  (``"energy"``: the copper losses, :mod:`controllers.duty`), alone or weighted into the
-  peak; the minimum-time mode minimises the duration under |F| <= force limit;
+  optimum unique), the integral of F^2, or the stroke's electrical energy (``"energy"``:
+  shaft power with the screw's efficiency by the direction of power flow plus the copper
+  losses, :mod:`controllers.duty`), alone or weighted into the peak; the minimum-time
+  mode minimises the duration under |F| <= force limit;
 * constraints: rest at the open position and at the toggle, monotone stroke
   inside the stroke limits, velocity (nodes and midpoints), acceleration and
   jerk limits (:mod:`controllers.limits`), the motor torque with the drive's
@@ -56,7 +57,7 @@ import numpy as np
 
 from controllers.compiled import Unit, code_digest, compiled
 from controllers.limits import DriveLimits
-from toggle.drive import drive_torque, torque_speed_limit
+from toggle.drive import drive_torque, flow_factor, torque_speed_limit
 from toggle.elastics import clamp_stroke
 from toggle.params import (
     MAX_CURVE_POINTS,
@@ -72,11 +73,11 @@ if TYPE_CHECKING:  # not imported: the plans are no part of the compiled problem
 
 OBJECTIVES = ("peak", "rms", "energy")
 REGULARISATION = 1e-2  # weight of the squared jerk (relative to its limit), for uniqueness
-#: Objective weights (peak, force integral, duration, jerk regularisation, and whether the
-#: integral is of the motor torque, with the drive's inertia, rather than of the input force)
-#: of each objective: "energy" minimises the integral of the squared motor torque, the
-#: motor's copper losses (R / k_t^2 times it), the part of a stroke's energy the motion
-#: decides (:mod:`controllers.duty`).
+#: Objective weights (peak, integral, duration, jerk regularisation, and whether the
+#: integral is the electrical energy rather than that of the squared input force: see
+#: :data:`INTEGRAND`) of each objective: "energy" minimises the stroke's electrical energy
+#: (shaft power with the screw's efficiency by the direction of power flow, plus the
+#: copper losses: :mod:`controllers.duty`).
 WEIGHTS = {"peak": [1.0, 0.0, 0.0, REGULARISATION, 0.0], "rms": [0.0, 1.0, 0.0, 0.0, 0.0],
            "energy": [0.0, 1.0, 0.0, 0.0, 1.0]}
 #: A protection cap that is not set: a value no plan reaches (the cap stays a parameter).
@@ -101,8 +102,8 @@ _WARM_FAR = {**_WARM, "mu_init": 1e-5}
 
 def objective_weights(objective: str, energy_weight: float = 0.0) -> list[float]:
     """The problem's objective weights (:data:`WEIGHTS`) of ``objective`` plus
-    ``energy_weight`` times the integral of the squared motor torque (in the problem's
-    scaling: force over the reference force, time over the reference time)."""
+    ``energy_weight`` times the stroke's electrical energy (in the problem's scaling: over
+    the reference force times the stroke)."""
     if objective not in OBJECTIVES:
         raise ParameterError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
     if not (math.isfinite(energy_weight) and energy_weight >= 0):
@@ -140,16 +141,27 @@ _SOURCE = code_digest(__name__)
 #: Upper triangle of a symmetric 3 x 3 matrix, row by row (the per-node plant Hessians).
 _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 _JET = 10  # rows of a node's plant data: value, gradient (3), Hessian upper triangle (6)
-#: The problem's parameters, in order: objective weights (peak, force integral, duration,
-#: jerk regularisation; the mass eta m_drive whose acceleration the integral adds to the
-#: input force, kg: 0, or the drive's for the motor torque), mold-contact position (m),
+#: The integrand of the objective's integral, g = w_copper T^2 + w_shaft T v at the nodes
+#: (trapezoidal rule), T = F k + m a over the force scale: ``inertia`` m, kg, and k by the
+#: direction of the thrust power F v (:func:`toggle.drive.flow_factor`: 1 / ``forward``
+#: driving, ``reverse`` back-driven, blended over :data:`FLOW_SMOOTHING`). With m = 0,
+#: k = 1, w_copper = 1 and w_shaft = 0 it is the integral of F^2 (``"rms"``); with the
+#: drive's m_drive, eta and eta', w_shaft = 1 and w_copper the copper losses' c p^2 f_ref
+#: T_ref / S it is the electrical energy of the stroke over f_ref S (``"energy"``: shaft
+#: power T_m omega plus copper losses c T_m^2, :mod:`controllers.duty`).
+INTEGRAND = ("inertia", "forward", "reverse", "w_shaft", "w_copper")
+#: The thrust power (over f_ref S / T_ref) over which the planner's motor torque blends the
+#: forward and the back-driving efficiency (smooth for IPOPT; the duty switches exactly).
+FLOW_SMOOTHING = 1e-2
+#: The problem's parameters, in order: objective weights (peak, integral, duration, jerk
+#: regularisation), the integral's integrand (:data:`INTEGRAND`), mold-contact position (m),
 #: force scale (N), time scale T_ref (s), jerk limit (m/s^3), platen speed limit at contact
 #: (m/s), pin friction mu; the drive: travel per motor radian (m/rad), efficiency,
 #: reflected mass of rotor and screw (kg), the factor on the torque-speed curve (1, less
 #: where minimum_time tightens it), the curve's speeds (rad/s) and torques (N m), padded
 #: to :data:`MAX_CURVE_POINTS` points; the mold-protection zone's platen speed cap (m/s)
 #: and input-force cap (N).
-PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", "w_inertia", "x_contact", "f_ref",
+PARAMETERS = ("w_peak", "w_energy", "w_time", "w_jerk", *INTEGRAND, "x_contact", "f_ref",
               "t_ref", "jerk", "contact_speed", "mu", "travel", "efficiency", "drive_mass",
               "torque_factor",
               *(f"curve_speed{k}" for k in range(MAX_CURVE_POINTS)),
@@ -401,16 +413,19 @@ class StrokeProblem:
             al[1:] - (al[:-1] + h * io),
         )
 
-        def integral(Fp: ca.SX, step: ca.SX) -> ca.SX:  # trapezoidal rule
-            return step * (ca.sumsqr(Fp) - (Fp[0] ** 2 + Fp[-1] ** 2) / 2)
+        def integral(g: ca.SX, step: ca.SX) -> ca.SX:  # trapezoidal rule
+            return step * (ca.sum1(g) - (g[0] + g[-1]) / 2)
 
-        # the integrand: the input force, or (w_inertia = eta m_drive) the motor torque over
-        # p / eta (toggle.drive.drive_torque), at the nodes in F's order (node n1 twice)
+        # the integrand (INTEGRAND) at the nodes in F's order (node n1 twice); the opening
+        # stroke's physical velocity is -nu (it is solved backwards in time)
         N = n1 + self.n2
-        F = F + p[_P["w_inertia"]] * ca.vertcat(z[2, :n1 + 1].T, z[2, n1:N + 1].T) / p[
+        v = ca.vertcat(nu[:n1 + 1], nu[n1:]) * (-1 if self.opening else 1)
+        k = flow_factor(F * v, p[_P["forward"]], p[_P["reverse"]], FLOW_SMOOTHING)
+        T = F * k + p[_P["inertia"]] * ca.vertcat(z[2, :n1 + 1].T, z[2, n1:N + 1].T) / p[
             _P["f_ref"]]
-        energy = (integral(F[:na + 1], th1) + integral(F[na:n1 + 1], thz)
-                  + integral(F[n1 + 1:], th2))
+        g = p[_P["w_copper"]] * T**2 + p[_P["w_shaft"]] * T * v
+        energy = (integral(g[:na + 1], th1) + integral(g[na:n1 + 1], thz)
+                  + integral(g[n1 + 1:], th2))
         duration = ca.sum1(h)
         jerk_bound = p[_P["jerk"]] * t_ref**3 / self.stroke
         objective = (p[_P["w_peak"]] * s + p[_P["w_energy"]] * energy

@@ -42,7 +42,12 @@ from controllers.stroke_problem import (
     neutral,
     plant_masses,
 )
-from toggle.drive import reflected_mass, travel_per_radian
+from toggle.drive import (
+    back_efficiency,
+    copper_coefficient,
+    reflected_mass,
+    travel_per_radian,
+)
 from toggle.elastics import clamp_stroke
 from toggle.params import ParameterError
 from toggle.plant import PlantConfig, plant_outputs
@@ -139,14 +144,29 @@ class StrokeReports:
         torque-speed curve and protection caps (speed, force; None: none), then the plants'
         force scales."""
         drive = self.config.mechanism.drive
-        weights = [*weights, 0.0][:5]
-        weights[4] *= drive.efficiency * reflected_mass(drive)  # w_inertia, kg
-        return [*weights, self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
+        return [*weights[:4], *self._integrand(bool(weights[4:5] and weights[4])),
+                self.config.x_contact, self.f_ref, self.t_ref, self.limits.jerk,
                 self.contact_speed, self.config.friction, travel_per_radian(drive),
                 drive.efficiency, reflected_mass(drive), torque_factor,
                 *curve_parameters(self.limits), *(NO_CAP if c is None else c for c in caps),
                 1.0, *self.scales,
                 *(m for plant in (self.config, *self.variants) for m in plant_masses(plant))]
+
+    def _integrand(self, electrical: bool) -> list[float]:
+        """The objective integral's :data:`controllers.stroke_problem.INTEGRAND`: of the
+        squared input force, or (``electrical``) the stroke's electrical energy over
+        f_ref S, which needs the motor's winding resistance and torque constant."""
+        if not electrical:
+            return [0.0, 1.0, 1.0, 0.0, 1.0]
+        drive = self.config.mechanism.drive
+        c = copper_coefficient(drive)
+        if c is None:
+            raise ParameterError(
+                f"the energy objective needs the motor's winding_resistance and "
+                f"torque_constant in the [drive] of {self.config.mechanism.name!r}")
+        p = travel_per_radian(drive)
+        return [reflected_mass(drive), drive.efficiency, back_efficiency(drive), 1.0,
+                c * p**2 * self.f_ref * self.t_ref / self.stroke]
 
     # ---- reports ------------------------------------------------------------------
 
