@@ -194,15 +194,16 @@ class Duty:
     def report(self) -> dict[str, object]:
         """The figures a machine builder compares, SI (the electrical ones None without the
         drive's winding data)."""
-        electrical = self.electrical() or {}
+        electrical = self.electrical()
+        figures = electrical or {}
         return {"cycle_time": self.cycle_time, "rms_torque": self.rms_torque,
                 "peak_torque": self.peak_torque, "peak_speed": self.peak_speed,
-                "energy_regenerating": electrical.get("energy_regenerating"),
-                "energy_without_regeneration": electrical.get("energy_without_regeneration"),
+                "energy_regenerating": figures.get("energy_regenerating"),
+                "energy_without_regeneration": figures.get("energy_without_regeneration"),
                 "shaft_energy_regenerating": self.shaft_energy_regenerating,
                 "shaft_energy_without_regeneration": self.shaft_energy_without_regeneration,
                 "torque_squared_integral": self.torque_squared,
-                "electrical": self.electrical(), "thermal": self.thermal()}
+                "electrical": electrical, "thermal": self.thermal()}
 
 
 def motor_duty(time: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
