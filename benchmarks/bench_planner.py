@@ -33,7 +33,8 @@ import time
 from dataclasses import replace
 
 from controllers.limits import drive_limits
-from controllers.planner import ClampPlanner, plan_config
+from controllers.planner import ClampPlanner
+from controllers.plans import plan_config
 
 
 def _timed(fn, *args, **kwargs):

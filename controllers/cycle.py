@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.duty import Duty, motor_duty
-from controllers.planner import Plan
+from controllers.plans import Plan
 from controllers.profiles import ProfileSamples, sample_times
 from toggle.params import ParameterError
 from toggle.plant import PlantConfig, plant_outputs

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.limits import DriveLimits
-from controllers.planner import CONTACT_SPEED
+from controllers.plans import CONTACT_SPEED
 from toggle.drive import motor_speed, motor_torque
 from toggle.plant import PlantConfig, plant_outputs
 

@@ -105,7 +105,7 @@ class RigSetup:
         """Crosshead position (m) of the mold that ``hil run``'s default job plans for and
         the simulated rig clamps: the plan's contact position (the preset's final tie-bar
         force held by this rig, :attr:`errors`); None when the preset has no mold."""
-        from controllers.planner import plan_config
+        from controllers.plans import plan_config
 
         return plan_config(self.preset, mu=self.mu, errors=self.errors).x_contact
 

@@ -99,7 +99,8 @@ def planned_trajectory(preset: str, period: float = DEFAULT_PERIOD, *,
     of the default duration (:meth:`controllers.planner.ClampPlanner.best`) for the preset
     with its friction ``mu``, mold ``x_contact``, dimensional ``errors`` and [dynamics]
     fields ``masses`` (the simulated rig's as built), sampled every ``period`` s."""
-    from controllers.planner import default_duration, plan_config, planner_for
+    from controllers.planner import default_duration, planner_for
+    from controllers.plans import plan_config
 
     cfg = plan_config(preset, mu=mu, x_contact=x_contact, errors=errors, masses=masses)
     planner = planner_for(cfg, drive_limits(cfg.mechanism))

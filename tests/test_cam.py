@@ -17,7 +17,8 @@ from tc6_schema import schema_path
 from controllers import cam
 from controllers import cam_formats as cf
 from controllers.limits import drive_limits
-from controllers.planner import default_duration, plan_config, planner_for
+from controllers.planner import default_duration, planner_for
+from controllers.plans import plan_config
 from controllers.profiles import s_curve
 from fmu_src.build import build_fmu
 from toggle.elastics import clamp_stroke

@@ -12,8 +12,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from toggle.drive import (
+    back_efficiency,
     contact_from_pulses,
+    copper_loss,
     encoder_pulses,
+    flow_factor,
+    flow_torque,
     motor_speed,
     motor_torque,
     reflected_mass,
@@ -304,3 +308,62 @@ def test_the_default_drive_follows_any_staircase_at_any_fixed_step(h, levels, ho
         for _ in range(hold):
             state = follow(state, middle + half * level, h, bandwidth.start, damping.start)
             assert abs(state.a) <= 100.0 and abs(state.v) <= 2.0
+
+
+def test_the_back_driving_efficiency_is_the_catalogue_relation_unless_given():
+    """eta' = 2 - 1/eta (NSK/THK) where the preset gives none; the presets state theirs;
+    a screw that would not back-drive (eta <= 0.5) is refused, naming the key to give."""
+    plain = dataclasses.replace(SM55.drive, back_efficiency=None)
+    assert back_efficiency(plain) == pytest.approx(2 - 1 / 0.8) == pytest.approx(0.75)
+    assert back_efficiency(SM55.drive) == SM55.drive.back_efficiency
+    with pytest.raises(ParameterError, match="back_efficiency"):
+        back_efficiency(dataclasses.replace(plain, efficiency=0.5))
+    with pytest.raises(ParameterError, match="back_efficiency must be in"):
+        dataclasses.replace(SM55.drive, back_efficiency=0.9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-1e4, 1e4), st.floats(-0.5, 0.5), st.floats(-5.0, 5.0))
+def test_the_torque_by_power_flow_is_eq_32_driving_and_eta_prime_back_driven(force, v, a):
+    """Driving (F v > 0) the torque is Eq 32's with the rotor; back-driven or at rest the
+    thrust reaches the motor times eta' (less torque than 1/eta gives, the same sign)."""
+    drive = SM55.drive
+    torque = float(flow_torque(force, v, drive, a))
+    inertia = float(motor_torque(0.0, drive, a))
+    if force * v > 0:
+        assert torque == pytest.approx(float(motor_torque(force, drive, a)), rel=1e-12,
+                                       abs=1e-12)
+    else:
+        expected = force * drive.back_efficiency * drive.ratio * drive.lead / (2 * math.pi)
+        assert torque - inertia == pytest.approx(expected, rel=1e-12, abs=1e-12)
+        assert abs(torque - inertia) <= abs(float(motor_torque(force, drive))) + 1e-12
+
+
+def test_the_smoothed_flow_factor_tends_to_the_switch():
+    """The planner's tanh blend is the exact switch away from zero power, the mean at it."""
+    powers = np.array([-1.0, -1e-3, 0.0, 1e-3, 1.0])
+    exact = flow_factor(powers, 0.8, 0.75)
+    np.testing.assert_allclose(exact, [0.75, 0.75, 0.75, 1.25, 1.25])
+    smooth = flow_factor(powers, 0.8, 0.75, 1e-5)
+    np.testing.assert_allclose(smooth[[0, 1, 3, 4]], exact[[0, 1, 3, 4]], rtol=1e-12)
+    assert smooth[2] == pytest.approx((1.25 + 0.75) / 2)
+
+
+def test_copper_losses_are_phases_r_i_squared():
+    drive = SM55.drive
+    current = 10.0 / drive.torque_constant
+    assert float(copper_loss(10.0, drive)) == pytest.approx(
+        drive.phases * drive.winding_resistance * current**2)
+    with pytest.raises(ParameterError, match="winding_resistance"):
+        copper_loss(1.0, dataclasses.replace(drive, winding_resistance=None))
+
+
+@pytest.mark.parametrize(("line", "named"), [
+    ("phases = 0", "phases"), ("brake_voltage = 10.0", "brake_voltage"),
+    ("torque_constant = -1.0", "torque_constant"), ("back_efficiency = 0.95", "back_eff")])
+def test_bad_motor_data_is_refused_naming_the_key(tmp_path, line, named):
+    """A preset's bad electrical data is refused at load, naming file, section and key."""
+    path = _preset_with(tmp_path, line)
+    with pytest.raises(ParameterError, match=named) as info:
+        load_mechanism(path)
+    assert str(path) in str(info.value) and "[drive]" in str(info.value)

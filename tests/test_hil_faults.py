@@ -172,7 +172,7 @@ def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_p
     """IPOPT catches KeyboardInterrupt and returns as failed: the guard remembers it, also
     when the failed solve failed the plan (which was reported as 'duration 3.1 s is too
     short', exit 1)."""
-    from controllers.planner import PlanningError
+    from controllers.plans import PlanningError
     from hil import experiment
     from hil.cli import main
     from hil.interrupts import Interrupted

@@ -176,7 +176,8 @@ def test_the_default_job_plans_for_the_rig_as_built(tmp_path) -> None:
     the nominal clamp's plan replayed on the same rig (45.1 N against 55.6 N on chang2021:
     the nominal plan starts fast, where the platen's friction is largest)."""
     from controllers.limits import drive_limits
-    from controllers.planner import default_duration, plan_config, planner_for
+    from controllers.planner import default_duration, planner_for
+    from controllers.plans import plan_config
     from controllers.profiles import predict
     from toggle.rig_tables import rig_dynamics, rig_errors
 

@@ -18,17 +18,8 @@ from hypothesis import strategies as st
 from controllers.compiled import code_digest, code_modules, compiled
 from controllers.compiled import compiled as _real_compiled
 from controllers.limits import drive_limits
-from controllers.planner import (
-    CREEP_FACTOR,
-    ClampPlanner,
-    PlanningError,
-    Protection,
-    _problem_key,
-    baseline_stroke,
-    baselines,
-    plan_config,
-    planner_for,
-)
+from controllers.planner import ClampPlanner, planner_for
+from controllers.plans import CREEP_FACTOR, PlanningError, Protection, plan_config
 from controllers.profiles import (
     CSV_COLUMNS,
     minimum_time,
@@ -38,6 +29,8 @@ from controllers.profiles import (
     s_curve,
     write_profile_csv,
 )
+from controllers.stroke_problem import problem_key
+from controllers.stroke_reports import baseline_stroke, baselines
 from fmu_src.build import build_fmu
 from toggle.elastics import ClampingError, clamp_stroke
 from toggle.interrupts import signals_survive
@@ -210,20 +203,20 @@ def test_without_a_compiler_the_functions_stay_interpreted(tmp_path, monkeypatch
 
 def test_the_cache_key_covers_the_plant_and_the_code_it_uses(tmp_path):
     cfg = plan_config("chang2021").with_(x_contact=None)
-    key = _problem_key(cfg, 200)
-    changed = [_problem_key(cfg.with_(velocity_epsilon=2e-4), 200), _problem_key(cfg, 100),
-               _problem_key(cfg.with_(mechanism=cfg.mechanism.with_error("upper", "r5", 1e-4)),
+    key = problem_key(cfg, 200)
+    changed = [problem_key(cfg.with_(velocity_epsilon=2e-4), 200), problem_key(cfg, 100),
+               problem_key(cfg.with_(mechanism=cfg.mechanism.with_error("upper", "r5", 1e-4)),
                             200)]
-    assert key == _problem_key(cfg, 200) and key not in changed
+    assert key == problem_key(cfg, 200) and key not in changed
     assert len(set(changed)) == len(changed)
     # mold height, friction, masses and the drive are parameters of the problem, not part of
     # the key
-    assert _problem_key(cfg.with_(mu=0.06, x_contact=0.04), 200) == key
-    assert _problem_key(replace(cfg, mechanism=replace(
+    assert problem_key(cfg.with_(mu=0.06, x_contact=0.04), 200) == key
+    assert problem_key(replace(cfg, mechanism=replace(
         cfg.mechanism, dynamics=replace(cfg.dynamics, platen=2.6))), 200) == key
     other_drive = replace(cfg.mechanism.drive, rotor_inertia=1e-4, lead=4e-3,
                           torque_speed=((0.0, 0.2), (40.0, 0.1)))
-    assert _problem_key(cfg.with_(mechanism=replace(cfg.mechanism, drive=other_drive)),
+    assert problem_key(cfg.with_(mechanism=replace(cfg.mechanism, drive=other_drive)),
                         200) == key
     package = tmp_path / "fakepkg"
     package.mkdir()
@@ -252,6 +245,16 @@ def test_the_planners_key_covers_the_plant_it_compiles_and_nothing_else():
     assert not {"toggle.plots", "toggle.press", "toggle_cli", "hil.cli"} & set(used)
 
 
+def test_the_compiled_problems_key_hashes_its_declaration_not_the_solving():
+    """The key's code digest is taken in controllers.stroke_problem (the declaration of the
+    compiled functions): it must follow the plant, and editing the solving, the reports or
+    the plans (none of them compiled) must not recompile."""
+    used = set(code_modules("controllers.stroke_problem"))
+    assert {"controllers.stroke_problem", "toggle.plant", "toggle.kinematics",
+            "toggle.statics", "toggle.drive"} <= used
+    assert not {"controllers.planner", "controllers.stroke_reports", "controllers.plans"} & used
+
+
 def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, tmp_path, monkeypatch):
     cfg, limits, planner, plan = chang
     faster = planner_for(cfg, replace(limits, velocity=0.05))
@@ -268,7 +271,7 @@ def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang, tmp_path, mo
     # in the disk cache (its own here: other processes prune the shared one), no compile
     monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
     ClampPlanner(cfg, limits, intervals=8)
-    monkeypatch.setattr("controllers.planner.compiled", _no_compile)
+    monkeypatch.setattr("controllers.stroke_problem.compiled", _no_compile)
     other = ClampPlanner(cfg.with_(mu=cfg.friction * 1.5), replace(limits, velocity=0.03),
                          intervals=8)
     assert other.problem._force.class_name() == "External"
@@ -293,7 +296,7 @@ def test_a_change_of_the_drive_reuses_the_compiled_problem(chang, tmp_path, monk
         heavier.samples.input_force, rtol=1e-9, atol=1e-9)
     monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
     ClampPlanner(cfg, limits, intervals=8).problem.with_torque  # noqa: B018 - both problems
-    monkeypatch.setattr("controllers.planner.compiled", _no_compile)
+    monkeypatch.setattr("controllers.stroke_problem.compiled", _no_compile)
     other = ClampPlanner(heavy, steep, intervals=8)
     assert other.problem._force.class_name() == "External"
     assert other.solve(DURATION).duration == pytest.approx(DURATION)
@@ -780,7 +783,7 @@ def test_a_signal_swallowed_in_a_block_reaches_the_handler_after_it(swallowed_si
 def test_ctrl_c_during_a_solve_stops_toggle_plan(monkeypatch, capsys, swallowed_sigint):
     """A Ctrl-C that IPOPT swallowed was a failed solve: toggle plan --trade-off went on
     with its next force limit for 25 s and exited 0. Now it stops with 130."""
-    from controllers.planner import StrokeProblem
+    from controllers.stroke_problem import StrokeProblem
 
     real = StrokeProblem.solver
     monkeypatch.setattr(StrokeProblem, "solver",

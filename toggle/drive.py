@@ -19,7 +19,20 @@ cell's input force) and acceleration a is
 
 the efficiency applying to the thrust (the screw's and belt's losses), not to the
 rotating parts' own inertia. The motor delivers at most its torque-speed curve
-(:func:`torque_speed_limit`), a table of the preset (``[drive] torque_speed``).
+(:func:`torque_speed_limit`), a table of the preset (``[drive] torque_speed``); against
+it the torque is taken with 1/eta in both directions (the larger torque, on the safe side).
+
+Where the load back-drives the motor (thrust power F v < 0: the clamp's elastic energy
+or the masses' kinetic energy flowing back through the screw) the screw's losses reduce
+the torque reaching the motor instead of adding to it, so the motor torque is
+
+    T_m = p (F k + m_drive a),  k = 1/eta where F v > 0, else eta'   (:func:`flow_torque`)
+
+with eta' the back-driving efficiency, by default eta' = 2 - 1/eta (:func:`back_efficiency`:
+the relation between a ball screw's forward and reverse efficiency that THK's and NSK's
+ball-screw catalogues give, from the same friction angle; 0.9 -> 0.889, 0.8 -> 0.75). At
+rest (v = 0) the motor holds the load with eta' (the screw's friction helps to hold it).
+The motor's copper losses are phases R (T_m / k_t)^2 (:func:`copper_loss`).
 """
 
 from __future__ import annotations
@@ -38,7 +51,7 @@ from toggle.elastics import (
     clamp_stroke,
     crosshead_travel,
 )
-from toggle.params import Drive, Mechanism
+from toggle.params import Drive, Mechanism, ParameterError
 
 
 def drive_data(mech: Mechanism) -> Drive:
@@ -67,6 +80,59 @@ def drive_torque(thrust: Any, acceleration: Any, travel: Any, efficiency: Any,
     drive mass m_drive (kg): the one torque equation, on floats, arrays or CasADi symbols
     (the planner's drive values are symbols of its compiled problem)."""
     return travel * (thrust / efficiency + mass * acceleration)
+
+
+def back_efficiency(drive: Drive) -> float:
+    """The back-driving efficiency eta' of belt and screw: the preset's ``back_efficiency``
+    or 2 - 1/eta (THK and NSK ball-screw catalogues); refused where that is not positive
+    (eta <= 0.5: the screw would not back-drive, a model this one is not)."""
+    if drive.back_efficiency is not None:
+        return drive.back_efficiency
+    reverse = 2.0 - 1.0 / drive.efficiency
+    if reverse <= 0:
+        raise ParameterError(f"a drive efficiency of {drive.efficiency:g} gives no back-driving "
+                         "efficiency (2 - 1/eta <= 0): give [drive] back_efficiency")
+    return reverse
+
+
+def flow_factor(power: Any, efficiency: Any, reverse: Any, smoothing: Any = None) -> Any:
+    """The factor k on the thrust in the motor torque by the direction of power flow:
+    1/eta where the thrust power F v is positive (the motor drives the load), eta' (the
+    ``reverse`` efficiency) where it is not. With ``smoothing`` (W, or the caller's power
+    unit) a tanh blend of the two over that power, for a smooth optimisation problem
+    (floats, arrays or CasADi symbols); without it the exact switch (arrays)."""
+    if smoothing is None:
+        return np.where(np.asarray(power) > 0, 1.0 / efficiency, reverse)
+    mean, half = (1.0 / efficiency + reverse) / 2, (1.0 / efficiency - reverse) / 2
+    return mean + half * np.tanh(power / smoothing)
+
+
+def flow_torque(thrust: Any, velocity: Any, drive: Drive, acceleration: Any = 0.0) -> Any:
+    """Motor torque T_m = p (F k + m_drive a), N m, with k by the direction of power flow
+    (:func:`flow_factor`: 1/eta driving, the back-driving efficiency eta' while the load
+    drives the motor and at rest) for crosshead thrust F (N), velocity v (m/s) and
+    acceleration a (m/s^2)."""
+    thrust = np.asarray(thrust, dtype=float)
+    k = flow_factor(thrust * np.asarray(velocity, dtype=float), drive.efficiency,
+                    back_efficiency(drive))
+    return drive_torque(thrust, acceleration, travel_per_radian(drive), 1.0 / k,
+                        reflected_mass(drive))
+
+
+def copper_coefficient(drive: Drive) -> float | None:
+    """c in the copper losses c T_m^2 (W per (N m)^2): phases R / k_t^2; None where the
+    preset gives no winding resistance or torque constant."""
+    if drive.winding_resistance is None or drive.torque_constant is None:
+        return None
+    return drive.phases * drive.winding_resistance / drive.torque_constant**2
+
+
+def copper_loss(torque: Any, drive: Drive) -> Any:
+    """The motor's copper losses phases R (T_m / k_t)^2, W, at motor torque T_m (N m)."""
+    c = copper_coefficient(drive)
+    if c is None:
+        raise ParameterError("the drive has no winding_resistance and torque_constant")
+    return c * np.asarray(torque) ** 2
 
 
 def motor_torque(thrust: Any, drive: Drive, acceleration: Any = 0.0) -> Any:

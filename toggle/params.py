@@ -286,6 +286,17 @@ class Drive:
     ...) from speed 0, speeds increasing, torques not increasing, interpolated linearly
     and constant beyond the last point (:func:`toggle.drive.torque_speed_limit`); None:
     the planner's flat default (:mod:`controllers.limits`).
+
+    The motor and its drive as physics (:mod:`controllers.duty`), each optional (None:
+    unknown, the figures that need it are not given): back_efficiency: eta' of belt and
+    screw while the load back-drives the motor (None: 2 - 1/eta, the ball-screw relation
+    of THK's and NSK's catalogues, :func:`toggle.drive.back_efficiency`);
+    torque_constant: k_t, N m per A (rms phase current); winding_resistance: R of one
+    phase, ohm; phases: the motor's phases (3: AC servo, 2: stepper), copper losses
+    phases R (T / k_t)^2; thermal_time_constant: the winding's, s; rated_temperature_rise:
+    the winding's rise above ambient at the rated torque, K (its thermal resistance follows
+    from the rated torque's copper losses); bus_voltage: the drive's DC bus, V;
+    brake_voltage: the bus voltage where its brake chopper (or overvoltage limit) acts, V.
     """
 
     ratio: float
@@ -297,12 +308,33 @@ class Drive:
     rotor_inertia: float = 0.0
     screw_inertia: float = 0.0
     torque_speed: tuple[tuple[float, float], ...] | None = None
+    back_efficiency: float | None = None
+    torque_constant: float | None = None
+    winding_resistance: float | None = None
+    phases: int = 3
+    thermal_time_constant: float | None = None
+    rated_temperature_rise: float | None = None
+    bus_voltage: float | None = None
+    brake_voltage: float | None = None
 
     def __post_init__(self) -> None:
-        _check_positive(self, optional=("rated_torque", "rated_speed"),
+        _check_positive(self, optional=("rated_torque", "rated_speed", "back_efficiency",
+                                        "torque_constant", "winding_resistance",
+                                        "thermal_time_constant", "rated_temperature_rise",
+                                        "bus_voltage", "brake_voltage"),
                         skip=("rotor_inertia", "screw_inertia", "torque_speed"))
         if self.efficiency > 1:
             raise ParameterError(f"drive efficiency must be in (0, 1], got {self.efficiency}")
+        if self.back_efficiency is not None and self.back_efficiency > self.efficiency:
+            raise ParameterError("drive back_efficiency must be in (0, efficiency]: back-"
+                                 f"driving loses at least as much, got {self.back_efficiency}")
+        if not (isinstance(self.phases, int) and not isinstance(self.phases, bool)
+                and 1 <= self.phases <= 6):
+            raise ParameterError(f"drive phases must be an integer 1 to 6, got {self.phases!r}")
+        if None not in (self.bus_voltage, self.brake_voltage) and not (
+                self.brake_voltage > self.bus_voltage):
+            raise ParameterError(f"drive brake_voltage ({self.brake_voltage} V) must be above "
+                                 f"bus_voltage ({self.bus_voltage} V)")
         for name in ("rotor_inertia", "screw_inertia"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not (

@@ -21,22 +21,23 @@ from controllers.cycle import MoldingCycle
 from controllers.duty import check_motor, motor_duty
 from controllers.limits import DriveLimits, drive_limits
 from controllers.planner import (
-    CONTACT_SPEED,
-    INTERVALS,
-    OBJECTIVES,
-    PROTECT_FRACTION,
     ClampPlanner,
-    Plan,
-    Protection,
-    baseline_stroke,
-    baselines,
     best_plan,
     default_duration,
-    plan_config,
     planner_for,
     trade_off_curve,
 )
+from controllers.plans import (
+    CONTACT_SPEED,
+    INTERVALS,
+    PROTECT_FRACTION,
+    Plan,
+    Protection,
+    plan_config,
+)
 from controllers.profiles import predict, read_profile_csv, write_profile_csv
+from controllers.stroke_problem import OBJECTIVES
+from controllers.stroke_reports import baseline_stroke, baselines
 from toggle.args import integer, number, path, positive
 from toggle.drive import motor_torque
 from toggle.elastics import clamp_stroke
@@ -450,11 +451,36 @@ def _print_molding(molding: dict) -> None:
     print(f"molding cycle {molding['cycle_time']:.4g} s: {phases}; motor RMS torque "
           f"{molding['rms_torque']:.4g} N m{rated}, peak {molding['peak_torque']:.4g} N m "
           f"({100 * motor['peak_over_curve']:.1f} % of the torque-speed curve), peak speed "
-          f"{molding['peak_speed']:.4g} rad/s; energy per cycle "
-          f"{molding['energy_regenerating']:.4g} J with regeneration, "
-          f"{molding['energy_without_regeneration']:.4g} J without; "
-          f"integral of torque^2 {molding['torque_squared_integral']:.4g} N^2 m^2 s (copper "
-          "losses: times R / k_t^2)")
+          f"{molding['peak_speed']:.4g} rad/s; shaft energy per cycle "
+          f"{molding['shaft_energy_regenerating']:.4g} J with regeneration, "
+          f"{molding['shaft_energy_without_regeneration']:.4g} J without")
+    _print_electrical(molding["electrical"], molding["thermal"])
+
+
+def _print_electrical(electrical: dict | None, thermal: dict | None) -> None:
+    """The cycle's electrical energy, braking and winding temperature, printed (or why not)."""
+    if electrical is None:
+        print("electrical energy: the preset's [drive] gives no winding_resistance and "
+              "torque_constant")
+        return
+    e = electrical
+    brake = (f"a brake resistor of at most {e['brake_resistor_max']:.4g} ohm "
+             f"({e['brake_resistor_power']:.4g} W continuous)"
+             if e["brake_resistor_max"] is not None else "no brake resistor needed")
+    bus = (f", or {e['bus_capacitance'] * 1e6:.4g} uF of DC bus for the largest braking event "
+           f"({e['largest_braking_event']:.4g} J)" if e["bus_capacitance"] else "")
+    print(f"electrical energy per cycle {e['energy_regenerating']:.4g} J with regeneration, "
+          f"{e['energy_without_regeneration']:.4g} J without (copper losses "
+          f"{e['copper_loss_energy']:.4g} J, mean {e['copper_loss_mean']:.4g} W); peak "
+          f"regenerative power {e['peak_regenerative_power']:.4g} W, braking energy "
+          f"{e['braking_energy']:.4g} J per cycle: {brake}{bus}")
+    if thermal is not None:
+        print(f"winding temperature rise over repeated cycles: peak "
+              f"{thermal['rise_periodic_peak']:.4g} K, mean {thermal['rise_periodic_mean']:.4g} K"
+              f" of the rated {thermal['rated_rise']:.4g} K (first cycle "
+              f"{thermal['rise_first_cycle']:.3g} K; 95 % after "
+              f"{thermal['cycles_to_settle']} cycles, time constant "
+              f"{thermal['time_constant']:.4g} s)")
 
 
 def plot(args: argparse.Namespace) -> int:
@@ -553,8 +579,8 @@ def _add_protection_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
-    add_preset_argument(p, accepts=("chang2021",),
-                        why="lin2003_sm55 and li_micro have no [dynamics] (give --masses)")
+    add_preset_argument(p, accepts=("chang2021", "lin2003_sm55"),
+                        why="li_micro has no [dynamics] (give --masses)")
     p.add_argument("--mu", type=FRICTION, default=None, help="pin friction (default: preset's)")
     mold = p.add_mutually_exclusive_group()
     mold.add_argument("--x-contact", type=POSITION, default=None,
@@ -595,7 +621,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="input-force limit of --min-time, N (default: the torque limit's)")
     p.add_argument("--objective", choices=OBJECTIVES, default="peak",
                    help="minimise the peak input force, the integral of its square or the "
-                        "integral of the squared motor torque (energy: the copper losses) "
+                        "stroke's electrical energy (energy: shaft power with the screw's "
+                        "efficiency by the direction of power flow, plus copper losses) "
                         "(default peak)")
     p.add_argument("--energy-weight", type=number(0.0, 1e6, "must be a weight from 0 to 1e6"),
                    default=0.0,
