@@ -188,13 +188,12 @@ def lockup(mech: Mechanism, result: ClampingResult) -> dict[str, float]:
     def opening(x: float) -> float:  # crosshead force to start opening at x (> 0 a push)
         return float(clamp_state(x, result.x_contact, mech, mu_s, OPENING).thrust)
 
-    held = opening(result.x_final) < 0
+    xs = np.linspace(result.x_contact, result.x_final, 41)[1:]
+    pushes = np.asarray(clamp_state(xs, result.x_contact, mech, mu_s, OPENING).thrust) >= 0
     travel = 0.0
-    if held:
-        xs = np.linspace(result.x_contact, result.x_final, 41)[1:]
-        pushes = [opening(x) >= 0 for x in xs]
-        if any(pushes):
-            i = max(i for i, p in enumerate(pushes) if p)
+    if not pushes[-1]:  # held at the final position: from where on?
+        if pushes.any():
+            i = int(np.flatnonzero(pushes)[-1])
             travel = result.x_final - brentq(opening, xs[i], xs[i + 1], xtol=1e-9)
         else:
             travel = result.x_final - result.x_contact
