@@ -271,3 +271,34 @@ def test_a_seed_replays_the_genetic_search_and_a_rerun_computes_nothing(tmp_path
     again = run_search(targets, tmp_path / "a", generations=5, population=20, seed=5,
                        workers=0)
     assert 0 < again.evaluated <= 20  # only the new generation's candidates
+
+
+def test_the_default_back_end_takes_the_free_cores_or_stays_in_the_process() -> None:
+    from design.runner import default_workers
+    assert default_workers(2400, cores=2, load=0.2) == 2  # an idle two-core machine
+    assert default_workers(2400, cores=2, load=1.0) == 0  # one CPU hog: one core's worth
+    assert default_workers(2400, cores=2, load=13.0) == 0  # the loaded machine of issue 38
+    assert default_workers(2400, cores=16, load=3.6) == 12
+    assert default_workers(50, cores=16, load=0.0) == 0  # too small to pay for a cluster
+
+
+def test_one_progress_bar_counts_the_whole_search(tmp_path: Path, monkeypatch) -> None:
+    import tqdm
+    bars: list[dict] = []
+
+    class Bar:  # records what the search tells its bar (a terminal would draw it)
+        def __init__(self, **kwargs: object) -> None:
+            bars.append({"total": kwargs["total"], "done": 0, "closed": False})
+
+        def update(self, n: int = 1) -> None:
+            bars[-1]["done"] += n
+
+        def close(self) -> None:
+            bars[-1]["closed"] = True
+
+    monkeypatch.setattr(tqdm, "tqdm", Bar)
+    targets = load_targets(LI_MICRO)
+    run_search(targets, tmp_path, generations=2, population=12, workers=0, progress=True)
+    assert bars == [{"total": 24, "done": 24, "closed": True}]  # one bar, 2 x 12 designs
+    run_search(targets, tmp_path, generations=3, population=12, workers=0, progress=True)
+    assert bars[1] == {"total": 36, "done": 36, "closed": True}  # the record's 24 counted
