@@ -6,7 +6,9 @@ goes to build/design/ and a rerun resumes from it), reads the record back by rep
 same seeded search (nothing is computed again: it checks that), and prints the Markdown of
 docs/design.md's tables: seed 004's groups against the front, and the SM-55 redesign with
 every objective and constraint against the SM-55, both opened by the same rule. Writes the
-figures to docs/design/ and the chosen SM-55 design to design/examples/sm55_design.toml.
+figures to docs/design/ and the chosen SM-55 design to design/examples/sm55_design.toml
+(the SM-55 opened by the same rule to build/design/sm55_reference.toml), and runs
+``toggle plan --min-time --cycle`` on both.
 ``tests/test_design_report.py`` runs it on a reduced search.
 """
 
@@ -143,6 +145,7 @@ def sm55(records: Path, search: dict, design_file: Path | None = None,
                                               reference.reference.variables, stroke)
     if design_file is not None:
         write_preset(design_file, targets, design, name="sm55_design")
+        write_preset(records / "sm55_reference.toml", targets, ref, name="sm55_reference")
     wins = [r.key for r in objectives + limits if r.verdict == "wins"]
     loses = [r.key for r in objectives + limits if r.verdict == "loses"]
     out = [f"```text\n{line}\n```\n",
@@ -166,6 +169,54 @@ def sm55(records: Path, search: dict, design_file: Path | None = None,
     return "\n".join(out)
 
 
+#: The planner's run on each side of the comparison (the molding cycle with it).
+PLAN = ["--min-time", "--force-limit", "1e5", "--cycle", "--hold", "8", "--eject", "1.5",
+        "--json"]
+
+
+def plans(presets: dict[str, Path]) -> str:
+    """``toggle plan`` on each preset: the minimum-time stroke's times, peak input force, the
+    motor's RMS torque and energy over the stroke and over the molding cycle."""
+    import contextlib
+    import io
+    import json
+
+    from toggle_cli import main
+    got = {}
+    for name, path in presets.items():
+        argv = ["plan", "--preset", os.path.relpath(path, ROOT), *PLAN]
+        text = io.StringIO()
+        here = Path.cwd()
+        os.chdir(ROOT)
+        try:
+            with contextlib.redirect_stdout(text):
+                if main(argv) != 0:
+                    raise SystemExit(f"toggle {' '.join(argv)} failed")
+        finally:
+            os.chdir(here)
+        got[name] = json.loads(text.getvalue())
+    quantities = [("stroke time (s)", lambda r: r["duration"]),
+                  ("closing time (s)", lambda r: r["closing_time"]),
+                  ("peak input force (N)", lambda r: r["peak_force"]),
+                  ("stroke RMS torque (N m)", lambda r: r["duty"]["rms_torque"]),
+                  ("stroke energy, no regeneration (J)",
+                   lambda r: r["duty"]["energy_without_regeneration"]),
+                  ("peak motor torque (N m)", lambda r: r["peak_motor_torque"]),
+                  ("molding cycle (s)", lambda r: r["molding_cycle"]["cycle_time"]),
+                  ("cycle RMS torque (N m)", lambda r: r["molding_cycle"]["rms_torque"]),
+                  ("cycle peak torque (N m)", lambda r: r["molding_cycle"]["peak_torque"]),
+                  ("cycle energy, no regeneration (J)",
+                   lambda r: r["molding_cycle"]["energy_without_regeneration"])]
+    (a, ra), (b, rb) = got.items()
+    out = ["```text", *(f"$ toggle plan --preset {os.path.relpath(p, ROOT)} {' '.join(PLAN)}"
+                        for p in presets.values()), "```", "",
+           f"| quantity | {a} | {b} | change |", "|---|---|---|---|"]
+    for label, value in quantities:
+        x, y = value(ra), value(rb)
+        out.append(f"| {label} | {x:.5g} | {y:.5g} | {100 * (y - x) / abs(x):+.2f} % |")
+    return "\n".join(out)
+
+
 def shrink(path: Path) -> None:
     """A 64-colour palette PNG: a tenth of the size, for the repository."""
     from PIL import Image
@@ -178,5 +229,8 @@ if __name__ == "__main__":
     print(seed_004(records, SEARCHES["li_micro"]))
     print()
     print(sm55(records, SEARCHES["sm55"], EXAMPLES / "sm55_design.toml"))
+    print()
+    print(plans({"SM-55": records / "sm55_reference.toml",
+                 "sm55_design": EXAMPLES / "sm55_design.toml"}))
     for png in FIGURES.glob("*.png"):
         shrink(png)
