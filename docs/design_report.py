@@ -146,8 +146,8 @@ def sm55(records: Path, search: dict, design_file: Path | None = None,
     if design_file is not None:
         write_preset(design_file, targets, design, name="sm55_design")
         write_preset(records / "sm55_reference.toml", targets, ref, name="sm55_reference")
-    wins = [r.key for r in objectives + limits if r.verdict == "wins"]
-    loses = [r.key for r in objectives + limits if r.verdict == "loses"]
+    wins = list(dict.fromkeys(r.key for r in objectives + limits if r.verdict == "wins"))
+    loses = list(dict.fromkeys(r.key for r in objectives + limits if r.verdict == "loses"))
     out = [f"```text\n{line}\n```\n",
            f"sm55: {len(result.evaluations)} designs, {len(result.feasible)} feasible, "
            f"{len(result.front)} in the Pareto set; SM-55: {reference.status}; chosen: "
