@@ -49,6 +49,9 @@ MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_tog
 CONSTRAINTS = ("assembly", "mold_open_stroke", "installation_length", "max_link_ratio",
                "clamp_force", "drive_thrust", "tolerances", *DESIGN_LIMITS)
 
+#: Objectives of the motor's duty along the closing-time bound's profile.
+_DUTY = ("close_rms_torque", "close_energy")
+
 #: The designer's limits read on the geometry alone (the others need the clamping forces).
 _GEOMETRIC = ("transmission_angle", "radial_envelope", "tiebar_clearance", "platen_side_load")
 
@@ -319,16 +322,31 @@ class Evaluator:
                 out.reason = (f"drive_thrust: the clamp needs {result.thrust_max:.6g} N, the "
                               f"motor holds {most:.6g} N")
                 return
-        if "close_time" in self.targets.objectives:
-            self._close_time(mech, result.x_contact, result.x_final, m, g, out)
+        if {"close_time", *_DUTY} & set(self.targets.objectives):
+            self._close_time(mech, result.x_contact, result.x_final, m, g, out,
+                             duty=bool(set(_DUTY) & set(self.targets.objectives)))
+
+    def close_duty(self, values: Mapping[str, float], x_open: float) -> dict[str, float]:
+        """The closing stroke's time bound, RMS torque and energy on the bound's profile
+        (:func:`design.timing.close_duty`) of a feasible candidate opening at ``x_open``."""
+        from design.timing import close_duty
+        from toggle.plant import PlantConfig
+        mech = self.mechanism(values, x_open=x_open)
+        result = analyse_clamping(mech)
+        return close_duty(PlantConfig(mech, x_contact=result.x_contact), self._limits,
+                          x_open, result.x_final)
 
     def _close_time(self, mech: Mechanism, x_contact: float, x_final: float,
-                    m: dict[str, float], g: dict[str, float], out: Evaluation) -> None:
-        from design.timing import StallError, close_time_bound
+                    m: dict[str, float], g: dict[str, float], out: Evaluation,
+                    duty: bool = False) -> None:
+        from design.timing import StallError, close_duty, close_time_bound
         from toggle.plant import PlantConfig
+        cfg = PlantConfig(mech, x_contact=x_contact)
         try:
-            m["close_time"] = close_time_bound(PlantConfig(mech, x_contact=x_contact),
-                                               self._limits, m["x_open"], x_final)
+            if duty:
+                m.update(close_duty(cfg, self._limits, m["x_open"], x_final))
+            else:
+                m["close_time"] = close_time_bound(cfg, self._limits, m["x_open"], x_final)
         except StallError as exc:
             g["drive_thrust"] = max(g.get("drive_thrust", 0.0), 1.0)
             out.reason = f"drive_thrust: {exc}"

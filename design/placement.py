@@ -163,6 +163,9 @@ def compare(evaluator: Evaluator, design: dict[str, float], reference: dict[str,
     evaluations and the rows of every objective and every constraint measured on both."""
     ref = evaluator(evaluator.vector(open_to_stroke(evaluator, reference, stroke)))
     des = evaluator(evaluator.vector(open_to_stroke(evaluator, design, stroke)))
+    if "close_time" in ref.metrics and "close_time" in des.metrics:  # the motor's duty too
+        for e in (ref, des):
+            e.metrics.update(evaluator.close_duty(e.variables, e.metrics["x_open"]))
     objectives = [Row(k, o.unit, o.sense, ref.metrics[k], des.metrics[k])
                   for k, o in OBJECTIVES.items() if k in ref.metrics and k in des.metrics]
     limits = []

@@ -229,6 +229,11 @@ OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
               "1", -1),
     Objective("close_time", "closing time bound under the motor's limits", "s", -1,
               ("clamp", "drive", "dynamics")),
+    Objective("close_rms_torque", "motor RMS torque over the closing stroke, on the time "
+              "bound's profile (an estimate of the minimum-time plan's)", "N m", -1,
+              ("clamp", "drive", "dynamics")),
+    Objective("close_energy", "motor energy (no regeneration) over the closing stroke, on "
+              "the time bound's profile", "J", -1, ("clamp", "drive", "dynamics")),
     Objective("thrust_peak", "peak crosshead thrust clamping to the force", "N", -1,
               ("clamp",)),
     Objective("link_stress", "peak axial link stress, clamped", "Pa", -1, ("clamp",)),

@@ -173,3 +173,15 @@ def test_seed_004_mp_is_eq_6_as_the_paper_gives_it() -> None:
     e = evaluator(evaluator.vector(group))
     assert e.metrics["force_amplification"] == pytest.approx(8.19, abs=0.005)
     assert e.metrics["mechanical_advantage_lock"] == pytest.approx(4.09, abs=0.005)
+
+
+def test_the_duty_on_the_bound_profile_does_at_least_the_clamping_work(sm55) -> None:
+    mech, evaluator, ref = sm55
+    duty = evaluator.close_duty(ref.variables, ref.metrics["x_open"])
+    assert duty["close_time"] == pytest.approx(ref.metrics["close_time"], rel=1e-12)
+    result = analyse_clamping(mech)
+    xs = np.linspace(result.x_contact, result.x_final, 801)
+    thrust = np.asarray(clamp_state(xs, result.x_contact, mech).thrust, dtype=float)
+    work = float(np.sum(0.5 * (thrust[1:] + thrust[:-1]) * np.diff(xs)))
+    assert duty["close_energy"] >= work / mech.drive.efficiency > 0  # the clamp-up's share
+    assert duty["close_rms_torque"] > 0
