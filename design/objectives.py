@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from design.targets import OBJECTIVES, TARGETS, VARIABLES, Targets
+from design import constraints as checks
+from design.targets import DESIGN_LIMITS, OBJECTIVES, TARGETS, VARIABLES, Targets
 from toggle.elastics import ClampingError, analyse_clamping
 from toggle.kinematics import AssemblyError, output_position, sensitivities, stroke_limits
 from toggle.params import HalfDims, Mechanism, ParameterError
@@ -35,12 +36,24 @@ from toggle.study import angle_grid, angle_measures, criteria
 
 #: Measures recorded for every feasible candidate besides the objectives, with units.
 MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_toggle": "m",
-            "link_ratio": "1"}
+            "link_ratio": "1", "transmission_D": "rad", "transmission_A": "rad",
+            "platen_side_load": "1", "radial_envelope": "m", "tiebar_clearance": "m",
+            "link_mass": "kg", "lockup_angle": "rad", "breakaway_force": "N",
+            "self_locking_travel": "m", "clamp_force_sensitivity": "1/m",
+            "link_utilisation": "1", "buckling_utilisation": "1", "pin_pressure": "Pa"}
 
 #: The constraints, in the order of the G matrix; each is active when its target is set
-#: (assembly always; drive_thrust when the preset has a drive and clamp data).
+#: (assembly always; drive_thrust when the preset has a drive and clamp data; the
+#: designer's limits of :data:`design.targets.DESIGN_LIMITS` at their defaults when the
+#: preset has the data they need, or at the value [targets] gives).
 CONSTRAINTS = ("assembly", "mold_open_stroke", "installation_length", "max_link_ratio",
-               "clamp_force", "drive_thrust", "tolerances")
+               "clamp_force", "drive_thrust", "tolerances", *DESIGN_LIMITS)
+
+#: Objectives of the motor's duty along the closing-time bound's profile.
+_DUTY = ("close_rms_torque", "close_energy")
+
+#: The designer's limits read on the geometry alone (the others need the clamping forces).
+_GEOMETRIC = ("transmission_angle", "radial_envelope", "tiebar_clearance", "platen_side_load")
 
 #: Platen travel before mold contact over which the speed ratio "at mold close" is read
 #: (the planner's default mold-protection zone: the last tenth).
@@ -94,15 +107,43 @@ class Evaluator:
         self.targets = targets
         self.base = targets.base
         self.digest = targets.digest()
+        self.limits = self._limits_in_force()
         self.active = self._active_constraints()
         wanted = set(targets.objectives)
         self._clamp = self.base.clamp is not None and bool(
-            wanted & {"close_time", "thrust_peak", "link_stress", "tiebar_stress"}
-            or "clamp_force" in targets.targets)
+            wanted & {"close_time", "thrust_peak", "link_stress", "tiebar_stress",
+                      "link_mass", "breakaway_force"}
+            or "clamp_force" in targets.targets or set(self.limits) - set(_GEOMETRIC))
         self._limits = None
         if self.base.drive is not None:
             from controllers.limits import drive_limits
             self._limits = drive_limits(self.base)
+
+    def _has(self, need: str) -> bool:
+        base = self.base
+        if need == "spacing":
+            return base.clamp is not None and base.clamp.tiebars.spacing is not None
+        return getattr(base, need) is not None
+
+    def _limits_in_force(self) -> dict[str, float]:
+        """Each designer's limit at the value [targets] gives, else at its default where
+        the preset has the data it needs (the radial envelope's default: the base
+        preset's own, at its open position)."""
+        out = {}
+        for key, lim in DESIGN_LIMITS.items():
+            if not all(self._has(n) for n in lim.needs):
+                continue
+            if key in self.targets.targets:
+                out[key] = self.targets.targets[key]
+            elif lim.default is not None:
+                out[key] = lim.default
+            elif key == "radial_envelope":
+                dims = self.base.lower
+                x_open, x_toggle = stroke_limits(dims)
+                if self.base.clamp is not None and self.base.clamp.x_open is not None:
+                    x_open = self.base.clamp.x_open
+                out[key] = checks.radial_envelope(checks.joint_paths(dims, x_open, x_toggle))
+        return out
 
     def _active_constraints(self) -> tuple[str, ...]:
         t, base = self.targets, self.base
@@ -113,13 +154,18 @@ class Evaluator:
               "clamp_force": base.clamp is not None,
               "drive_thrust": base.clamp is not None and base.drive is not None,
               "tolerances": "tolerance_cost" in t.objectives}
+        on.update({k: k in self.limits for k in DESIGN_LIMITS})
         return tuple(c for c in CONSTRAINTS if on[c])
 
     def vector(self, values: Mapping[str, float]) -> np.ndarray:
         return np.array([float(values[v]) for v in VARIABLES])
 
     def values(self, vector: Sequence[float]) -> dict[str, float]:
-        return dict(zip(VARIABLES, (float(v) for v in vector)))
+        """The variables of a vector; with settings.lockup_angle, e follows the links."""
+        out = dict(zip(VARIABLES, (float(v) for v in vector)))
+        if self.targets.settings["lockup_angle"] > 0:
+            out["e"] = (out["r4b"] + out["r5"]) * math.sin(self.targets.settings["lockup_angle"])
+        return out
 
     def mechanism(self, values: Mapping[str, float], x_open: float | None = None,
                   name: str = "design") -> Mechanism:
@@ -130,7 +176,14 @@ class Evaluator:
         if clamp is not None:
             clamp = replace(clamp, x_open=x_open, final_tiebar_force=self.targets.targets.get(
                 "clamp_force", clamp.final_tiebar_force))
+        dynamics = self.base.dynamics
+        if dynamics is not None and self.base.sections is not None and clamp is not None:
+            # the links' mass scales with their lengths (sections as the preset's)
+            scale = (checks.link_mass(dims, self.base)
+                     / checks.link_mass(self.base.lower, self.base))
+            dynamics = replace(dynamics, links=dynamics.links * scale)
         return replace(self.base, name=name, lower=dims, upper=dims, clamp=clamp,
+                       dynamics=dynamics,
                        description=f"designed by toggle design on {self.base.name}")
 
     def __call__(self, vector: Sequence[float]) -> Evaluation:
@@ -166,6 +219,11 @@ class Evaluator:
                                 f"{slowest:.3g} at a toggle angle of {where:.4g} deg)")
         m.update(criteria(measures))
         m["velocity_ratio_peak"] = m.pop("velocity_ratio")
+        # seed 004's Mp is its Eq 6, the strokes' ratio from lock-up (8.19 for group 1 at
+        # 1 deg); Eq 5's 1 / Mv, the force ratio at the angle, is half of it near lock-up
+        m["mechanical_advantage_lock"] = m.pop("force_amplification")
+        m["force_amplification"] = float(measures.crosshead_stroke[0]
+                                         / measures.platen_stroke[0])
         m["x_open"], m["x_toggle"] = float(measures.x[-1]), x_toggle
         m["platen_stroke"] = float(measures.platen_stroke[-1])
         m["crosshead_stroke"] = float(measures.crosshead_stroke[-1])
@@ -188,12 +246,38 @@ class Evaluator:
                     unit = TARGETS[key][0]
                     out.reason = (f"{key}: {abs(value):.6g} {unit} against "
                                   f"{'at most' if most else 'at least'} {target:.6g} {unit}")
+        self._geometry(dims, x_toggle, m, g, out)
         sens = sensitivities(x_toggle, dims)
         m["tolerance_sensitivity"] = float(math.sqrt(sum(float(v) ** 2 for v in sens.values())))
         if "tolerance_cost" in t.objectives:
             self._tolerances(values, m, g, out)
         if self._clamp:
             self._clamping(values, m, g, out)
+
+    def _limit(self, key: str, value: float, g: dict[str, float], out: Evaluation) -> None:
+        """The normalised constraint of a designer's limit (0 at the limit, > 0 violated)."""
+        if key not in g:
+            return
+        lim, target = DESIGN_LIMITS[key], self.limits[key]
+        g[key] = (value - target if lim.most else target - value) / abs(target)
+        if g[key] > 0 and not out.reason:
+            out.reason = (f"{key}: {value:.6g} {lim.unit} against "
+                          f"{'at most' if lim.most else 'at least'} {target:.6g} {lim.unit}")
+
+    def _geometry(self, dims: HalfDims, x_toggle: float, m: dict[str, float],
+                  g: dict[str, float], out: Evaluation) -> None:
+        paths = checks.joint_paths(dims, m["x_open"], x_toggle,
+                                   int(self.targets.settings["points"]))
+        m.update(checks.transmission_angles(paths))
+        m["transmission_angle"] = min(m["transmission_D"], m["transmission_A"])
+        m["platen_side_load"] = checks.platen_side_load(paths)
+        m["radial_envelope"] = checks.radial_envelope(paths)
+        if self._has("sections") and self._has("spacing"):
+            m["tiebar_clearance"] = checks.tiebar_clearance(
+                replace(self.base, lower=dims, upper=dims), paths)
+        for key in _GEOMETRIC:
+            if key in m:
+                self._limit(key, m[key], g, out)
 
     def _tolerances(self, values: dict[str, float], m: dict[str, float],
                     g: dict[str, float], out: Evaluation) -> None:
@@ -223,6 +307,14 @@ class Evaluator:
                                    abs(s.link2_cf_force) / links.area2) for s in states)
         bars = clamp.tiebars
         m["tiebar_stress"] = max(s.tiebar_force for s in states) / (bars.count * bars.area)
+        m.update(checks.lockup(mech, result))
+        if mech.sections is not None:
+            m.update(checks.structure(mech, result))
+            if mech.dynamics is not None:
+                m["link_mass"] = mech.dynamics.links
+        for key in DESIGN_LIMITS:
+            if key not in _GEOMETRIC and key in m:
+                self._limit(key, m[key], g, out)
         if "drive_thrust" in g:
             most = self._limits.force(mech.drive)
             g["drive_thrust"] = (result.thrust_max - most) / most
@@ -230,16 +322,31 @@ class Evaluator:
                 out.reason = (f"drive_thrust: the clamp needs {result.thrust_max:.6g} N, the "
                               f"motor holds {most:.6g} N")
                 return
-        if "close_time" in self.targets.objectives:
-            self._close_time(mech, result.x_contact, result.x_final, m, g, out)
+        if {"close_time", *_DUTY} & set(self.targets.objectives):
+            self._close_time(mech, result.x_contact, result.x_final, m, g, out,
+                             duty=bool(set(_DUTY) & set(self.targets.objectives)))
+
+    def close_duty(self, values: Mapping[str, float], x_open: float) -> dict[str, float]:
+        """The closing stroke's time bound, RMS torque and energy on the bound's profile
+        (:func:`design.timing.close_duty`) of a feasible candidate opening at ``x_open``."""
+        from design.timing import close_duty
+        from toggle.plant import PlantConfig
+        mech = self.mechanism(values, x_open=x_open)
+        result = analyse_clamping(mech)
+        return close_duty(PlantConfig(mech, x_contact=result.x_contact), self._limits,
+                          x_open, result.x_final)
 
     def _close_time(self, mech: Mechanism, x_contact: float, x_final: float,
-                    m: dict[str, float], g: dict[str, float], out: Evaluation) -> None:
-        from design.timing import StallError, close_time_bound
+                    m: dict[str, float], g: dict[str, float], out: Evaluation,
+                    duty: bool = False) -> None:
+        from design.timing import StallError, close_duty, close_time_bound
         from toggle.plant import PlantConfig
+        cfg = PlantConfig(mech, x_contact=x_contact)
         try:
-            m["close_time"] = close_time_bound(PlantConfig(mech, x_contact=x_contact),
-                                               self._limits, m["x_open"], x_final)
+            if duty:
+                m.update(close_duty(cfg, self._limits, m["x_open"], x_final))
+            else:
+                m["close_time"] = close_time_bound(cfg, self._limits, m["x_open"], x_final)
         except StallError as exc:
             g["drive_thrust"] = max(g.get("drive_thrust", 0.0), 1.0)
             out.reason = f"drive_thrust: {exc}"

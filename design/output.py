@@ -3,7 +3,8 @@ every design as a preset TOML that the other commands take with ``--preset FILE`
 
 A design's preset is its base preset (clamp data, drive, masses, the family's group
 merged in) with the linkage replaced by the design's half (both halves equal), the clamp's
-open position set to the design's and its final tie-bar force to the target.
+open position set to the design's, its final tie-bar force to the target and its links'
+mass to the design's (scaled with their sizes).
 """
 
 from __future__ import annotations
@@ -69,6 +70,8 @@ def preset_dict(targets: Targets, evaluation: Evaluation, name: str,
     table["description"] = (f"designed by toggle design from {targets.preset} for "
                             f"{origin or targets.origin} (key {evaluation.key})")
     table["half"] = {d: getattr(dims, d) for d in DIMENSIONS}
+    if "link_mass" in evaluation.metrics and "dynamics" in table:  # scaled with the links
+        table["dynamics"] = dict(table["dynamics"], links=evaluation.metrics["link_mass"])
     if "clamp" in table:
         table["clamp"] = dict(table["clamp"], x_open=evaluation.metrics["x_open"])
         if "clamp_force" in targets.targets:

@@ -131,6 +131,22 @@ def runner_active(runner: Runner) -> tuple[str, ...]:
     return evaluator_for(runner.targets).active
 
 
+def _partitions(objectives: int, population: int) -> int:
+    """Das-Dennis partitions: the most whose directions fit the population."""
+    partitions = 1
+    while math.comb(partitions + 1 + objectives - 1, objectives - 1) <= population:
+        partitions += 1
+    return partitions
+
+
+def _population(objectives: int, population: int) -> int:
+    """Candidates per generation (NSGA-III's at least one per reference direction)."""
+    if objectives <= 3:
+        return population
+    return max(population, math.comb(_partitions(objectives, population) + objectives - 1,
+                                     objectives - 1))
+
+
 def _algorithm(objectives: int, population: int, seed: int) -> object:
     if objectives <= 3:
         from pymoo.algorithms.moo.nsga2 import NSGA2
@@ -138,11 +154,9 @@ def _algorithm(objectives: int, population: int, seed: int) -> object:
     from pymoo.algorithms.moo.nsga3 import NSGA3
     from pymoo.operators.selection.tournament import TournamentSelection
     from pymoo.util.ref_dirs import get_reference_directions
-    partitions = 1
-    while math.comb(partitions + 1 + objectives - 1, objectives - 1) <= population:
-        partitions += 1
-    directions = get_reference_directions("das-dennis", objectives, n_partitions=partitions)
-    return NSGA3(ref_dirs=directions, pop_size=max(population, len(directions)),
+    directions = get_reference_directions("das-dennis", objectives,
+                                          n_partitions=_partitions(objectives, population))
+    return NSGA3(ref_dirs=directions, pop_size=_population(objectives, population),
                  selection=TournamentSelection(func_comp=_by_cv_then_random))
 
 
@@ -173,8 +187,10 @@ def run_search(targets: Targets, folder: str | Path, *, generations: int = 20,
     experiments; otherwise run the genetic algorithm for ``generations`` of ``population``.
     """
     store = Store(folder, targets.digest())
+    total = samples if doe_method is not None else generations * _population(
+        len(targets.objectives), population)
     with Runner(targets, store, scheduler=scheduler, workers=workers, progress=progress,
-                connect_timeout=connect_timeout) as runner:
+                connect_timeout=connect_timeout, total=total) as runner:
         if doe_method is not None:
             evaluations = doe(targets, runner, doe_method, samples, seed)
         else:

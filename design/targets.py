@@ -58,9 +58,66 @@ TARGETS: dict[str, tuple[str, str]] = {
     "max_link_ratio": ("1", "most ratio of the longest to the shortest link"),
 }
 
+@dataclass(frozen=True)
+class Limit:
+    """A designer's limit: ``most`` True for an upper bound; ``default`` (SI) and the
+    source of that default; ``needs`` the preset data it takes (``sections``, ``spacing``,
+    ``clamp``)."""
+
+    key: str
+    unit: str
+    most: bool
+    default: float | None
+    source: str
+    needs: tuple[str, ...] = ()
+
+
+#: The designer's limits: each a key of [targets] and a constraint of the same name.
+DESIGN_LIMITS: dict[str, Limit] = {lim.key: lim for lim in (
+    Limit("transmission_angle", "rad", False, math.radians(40.0),
+          "40 deg, the least transmission angle for smooth running (Norton, Design of "
+          "Machinery, on Alt's rule); at D (link 3 on the arm) and at A (link 5 on the "
+          "platen's line: 90 deg less its inclination)"),
+    Limit("radial_envelope", "m", True, None,
+          "the reference machine's own (the base preset's, at its open position): a "
+          "redesign fits the frame it replaces"),
+    Limit("tiebar_clearance", "m", False, 0.010,
+          "10 mm between the links' side faces and a tie bar (assumption: a running "
+          "clearance; no standard names one)", ("sections", "spacing")),
+    Limit("clamp_force_sensitivity", "1/m", True, 3000.0,
+          "at most 30 % clamp force change per 0.1 mm of mold height (a 300 mm steel mold "
+          "grows 0.10 mm over 30 K at 11.5e-6/K); the SM-55 has 25.9 %", ("clamp",)),
+    Limit("self_locking_travel", "m", False, 1.0e-3,
+          "the clamp holds the mold shut without motor torque over at least the last 1 mm "
+          "of crosshead travel (assumption: well above a servo's stopping error)",
+          ("clamp",)),
+    Limit("link_utilisation", "1", True, 1.0,
+          "axial plus bending stress of each link within yield / 2 (assumption: a safety "
+          "factor of 2 on EN 1563's Rp0.2 for cyclically loaded ductile iron)",
+          ("sections", "clamp")),
+    Limit("buckling_utilisation", "1", True, 1.0,
+          "compression of the two-force links within the Johnson-Euler load / 3 "
+          "(Shigley's column formulas, pinned ends; design factor 3, assumption)",
+          ("sections", "clamp")),
+    Limit("pin_pressure", "Pa", True, 100.0e6,
+          "100 MPa, hardened steel pin in a hardened, greased steel bush under slow oscillating "
+          "load (assumption: the top of the 25-100 MPa range bush makers rate; bronze bushes "
+          "take about 60 MPa)",
+          ("sections", "clamp")),
+    Limit("platen_side_load", "1", True, math.tan(math.radians(50.0)),
+          "transverse over axial force at the platen joint, tan 50 deg: link 5 within 50 "
+          "deg of the platen's line (the 40 deg transmission rule at A)"),
+)}
+
+TARGETS.update({k: (lim.unit, ("most " if lim.most else "least ") + lim.key.replace("_", " ")
+                     + f" (default: {lim.source})") for k, lim in DESIGN_LIMITS.items()})
+
 #: Keys of [settings] with their defaults: the toggle angle where force amplification is
-#: read (seed 004's "near lock-up"), points on the opening, the friction of the cost model.
-SETTINGS: dict[str, float] = {"alpha_lock": math.radians(1.0), "points": 60}
+#: read (seed 004's "near lock-up"), points on the opening; lockup_angle > 0 holds the
+#: angle of links 4b and 5 at lock-up (seed 004's gamma0): e = (r4b + r5) sin(lockup_angle)
+#: follows the links instead of bounds.e.
+SETTINGS: dict[str, float] = {"alpha_lock": math.radians(1.0), "points": 60,
+                              "lockup_angle": 0.0}
 
 _TOP = {"preset", "objectives", "targets", "bounds", "settings", "description"}
 
@@ -91,9 +148,10 @@ class Targets:
     def digest(self) -> str:
         """Hash of everything that changes an evaluation: a store keyed by it is only reused
         for the same problem."""
+        limits = sorted((k, lim.default) for k, lim in DESIGN_LIMITS.items())
         payload = json.dumps([self.preset, sorted(self.targets.items()),
-                              sorted(self.settings.items()), _preset_text(self.preset)],
-                             sort_keys=True)
+                              sorted(self.settings.items()), _preset_text(self.preset),
+                              limits], sort_keys=True)
         return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
 
@@ -160,7 +218,10 @@ class Objective:
 
 #: Every objective a targets file may pick (``toggle design --help`` lists them).
 OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
-    Objective("force_amplification", "force amplification near lock-up (seed 004)", "1", 1),
+    Objective("force_amplification", "seed 004's Mp (Eq 6): crosshead over platen stroke "
+              "from lock-up to alpha_lock", "1", 1),
+    Objective("mechanical_advantage_lock", "frictionless platen over crosshead force at "
+              "alpha_lock (1 / Mv, seed 004's Eq 5)", "1", 1),
     Objective("stroke_ratio", "platen over crosshead stroke, open clamp", "1", 1),
     Objective("velocity_ratio_peak", "peak platen over crosshead speed", "1", 1),
     Objective("coping_angle_min", "minimum coping angle (seed 004)", "rad", 1),
@@ -168,6 +229,11 @@ OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
               "1", -1),
     Objective("close_time", "closing time bound under the motor's limits", "s", -1,
               ("clamp", "drive", "dynamics")),
+    Objective("close_rms_torque", "motor RMS torque over the closing stroke, on the time "
+              "bound's profile (an estimate of the minimum-time plan's)", "N m", -1,
+              ("clamp", "drive", "dynamics")),
+    Objective("close_energy", "motor energy (no regeneration) over the closing stroke, on "
+              "the time bound's profile", "J", -1, ("clamp", "drive", "dynamics")),
     Objective("thrust_peak", "peak crosshead thrust clamping to the force", "N", -1,
               ("clamp",)),
     Objective("link_stress", "peak axial link stress, clamped", "Pa", -1, ("clamp",)),
@@ -176,6 +242,13 @@ OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
     Objective("tolerance_sensitivity", "RSS of platen-position sensitivities at the toggle",
               "1", -1),
     Objective("installation_length", "axial length of the linkage", "m", -1),
+    Objective("transmission_angle", "least transmission angle over the stroke (D and A)",
+              "rad", 1),
+    Objective("radial_envelope", "radial height the pins sweep", "m", -1),
+    Objective("link_mass", "mass of the links (scaled from the preset's by their sizes)",
+              "kg", -1, ("clamp", "dynamics", "sections")),
+    Objective("breakaway_force", "crosshead pull that opens the clamped mold", "N", -1,
+              ("clamp",)),
 )}
 
 
@@ -223,9 +296,11 @@ def targets_from_dict(table: dict[str, Any], origin: str = "<targets>") -> Targe
             raise ParameterError(f"{origin}: settings.{key} is unknown; "
                                  f"known: {', '.join(SETTINGS)}")
         settings[key] = _number(value, f"{origin}: settings.{key}", "")
-    if not (0 < settings["alpha_lock"] < 0.5 and 2 <= settings["points"] <= 1000):
-        raise ParameterError(f"{origin}: settings need 0 < alpha_lock < 0.5 rad and "
-                             f"2 <= points <= 1000, got {settings}")
+    if not (0 < settings["alpha_lock"] < 0.5 and 2 <= settings["points"] <= 1000
+            and 0 <= settings["lockup_angle"] < 0.5):
+        raise ParameterError(f"{origin}: settings need 0 < alpha_lock < 0.5 rad, "
+                             f"2 <= points <= 1000 and 0 <= lockup_angle < 0.5 rad, "
+                             f"got {settings}")
     bounds = _bounds(table.get("bounds"), origin)
     if bounds["alpha_open"][0] <= settings["alpha_lock"]:
         raise ParameterError(f"{origin}: bounds.alpha_open must stay above settings.alpha_lock "

@@ -48,10 +48,9 @@ def _accelerations(cfg: PlantConfig, limits: DriveLimits, xs: np.ndarray, vs: np
     return up, down
 
 
-def close_time_bound(cfg: PlantConfig, limits: DriveLimits, x_open: float, x_final: float
-                     ) -> float:
-    """Lower bound on the closing stroke's duration from rest at ``x_open`` to rest at
-    ``x_final`` with the mold of ``cfg`` (its ``x_contact``), s."""
+def _profile(cfg: PlantConfig, limits: DriveLimits, x_open: float, x_final: float
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """The bound's phase-plane profile: positions (m) and the fastest speeds (m/s) there."""
     x_contact = cfg.x_contact
     xs = np.concatenate([np.linspace(x_open, x_contact, APPROACH_POINTS),
                          np.linspace(x_contact, x_final, CLAMP_POINTS + 1)[1:]])
@@ -76,4 +75,32 @@ def close_time_bound(cfg: PlantConfig, limits: DriveLimits, x_open: float, x_fin
     if np.any(mean <= 0):
         i = int(np.argmax(mean <= 0))
         raise StallError(f"the motor cannot move the crosshead at x = {xs[i]:.6g} m")
-    return float(np.sum(dx / mean))
+    return xs, v
+
+
+def close_time_bound(cfg: PlantConfig, limits: DriveLimits, x_open: float, x_final: float
+                     ) -> float:
+    """Lower bound on the closing stroke's duration from rest at ``x_open`` to rest at
+    ``x_final`` with the mold of ``cfg`` (its ``x_contact``), s."""
+    xs, v = _profile(cfg, limits, x_open, x_final)
+    return float(np.sum(np.diff(xs) / (0.5 * (v[:-1] + v[1:]))))
+
+
+def close_duty(cfg: PlantConfig, limits: DriveLimits, x_open: float, x_final: float
+               ) -> dict[str, float]:
+    """The bound's duration and the motor's RMS torque (N m) and energy without
+    regeneration (J) along its profile: a fast estimate of the minimum-time plan's (the
+    planner adds the jerk limit; docs/design.md compares the two)."""
+    xs, v = _profile(cfg, limits, x_open, x_final)
+    dx = np.diff(xs)
+    dt = dx / (0.5 * (v[:-1] + v[1:]))
+    a = np.diff(v) / dt  # constant on each interval
+    x_mid, v_mid = 0.5 * (xs[:-1] + xs[1:]), 0.5 * (v[:-1] + v[1:])
+    drive = cfg.mechanism.drive
+    torque = np.asarray(motor_torque(plant_outputs(x_mid, v_mid, a, cfg).input_force, drive,
+                                     a), dtype=float)
+    power = np.maximum(torque * np.asarray(motor_speed(v_mid, drive), dtype=float), 0.0)
+    duration = float(np.sum(dt))
+    return {"close_time": duration,
+            "close_rms_torque": float(np.sqrt(np.sum(torque ** 2 * dt) / duration)),
+            "close_energy": float(np.sum(power * dt))}

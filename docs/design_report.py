@@ -1,67 +1,133 @@
-"""Tables and figures of docs/design.md: seed 004's groups against the front, and a design
-for seed 001's SM-55 targets. Run from the repository: ``.venv/bin/python
-docs/design_report.py`` (a few minutes on a local Dask cluster; the searches are recorded
-in build/design/ and resumed from there). Prints the Markdown tables; writes the figures
-to docs/design/ and the chosen SM-55 design to design/examples/sm55_design.toml.
+"""The numbers, tables and figures of docs/design.md, from the commands it documents.
+
+Run from the repository: ``.venv/bin/python docs/design_report.py``. It runs each documented
+``toggle design`` command as written (in this process, through the command line; the record
+goes to build/design/ and a rerun resumes from it), reads the record back by replaying the
+same seeded search (nothing is computed again: it checks that), and prints the Markdown of
+docs/design.md's tables: seed 004's groups against the front, and the SM-55 redesign with
+every objective and constraint against the SM-55, both opened by the same rule. Writes the
+figures to docs/design/ and the chosen SM-55 design to design/examples/sm55_design.toml
+(the SM-55 opened by the same rule to build/design/sm55_reference.toml), and runs
+``toggle plan --min-time --cycle`` on both.
+``tests/test_design_report.py`` runs it on a reduced search.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import sys
 from dataclasses import replace
 from pathlib import Path
 
-from design.figures import front_figure, parallel_figure
-from design.objectives import OBJECTIVES
-from design.output import write_preset
-from design.placement import improvements, place
-from design.search import run_search
-from design.targets import load_targets
-
 ROOT = Path(__file__).resolve().parents[1]
-EXAMPLES, FIGURES, RECORDS = ROOT / "design" / "examples", ROOT / "docs" / "design", \
-    ROOT / "build" / "design"
-SEARCH = {"generations": 40, "population": 60, "seed": 0}
-SEARCH_SM55 = {**SEARCH, "generations": 80}
+sys.path.insert(0, str(ROOT))
+
+from design.figures import front_figure, parallel_figure  # noqa: E402
+from design.objectives import Evaluator  # noqa: E402
+from design.output import write_preset  # noqa: E402
+from design.placement import Row, compare, improvements, place  # noqa: E402
+from design.search import SearchResult, run_search  # noqa: E402
+from design.targets import OBJECTIVES, load_targets  # noqa: E402
+
+EXAMPLES, FIGURES = ROOT / "design" / "examples", ROOT / "docs" / "design"
+#: The documented searches: targets file and the options of its command line.
+SEARCHES = {"li_micro": {"generations": 40, "population": 60, "seed": 0},
+            "sm55": {"generations": 40, "population": 60, "seed": 0}}
 
 
-def _cell(key: str, value: float) -> str:
-    return f"{math.degrees(value):.2f} deg" if OBJECTIVES[key].unit == "rad" else f"{value:.5g}"
+def command(name: str, search: dict, out: Path) -> list[str]:
+    """The documented command line (after ``toggle``), paths relative to the repository."""
+    return ["design", f"design/examples/{name}.toml", "--generations",
+            str(search["generations"]), "--population", str(search["population"]), "--seed",
+            str(search["seed"]), "--out", os.path.relpath(out, ROOT), "--no-figures", "--json"]
 
 
-def seed_004() -> None:
-    targets = load_targets(EXAMPLES / "li_micro.toml")
-    result = run_search(targets, RECORDS / "li_micro", **SEARCH)
+def run_documented(name: str, search: dict, out: Path) -> tuple[str, SearchResult]:
+    """Run the documented command, then replay its record (which must compute nothing)."""
+    import contextlib
+    import io
+
+    from toggle_cli import main
+    argv = command(name, search, out)
+    here = Path.cwd()
+    os.chdir(ROOT)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            code = main(argv)
+    finally:
+        os.chdir(here)
+    if code != 0:
+        raise SystemExit(f"toggle {' '.join(argv)} exited {code}")
+    targets = load_targets(EXAMPLES / f"{name}.toml")
+    result = run_search(targets, out, workers=0, **search)
+    if result.evaluated:
+        raise SystemExit(f"the record in {out} does not replay: {result.evaluated} computed")
+    return "$ toggle " + " ".join(argv), result
+
+
+def _cell(unit: str, value: float) -> str:
+    return f"{math.degrees(value):.2f} deg" if unit == "rad" else f"{value:.5g}"
+
+
+def seed_004(records: Path, search: dict, figures: bool = True) -> str:
+    line, result = run_documented("li_micro", search, records / "li_micro")
+    targets = result.targets
     placements = place(targets, result.front)
     keys = targets.objectives
-    print(f"li_micro: {len(result.evaluations)} designs, {len(result.feasible)} feasible, "
-          f"{len(result.front)} in the Pareto set\n")
+    out = [f"```text\n{line}\n```\n",
+           f"li_micro: {len(result.evaluations)} designs, {len(result.feasible)} feasible, "
+           f"{len(result.front)} in the Pareto set\n"]
     headers = [f"{k} (deg)" if OBJECTIVES[k].unit == "rad" else OBJECTIVES[k].header
                for k in keys]
-    print("| group | " + " | ".join(headers)
-          + " | place | dominated by | least gain |")
-    print("|---" * (len(keys) + 4) + "|")
+    out.append("| group | " + " | ".join(headers) + " | platen_stroke (mm) | place "
+               "| dominated by | least gain |")
+    out.append("|---" * (len(keys) + 5) + "|")
     for p in placements:
         by = f"design-{p.dominated_by.key[:12]}" if p.dominated_by else "-"
-        gain = (f"{100 * p.margin:.2f} %" if p.dominated_by
-                else f"nearest design-{p.nearest.key[:12]} is {100 * p.shortfall:.2f} % short")
-        print(f"| {p.name} | " + " | ".join(_cell(k, p.reference.metrics[k]) for k in keys)
-              + f" | {p.status} | {by} | {gain} |")
+        gain = (f"{100 * p.margin:.2f} %" if p.dominated_by else
+                f"nearest design-{p.nearest.key[:12]} is {100 * p.shortfall:.2f} % short"
+                if p.nearest else "-")
+        m = p.reference.metrics
+        out.append(f"| {p.name} | " + " | ".join(_cell(OBJECTIVES[k].unit, m[k]) for k in keys)
+                   + f" | {1e3 * m['platen_stroke']:.1f} | {p.status} | {by} | {gain} |")
         if p.dominated_by:
-            print(f"| ↳ design-{p.dominated_by.key[:12]} | "
-                  + " | ".join(f"{_cell(k, p.dominated_by.metrics[k])} "
-                               f"({100 * p.improvements[k]:+.1f} %)" for k in keys)
-                  + " | | | |")
-    front_figure(FIGURES / "li_micro_front.png", keys, result.feasible, result.front,
-                 placements)
-    # the parallel coordinates of the designs named in the table, not all 1400
-    named = {d.key: d for p in placements for d in (p.dominated_by, p.nearest) if d}
-    parallel_figure(FIGURES / "li_micro_parallel.png", keys, list(named.values()), placements)
+            d = p.dominated_by.metrics
+            out.append(f"| ↳ design-{p.dominated_by.key[:12]} | "
+                       + " | ".join(f"{_cell(OBJECTIVES[k].unit, d[k])} "
+                                    f"({100 * p.improvements[k]:+.1f} %)" for k in keys)
+                       + f" | {1e3 * d['platen_stroke']:.1f} | | | |")
+    if figures:
+        front_figure(FIGURES / "li_micro_front.png", keys, result.feasible, result.front,
+                     placements)
+        named = {d.key: d for p in placements for d in (p.dominated_by, p.nearest) if d}
+        parallel_figure(FIGURES / "li_micro_parallel.png", keys, list(named.values()),
+                        placements)
+    return "\n".join(out)
 
 
-def sm55() -> None:
-    targets = load_targets(EXAMPLES / "sm55.toml")
-    result = run_search(targets, RECORDS / "sm55", **SEARCH_SM55)
+def _change(row: Row) -> str:
+    if row.unit == "rad":
+        return f"{math.degrees(row.design - row.reference):+.2f} deg"
+    return f"{100 * row.change:+.2f} %"
+
+
+def _rows(rows: list[Row], limits: bool) -> list[str]:
+    out = []
+    for r in rows:
+        better = "higher" if r.better > 0 else "lower"
+        limit = (f" | {'at least' if r.better > 0 else 'at most'} {_cell(r.unit, r.limit)}"
+                 if limits else "")
+        out.append(f"| {r.key} ({'deg' if r.unit == 'rad' else r.unit}) | {better}{limit} | "
+                   f"{_cell(r.unit, r.reference)} | {_cell(r.unit, r.design)} | {_change(r)} "
+                   f"| {r.verdict} |")
+    return out
+
+
+def sm55(records: Path, search: dict, design_file: Path | None = None,
+         figures: bool = True) -> str:
+    line, result = run_documented("sm55", search, records / "sm55")
+    targets = result.targets
     (reference,) = place(targets, result.front)
     keys = targets.objectives
 
@@ -69,27 +135,86 @@ def sm55() -> None:
         return list(improvements(design, reference.reference, keys).values())
 
     # better by more than 1 % on at least two objectives; of those, the one whose worst
-    # loss is least (then the largest total gain)
+    # loss is least (then the largest total gain); else the least worst loss of all
     eligible = [d for d in result.front if sum(g > 0.01 for g in gains_of(d)) >= 2]
-    best = min(eligible, key=lambda d: (max(0.0, -min(gains_of(d))), -sum(gains_of(d))))
-    write_preset(EXAMPLES / "sm55_design.toml", targets, best, name="sm55_design")
-    gains = improvements(best, reference.reference, keys)
-    print(f"\nsm55: {len(result.evaluations)} designs, {len(result.feasible)} feasible, "
-          f"{len(result.front)} in the Pareto set; SM-55: {reference.status}\n")
-    print("| quantity | SM-55 | sm55_design | change |\n|---|---|---|---|")
-    for k in (*keys, "platen_stroke", "crosshead_stroke", "x_open", "stroke_ratio",
-              "force_amplification_clamp"):
-        a, b = reference.reference.metrics[k], best.metrics[k]
-        unit = OBJECTIVES[k].unit if k in OBJECTIVES else ("1" if "ratio" in k
-                                                          or "amplification" in k else "m")
-        note = f" ({100 * gains[k]:+.1f} % better)" if k in gains else ""
-        print(f"| {k} ({unit}) | {a:.5g} | {b:.5g} | {100 * (b - a) / abs(a):+.2f} %{note} |")
-    print("\n| variable | SM-55 | sm55_design |\n|---|---|---|")
-    for v, a in reference.reference.variables.items():
-        print(f"| {v} | {a:.5g} | {best.variables[v]:.5g} |")
-    chosen = replace(reference, name="sm55_design", reference=best, dominated_by=None)
-    front_figure(FIGURES / "sm55_front.png", keys, result.feasible, result.front,
-                 [replace(reference, dominated_by=best), chosen])
+    best = min(eligible or result.front,
+               key=lambda d: (max(0.0, -min(gains_of(d))), -sum(gains_of(d))))
+    evaluator = Evaluator(targets)
+    stroke = targets.targets["mold_open_stroke"]
+    design, ref, objectives, limits = compare(evaluator, best.variables,
+                                              reference.reference.variables, stroke)
+    if design_file is not None:
+        write_preset(design_file, targets, design, name="sm55_design")
+        write_preset(records / "sm55_reference.toml", targets, ref, name="sm55_reference")
+    wins = list(dict.fromkeys(r.key for r in objectives + limits if r.verdict == "wins"))
+    loses = list(dict.fromkeys(r.key for r in objectives + limits if r.verdict == "loses"))
+    out = [f"```text\n{line}\n```\n",
+           f"sm55: {len(result.evaluations)} designs, {len(result.feasible)} feasible, "
+           f"{len(result.front)} in the Pareto set; SM-55: {reference.status}; chosen: "
+           f"design-{best.key[:12]}, compared with both opened to {1e3 * stroke:.1f} mm "
+           f"(x_open SM-55 {1e3 * ref.metrics['x_open']:.2f} mm, design "
+           f"{1e3 * design.metrics['x_open']:.2f} mm); the design is "
+           f"{'feasible' if design.feasible else 'infeasible: ' + design.reason}\n",
+           "| objective | better | SM-55 | sm55_design | change | design |",
+           "|---|---|---|---|---|---|", *_rows(objectives, False), "",
+           "| constraint | better | limit | SM-55 | sm55_design | change | design |",
+           "|---|---|---|---|---|---|---|", *_rows(limits, True), "",
+           f"wins on {len(wins)}: {', '.join(wins)}; loses on {len(loses)}: "
+           f"{', '.join(loses)}\n", "| variable | SM-55 | sm55_design |", "|---|---|---|"]
+    out += [f"| {v} | {a:.5g} | {design.variables[v]:.5g} |" for v, a in ref.variables.items()]
+    if figures:
+        chosen = replace(reference, name="sm55_design", reference=best, dominated_by=None)
+        front_figure(FIGURES / "sm55_front.png", keys, result.feasible, result.front,
+                     [replace(reference, dominated_by=None), chosen])
+    return "\n".join(out)
+
+
+#: The planner's run on each side of the comparison (the molding cycle with it).
+PLAN = ["--min-time", "--force-limit", "1e5", "--cycle", "--hold", "8", "--eject", "1.5",
+        "--json"]
+
+
+def plans(presets: dict[str, Path]) -> str:
+    """``toggle plan`` on each preset: the minimum-time stroke's times, peak input force, the
+    motor's RMS torque and energy over the stroke and over the molding cycle."""
+    import contextlib
+    import io
+    import json
+
+    from toggle_cli import main
+    got = {}
+    for name, path in presets.items():
+        argv = ["plan", "--preset", os.path.relpath(path, ROOT), *PLAN]
+        text = io.StringIO()
+        here = Path.cwd()
+        os.chdir(ROOT)
+        try:
+            with contextlib.redirect_stdout(text):
+                if main(argv) != 0:
+                    raise SystemExit(f"toggle {' '.join(argv)} failed")
+        finally:
+            os.chdir(here)
+        got[name] = json.loads(text.getvalue())
+    quantities = [("stroke time (s)", lambda r: r["duration"]),
+                  ("closing time (s)", lambda r: r["closing_time"]),
+                  ("peak input force (N)", lambda r: r["peak_force"]),
+                  ("stroke RMS torque (N m)", lambda r: r["duty"]["rms_torque"]),
+                  ("stroke energy, no regeneration (J)",
+                   lambda r: r["duty"]["energy_without_regeneration"]),
+                  ("peak motor torque (N m)", lambda r: r["peak_motor_torque"]),
+                  ("molding cycle (s)", lambda r: r["molding_cycle"]["cycle_time"]),
+                  ("cycle RMS torque (N m)", lambda r: r["molding_cycle"]["rms_torque"]),
+                  ("cycle peak torque (N m)", lambda r: r["molding_cycle"]["peak_torque"]),
+                  ("cycle energy, no regeneration (J)",
+                   lambda r: r["molding_cycle"]["energy_without_regeneration"])]
+    (a, ra), (b, rb) = got.items()
+    out = ["```text", *(f"$ toggle plan --preset {os.path.relpath(p, ROOT)} {' '.join(PLAN)}"
+                        for p in presets.values()), "```", "",
+           f"| quantity | {a} | {b} | change |", "|---|---|---|---|"]
+    for label, value in quantities:
+        x, y = value(ra), value(rb)
+        out.append(f"| {label} | {x:.5g} | {y:.5g} | {100 * (y - x) / abs(x):+.2f} % |")
+    return "\n".join(out)
 
 
 def shrink(path: Path) -> None:
@@ -100,7 +225,12 @@ def shrink(path: Path) -> None:
 
 if __name__ == "__main__":
     FIGURES.mkdir(parents=True, exist_ok=True)
-    seed_004()
-    sm55()
+    records = ROOT / "build" / "design"
+    print(seed_004(records, SEARCHES["li_micro"]))
+    print()
+    print(sm55(records, SEARCHES["sm55"], EXAMPLES / "sm55_design.toml"))
+    print()
+    print(plans({"SM-55": records / "sm55_reference.toml",
+                 "sm55_design": EXAMPLES / "sm55_design.toml"}))
     for png in FIGURES.glob("*.png"):
         shrink(png)

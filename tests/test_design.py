@@ -91,11 +91,12 @@ def test_seed_004_criteria_are_the_studys(sm55) -> None:
         e = evaluator(evaluator.vector(values))
         dims = load_preset(name).lower
         expect = criteria(angle_measures(dims, angle_grid(math.radians(1), math.pi / 2, 90)))
-        assert e.metrics["stroke_ratio"] == pytest.approx(expect["stroke_ratio"], rel=1e-9)
+        # e follows gamma0 (settings.lockup_angle): the preset's e to its 10 digits
+        assert e.metrics["stroke_ratio"] == pytest.approx(expect["stroke_ratio"], rel=1e-7)
         assert e.metrics["velocity_ratio_peak"] == pytest.approx(expect["velocity_ratio"],
-                                                                 rel=1e-9)
-        assert e.metrics["force_amplification"] == pytest.approx(
-            expect["force_amplification"], rel=1e-9)
+                                                                 rel=1e-7)
+        assert e.metrics["mechanical_advantage_lock"] == pytest.approx(
+            expect["force_amplification"], rel=1e-7)
         assert e.feasible, (name, e.reason)  # the targets are the groups' envelope
 
 
@@ -238,15 +239,19 @@ def test_seed_004_groups_are_on_the_front_or_dominated_by_a_named_design(tmp_pat
     assert [p.name for p in placements] == [f"li_micro/{g}" for g in "1234567"]
     keys = targets.objectives
     for p in placements:
-        if p.dominated_by is None:  # no front design is as good everywhere, better somewhere
-            for design in result.front:
+        stroke = p.reference.metrics["platen_stroke"]
+        if p.dominated_by is None:  # no front design of an equal or longer stroke is as good
+            for design in result.front:  # everywhere and better somewhere
+                if design.metrics["platen_stroke"] < stroke:
+                    continue
                 gains = [OBJECTIVES[k].sense * (design.metrics[k] - p.reference.metrics[k])
                          for k in keys]
                 assert min(gains) < 0 or max(gains) <= 0
         else:
+            assert p.dominated_by.metrics["platen_stroke"] >= stroke  # a fair comparison
             assert p.margin == pytest.approx(min(p.improvements.values()))
             assert p.margin >= 0 and max(p.improvements.values()) > 0
-    assert any(p.dominated_by for p in placements)
+    assert all(p.reference.feasible for p in placements)  # the targets are their envelope
     assert pareto_front(result.evaluations + [p.reference for p in placements], keys)
 
 
@@ -274,3 +279,34 @@ def test_a_seed_replays_the_genetic_search_and_a_rerun_computes_nothing(tmp_path
     again = run_search(targets, tmp_path / "a", generations=5, population=20, seed=5,
                        workers=0)
     assert 0 < again.evaluated <= 20  # only the new generation's candidates
+
+
+def test_the_default_back_end_takes_the_free_cores_or_stays_in_the_process() -> None:
+    from design.runner import default_workers
+    assert default_workers(2400, cores=2, load=0.2) == 2  # an idle two-core machine
+    assert default_workers(2400, cores=2, load=1.0) == 0  # one CPU hog: one core's worth
+    assert default_workers(2400, cores=2, load=13.0) == 0  # the loaded machine of issue 38
+    assert default_workers(2400, cores=16, load=3.6) == 12
+    assert default_workers(50, cores=16, load=0.0) == 0  # too small to pay for a cluster
+
+
+def test_one_progress_bar_counts_the_whole_search(tmp_path: Path, monkeypatch) -> None:
+    import tqdm
+    bars: list[dict] = []
+
+    class Bar:  # records what the search tells its bar (a terminal would draw it)
+        def __init__(self, **kwargs: object) -> None:
+            bars.append({"total": kwargs["total"], "done": 0, "closed": False})
+
+        def update(self, n: int = 1) -> None:
+            bars[-1]["done"] += n
+
+        def close(self) -> None:
+            bars[-1]["closed"] = True
+
+    monkeypatch.setattr(tqdm, "tqdm", Bar)
+    targets = load_targets(LI_MICRO)
+    run_search(targets, tmp_path, generations=2, population=12, workers=0, progress=True)
+    assert bars == [{"total": 24, "done": 24, "closed": True}]  # one bar, 2 x 12 designs
+    run_search(targets, tmp_path, generations=3, population=12, workers=0, progress=True)
+    assert bars[1] == {"total": 36, "done": 36, "closed": True}  # the record's 24 counted

@@ -129,6 +129,8 @@ class Mechanism:
     drive: Drive | None = None
     #: Masses and guide damping of the dynamic plant; None if the file has no [dynamics].
     dynamics: Dynamics | None = None
+    #: Link sections and materials (toggle design's structural checks); None without [sections].
+    sections: Sections | None = None
 
     def half(self, half: str) -> HalfDims:
         if half not in HALVES:
@@ -224,9 +226,12 @@ class TieBars:
     length: float
     area: float
     modulus: float
+    #: centre distance of the (square) tie-bar pattern, m; optional (toggle design's
+    #: tie-bar clearance and radial envelope use it)
+    spacing: float | None = None
 
     def __post_init__(self) -> None:
-        _check_positive(self)
+        _check_positive(self, optional=("spacing",))
 
     @property
     def stiffness(self) -> float:
@@ -265,6 +270,50 @@ class ClampData:
             raise ParameterError(
                 f"static_factor (mu_s / mu_d) must be >= 1, got {self.static_factor!r}"
             )
+
+
+@dataclass(frozen=True)
+class LinkSection:
+    """One member's rectangular section and material (SI): depth in the plane of motion and
+    thickness along its pins (m), Young's modulus and yield strength (Pa), density (kg/m^3).
+    Read from ``[sections.<link>]`` for toggle design's strength, buckling, pin-pressure and
+    mass checks (docs/design.md)."""
+
+    depth: float
+    thickness: float
+    modulus: float
+    yield_strength: float
+    density: float
+
+    def __post_init__(self) -> None:
+        _check_positive(self)
+
+    @property
+    def area(self) -> float:
+        return self.depth * self.thickness
+
+
+@dataclass(frozen=True)
+class Sections:
+    """Sections of the three kinds of link (one member each; [clamp.counts] gives how many):
+    crosshead_link (link 3, r3), triangle (link 4, its arms r4a, r4b, r4c), platen_link
+    (link 5, r5)."""
+
+    crosshead_link: LinkSection
+    triangle: LinkSection
+    platen_link: LinkSection
+
+
+def _sections_from_table(table: Any, origin: str) -> Sections:
+    if not isinstance(table, dict):
+        raise ParameterError(f"{origin}: [sections] must be a table")
+    names = [f.name for f in fields(Sections)]
+    unknown, missing = set(table) - set(names), set(names) - set(table)
+    if unknown or missing:
+        raise ParameterError(f"{origin}: [sections]: unknown {sorted(unknown)}, "
+                             f"missing {sorted(missing)}")
+    return Sections(**{n: _section(LinkSection, table[n], origin, f"sections.{n}")
+                       for n in names})
 
 
 #: Most points of a drive's torque-speed curve (the planner keeps them as parameters of its
@@ -559,6 +608,8 @@ def mechanism_from_dict(
         drive=_section(Drive, table["drive"], origin, "drive") if "drive" in table else None,
         dynamics=(_section(Dynamics, table["dynamics"], origin, "dynamics")
                   if "dynamics" in table else None),
+        sections=(_sections_from_table(table["sections"], origin)
+                  if "sections" in table else None),
     )
 
 

@@ -1,7 +1,9 @@
 """``toggle design``: search the double-toggle family for a targets file (:mod:`design`).
 
-Evaluates on a local Dask cluster (one worker per core) by default, on an existing one
-with ``--scheduler tcp://HOST:PORT``, or in this process with ``--workers 0``. Every
+Evaluates by default on a local Dask cluster of one worker per free core, or in this process
+when no more than one core is free or the search is small (design.runner.default_workers);
+on an existing cluster with ``--scheduler tcp://HOST:PORT``; in this process with
+``--workers 0``. One progress bar counts the whole search, with an ETA. Every
 evaluation is appended to OUT/evaluations.jsonl as it arrives: run the same command again
 to resume. Writes OUT/pareto.csv, pareto.parquet, all.csv, presets/*.toml (each takes
 ``--preset FILE`` in the other commands) and the figures front.png and parallel.png.
@@ -63,8 +65,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--connect-timeout", type=positive("time in s", 3600.0), default=10.0,
                    help="seconds to wait for the --scheduler before giving up")
     where.add_argument("--workers", type=WORKERS, default=None,
-                       help="local worker processes (default: one per core; 0: no Dask, "
-                            "evaluate in this process)")
+                       help="local worker processes (default: one per free core, or none "
+                            "when at most one core is free or the search is under 200 "
+                            "candidates; 0: no Dask, evaluate in this process)")
     p.add_argument("--doe", nargs=2, metavar=("lhs|sobol", "N"), action=_DoeAction,
                    default=None, help="a design of experiments of N candidates instead of "
                                       "the genetic algorithm")

@@ -1,0 +1,187 @@
+"""A designer's limits (issue 38), each against a hand computation for the SM-55: the joints
+are placed along the model's angles (toggle.kinematics.half_pose) and the forces are the
+model's (toggle.elastics); the transmission angles, envelope, tie-bar clearance, buckling
+loads and pin pressures are computed here from those, not by design.constraints."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from design.objectives import Evaluator
+from design.placement import design_values
+from design.targets import DESIGN_LIMITS, load_targets, targets_from_dict
+from toggle.elastics import analyse_clamping, clamp_state
+from toggle.kinematics import half_pose, stroke_limits
+from toggle.params import ParameterError, load_preset
+from toggle.statics import OPENING
+
+SM55 = Path(__file__).resolve().parents[1] / "design" / "examples" / "sm55.toml"
+
+
+@pytest.fixture(scope="module")
+def sm55() -> tuple:
+    mech = load_preset("lin2003_sm55")
+    evaluator = Evaluator(load_targets(SM55))
+    ref = evaluator(evaluator.vector(design_values(mech)))
+    return mech, evaluator, ref
+
+
+def _joints(mech, points: int = 2001) -> dict[str, np.ndarray]:
+    """C, E, D, B, A of the lower half over the stroke (2 x n, m), placed by hand."""
+    h = mech.lower
+    xs = np.linspace(mech.clamp.x_open, stroke_limits(h)[1], points)
+    pose = half_pose(xs, h)
+    arm = pose.theta4 + pose.alpha4
+    return {"E": np.stack([xs, np.full_like(xs, h.r1 - h.r2)]),
+            "D": np.stack([h.r4a * np.cos(arm), h.r4a * np.sin(arm)]),
+            "B": np.stack([h.r4b * np.cos(pose.theta4), h.r4b * np.sin(pose.theta4)]),
+            "A": np.stack([pose.L, np.full_like(xs, h.e)]),
+            "C": np.zeros((2, points))}
+
+
+def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    cos = np.sum(u * v, axis=0) / np.linalg.norm(u, axis=0) / np.linalg.norm(v, axis=0)
+    a = np.degrees(np.arccos(np.clip(cos, -1, 1)))
+    return np.minimum(a, 180 - a)
+
+
+def test_transmission_angles_of_the_sm55_by_hand(sm55) -> None:
+    mech, _, ref = sm55
+    j = _joints(mech)
+    assert np.allclose(np.linalg.norm(j["D"] - j["E"], axis=0), mech.lower.r3)  # D closes
+    at_d = _angle(j["D"] - j["E"], j["D"] - j["C"]).min()  # link 3 against the arm
+    at_a = 90 - _angle(j["A"] - j["B"], np.array([[1.0], [0.0]])).max()  # link 5, platen line
+    assert at_d == pytest.approx(65.80, abs=0.01)  # issue 38: 65.8 deg
+    assert at_a == pytest.approx(90 - 37.0, abs=0.01)  # link 1 at 37 deg at open
+    assert math.degrees(ref.metrics["transmission_D"]) == pytest.approx(at_d, abs=0.02)
+    assert math.degrees(ref.metrics["transmission_A"]) == pytest.approx(at_a, abs=0.02)
+    assert ref.metrics["platen_side_load"] == pytest.approx(math.tan(math.radians(90 - at_a)),
+                                                            rel=1e-3)
+
+
+def test_radial_envelope_and_tiebar_clearance_of_the_sm55_by_hand(sm55) -> None:
+    mech, _, ref = sm55
+    j = _joints(mech)
+    ys = np.concatenate([p[1] for p in j.values()])
+    assert j["D"][1].max() * 1e3 == pytest.approx(133.17, abs=0.01)  # issue 38's arm tip
+    assert ref.metrics["radial_envelope"] == pytest.approx(ys.max() - ys.min(), abs=1e-5)
+    # both halves' links fill |z| <= w / 2 side by side and |y| <= 135 + 22.5 mm (pivot C
+    # and its pin: the farthest boss from the axis), the bars (d = 60 mm) at +-185 mm
+    w = 3 * 0.028 + 2 * 0.039  # at B: 3 links 1 and 2 plates of link 2 per half
+    reach = 0.135 + 0.0225
+    bar = math.sqrt(2827e-6 / math.pi)
+    expect = math.hypot(0.185 - w / 2, 0.185 - reach) - bar
+    assert expect == pytest.approx(0.0776, abs=1e-4)
+    assert ref.metrics["tiebar_clearance"] == pytest.approx(expect, abs=1e-9)
+
+
+def _johnson_euler(depth: float, thickness: float, length: float, e: float, sy: float
+                   ) -> float:
+    slender = length * math.sqrt(12) / min(depth, thickness)
+    if slender ** 2 >= 2 * math.pi ** 2 * e / sy:
+        return math.pi ** 2 * e * depth * thickness / slender ** 2
+    return depth * thickness * (sy - (sy * slender / (2 * math.pi)) ** 2 / e)
+
+
+def test_buckling_and_pin_pressure_of_the_sm55_by_hand(sm55) -> None:
+    mech, _, ref = sm55
+    h, result = mech.lower, analyse_clamping(mech)
+    e, sy = 172528393450.0, 370e6
+    p5 = _johnson_euler(0.078, 0.028, h.r5, e, sy)  # link 1: 231 mm, 78 x 28 mm
+    p3 = _johnson_euler(0.050, 0.030, h.r3, e, sy)
+    assert 7.5e5 < p5 < 8.0e5  # Johnson's parabola: slenderness 28.6 against 95.9
+    peak = clamp_state(result.x_at_thrust_max, result.x_contact, mech)
+    states = (peak, result.final, result.hold)
+    buckling = 3 * max(max(s.link1_force / p5, s.crosshead_link_force / p3) for s in states)
+    assert ref.metrics["buckling_utilisation"] == pytest.approx(buckling, rel=1e-9)
+    # pins: link 1 on pin B (45 mm) over 28 mm; the triangle's two plates take the three
+    # links 1 of a half over 39 mm each; link 3 on pin D (30 mm)
+    hold = result.hold
+    pressures = [hold.link1_force / (0.045 * 0.028), 6 / 4 * hold.link1_force / (0.045 * 0.039),
+                 hold.crosshead_link_force / (0.030 * 0.030)]
+    assert max(pressures) == pytest.approx(77.15e6, rel=1e-3)
+    assert ref.metrics["pin_pressure"] == pytest.approx(max(pressures), rel=1e-9)
+
+
+def test_mold_height_sensitivity_and_self_locking_by_finite_differences(sm55) -> None:
+    mech, _, ref = sm55
+    h, result = mech.lower, analyse_clamping(mech)
+    dh = 1e-6  # the mold 1 um thicker: contact 1 um of platen travel earlier
+    l_c = float(half_pose(result.x_contact, h).L)
+    x_c = brentq(lambda x: float(half_pose(x, h).L) - (l_c - dh), result.x_contact - 1e-3,
+                 result.x_contact)
+    thicker = analyse_clamping(mech, x_contact=x_c)
+    per_m = (thicker.final.clamp_force / result.final.clamp_force - 1) / dh
+    assert ref.metrics["clamp_force_sensitivity"] == pytest.approx(per_m, rel=2e-3)
+    assert 0.25 < per_m * 1e-4 < 0.27  # 25.9 % per 0.1 mm
+    travel = ref.metrics["self_locking_travel"]
+    mu_s = mech.clamp.static_factor * mech.clamp.mu
+
+    def opening(x: float) -> float:
+        return float(clamp_state(x, result.x_contact, mech, mu_s, OPENING).thrust)
+
+    assert opening(result.x_final - 0.99 * travel) < 0 < opening(result.x_final - 1.01 * travel)
+    assert ref.metrics["breakaway_force"] == pytest.approx(-opening(result.x_final), rel=1e-12)
+
+
+def test_link_masses_scale_with_length(sm55) -> None:
+    mech, evaluator, ref = sm55
+    assert ref.metrics["link_mass"] == pytest.approx(mech.dynamics.links, rel=1e-12)
+    values = design_values(mech)
+    longer = {k: v * 1.1 if k in ("r3", "r4a", "r4b", "r5") else v for k, v in values.items()}
+    bigger = evaluator.mechanism(evaluator.values(evaluator.vector(longer)))
+    assert bigger.dynamics.links == pytest.approx(1.1 * mech.dynamics.links, rel=1e-9)
+
+
+def test_the_sm55_meets_every_default_and_the_old_design_does_not(sm55) -> None:
+    mech, evaluator, ref = sm55
+    assert set(DESIGN_LIMITS) <= set(evaluator.active)
+    assert ref.feasible, ref.reason
+    old = load_preset(str(SM55.parent / "sm55_old_design.toml"))
+    design = evaluator(evaluator.vector(design_values(old)))
+    assert design.constraints["transmission_angle"] > 0  # 38.4 deg at A (link 1 at 51.6)
+    assert design.constraints["radial_envelope"] > 0  # the arm tip 37 mm over its pin line
+
+
+def test_a_target_overrides_a_default_and_missing_data_turns_a_limit_off(tmp_path: Path
+                                                                         ) -> None:
+    bounds = {v: 0.1 for v in ("d", "r3", "r4a", "r4b", "r5")}
+    bounds.update(e=0.005, alpha4=0.5, alpha_open=1.0)
+    table = {"preset": "lin2003_sm55", "objectives": ["thrust_peak", "link_mass"],
+             "targets": {"pin_pressure": 80e6}, "bounds": bounds}
+    assert Evaluator(targets_from_dict(table)).limits["pin_pressure"] == 80e6
+    table.update(preset="chang2021", objectives=["stroke_ratio", "transmission_angle"],
+                 targets={})
+    limits = Evaluator(targets_from_dict(table)).limits  # no [clamp], no [sections]
+    assert "transmission_angle" in limits and "pin_pressure" not in limits
+    with pytest.raises(ParameterError, match="targets.pin_pressure must be > 0"):
+        targets_from_dict(dict(table, targets={"pin_pressure": -1.0}))
+
+
+def test_seed_004_mp_is_eq_6_as_the_paper_gives_it() -> None:
+    """Eq 6 is Mp = S0 / Sm, the crosshead over the platen stroke from lock-up (Eq 2 over
+    Eq 1), not Eq 5's instantaneous 1 / Mv: for group 1 at 1 deg the paper's 8.19 (to its
+    two decimals, so within 0.005); 1 / Mv is 4.09 there."""
+    targets = load_targets(SM55.parent / "li_micro.toml")
+    evaluator = Evaluator(targets)
+    group = design_values(load_preset("li_micro/1"), targets.bounds["alpha_open"][0])
+    e = evaluator(evaluator.vector(group))
+    assert e.metrics["force_amplification"] == pytest.approx(8.19, abs=0.005)
+    assert e.metrics["mechanical_advantage_lock"] == pytest.approx(4.09, abs=0.005)
+
+
+def test_the_duty_on_the_bound_profile_does_at_least_the_clamping_work(sm55) -> None:
+    mech, evaluator, ref = sm55
+    duty = evaluator.close_duty(ref.variables, ref.metrics["x_open"])
+    assert duty["close_time"] == pytest.approx(ref.metrics["close_time"], rel=1e-12)
+    result = analyse_clamping(mech)
+    xs = np.linspace(result.x_contact, result.x_final, 801)
+    thrust = np.asarray(clamp_state(xs, result.x_contact, mech).thrust, dtype=float)
+    work = float(np.sum(0.5 * (thrust[1:] + thrust[:-1]) * np.diff(xs)))
+    assert duty["close_energy"] >= work / mech.drive.efficiency > 0  # the clamp-up's share
+    assert duty["close_rms_torque"] > 0

@@ -1,0 +1,73 @@
+"""docs/design.md replays (issue 38): its script reruns the documented command and reads the
+record back without computing anything; the same seed gives the same record and the same
+tables whether the record was computed in the process or on two workers; the comparison
+lists every objective and constraint of a design and its reference, losses included."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from design.objectives import CONSTRAINTS, Evaluator
+from design.placement import compare, design_values
+from design.search import run_search
+from design.targets import OBJECTIVES, load_targets
+from toggle.params import load_preset
+
+ROOT = Path(__file__).resolve().parents[1]
+REDUCED = {"generations": 3, "population": 16, "seed": 3}
+
+
+def _report():
+    spec = importlib.util.spec_from_file_location("design_report",
+                                                  ROOT / "docs" / "design_report.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _record(folder: Path) -> list[dict]:
+    lines = (folder / "evaluations.jsonl").read_text().splitlines()
+    return sorted((json.loads(line) for line in lines[1:]), key=lambda r: r["key"])
+
+
+def test_the_report_replays_its_command_on_any_number_of_workers(tmp_path: Path) -> None:
+    report = _report()
+    assert report.command("li_micro", report.SEARCHES["li_micro"], ROOT / "build" / "x")[:2] \
+        == ["design", "design/examples/li_micro.toml"]
+    # the record computed on a local cluster of two workers, then by the documented command
+    targets = load_targets(ROOT / "design" / "examples" / "li_micro.toml")
+    two = run_search(targets, tmp_path / "two" / "li_micro", workers=2, **REDUCED)
+    assert two.evaluated > 0
+    on_two = report.seed_004(tmp_path / "two", REDUCED, figures=False)
+    fresh = report.seed_004(tmp_path / "one", REDUCED, figures=False)  # in the process
+    assert _record(tmp_path / "two" / "li_micro") == _record(tmp_path / "one" / "li_micro")
+    body = fresh.split("```\n", 2)[-1]  # the tables, after the command line
+    assert body == on_two.split("```\n", 2)[-1]
+    assert "li_micro/1" in body and "in the Pareto set" in body
+    again = report.seed_004(tmp_path / "one", REDUCED, figures=False)  # resumed: nothing new
+    assert again == fresh
+
+
+def test_a_comparison_lists_every_objective_and_constraint_losses_included() -> None:
+    targets = load_targets(ROOT / "design" / "examples" / "sm55.toml")
+    evaluator = Evaluator(targets)
+    old = design_values(load_preset(str(ROOT / "design" / "examples" / "sm55_old_design.toml")))
+    ref = design_values(load_preset("lin2003_sm55"))
+    stroke = targets.targets["mold_open_stroke"]
+    design, reference, objectives, limits = compare(evaluator, old, ref, stroke)
+    for e in (design, reference):  # both opened by the same rule: to the same stroke
+        assert e.metrics["platen_stroke"] == pytest.approx(stroke, rel=1e-8)
+    assert reference.metrics["x_open"] == pytest.approx(-0.070, abs=1e-4)
+    assert {r.key for r in objectives} == {k for k in OBJECTIVES if k in design.metrics}
+    assert {r.key for r in limits} == {c for c in CONSTRAINTS if c in evaluator.active} - {
+        "assembly", "clamp_force", "drive_thrust"}
+    verdicts = {r.key: r.verdict for r in objectives + limits}
+    assert verdicts["thrust_peak"] == "wins" and verdicts["transmission_angle"] == "loses"
+    assert verdicts["radial_envelope"] == "loses" and verdicts["platen_side_load"] == "loses"
+    row = next(r for r in objectives if r.key == "installation_length")
+    assert row.change == pytest.approx(
+        design.metrics["installation_length"] / reference.metrics["installation_length"] - 1)
