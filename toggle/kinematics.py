@@ -160,6 +160,41 @@ def half_pose(
     return HalfPose(L, theta3, theta4, theta5, gamma1, gamma2, alpha4, l)
 
 
+class HalfJoints(NamedTuple):
+    """Joint centres of one half at input x, m, in the half's own frame: the fixed pivot of
+    the triangular link at the origin, y towards the clamp axis (the crosshead pin at height
+    d = r1 - r2, the platen joint at e). Each is an (x, y) pair of floats or arrays."""
+
+    pivot: tuple[Any, Any]  # triangular link 4 on the tailstock platen (seed 000: D, A)
+    crosshead: tuple[Any, Any]  # link 3 on the crosshead (input link 2)
+    corner: tuple[Any, Any]  # link 3 on the triangular link, r4a from the pivot
+    elbow: tuple[Any, Any]  # link 5 on the triangular link, r4b from the pivot (E, B)
+    platen: tuple[Any, Any]  # link 5 on the moving platen (F, C): (L, e)
+
+
+def half_joints(x: Any, dims: HalfDims, *, label: str = "half") -> HalfJoints:
+    """Where every joint of one half is at input x (numeric), from :func:`half_pose`'s angles:
+    the drawing of the mechanism, not a second solution of its loops."""
+    pose = half_pose(x, dims, label=label)
+    x = np.asarray(x, dtype=float)
+    crosshead = (x, np.full_like(x, dims.d))
+    corner = (x + dims.r3 * np.cos(pose.theta3), dims.d + dims.r3 * np.sin(pose.theta3))
+    elbow = (dims.r4b * np.cos(pose.theta4), dims.r4b * np.sin(pose.theta4))
+    platen = (elbow[0] + dims.r5 * np.cos(pose.theta5), elbow[1] + dims.r5 * np.sin(pose.theta5))
+    return HalfJoints((np.zeros_like(x), np.zeros_like(x)), crosshead, corner, elbow, platen)
+
+
+def clamp_joints(x: float, lower: HalfDims, upper: HalfDims) -> dict[str, HalfJoints]:
+    """Every joint of both halves at crosshead position x, m, in the clamp's frame: the clamp
+    axis is y = 0, the tailstock pivots at x = 0, the lower half below the axis (its pivot at
+    y = -r1) and the upper half its mirror image above it, each with its own dimensions."""
+    out = {}
+    for name, dims, sign in (("lower", lower, -1.0), ("upper", upper, 1.0)):
+        local = half_joints(x, dims, label=f"{name} half")
+        out[name] = HalfJoints(*((px, sign * (dims.r1 - py)) for px, py in local))
+    return out
+
+
 def output_position(x: Any, dims: HalfDims | Sequence[Any], *, label: str = "half") -> Any:
     """Output (platen joint) position L(x) of one half, m (the pose without theta3)."""
     return _chain(x, dims, True, label)[0]

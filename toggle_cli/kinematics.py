@@ -11,6 +11,7 @@ from toggle.kinematics import half_motion, half_pose, mirror_angles, stroke_limi
 from toggle.params import HALVES, Mechanism
 from toggle_cli.common import (
     MM,
+    POSITION,
     add_json_argument,
     add_out_argument,
     add_preset_argument,
@@ -119,8 +120,33 @@ def plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def plot_linkage(args: argparse.Namespace) -> int:
+    from toggle.linkage import animate_linkage, plot_linkage
+
+    mech = mechanism(args)
+    paths = [plot_linkage(mech, args.out / "linkage.png", args.x)]
+    if args.animate:
+        paths.append(animate_linkage(mech, args.out / "linkage.gif", args.frames))
+    for path in paths:
+        print(path)
+    return 0
+
+
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("kinematics", help="L(x), dL/dx and MA of both halves (seed 000 Fig 6)")
     add_preset_argument(p)
     add_out_argument(p)
     p.set_defaults(handler=plot)
+    p = kinds.add_parser(
+        "linkage", help="the mechanism drawn to scale, both halves, joints labelled as seed 000 "
+                        "(linkage.png; --animate: linkage.gif over the stroke)")
+    add_preset_argument(p, accepts=("chang2021", "lin2003_sm55", "li_micro"),
+                        why="a design's presets/design-KEY.toml too")
+    add_out_argument(p)
+    p.add_argument("--x", type=POSITION, default=None,
+                   help="crosshead position, m (default: open, mid-stroke and toggle side by side)")
+    p.add_argument("--animate", action="store_true",
+                   help="also write linkage.gif: one closing and opening over the stroke")
+    p.add_argument("--frames", type=integer(2, 1000, "must be a frame count from 2 to 1000"),
+                   default=40, help="frames of the animation")
+    p.set_defaults(handler=plot_linkage)
