@@ -25,6 +25,7 @@ import sys  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 
 from toggle.args import (  # noqa: E402
+    add_force_options,
     add_version,
     join_negative_numbers,
     quiet_broken_pipe,
@@ -47,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"toggle_cli.{name}").add_parser(sub)
+    add_force_options(parser)
     use_help_formatter(parser)
     return parser
 
@@ -66,6 +68,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = " ".join(filter(None, (args.command, getattr(args, "kind", None))))
     try:
         try:
+            check_outputs(args)
             return int(args.handler(args) or 0)
         except Exception as exc:  # a signal's exception wrapped by C code: the signal
             stop = signal_cause(exc)
@@ -86,6 +89,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, RuntimeError) as exc:
         print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Before the work: the process's overwrite policy from ``--force``, and the files the
+    command declared (:func:`toggle_cli.common.declare_outputs`) checked writable."""
+    from toggle.files import allow_overwrite, check_writable, check_writable_dir
+    from toggle_cli.common import outputs
+
+    allow_overwrite(getattr(args, "force", False))
+    targets = outputs(args)
+    if targets:
+        check_writable_dir(args.out, "--out")
+    for target in targets:
+        check_writable(target, "--out")
 
 
 def signal_cause(exc: BaseException) -> KeyboardInterrupt | None:

@@ -55,6 +55,18 @@ def add_out_argument(parser: argparse.ArgumentParser) -> None:
                         help="output folder (default figures)")
 
 
+def declare_outputs(parser: argparse.ArgumentParser, *names: str) -> None:
+    """The files a ``toggle plot`` kind writes into its ``--out`` folder (``str.format``
+    fields from the arguments, e.g. ``"sensitivity_IT{it}.png"``): the command line checks
+    them before the work (:func:`outputs`)."""
+    parser.set_defaults(outputs=names)
+
+
+def outputs(args: argparse.Namespace) -> list[Path]:
+    """The output files a command declared with :func:`declare_outputs`, under ``--out``."""
+    return [args.out / name.format(**vars(args)) for name in getattr(args, "outputs", ())]
+
+
 def mechanism(args: argparse.Namespace) -> Mechanism:
     return load_preset(args.preset)
 

@@ -7,6 +7,7 @@ import argparse
 import numpy as np
 
 from toggle.args import integer
+from toggle.files import check_writable, check_writable_dir
 from toggle.kinematics import half_motion, half_pose, mirror_angles, stroke_limits
 from toggle.params import HALVES, Mechanism
 from toggle_cli.common import (
@@ -15,6 +16,7 @@ from toggle_cli.common import (
     add_json_argument,
     add_out_argument,
     add_preset_argument,
+    declare_outputs,
     deg,
     mechanism,
     print_json,
@@ -123,6 +125,10 @@ def plot(args: argparse.Namespace) -> int:
 def plot_linkage(args: argparse.Namespace) -> int:
     from toggle.linkage import animate_linkage, plot_linkage
 
+    names = ("linkage.png", "linkage.gif") if args.animate else ("linkage.png",)
+    check_writable_dir(args.out, "--out")
+    for name in names:  # before the drawing
+        check_writable(args.out / name, "--out")
     mech = mechanism(args)
     paths = [plot_linkage(mech, args.out / "linkage.png", args.x)]
     if args.animate:
@@ -136,6 +142,7 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("kinematics", help="L(x), dL/dx and MA of both halves (seed 000 Fig 6)")
     add_preset_argument(p)
     add_out_argument(p)
+    declare_outputs(p, "kinematics.png")
     p.set_defaults(handler=plot)
     p = kinds.add_parser(
         "linkage", help="the mechanism drawn to scale, both halves, joints labelled as seed 000 "
