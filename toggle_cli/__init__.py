@@ -37,7 +37,7 @@ from toggle.params import ParameterError  # noqa: E402
 
 #: Command modules, in the order ``toggle --help`` lists them.
 COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetry", "calibrate",
-            "tables", "build_fmu", "plan", "design", "plot")
+            "tables", "build_fmu", "plan", "design", "plot", "cache")
 
 
 def build_parser() -> argparse.ArgumentParser:
