@@ -107,3 +107,16 @@ def test_toggle_cache_shows_and_clears(cache: Path, capsys: pytest.CaptureFixtur
     assert main(["cache", "clear"]) == 0
     assert "removed 2 libraries" in capsys.readouterr().out
     assert list(cache.iterdir()) == []
+
+
+def test_toggle_version_loads_no_command() -> None:
+    """``toggle --version`` answers without numpy, CasADi or the commands (benchmarks/
+    bench_startup.py times it: under 0.3 s where loading them took seconds)."""
+    probe = ("import sys, toggle_cli; code = toggle_cli.main(['--version']); "
+             "print(code, sorted(m for m in ('numpy', 'casadi', 'scipy', 'toggle.kinematics', "
+             "'toggle_cli.plan', 'importlib.metadata') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True).stdout.split("\n")
+    from toggle import __version__
+    assert out[0] == f"toggle {__version__}"
+    assert out[1] == "0 []"

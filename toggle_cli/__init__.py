@@ -30,10 +30,9 @@ from toggle.args import (  # noqa: E402
     join_negative_numbers,
     quiet_broken_pipe,
     use_help_formatter,
+    version,
 )
 from toggle.interrupts import Terminated, unwind_on_signals  # noqa: E402
-from toggle.kinematics import AssemblyError  # noqa: E402
-from toggle.params import ParameterError  # noqa: E402
 
 #: Command modules, in the order ``toggle --help`` lists them.
 COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetry", "calibrate",
@@ -60,8 +59,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     failure (a file that cannot be read or written, a solver that fails), 130 Ctrl-C, 143
     SIGTERM.
     """
-    args = build_parser().parse_args(join_negative_numbers(
-        sys.argv[1:] if argv is None else list(argv)))
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--version"]:  # without loading the commands (numpy, CasADi: seconds)
+        print(f"toggle {version()}")
+        return 0
+    args = build_parser().parse_args(join_negative_numbers(argv))
+    from toggle.kinematics import AssemblyError  # loaded with the commands by now
+    from toggle.params import ParameterError
+
     # from here a signal unwinds into the handlers below (while the commands' modules load
     # and the arguments are parsed, toggle/__init__.py's end the process at once)
     unwind_on_signals()
