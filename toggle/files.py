@@ -15,22 +15,82 @@ The convention, stated once here:
 
 Refusals are :class:`OutputError`, both an OSError and a ValueError: the command lines
 answer it as a usage error (exit 2) in one line naming the option and the path.
+
+Input files are read by :func:`read_text` and :func:`read_toml`: a file that is missing,
+unreadable, not UTF-8 text or not TOML is an :class:`InputError` (a ValueError: exit 2)
+whose one line names the file and says what is wrong in words, not "[Errno 2]" or
+"'utf-8' codec can't decode"; :func:`in_words` rewrites such phrases in any message.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import stat
+import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 _POLICY = {"overwrite": True}
 
 
 class OutputError(OSError, ValueError):
     """An output path that must not or cannot be written (the message names it)."""
+
+
+class InputError(ValueError):
+    """An input file that cannot be read or is not what it should be (the message names it)."""
+
+
+def read_text(path: str | Path, what: str = "file") -> str:
+    """The UTF-8 text of an input file; :class:`InputError` in words when it cannot be."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(f"{what} {path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{what} {path}: is a folder, not a file") from None
+    except PermissionError:
+        raise InputError(f"{what} {path}: not readable (permission denied)") from None
+    except OSError as exc:
+        raise InputError(f"{what} {path}: cannot be read ({_reason(exc)})") from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        column = exc.start - raw.rfind(b"\n", 0, exc.start)
+        raise InputError(f"{what} {path}: not UTF-8 text (line {line}, column {column}: byte "
+                         f"0x{raw[exc.start]:02x}); save it as UTF-8") from None
+
+
+def read_toml(path: str | Path, what: str = "file") -> dict[str, Any]:
+    """An input TOML file's table; :class:`InputError` naming the file and the line."""
+    text = read_text(path, what)
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{what} {path}: not valid TOML: {exc}") from None
+
+
+_ERRNO = re.compile(r"\[Errno -?\d+\]\s*")
+_CODEC = re.compile(r"'[\w-]+' codec can't decode byte (0x[0-9a-f]+) in position (\d+)"
+                    r"(: [\w ]+)?")
+
+
+def in_words(text: str) -> str:
+    """A message with Python's internals in words: no "[Errno N]", and "'utf-8' codec
+    can't decode byte 0xff in position 3: ..." as "not UTF-8 text (byte 3)"."""
+    text = _ERRNO.sub("", text)
+    return _CODEC.sub(lambda m: f"not UTF-8 text (byte {m.group(2)})", text)
 
 
 def allow_overwrite(allowed: bool) -> None:

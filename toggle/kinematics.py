@@ -361,6 +361,59 @@ def stroke_limits(dims: HalfDims) -> tuple[float, float]:
     return float(best.x), x_tp
 
 
+def _crank_horizontal(dims: HalfDims) -> list[float]:
+    """Where link 3 is horizontal (theta3 = 360 deg), from the loop of links 3 and 4 alone
+    (theta3 does not depend on link 5: a link 5 too short must not move the open position
+    to wherever the half happens to assemble)."""
+    reach = dims.r3 + dims.r4a
+    xs = np.linspace(-reach, reach, 4001)
+
+    def theta3(x: Any) -> Any:
+        with np.errstate(invalid="ignore"):
+            return half_pose(x, dims, check=False).theta3 - _TWO_PI
+    # a sign change only between neighbours where the loop closes (NaN compares false)
+    g = np.asarray(theta3(xs))
+    with np.errstate(invalid="ignore"):
+        idx = np.flatnonzero(g[:-1] * g[1:] < 0)
+    tol = 4 * np.finfo(float).eps
+    return [float(brentq(lambda x: float(theta3(x)), xs[i], xs[i + 1], xtol=1e-15, rtol=tol))
+            for i in idx]
+
+
+@functools.lru_cache(maxsize=256)
+def check_stroke(dims: HalfDims, x_open: float | None = None, *, label: str = "half") -> None:
+    """Refuse dimensions that cannot make the double-toggle clamp: the half must have a
+    toggle and assemble at every position from its open position (``x_open``, a preset's
+    own, or where link 3 is horizontal) to it. :func:`stroke_limits` alone would open such a
+    half wherever it happens to assemble (``r5 = 5e-3`` in chang2021: a 5.38 mm stroke
+    starting at 36.6 mm); this names the loop that fails and where (:class:`AssemblyError`).
+    """
+    x_first, x_tp = stroke_limits(dims)
+    how = ""
+    if x_open is None:
+        horizontal = [x for x in _crank_horizontal(dims) if x < x_tp]
+        x_open, how = (horizontal[-1], "link 3 horizontal, ") if horizontal else (x_first, "")
+    where = f"its open position ({how}x = {x_open * 1e3:.4g} mm)"
+    if not x_open < x_tp:
+        raise AssemblyError(f"not a double-toggle clamp: the {label} opens at x = "
+                            f"{x_open * 1e3:.4g} mm, not before its toggle at {x_tp * 1e3:.4g} mm")
+    xs = np.linspace(x_open, x_tp, 401)
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(half_pose(xs, dims, check=False).L)
+    if np.all(ok):
+        return
+    bad = float(xs[np.flatnonzero(~ok)[0]])
+    try:
+        half_pose(bad, dims)
+    except AssemblyError as exc:  # "... at x = X m: LOOP (argument A outside [-1, 1])"
+        why = str(exc).split(": ", 1)[-1].split(" (argument")[0] + " does not close"
+    else:  # pragma: no cover - NaN without a domain error
+        why = "loops do not close"
+    raise AssemblyError(
+        f"not a double-toggle clamp: the {label} cannot move from {where} to the toggle "
+        f"(x = {x_tp * 1e3:.4g} mm); at x = {bad * 1e3:.4g} mm the {why}")
+
+
 def toggle_position(dims: HalfDims) -> float:
     """Input position x_TP of the toggle (first maximum of L(x)), m."""
     return stroke_limits(dims)[1]

@@ -124,12 +124,15 @@ def signal_cause(exc: BaseException) -> KeyboardInterrupt | None:
 
 
 def one_line(exc: BaseException) -> str:
-    """The message of ``exc`` on one line (an OSError with its file name)."""
+    """The message of ``exc`` on one line, in words (an OSError with its file name and its
+    reason, no "[Errno N]": :func:`toggle.files.in_words`)."""
+    from toggle.files import in_words
+
     if isinstance(exc, OSError) and exc.filename is not None:
-        text = f"{exc.filename}: {exc.strerror or exc}"
+        text = f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"
     else:
-        text = str(exc) or type(exc).__name__
-    return " ".join(text.split())
+        text = str(exc) or "failed"
+    return " ".join(in_words(text).split())
 
 
 if __name__ == "__main__":  # pragma: no cover
