@@ -140,7 +140,10 @@ class Comparison(NamedTuple):
     measured: float  # N
     three_sigma: float  # N
     model: float  # N
-    relative_error: float  # (model - measured) / measured
+    #: (model - measured) / measured; NaN where the measured mean is within its 3-sigma band
+    #: of zero (the delta_r8 = 0 rows, 1-3 N +- 3-4 N): a relative error there means nothing
+    #: (it read -100 % beside "in band: yes")
+    relative_error: float
 
     @property
     def within_band(self) -> bool:
@@ -151,6 +154,10 @@ def compare(table: ForceTable, mech: Mechanism, params: AsymmetryParams) -> list
     """Side-by-side rows for every (speed, error) of the table."""
     model = predict(table, mech, params)
     mean, band = table.mean, table.three_sigma
+    def relative(i: int, j: int) -> float:
+        if abs(mean[i, j]) <= band[i, j]:
+            return math.nan
+        return float((model[i, j] - mean[i, j]) / mean[i, j])
     return [Comparison(float(s), float(e), float(mean[i, j]), float(band[i, j]),
-                       float(model[i, j]), float((model[i, j] - mean[i, j]) / mean[i, j]))
+                       float(model[i, j]), relative(i, j))
             for i, s in enumerate(table.speeds) for j, e in enumerate(table.errors)]

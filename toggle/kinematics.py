@@ -250,17 +250,25 @@ def _evaluate(
     return x_arr, pose, [np.asarray(o) for o in out]
 
 
+#: A velocity ratio dL/dx this small is the toggle's zero, m/m (rounding leaves ~1e-16;
+#: the advantage it stands for, above 1e12, is no clamp's).
+TOGGLE_RATIO = 1e-12
+
+
 def half_motion(x: Any, dims: HalfDims, *, label: str = "half") -> HalfMotion:
     """L, dL/dx, d2L/dx2 (exact, by AD), angles and ideal mechanical advantage.
 
     The ideal mechanical advantage of the whole clamp is output force over
-    input force without friction; by virtual work it is 1 / (dL/dx).
+    input force without friction; by virtual work it is 1 / (dL/dx). At the toggle it is
+    unbounded: where |dL/dx| is below :data:`TOGGLE_RATIO` (rounding there gave dL/dx =
+    -1.6e-16, an advantage of -6.4e15) it is +inf.
     """
     x_arr, pose, (L, dL, d2L, _) = _evaluate(x, dims, label)
     shape = x_arr.shape
     dL = dL.reshape(shape)
-    with np.errstate(divide="ignore", over="ignore"):  # 1/dL is inf at the toggle
-        ma = np.where(dL != 0, 1.0 / np.where(dL != 0, dL, 1.0), np.inf)
+    at_toggle = np.abs(dL) <= TOGGLE_RATIO
+    with np.errstate(divide="ignore", over="ignore"):
+        ma = np.where(at_toggle, np.inf, 1.0 / np.where(at_toggle, 1.0, dL))
     return HalfMotion(L.reshape(shape), dL, d2L.reshape(shape), np.asarray(pose.theta3),
                       np.asarray(pose.theta4), np.asarray(pose.theta5), ma)
 
