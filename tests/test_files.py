@@ -114,6 +114,7 @@ def test_the_command_line_refuses_an_existing_figure_before_the_work(
     err = capsys.readouterr().err.strip()
     assert err.endswith(f"--out {figure}: exists; give --force to replace it")
     assert figure.stat().st_mtime_ns == before
+    check_writable(figure, "--out")  # the refusal was the command's, not the library's
     assert main([*argv, "--force"]) == 0
 
 

@@ -55,9 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``toggle`` script; returns the exit status.
 
-    Exit codes: 0 done, 2 a usage error (a bad option, preset or value), 1 a runtime
-    failure (a file that cannot be read or written, a solver that fails), 130 Ctrl-C, 143
-    SIGTERM.
+    Exit codes: 0 done, 2 a usage error or unreadable or invalid input (a bad option,
+    preset, value or file; an output refused before the work), 1 a run that failed (a
+    solver that fails, a write that fails midway), 130 Ctrl-C, 143 SIGTERM.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv == ["--version"]:  # without loading the commands (numpy, CasADi: seconds)
@@ -94,6 +94,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, RuntimeError) as exc:
         print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
+    finally:  # the policy is the command's: a library caller in this process keeps replacing
+        from toggle.files import allow_overwrite
+
+        allow_overwrite(True)
 
 
 def check_outputs(args: argparse.Namespace) -> None:
