@@ -131,16 +131,16 @@ def plot_linkage(mech: Mechanism, path: Path, x: float | None = None) -> Path:
     """The clamp at crosshead position ``x`` (m); without it, open, mid-stroke and at the
     toggle side by side (seed 000, Figure 3). PNG."""
     x_open, x_tp = stroke_ends(mech)
-    positions = [x] if x is not None else [x_open, 0.5 * (x_open + x_tp), x_tp]
-    names = ["", "open", "mid-stroke", "toggle"] if x is None else ["", ""]
-    limits = _bounds(mech, list(np.linspace(x_open, x_tp, 25)) + positions)
-    fig, axes = plt.subplots(1, len(positions), figsize=_figure_size(limits, len(positions)),
+    panels = ([("open: ", x_open), ("mid-stroke: ", 0.5 * (x_open + x_tp)), ("toggle: ", x_tp)]
+              if x is None else [("", x)])
+    limits = _bounds(mech, [*np.linspace(x_open, x_tp, 25), *(xi for _, xi in panels)])
+    fig, axes = plt.subplots(1, len(panels), figsize=_figure_size(limits, len(panels)),
                              squeeze=False)
-    for ax, xi, name in zip(axes[0], positions, names[1:]):
+    for ax, (name, xi) in zip(axes[0], panels):
         draw_linkage(ax, mech, xi, limits)
         platen = clamp_joints(xi, mech.lower, mech.upper)["lower"].platen[0]
-        ax.set_title(f"{name + ': ' if name else ''}x = {xi * MM:.2f} mm, "
-                     f"L = {float(platen) * MM:.2f} mm", fontsize=10)
+        ax.set_title(f"{name}x = {xi * MM:.2f} mm, L = {float(platen) * MM:.2f} mm",
+                     fontsize=10)
     fig.suptitle(f"{mech.name}: the double-toggle clamp to scale "
                  "(links 1-9, joints A-F as seed 000)", fontsize=11)
     return save_figure(fig, path)

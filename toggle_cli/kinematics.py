@@ -115,7 +115,7 @@ def plot(args: argparse.Namespace) -> int:
     return 0
 
 
-def plot_linkage(args: argparse.Namespace) -> int:
+def linkage(args: argparse.Namespace) -> int:
     from toggle.linkage import animate_linkage, plot_linkage
 
     names = ("linkage.png", "linkage.gif") if args.animate else ("linkage.png",)
@@ -149,4 +149,4 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
                    help="also write linkage.gif: one closing and opening over the stroke")
     p.add_argument("--frames", type=integer(2, 1000, "must be a frame count from 2 to 1000"),
                    default=40, help="frames of the animation")
-    p.set_defaults(handler=plot_linkage)
+    p.set_defaults(handler=linkage)
