@@ -126,3 +126,17 @@ def test_in_words_removes_errno_and_codec_phrases() -> None:
     assert in_words("x: [Errno 13] Permission denied: 'x'") == "x: Permission denied: 'x'"
     assert in_words("'utf-8' codec can't decode byte 0xff in position 7: invalid start byte"
                     ) == "not UTF-8 text (byte 7)"
+
+
+@pytest.mark.parametrize("argv, usage", [
+    (["kinematics", "--bogus"], "usage: toggle kinematics "),
+    (["plot", "linkage", "--bogus", "1"], "usage: toggle plot linkage "),
+])
+def test_an_unknown_option_is_answered_with_the_sub_commands_usage(
+        argv: list[str], usage: str, capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and err.startswith(usage)
+    assert err.rstrip().endswith(f"error: unrecognized arguments: {' '.join(argv[-2:])}"
+                                 if argv[-1] == "1" else "error: unrecognized arguments: --bogus")

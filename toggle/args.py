@@ -132,6 +132,27 @@ def version() -> str:
     return __version__
 
 
+def remember_parsers(parser: argparse.ArgumentParser) -> None:
+    """Every (sub-)command's parser as the default ``command_parser`` of its arguments, so
+    that :func:`parse_command_line` can answer in the sub-command's own usage."""
+    parser.set_defaults(command_parser=parser)
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for sub in action.choices.values():
+                remember_parsers(sub)
+
+
+def parse_command_line(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    """``parser.parse_args(argv)``, but an unknown option is refused with the usage of the
+    sub-command it was given to (argparse answers with the top level's: "usage: toggle
+    [-h] [--version] COMMAND ...", which does not say what the sub-command takes)."""
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        getattr(args, "command_parser", parser).error(
+            f"unrecognized arguments: {' '.join(extra)}")
+    return args
+
+
 def add_version(parser: argparse.ArgumentParser) -> None:
     """``--version``: the installed toggle-clamp version."""
     parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")

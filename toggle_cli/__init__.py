@@ -28,7 +28,9 @@ from toggle.args import (  # noqa: E402
     add_force_options,
     add_version,
     join_negative_numbers,
+    parse_command_line,
     quiet_broken_pipe,
+    remember_parsers,
     use_help_formatter,
     version,
 )
@@ -49,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
         importlib.import_module(f"toggle_cli.{name}").add_parser(sub)
     add_force_options(parser)
     use_help_formatter(parser)
+    remember_parsers(parser)
     return parser
 
 
@@ -63,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv == ["--version"]:  # without loading the commands (numpy, CasADi: seconds)
         print(f"toggle {version()}")
         return 0
-    args = build_parser().parse_args(join_negative_numbers(argv))
+    args = parse_command_line(build_parser(), join_negative_numbers(argv))
     from toggle.kinematics import AssemblyError  # loaded with the commands by now
     from toggle.params import ParameterError
 
