@@ -124,3 +124,33 @@ def test_an_output_folder_that_is_a_file_is_refused_before_the_work(
     folder.write_text("not a folder")
     assert main(["plot", "synthesize", "--out", str(folder)]) == 2
     assert "not a directory" in capsys.readouterr().err
+
+
+def test_plan_refuses_an_existing_out_before_solving(tmp_path: Path, monkeypatch,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    import toggle_cli.plan as plan_cli
+
+    monkeypatch.setattr(plan_cli, "planner_for", lambda *a, **k: pytest.fail("solved first"))
+    existing = tmp_path / "plan.csv"
+    existing.write_text("mine\n")
+    assert main(["plan", "--out", str(existing)]) == 2
+    assert capsys.readouterr().err.strip().endswith("exists; give --force to replace it")
+    assert existing.read_text() == "mine\n"
+
+
+def test_force_is_offered_only_where_outputs_are_checked() -> None:
+    from toggle_cli import build_parser
+
+    def takes_force(*words: str) -> bool:
+        parser = build_parser()
+        for word in words:
+            parser = next(a for a in parser._actions  # noqa: SLF001
+                          if hasattr(a, "choices") and isinstance(a.choices, dict)
+                          ).choices[word]
+        return "--force" in parser._option_string_actions  # noqa: SLF001
+
+    for words in (("plan",), ("tables",), ("plot", "kinematics"), ("plot", "linkage"),
+                  ("plot", "synthesize"), ("plot", "clamp")):
+        assert takes_force(*words), words
+    for words in (("kinematics",), ("cache",), ("build-fmu",)):
+        assert not takes_force(*words), words

@@ -105,20 +105,16 @@ def use_help_formatter(parser: argparse.ArgumentParser) -> None:
                 use_help_formatter(sub)
 
 
-#: Options that name what a command writes: a command with one of them takes ``--force``.
-OUTPUT_OPTIONS = ("--out", "--cycle-out", "--duty-plot", "--plot")
-
-
 def add_force_options(parser: argparse.ArgumentParser) -> None:
-    """``--force`` on ``parser`` and every sub-command that writes files (has one of
-    :data:`OUTPUT_OPTIONS`) and has none yet: without it an existing output file is refused
-    before any work (:func:`toggle.files.check_writable`)."""
+    """``--force`` on ``parser`` and every sub-command that checks its output files before
+    the work (its ``checks_outputs`` default is true: :func:`toggle.files.check_writable`
+    refuses an existing one unless ``--force``) and has none yet."""
     for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
         if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
             for sub in action.choices.values():
                 add_force_options(sub)
     options = parser._option_string_actions  # noqa: SLF001
-    if any(o in options for o in OUTPUT_OPTIONS) and "--force" not in options:
+    if parser.get_default("checks_outputs") and "--force" not in options:
         parser.add_argument("--force", action="store_true",
                             help="replace output files that exist (without it they are "
                                  "refused before any work)")

@@ -36,6 +36,11 @@ from toggle.args import (  # noqa: E402
 )
 from toggle.interrupts import Terminated, unwind_on_signals  # noqa: E402
 
+#: Commands (their words) whose modules check their output files with
+#: :func:`toggle.files.check_writable` before the work (``toggle plan``: --out, --cycle-out,
+#: --duty-plot) without marking it: they take ``--force`` too.
+CHECKS_OUTPUTS = (("plan",),)
+
 #: Command modules, in the order ``toggle --help`` lists them.
 COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetry", "calibrate",
             "tables", "build_fmu", "plan", "design", "plot", "cache")
@@ -49,10 +54,22 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"toggle_cli.{name}").add_parser(sub)
+    for words in CHECKS_OUTPUTS:
+        command = parser
+        for word in words:
+            command = _subcommands(command)[word]
+        command.set_defaults(checks_outputs=True)
     add_force_options(parser)
     use_help_formatter(parser)
     remember_parsers(parser)
     return parser
+
+
+def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            return dict(action.choices)
+    return {}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

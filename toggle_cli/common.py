@@ -58,8 +58,8 @@ def add_out_argument(parser: argparse.ArgumentParser) -> None:
 def declare_outputs(parser: argparse.ArgumentParser, *names: str) -> None:
     """The files a ``toggle plot`` kind writes into its ``--out`` folder (``str.format``
     fields from the arguments, e.g. ``"sensitivity_IT{it}.png"``): the command line checks
-    them before the work (:func:`outputs`)."""
-    parser.set_defaults(outputs=names)
+    them before the work (:func:`outputs`), and the command takes ``--force``."""
+    parser.set_defaults(outputs=names, checks_outputs=True)
 
 
 def outputs(args: argparse.Namespace) -> list[Path]:

@@ -149,4 +149,4 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
                    help="also write linkage.gif: one closing and opening over the stroke")
     p.add_argument("--frames", type=integer(2, 1000, "must be a frame count from 2 to 1000"),
                    default=40, help="frames of the animation")
-    p.set_defaults(handler=linkage)
+    p.set_defaults(handler=linkage, checks_outputs=True)

@@ -144,4 +144,4 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     add_preset_argument(p, default="dong2022", accepts=("dong2022", *CLAMP_PRESETS),
                         why="dong2022 is a press, the others clamps")
     add_out_argument(p)
-    p.set_defaults(handler=plot)
+    p.set_defaults(handler=plot, checks_outputs=True)
