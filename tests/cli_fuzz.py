@@ -98,15 +98,22 @@ def _files(root: Path | None) -> set[Path]:
     return set() if root is None else {p for p in root.rglob("*") if p.is_file()}
 
 
+#: Phrases of Python's internals that an answer in the user's words does not contain.
+INTERNALS = ("[Errno", "codec can't", "NoneType", "<class ", "object has no attribute",
+             "unsupported operand", "takes 1 positional")
+
+
 def check_answer(main: Callable[[Sequence[str]], int], argv: list[str],
-                 outputs: Sequence[Path], watch: Path | None = None) -> tuple[int, str]:
+                 outputs: Sequence[Path], watch: Path | None = None,
+                 in_words: bool = False) -> tuple[int, str]:
     """Run ``main(argv)`` in-process; assert the CLI contract; return (exit code, stderr).
 
     The contract: no traceback; exit 0, 1 (runtime failure) or 2 (usage); a failure says
     so on exactly one ``error:`` line (the last); a refused command leaves ``outputs`` as
     they were and adds no file under ``watch``; no temporary file is ever left behind; no
     numerical warning (a division by zero, an invalid value: the trace of a silent NaN);
-    JSON output is JSON (no NaN or Infinity).
+    JSON output is JSON (no NaN or Infinity); with ``in_words`` no phrase of
+    :data:`INTERNALS` ("[Errno 2]", "'utf-8' codec can't decode", a Python type's name).
     """
     before = {p: p.exists() for p in outputs}
     files = _files(watch)
@@ -131,7 +138,8 @@ def check_answer(main: Callable[[Sequence[str]], int], argv: list[str],
         errors = [ln for ln in text.splitlines() if "error:" in ln]
         assert len(errors) == 1 and text.rstrip().endswith(errors[0]), (argv, text)
         assert len(errors[0]) < 400, (argv, errors[0])  # one readable line, no dumped arrays
-        for leak in ("np.float64(", "array(", "HalfDims(", "Traceback"):
+        for leak in ("np.float64(", "array(", "HalfDims(", "Traceback",
+                     *(INTERNALS if in_words else ())):
             assert leak not in errors[0], (argv, errors[0])
         for p in outputs:
             assert p.exists() == before[p], (argv, p, text)  # a refused command left nothing

@@ -46,7 +46,8 @@ def test_plan_refuses_an_unwritable_out_before_solving(monkeypatch, capsys, regu
 
     monkeypatch.setattr(plan_cli, "planner_for", lambda *a, **k: pytest.fail("solved first"))
     code, _, err = answer(toggle, ["plan", "--out", str(regular / "plan.csv")], capsys)
-    assert code == 1 and err.startswith("toggle plan: error: --out") and str(regular) in err
+    # a refused output is a usage error (exit 2), told before the work
+    assert code == 2 and err.startswith("toggle plan: error: --out") and str(regular) in err
 
 
 @pytest.mark.parametrize("argv", [
@@ -56,7 +57,7 @@ def test_plan_refuses_an_unwritable_out_before_solving(monkeypatch, capsys, regu
 ])
 def test_toggle_outputs_under_a_regular_file_are_one_line(argv, capsys, regular):
     code, _, err = answer(toggle, [a.format(r=regular) for a in argv], capsys)
-    assert code == 1 and "error:" in err and str(regular) in err
+    assert code == 2 and "error:" in err and str(regular) in err
     assert regular.read_text() == "a file, not a folder\n"
 
 

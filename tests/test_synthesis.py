@@ -35,6 +35,10 @@ def test_significance_matches_table3(press_model):
     tilt = synthesis.sensitivity_table(press_model)
     top3 = sorted(tilt, key=lambda r: -r.significance_tilt)[:3]
     assert {r.source for r in top3} == {"l1", "Cx", "l5"}
+    # Section 4 / Figure 7: l1, Cx and l5 account for 85 % of the tilt error (a chart of
+    # the tilt once drew the position's bars again: the shares must differ)
+    assert sum(r.significance_tilt for r in top3) == pytest.approx(0.85, abs=0.015)
+    assert sum(r.significance_tilt for r in tilt) == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize("model_name", ["press_model", "clamp_model"])

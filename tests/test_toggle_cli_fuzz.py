@@ -21,6 +21,8 @@ from toggle_cli import build_parser, main
 
 ROOT = Path(tempfile.mkdtemp(prefix="toggle_fuzz_"))
 PATHS = path_values(ROOT)
+(ROOT / "latin1.toml").write_bytes("# Größe\nname = 'x'\n".encode("latin-1"))  # not UTF-8
+PATHS.append(str(ROOT / "latin1.toml"))
 
 #: Options appended to keep one run in milliseconds (a count, a sample size).
 CAPS: dict[tuple[str, ...], list[str]] = {
@@ -35,6 +37,7 @@ CAPS: dict[tuple[str, ...], list[str]] = {
     ("plan",): ["--intervals", "4"],
     ("plot", "trade-off"): ["--intervals", "4", "--points", "2"],
     ("calibrate",): ["--fit", "free_play", "--speeds", "5e-3"],
+    ("plot", "linkage"): ["--frames", "2"],
 }
 
 
@@ -51,7 +54,9 @@ def monkeypatch_module():
 @pytest.fixture(autouse=True, scope="module")
 def cheap(monkeypatch_module) -> None:
     import fmu_src.native_build as native
+    import toggle.linkage as linkage
     import toggle_cli.build_fmu as build_cli
+    from toggle.files import atomic_path
 
     def fake_build(out: Path, *_args: object, **_kwargs: object) -> Path:
         path = Path(out) / "ToggleClamp.fmu"
@@ -62,7 +67,13 @@ def cheap(monkeypatch_module) -> None:
     def fake_savefig(fig: object, path: Path, **_kw: object) -> None:
         Path(path).write_bytes(b"\x89PNG")  # rendering is matplotlib's; the writing is ours
 
+    def fake_animation(mech: object, path: Path, frames: int = 2, **_kw: object) -> Path:
+        with atomic_path(Path(path)) as tmp:  # the GIF writer renders through savefig
+            tmp.write_bytes(b"GIF89a")
+        return Path(path)
+
     monkeypatch_module.setattr(Figure, "savefig", fake_savefig)
+    monkeypatch_module.setattr(linkage, "animate_linkage", fake_animation)
     monkeypatch_module.setattr(Figure, "tight_layout", lambda fig, **_kw: None)
     monkeypatch_module.setattr(build_cli, "build_fmu", fake_build)
     monkeypatch_module.setattr(native, "build_native_fmu", fake_build)
@@ -73,4 +84,4 @@ def cheap(monkeypatch_module) -> None:
           suppress_health_check=[HealthCheck.too_slow])
 @given(argv=invocations(build_parser(), PATHS, caps))
 def test_every_toggle_command_answers_bad_input_with_one_clear_line(argv: list[str]) -> None:
-    check_answer(main, argv, [], watch=ROOT)
+    check_answer(main, argv, [], watch=ROOT, in_words=True)

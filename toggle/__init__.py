@@ -14,6 +14,9 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+#: The package's version (pyproject.toml reads it from here).
+__version__ = "0.1.0"
+
 _EXPORTS = {"AssemblyError": "toggle.kinematics", "HalfDims": "toggle.params",
             "Mechanism": "toggle.params", "load_mechanism": "toggle.params",
             "load_preset": "toggle.params"}

@@ -14,7 +14,6 @@ import os
 import re
 import sys
 from collections.abc import Callable
-from importlib import metadata
 from pathlib import Path
 
 #: A negative number as the value of an option (argparse takes '-1e-3' for an option).
@@ -106,13 +105,53 @@ def use_help_formatter(parser: argparse.ArgumentParser) -> None:
                 use_help_formatter(sub)
 
 
+def add_force_options(parser: argparse.ArgumentParser) -> None:
+    """``--force`` on ``parser`` and every sub-command that checks its output files before
+    the work (its ``checks_outputs`` default is true: :func:`toggle.files.check_writable`
+    refuses an existing one unless ``--force``) and has none yet."""
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for sub in action.choices.values():
+                add_force_options(sub)
+    options = parser._option_string_actions  # noqa: SLF001
+    if parser.get_default("checks_outputs") and "--force" not in options:
+        parser.add_argument("--force", action="store_true",
+                            help="replace output files that exist (without it they are "
+                                 "refused before any work)")
+
+
+def version() -> str:
+    """The toggle-clamp version (the package's own: importlib.metadata takes a tenth of a
+    second to load, a third of what ``toggle --version`` may take)."""
+    from toggle import __version__
+
+    return __version__
+
+
+def remember_parsers(parser: argparse.ArgumentParser) -> None:
+    """Every (sub-)command's parser as the default ``command_parser`` of its arguments, so
+    that :func:`parse_command_line` can answer in the sub-command's own usage."""
+    parser.set_defaults(command_parser=parser)
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for sub in action.choices.values():
+                remember_parsers(sub)
+
+
+def parse_command_line(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    """``parser.parse_args(argv)``, but an unknown option is refused with the usage of the
+    sub-command it was given to (argparse answers with the top level's: "usage: toggle
+    [-h] [--version] COMMAND ...", which does not say what the sub-command takes)."""
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        getattr(args, "command_parser", parser).error(
+            f"unrecognized arguments: {' '.join(extra)}")
+    return args
+
+
 def add_version(parser: argparse.ArgumentParser) -> None:
     """``--version``: the installed toggle-clamp version."""
-    try:
-        version = metadata.version("toggle-clamp")
-    except metadata.PackageNotFoundError:  # pragma: no cover - run from a source tree
-        version = "unknown"
-    parser.add_argument("--version", action="version", version=f"%(prog)s {version}")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
 
 
 def quiet_broken_pipe() -> int:

@@ -10,20 +10,31 @@ moved into the cache complete, named with the checksum of its content; one whose
 does not match (truncated, damaged: loading it could crash the process) is deleted and
 rebuilt, as is one that does not load. Where no compiler works or the cache is not
 writable, :func:`shared_library` returns None and the caller falls back to its
-interpreted path. The newest :data:`KEEP` libraries of a name are kept.
+interpreted path.
+
+The cache stays bounded: the :data:`KEEP` most recently used libraries of a name, and
+at most :func:`size_cap` bytes in all (``TOGGLE_CACHE_MAX_MB``, default 200 MB), the least
+recently used deleted first (a library's time is refreshed when it is loaded). A compile
+works in a scratch folder named by host and process (``scratch-HOST-PID-*``); one left by a
+killed compile is removed when the next compile starts. ``toggle cache`` shows and clears
+it (:func:`cache_report`, :func:`clear_cache`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import platform
+import shutil
+import socket
 import subprocess
 import tempfile
+import time
 import zlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TypeVar
+from typing import NamedTuple, TypeVar
 
 import casadi as ca
 
@@ -33,15 +44,122 @@ Sources = list[tuple[Sequence[str], Path]]
 _COMPILE = ("-fPIC", "-c")
 _LINK = ("-shared", "-s")
 _TIMEOUT = 300  # s, per compiler run
-#: Libraries of one name kept (0.7 to 2 MB each); older ones (of changed code or plants,
-#: other N, robust variants) are deleted.
-KEEP = 48
+#: Libraries of one name kept (a planner's 'stroke' library is 4 to 10 MB); older ones (of
+#: changed code or plants, other N, robust variants) are deleted.
+KEEP = 24
+#: Default cap on the cache's total size, MB (``TOGGLE_CACHE_MAX_MB``).
+DEFAULT_MAX_MB = 200.0
+_SCRATCH = "scratch-"
 
 
 def cache_dir() -> Path:
     """Directory of the compiled libraries."""
     default = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "toggle-clamp"
     return Path(os.environ.get("TOGGLE_CACHE_DIR", default))
+
+
+def size_cap() -> int:
+    """The most bytes the cache keeps (``TOGGLE_CACHE_MAX_MB``; an unusable value: the
+    default)."""
+    try:
+        mb = float(os.environ.get("TOGGLE_CACHE_MAX_MB", DEFAULT_MAX_MB))
+    except ValueError:
+        mb = DEFAULT_MAX_MB
+    return int((mb if mb > 0 else DEFAULT_MAX_MB) * 1e6)
+
+
+def _scratch_prefix(pid: int | None = None) -> str:
+    return f"{_SCRATCH}{socket.gethostname()}-{os.getpid() if pid is None else pid}-"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process
+        return True
+    return True
+
+
+def _stale_scratch() -> list[Path]:
+    """Scratch folders of compiles on this host whose process is gone, and the unnamed
+    ``tmp*`` ones of earlier versions once older than any compile lasts (2 x the timeout)."""
+    prefix = f"{_SCRATCH}{socket.gethostname()}-"
+    stale = []
+    for folder in cache_dir().glob(f"{prefix}*"):
+        pid = folder.name[len(prefix):].split("-", 1)[0]
+        if folder.is_dir() and pid.isdigit() and not _alive(int(pid)):
+            stale.append(folder)
+    now = time.time()
+    for folder in cache_dir().glob("tmp*"):
+        with contextlib.suppress(OSError):
+            if folder.is_dir() and now - folder.stat().st_mtime > 2 * _TIMEOUT:
+                stale.append(folder)
+    return stale
+
+
+def _size(path: Path) -> int:
+    """Bytes of a file, or of a folder's files."""
+    if path.is_dir():
+        return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+    return path.stat().st_size
+
+
+def remove_stale_scratch() -> int:
+    """Remove the scratch folders of killed compiles; return the bytes freed."""
+    freed = 0
+    for folder in _stale_scratch():
+        try:
+            size = _size(folder)
+            shutil.rmtree(folder)
+            freed += size
+        except OSError:  # another process removing it too
+            pass
+    return freed
+
+
+class CacheReport(NamedTuple):
+    """What the compiled-code cache holds: its folder, (count, bytes) of the libraries of
+    each name, (count, bytes) of killed compiles' scratch folders, and the size cap."""
+
+    folder: Path
+    libraries: dict[str, tuple[int, int]]
+    stale_scratch: tuple[int, int]
+    cap: int
+
+    @property
+    def total(self) -> int:
+        return sum(b for _, b in self.libraries.values()) + self.stale_scratch[1]
+
+
+def cache_report() -> CacheReport:
+    """The cache's content (an absent folder is an empty cache)."""
+    libraries: dict[str, tuple[int, int]] = {}
+    folder = cache_dir()
+    if folder.is_dir():
+        for library in folder.glob("*.so"):
+            name = library.name.rsplit("_", 2)[0]
+            count, size = libraries.get(name, (0, 0))
+            libraries[name] = (count + 1, size + library.stat().st_size)
+    stale = _stale_scratch() if folder.is_dir() else []
+    return CacheReport(folder, dict(sorted(libraries.items())),
+                       (len(stale), sum(map(_size, stale))), size_cap())
+
+
+def clear_cache() -> tuple[int, int]:
+    """Delete every cached library and killed compiles' scratch (a running compile's
+    scratch stays); return (files, bytes) removed."""
+    files, freed = 0, remove_stale_scratch()
+    if cache_dir().is_dir():
+        for library in cache_dir().glob("*.so"):
+            try:
+                size = library.stat().st_size
+                library.unlink()
+            except OSError:
+                continue
+            files, freed = files + 1, freed + size
+    return files, freed
 
 
 def _compiler() -> str:
@@ -81,7 +199,8 @@ def _compile(sources: Callable[[Path], Sources], stem: str, libs: Sequence[str])
     named by ``stem`` and its checksum, moved into the cache in one step; None on failure."""
     try:
         cache_dir().mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=cache_dir()) as tmp:
+        remove_stale_scratch()
+        with tempfile.TemporaryDirectory(dir=cache_dir(), prefix=_scratch_prefix()) as tmp:
             units = sources(Path(tmp))
             objects = [source.with_suffix(".o") for _, source in units]
             _run_all([[_compiler(), *flags, *_COMPILE, "-o", str(obj), str(source)]
@@ -95,14 +214,31 @@ def _compile(sources: Callable[[Path], Sources], stem: str, libs: Sequence[str])
         return None
 
 
-def _prune(name: str) -> None:
-    """Delete all but the :data:`KEEP` newest libraries of ``name``."""
-    try:
-        libraries = sorted(cache_dir().glob(f"{name}_*.so"), key=lambda p: p.stat().st_mtime)
-        for old in libraries[:-KEEP]:
-            old.unlink(missing_ok=True)
-    except OSError:  # another process pruning at the same time
-        pass
+def _prune(name: str, keep: Path | None = None) -> None:
+    """Delete all but the :data:`KEEP` most recently used libraries of ``name``, then the
+    least recently used of any name while the cache is over :func:`size_cap` (never
+    ``keep``, the one just loaded)."""
+    def by_age(pattern: str) -> list[tuple[float, int, Path]]:
+        out = []
+        for p in cache_dir().glob(pattern):
+            with contextlib.suppress(OSError):  # another process pruning at the same time
+                st = p.stat()
+                out.append((st.st_mtime, st.st_size, p))
+        return sorted(out)
+
+    for _, _, old in by_age(f"{name}_*.so")[:-KEEP]:
+        with contextlib.suppress(OSError):
+            old.unlink()
+    libraries = by_age("*.so")
+    total = sum(size for _, size, _ in libraries)
+    for _, size, old in libraries:
+        if total <= size_cap():
+            break
+        if old == keep:
+            continue
+        with contextlib.suppress(OSError):
+            old.unlink()
+            total -= size
 
 
 def _intact(library: Path) -> bool:
@@ -141,8 +277,10 @@ def shared_library(name: str, key: str, sources: Callable[[Path], Sources],
     for library in cache_dir().glob(f"{stem}_*.so"):
         loaded = load(library) if _intact(library) else None
         if loaded is not None:
+            with contextlib.suppress(OSError):  # used now: the last to be pruned
+                os.utime(library)
             return loaded
     library = _compile(sources, stem, libs)
     loaded = load(library) if library else None
-    _prune(name)
+    _prune(name, library)
     return loaded

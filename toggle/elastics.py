@@ -35,7 +35,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.optimize import brentq, minimize_scalar
 
-from toggle.kinematics import half_pose, stroke_limits
+from toggle.kinematics import check_stroke, half_pose, stroke_limits
 from toggle.params import HALVES, ClampData, HalfDims, Mechanism
 from toggle.statics import CLOSING, check_friction, force_ratios, linkage_angles
 
@@ -138,6 +138,7 @@ def clamp_stroke(mech: Mechanism, half: str = "lower") -> tuple[float, float]:
     dims = mech.half(half)
     x_open, x_final = stroke_limits(dims)
     preset_open = clamp_data(mech).x_open
+    check_stroke(dims, preset_open, label=f"{half} half of {mech.name}")  # reachable?
     if preset_open is None:
         return x_open, x_final
     half_pose(preset_open, dims, label=f"{half} half at the preset's x_open")  # assembles?

@@ -160,6 +160,41 @@ def half_pose(
     return HalfPose(L, theta3, theta4, theta5, gamma1, gamma2, alpha4, l)
 
 
+class HalfJoints(NamedTuple):
+    """Joint centres of one half at input x, m, in the half's own frame: the fixed pivot of
+    the triangular link at the origin, y towards the clamp axis (the crosshead pin at height
+    d = r1 - r2, the platen joint at e). Each is an (x, y) pair of floats or arrays."""
+
+    pivot: tuple[Any, Any]  # triangular link 4 on the tailstock platen (seed 000: D, A)
+    crosshead: tuple[Any, Any]  # link 3 on the crosshead (input link 2)
+    corner: tuple[Any, Any]  # link 3 on the triangular link, r4a from the pivot
+    elbow: tuple[Any, Any]  # link 5 on the triangular link, r4b from the pivot (E, B)
+    platen: tuple[Any, Any]  # link 5 on the moving platen (F, C): (L, e)
+
+
+def half_joints(x: Any, dims: HalfDims, *, label: str = "half") -> HalfJoints:
+    """Where every joint of one half is at input x (numeric), from :func:`half_pose`'s angles:
+    the drawing of the mechanism, not a second solution of its loops."""
+    pose = half_pose(x, dims, label=label)
+    x = np.asarray(x, dtype=float)
+    crosshead = (x, np.full_like(x, dims.d))
+    corner = (x + dims.r3 * np.cos(pose.theta3), dims.d + dims.r3 * np.sin(pose.theta3))
+    elbow = (dims.r4b * np.cos(pose.theta4), dims.r4b * np.sin(pose.theta4))
+    platen = (elbow[0] + dims.r5 * np.cos(pose.theta5), elbow[1] + dims.r5 * np.sin(pose.theta5))
+    return HalfJoints((np.zeros_like(x), np.zeros_like(x)), crosshead, corner, elbow, platen)
+
+
+def clamp_joints(x: float, lower: HalfDims, upper: HalfDims) -> dict[str, HalfJoints]:
+    """Every joint of both halves at crosshead position x, m, in the clamp's frame: the clamp
+    axis is y = 0, the tailstock pivots at x = 0, the lower half below the axis (its pivot at
+    y = -r1) and the upper half its mirror image above it, each with its own dimensions."""
+    out = {}
+    for name, dims, sign in (("lower", lower, -1.0), ("upper", upper, 1.0)):
+        local = half_joints(x, dims, label=f"{name} half")
+        out[name] = HalfJoints(*((px, sign * (dims.r1 - py)) for px, py in local))
+    return out
+
+
 def output_position(x: Any, dims: HalfDims | Sequence[Any], *, label: str = "half") -> Any:
     """Output (platen joint) position L(x) of one half, m (the pose without theta3)."""
     return _chain(x, dims, True, label)[0]
@@ -215,17 +250,25 @@ def _evaluate(
     return x_arr, pose, [np.asarray(o) for o in out]
 
 
+#: A velocity ratio dL/dx this small is the toggle's zero, m/m (rounding leaves ~1e-16;
+#: the advantage it stands for, above 1e12, is no clamp's).
+TOGGLE_RATIO = 1e-12
+
+
 def half_motion(x: Any, dims: HalfDims, *, label: str = "half") -> HalfMotion:
     """L, dL/dx, d2L/dx2 (exact, by AD), angles and ideal mechanical advantage.
 
     The ideal mechanical advantage of the whole clamp is output force over
-    input force without friction; by virtual work it is 1 / (dL/dx).
+    input force without friction; by virtual work it is 1 / (dL/dx). At the toggle it is
+    unbounded: where |dL/dx| is below :data:`TOGGLE_RATIO` (rounding there gave dL/dx =
+    -1.6e-16, an advantage of -6.4e15) it is +inf.
     """
     x_arr, pose, (L, dL, d2L, _) = _evaluate(x, dims, label)
     shape = x_arr.shape
     dL = dL.reshape(shape)
-    with np.errstate(divide="ignore", over="ignore"):  # 1/dL is inf at the toggle
-        ma = np.where(dL != 0, 1.0 / np.where(dL != 0, dL, 1.0), np.inf)
+    at_toggle = np.abs(dL) <= TOGGLE_RATIO
+    with np.errstate(divide="ignore", over="ignore"):
+        ma = np.where(at_toggle, np.inf, 1.0 / np.where(at_toggle, 1.0, dL))
     return HalfMotion(L.reshape(shape), dL, d2L.reshape(shape), np.asarray(pose.theta3),
                       np.asarray(pose.theta4), np.asarray(pose.theta5), ma)
 
@@ -324,6 +367,59 @@ def stroke_limits(dims: HalfDims) -> tuple[float, float]:
     best = minimize_scalar(lambda x: -float(half_pose(x, dims).theta3), bounds=(lo, hi),
                            method="bounded", options={"xatol": 1e-13})
     return float(best.x), x_tp
+
+
+def _crank_horizontal(dims: HalfDims) -> list[float]:
+    """Where link 3 is horizontal (theta3 = 360 deg), from the loop of links 3 and 4 alone
+    (theta3 does not depend on link 5: a link 5 too short must not move the open position
+    to wherever the half happens to assemble)."""
+    reach = dims.r3 + dims.r4a
+    xs = np.linspace(-reach, reach, 4001)
+
+    def theta3(x: Any) -> Any:
+        with np.errstate(invalid="ignore"):
+            return half_pose(x, dims, check=False).theta3 - _TWO_PI
+    # a sign change only between neighbours where the loop closes (NaN compares false)
+    g = np.asarray(theta3(xs))
+    with np.errstate(invalid="ignore"):
+        idx = np.flatnonzero(g[:-1] * g[1:] < 0)
+    tol = 4 * np.finfo(float).eps
+    return [float(brentq(lambda x: float(theta3(x)), xs[i], xs[i + 1], xtol=1e-15, rtol=tol))
+            for i in idx]
+
+
+@functools.lru_cache(maxsize=256)
+def check_stroke(dims: HalfDims, x_open: float | None = None, *, label: str = "half") -> None:
+    """Refuse dimensions that cannot make the double-toggle clamp: the half must have a
+    toggle and assemble at every position from its open position (``x_open``, a preset's
+    own, or where link 3 is horizontal) to it. :func:`stroke_limits` alone would open such a
+    half wherever it happens to assemble (``r5 = 5e-3`` in chang2021: a 5.38 mm stroke
+    starting at 36.6 mm); this names the loop that fails and where (:class:`AssemblyError`).
+    """
+    x_first, x_tp = stroke_limits(dims)
+    how = ""
+    if x_open is None:
+        horizontal = [x for x in _crank_horizontal(dims) if x < x_tp]
+        x_open, how = (horizontal[-1], "link 3 horizontal, ") if horizontal else (x_first, "")
+    where = f"its open position ({how}x = {x_open * 1e3:.4g} mm)"
+    if not x_open < x_tp:
+        raise AssemblyError(f"not a double-toggle clamp: the {label} opens at x = "
+                            f"{x_open * 1e3:.4g} mm, not before its toggle at {x_tp * 1e3:.4g} mm")
+    xs = np.linspace(x_open, x_tp, 401)
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(half_pose(xs, dims, check=False).L)
+    if np.all(ok):
+        return
+    bad = float(xs[np.flatnonzero(~ok)[0]])
+    try:
+        half_pose(bad, dims)
+    except AssemblyError as exc:  # "... at x = X m: LOOP (argument A outside [-1, 1])"
+        why = str(exc).split(": ", 1)[-1].split(" (argument")[0] + " does not close"
+    else:  # pragma: no cover - NaN without a domain error
+        why = "loops do not close"
+    raise AssemblyError(
+        f"not a double-toggle clamp: the {label} cannot move from {where} to the toggle "
+        f"(x = {x_tp * 1e3:.4g} mm); at x = {bad * 1e3:.4g} mm the {why}")
 
 
 def toggle_position(dims: HalfDims) -> float:

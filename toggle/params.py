@@ -7,6 +7,7 @@ in ``toggle/presets``; a user's own file loads the same way.
 
 from __future__ import annotations
 
+import difflib
 import math
 import sys
 from collections.abc import Mapping
@@ -14,6 +15,8 @@ from dataclasses import MISSING, dataclass, fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+from toggle.files import InputError, read_toml
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -496,13 +499,10 @@ def _section(cls: type, table: Any, origin: str, where: str) -> Any:
     """Build one dataclass section from a TOML table, naming unknown/missing keys."""
     if not isinstance(table, dict):
         raise ParameterError(f"{origin}: [{where}] must be a table")
-    names = {f.name for f in fields(cls)}
-    required = {f.name for f in fields(cls) if f.default is MISSING}
-    unknown, missing = set(table) - names, required - set(table)
-    if unknown or missing:
-        raise ParameterError(
-            f"{origin}: [{where}]: unknown {sorted(unknown)}, missing {sorted(missing)}"
-        )
+    _unknown(table, [f.name for f in fields(cls)], f"{origin}: [{where}]", "key")
+    missing = [f.name for f in fields(cls) if f.default is MISSING and f.name not in table]
+    if missing:
+        raise ParameterError(f"{origin}: [{where}] has no {', '.join(missing)}")
     try:
         return cls(**table)
     except (TypeError, ParameterError) as exc:
@@ -522,18 +522,35 @@ def _clamp_from_table(table: Any, origin: str) -> ClampData:
     return _section(ClampData, values, origin, "clamp")
 
 
+#: The tables and keys of a clamp preset (a family adds ``groups`` and ``default_group``).
+SECTIONS = ("name", "description", "half", "lower", "upper", "clamp", "drive", "dynamics")
+
+
+def _unknown(names: Any, known: Any, where: str, kind: str) -> None:
+    """Refuse the first of ``names`` not in ``known``, by name, with the nearest known one."""
+    for name in names:
+        if name not in known:
+            near = difflib.get_close_matches(str(name), list(known), n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise ParameterError(f"{where}: unknown {kind} {name!r}{hint}; "
+                                 f"known: {', '.join(known)}")
+
+
 def _halves_from_table(table: dict[str, Any], origin: str) -> tuple[HalfDims, HalfDims]:
+    for name in ("half", *HALVES):  # each table's own keys, named where they are
+        if name in table:
+            if not isinstance(table[name], dict):
+                raise ParameterError(f"{origin}: [{name}] must be a table of dimensions (m)")
+            _unknown(table[name], DIMENSIONS, f"{origin}: [{name}]", "dimension")
     common = table.get("half", {})
     out = []
     for half in HALVES:
         values = {**common, **table.get(half, {})}
-        unknown = set(values) - set(DIMENSIONS)
-        missing = set(DIMENSIONS) - set(values)
-        if unknown or missing:
+        missing = [k for k in DIMENSIONS if k not in values]
+        if missing:
             raise ParameterError(
-                f"{origin}: [{half}] dimensions: "
-                f"unknown {sorted(unknown)}, missing {sorted(missing)}"
-            )
+                f"{origin}: the {half} half has no {', '.join(missing)} "
+                f"(give it in [half], or in [{half}] for this half only)")
         for key, value in values.items():
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ParameterError(f"{origin}: [{half}] {key} = {value!r} is not a number (m)")
@@ -598,6 +615,7 @@ def mechanism_from_dict(
         what = table.get("description", "")
         raise ParameterError(f"{origin} has no clamp link dimensions ([half], [lower], [upper])"
                              + (f": it is the {what}" if what else ""))
+    _unknown(table, SECTIONS, origin, "section or key")
     lower, upper = _halves_from_table(table, origin)
     return Mechanism(
         name=str(table.get("name", origin)),
@@ -615,9 +633,9 @@ def mechanism_from_dict(
 
 def _read_toml(path: Path) -> dict[str, Any]:
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ParameterError(f"cannot read mechanism file {path}: {exc}") from exc
+        return read_toml(path, "preset")
+    except InputError as exc:
+        raise ParameterError(str(exc)) from None
 
 
 def load_mechanism(path: str | Path, group: str | int | None = None) -> Mechanism:

@@ -397,30 +397,35 @@ def plot_tables(tables: PaperTables, nominal: Mechanism, model: RigModel, folder
     """One PNG per statistic: measured mean +- 3 sigma (error bars) and the simulated rig
     (curves over ``points`` link-8 errors) against delta_r8, one colour per speed; the
     (statistic, speed) rows in ``fitted`` (default: the shipped calibration's, every
-    statistic at :data:`SHIPPED_FIT_SPEEDS`) drawn solid, predicted ones dashed. Written
-    as ``tables_<stat>.png``."""
+    statistic at :data:`SHIPPED_FIT_SPEEDS`) drawn solid, predicted ones dashed. The speeds'
+    measured bars stand side by side around their delta_r8 (a few hundredths of a mm
+    apart: on one abscissa they hid each other), the legend beside the axes. Written as
+    ``tables_<stat>.png``."""
     from toggle.plots import plt, save_figure
 
     errors = np.linspace(tables.errors.min(), tables.errors.max(), points)
     curves = [[model.statistics(nominal, v, d) for d in errors] for v in tables.speeds]
     paths = []
+    spread = 0.04 * float(np.ptp(tables.errors)) * 1e3  # mm between the speeds' bars
     for stat in statistics:
         scale, unit = (1e3, "mm") if stat == "stroke" else (1.0, "N")
-        fig, ax = plt.subplots(figsize=(6, 4))
+        fig, ax = plt.subplots(figsize=(9, 4.5))
         for i, v in enumerate(tables.speeds):
             colour = f"C{i}"
             was_fitted = ((stat, float(v)) in fitted if fitted is not None else
                           any(math.isclose(v, f, rel_tol=1e-6) for f in SHIPPED_FIT_SPEEDS))
-            ax.errorbar(tables.errors * 1e3, tables.mean[stat][i] * scale,
-                        yerr=tables.three_sigma[stat][i] * scale, fmt="o", color=colour,
-                        capsize=3, label=f"measured, v = {v * 1e3:g} mm/s (mean ± 3σ)")
+            shift = (i - (len(tables.speeds) - 1) / 2) * spread
+            ax.errorbar(tables.errors * 1e3 + shift, tables.mean[stat][i] * scale,
+                        yerr=tables.three_sigma[stat][i] * scale, fmt="o", ms=5,
+                        color=colour, capsize=3, label=f"{v * 1e3:g} mm/s measured ± 3σ")
             ax.plot(errors * 1e3, [getattr(s, stat) * scale for s in curves[i]],
                     "-" if was_fitted else "--", color=colour,
-                    label=f"simulated rig, v = {v * 1e3:g} mm/s "
+                    label=f"{v * 1e3:g} mm/s simulated "
                           f"({'fitted' if was_fitted else 'predicted'})")
         ax.set_xlabel("link-8 error Δr8 (mm)")
         ax.set_ylabel(f"{STAT_LABELS[stat]} ({unit})")
-        ax.set_title(f"Seed 000 Tables 3-8: {STAT_LABELS[stat]}")
-        ax.legend(fontsize=6)
+        ax.set_title(f"Seed 000 Tables 3-8: {STAT_LABELS[stat]} (measured bars of the speeds "
+                     "side by side at each Δr8)", fontsize=10)
+        ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
         paths.append(save_figure(fig, Path(folder) / f"tables_{stat}.png"))
     return paths

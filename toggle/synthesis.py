@@ -179,9 +179,12 @@ def clamp_error_model(mech: Mechanism, settings: SynthesisSettings | None = None
 class SourceSensitivity:
     """Sensitivity (d output / d source, per chain) and significance of one error source.
 
-    Significance (Eq 19) normalises |sensitivity| over all sources of both
-    chains. To first order the tilt is (ds1 - ds2) / W, so its significances
-    equal the position ones and the lever-arm sources have none.
+    Significance of the position (Eq 19) normalises |sensitivity| over all sources of
+    both chains (Figure 6: l1 and Cx 51 %). To first order the tilt is (ds1 - ds2) / W,
+    whose |sensitivity| shares are the position's again (a chart of them drew the same bars
+    twice); the tilt's significance is its share of the tilt's variance, sensitivity^2 over
+    the sum of them, which is what Figure 7 shows (l1, Cx and l5 85 %). The lever-arm
+    sources enter at second order only and have none.
     """
 
     source: str
@@ -194,7 +197,7 @@ class SourceSensitivity:
 def sensitivity_table(model: ErrorModel) -> list[SourceSensitivity]:
     g_left, g_right = model.gradient["left"], model.gradient["right"]
     pos = 0.5 * (np.abs(g_left) + np.abs(g_right))  # |d dS / d source|, both chains
-    tilt = (np.abs(g_left) + np.abs(g_right)) / model.nominal_spacing
+    tilt = (g_left**2 + g_right**2) / model.nominal_spacing**2  # variance per source
     return [SourceSensitivity(s, float(g_left[i]), float(g_right[i]), float(pos[i] / pos.sum()),
                               float(tilt[i] / tilt.sum()))
             for i, s in enumerate(model.sources)]

@@ -25,18 +25,25 @@ import sys  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 
 from toggle.args import (  # noqa: E402
+    add_force_options,
     add_version,
     join_negative_numbers,
+    parse_command_line,
     quiet_broken_pipe,
+    remember_parsers,
     use_help_formatter,
+    version,
 )
 from toggle.interrupts import Terminated, unwind_on_signals  # noqa: E402
-from toggle.kinematics import AssemblyError  # noqa: E402
-from toggle.params import ParameterError  # noqa: E402
+
+#: Commands (their words) whose modules check their output files with
+#: :func:`toggle.files.check_writable` before the work (``toggle plan``: --out, --cycle-out,
+#: --duty-plot) without marking it: they take ``--force`` too.
+CHECKS_OUTPUTS = (("plan",),)
 
 #: Command modules, in the order ``toggle --help`` lists them.
 COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetry", "calibrate",
-            "tables", "build_fmu", "plan", "design", "plot")
+            "tables", "build_fmu", "plan", "design", "plot", "cache")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -47,25 +54,46 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"toggle_cli.{name}").add_parser(sub)
+    for words in CHECKS_OUTPUTS:
+        command = parser
+        for word in words:
+            command = _subcommands(command)[word]
+        command.set_defaults(checks_outputs=True)
+    add_force_options(parser)
     use_help_formatter(parser)
+    remember_parsers(parser)
     return parser
+
+
+def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            return dict(action.choices)
+    return {}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``toggle`` script; returns the exit status.
 
-    Exit codes: 0 done, 2 a usage error (a bad option, preset or value), 1 a runtime
-    failure (a file that cannot be read or written, a solver that fails), 130 Ctrl-C, 143
-    SIGTERM.
+    Exit codes: 0 done, 2 a usage error or unreadable or invalid input (a bad option,
+    preset, value or file; an output refused before the work), 1 a run that failed (a
+    solver that fails, a write that fails midway), 130 Ctrl-C, 143 SIGTERM.
     """
-    args = build_parser().parse_args(join_negative_numbers(
-        sys.argv[1:] if argv is None else list(argv)))
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--version"]:  # without loading the commands (numpy, CasADi: seconds)
+        print(f"toggle {version()}")
+        return 0
+    args = parse_command_line(build_parser(), join_negative_numbers(argv))
+    from toggle.kinematics import AssemblyError  # loaded with the commands by now
+    from toggle.params import ParameterError
+
     # from here a signal unwinds into the handlers below (while the commands' modules load
     # and the arguments are parsed, toggle/__init__.py's end the process at once)
     unwind_on_signals()
     command = " ".join(filter(None, (args.command, getattr(args, "kind", None))))
     try:
         try:
+            check_outputs(args)
             return int(args.handler(args) or 0)
         except Exception as exc:  # a signal's exception wrapped by C code: the signal
             stop = signal_cause(exc)
@@ -86,6 +114,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, RuntimeError) as exc:
         print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
+    finally:  # the policy is the command's: a library caller in this process keeps replacing
+        from toggle.files import allow_overwrite
+
+        allow_overwrite(True)
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Before the work: the process's overwrite policy from ``--force``, and the files the
+    command declared (:func:`toggle_cli.common.declare_outputs`) checked writable."""
+    from toggle.files import allow_overwrite, check_writable, check_writable_dir
+    from toggle_cli.common import outputs
+
+    allow_overwrite(getattr(args, "force", False))
+    targets = outputs(args)
+    if targets:
+        check_writable_dir(args.out, "--out")
+    for target in targets:
+        check_writable(target, "--out")
 
 
 def signal_cause(exc: BaseException) -> KeyboardInterrupt | None:
@@ -102,12 +148,15 @@ def signal_cause(exc: BaseException) -> KeyboardInterrupt | None:
 
 
 def one_line(exc: BaseException) -> str:
-    """The message of ``exc`` on one line (an OSError with its file name)."""
+    """The message of ``exc`` on one line, in words (an OSError with its file name and its
+    reason, no "[Errno N]": :func:`toggle.files.in_words`)."""
+    from toggle.files import in_words
+
     if isinstance(exc, OSError) and exc.filename is not None:
-        text = f"{exc.filename}: {exc.strerror or exc}"
+        text = f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"
     else:
-        text = str(exc) or type(exc).__name__
-    return " ".join(text.split())
+        text = str(exc) or "failed"
+    return " ".join(in_words(text).split())
 
 
 if __name__ == "__main__":  # pragma: no cover

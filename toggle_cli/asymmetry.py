@@ -18,6 +18,7 @@ from toggle_cli.common import (
     add_json_argument,
     add_out_argument,
     add_preset_argument,
+    declare_outputs,
     mechanism,
     print_json,
 )
@@ -87,4 +88,5 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("asymmetry", help="extra input force vs x for delta_r8 = 0..0.75 mm")
     _add_common(p)
     add_out_argument(p)
+    declare_outputs(p, "asymmetry.png")
     p.set_defaults(handler=plot)

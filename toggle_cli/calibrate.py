@@ -9,6 +9,7 @@ values (SI) and every row of the table side by side with the model.
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import asdict
 
 from toggle.args import path
@@ -60,10 +61,16 @@ def run(args: argparse.Namespace) -> int:
           f"{', '.join(f'{s * MM:g}' for s in cal.speeds)} mm/s of {args.table}")
     for name, value in fitted.items():
         print(f"  {name} = {value:.6g} {FITTED_UNITS.get(name, '(SI)')}")
-    print(table(["v mm/s", "dr8 mm", "F_TP N", "+-3sigma N", "model N", "error %", "in band"],
+    print(table(["v mm/s", "dr8 mm", "F_TP N", "+-3sigma N", "model N", "error N",
+                 "error %", "in band"],
                 [(r.speed * MM, r.error * MM, r.measured, r.three_sigma, r.model,
-                  100 * r.relative_error, "yes" if r.within_band else "no") for r in rows],
+                  r.model - r.measured,
+                  "n/a" if math.isnan(r.relative_error) else 100 * r.relative_error,
+                  "yes" if r.within_band else "no") for r in rows],
                 fmt="{:>12.2f}"))
+    if any(math.isnan(r.relative_error) for r in rows):
+        print("n/a: the measured F_TP is within its 3-sigma band of zero (the symmetric "
+              "clamp), where a relative error means nothing; compare the error in N")
     return 0
 
 

@@ -25,6 +25,7 @@ from toggle_cli.common import (
     POSITION,
     add_json_argument,
     add_preset_argument,
+    declare_outputs,
     deg,
     mechanism,
     print_json,
@@ -191,4 +192,6 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
                    help="motor speed of the torque figure, rpm (default 200)")
     p.add_argument("--out", type=path, default=Path("build/figures/clamp"),
                    help="output folder for the PNG files (default build/figures/clamp)")
+    declare_outputs(p, "fig4_tiebar_force.png", "fig5_mechanical_advantage.png",
+                    "fig6_thrust.png", "fig7_thrust_max.png", "fig8_motor_torque.png")
     p.set_defaults(handler=plot)

@@ -13,7 +13,7 @@ from typing import Any
 
 from toggle.args import integer, number, path, positive
 from toggle.json_text import json_text
-from toggle.params import Mechanism, load_preset
+from toggle.params import HALVES, Mechanism, ParameterError, load_preset
 
 MM = 1e3  # metres to millimetres, for tables only
 
@@ -55,8 +55,32 @@ def add_out_argument(parser: argparse.ArgumentParser) -> None:
                         help="output folder (default figures)")
 
 
+def declare_outputs(parser: argparse.ArgumentParser, *names: str) -> None:
+    """The files a ``toggle plot`` kind writes into its ``--out`` folder (``str.format``
+    fields from the arguments, e.g. ``"sensitivity_IT{it}.png"``): the command line checks
+    them before the work (:func:`outputs`), and the command takes ``--force``."""
+    parser.set_defaults(outputs=names, checks_outputs=True)
+
+
+def outputs(args: argparse.Namespace) -> list[Path]:
+    """The output files a command declared with :func:`declare_outputs`, under ``--out``."""
+    return [args.out / name.format(**vars(args)) for name in getattr(args, "outputs", ())]
+
+
 def mechanism(args: argparse.Namespace) -> Mechanism:
-    return load_preset(args.preset)
+    """The ``--preset``, refused (ParameterError, exit 2) where its dimensions cannot make
+    the double-toggle clamp it states, with the reason
+    (:func:`toggle.kinematics.check_stroke`)."""
+    from toggle.kinematics import AssemblyError, check_stroke
+
+    mech = load_preset(args.preset)
+    x_open = mech.clamp.x_open if mech.clamp is not None else None
+    for half in HALVES:
+        try:
+            check_stroke(mech.half(half), x_open, label=f"{half} half")
+        except AssemblyError as exc:
+            raise ParameterError(f"preset {args.preset}: {exc}") from None
+    return mech
 
 
 def print_json(payload: Any) -> None:

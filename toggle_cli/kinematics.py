@@ -7,13 +7,16 @@ import argparse
 import numpy as np
 
 from toggle.args import integer
+from toggle.files import check_writable, check_writable_dir
 from toggle.kinematics import half_motion, half_pose, mirror_angles, stroke_limits
 from toggle.params import HALVES, Mechanism
 from toggle_cli.common import (
     MM,
+    POSITION,
     add_json_argument,
     add_out_argument,
     add_preset_argument,
+    declare_outputs,
     deg,
     mechanism,
     print_json,
@@ -60,6 +63,8 @@ def profile(mech: Mechanism, points: int) -> dict:
         m = half_motion(xs, mech.half(h), label=f"{h} half")
         out[h] = {"L": m.L.tolist(), "dL_dx": m.dL_dx.tolist(),
                   "mechanical_advantage": m.mechanical_advantage.tolist()}
+    out["note"] = ("mechanical_advantage is dx/dL, unbounded at the toggle: null there "
+                   "(+inf in the text table)")
     return out
 
 
@@ -79,10 +84,10 @@ def run(args: argparse.Namespace) -> int:
     if args.points:
         p = data["profile"]
         rows = [(x * MM, p["lower"]["L"][i] * MM, p["upper"]["L"][i] * MM, p["lower"]["dL_dx"][i],
-                 _advantage(p["lower"]["mechanical_advantage"][i])) for i, x in enumerate(p["x"])]
+                 p["lower"]["mechanical_advantage"][i]) for i, x in enumerate(p["x"])]
         print()
         print(table(("x mm", "L_L mm", "L_U mm", "dL/dx (1)", "MA (1)"), rows))
-        print("(MA = dx/dL, unbounded at the toggle: shown as inf above 1e9)")
+        print("(MA = dx/dL, unbounded at the toggle: inf there)")
     return 0
 
 
@@ -90,15 +95,6 @@ def _wrapped_deg(rad: float) -> float:
     """An angle in degrees within (-180, 180] (a pose can carry whole turns)."""
     value = deg(rad) % 360.0
     return value - 360.0 if value > 180.0 else value
-
-
-def _advantage(value: float) -> float:
-    """The mechanical advantage as printed: ``inf`` where the toggle makes it unbounded."""
-    return float("inf") if abs(value) > MA_SHOWN_MAX else value
-
-
-#: Mechanical advantages above this are the toggle's singularity, printed as inf.
-MA_SHOWN_MAX = 1e9
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -119,8 +115,38 @@ def plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def linkage(args: argparse.Namespace) -> int:
+    from toggle.linkage import animate_linkage, plot_linkage
+
+    names = ("linkage.png", "linkage.gif") if args.animate else ("linkage.png",)
+    check_writable_dir(args.out, "--out")
+    for name in names:  # before the drawing
+        check_writable(args.out / name, "--out")
+    mech = mechanism(args)
+    paths = [plot_linkage(mech, args.out / "linkage.png", args.x)]
+    if args.animate:
+        paths.append(animate_linkage(mech, args.out / "linkage.gif", args.frames))
+    for path in paths:
+        print(path)
+    return 0
+
+
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("kinematics", help="L(x), dL/dx and MA of both halves (seed 000 Fig 6)")
     add_preset_argument(p)
     add_out_argument(p)
+    declare_outputs(p, "kinematics.png")
     p.set_defaults(handler=plot)
+    p = kinds.add_parser(
+        "linkage", help="the mechanism drawn to scale, both halves, joints labelled as seed 000 "
+                        "(linkage.png; --animate: linkage.gif over the stroke)")
+    add_preset_argument(p, accepts=("chang2021", "lin2003_sm55", "li_micro"),
+                        why="a design's presets/design-KEY.toml too")
+    add_out_argument(p)
+    p.add_argument("--x", type=POSITION, default=None,
+                   help="crosshead position, m (default: open, mid-stroke and toggle side by side)")
+    p.add_argument("--animate", action="store_true",
+                   help="also write linkage.gif: one closing and opening over the stroke")
+    p.add_argument("--frames", type=integer(2, 1000, "must be a frame count from 2 to 1000"),
+                   default=40, help="frames of the animation")
+    p.set_defaults(handler=linkage, checks_outputs=True)

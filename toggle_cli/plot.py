@@ -9,7 +9,9 @@ from toggle_cli import COMMANDS
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plot", help="write PNG figures (kinds listed below)")
+    p = sub.add_parser("plot", help="write figures (PNG; linkage also a GIF): "
+                                    "'toggle plot --help' lists the kinds",
+                       description="Write figures into --out. Kinds:")
     kinds = p.add_subparsers(dest="kind", required=True, metavar="KIND")
     for name in COMMANDS:
         module = importlib.import_module(f"toggle_cli.{name}")

@@ -34,6 +34,7 @@ from toggle_cli.common import (
     add_json_argument,
     add_out_argument,
     add_preset_argument,
+    declare_outputs,
     deg,
     print_json,
     table,
@@ -272,9 +273,11 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("study", help="Ms, Mv, Mp, psi against toggle angle (seed 004 Figs 3-6)")
     _add_range_arguments(p, "li_micro")
     add_out_argument(p)
+    declare_outputs(p, "study.png")
     p.set_defaults(handler=_plot_study)
     s = kinds.add_parser("sweep", help="contours of the study's criteria over two dimensions")
     _add_range_arguments(s, "li_micro/1")
     _add_dim_argument(s)
     add_out_argument(s)
+    declare_outputs(s, "sweep.png")
     s.set_defaults(handler=_plot_sweep)

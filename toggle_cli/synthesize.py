@@ -12,6 +12,7 @@ from dataclasses import asdict
 from typing import Any
 
 from toggle import press, synthesis
+from toggle.files import check_writable, check_writable_dir
 from toggle.params import load_preset
 from toggle_cli.common import (
     CLAMP_PRESETS,
@@ -119,14 +120,16 @@ def plot(args: argparse.Namespace) -> int:
 
     from toggle.plots import plt, save_figure
 
+    check_writable_dir(args.out, "--out")
     model = error_model(args.preset)
+    check_writable(args.out / f"significance_{model.name}.png", "--out")  # before the work
     rows = synthesis.sensitivity_table(model)
     pos = np.array([r.significance_position for r in rows])
     tilt = np.array([r.significance_tilt for r in rows])
     x = np.arange(len(rows))
     fig, ax = plt.subplots(figsize=(8, 4))
-    ax.bar(x - 0.2, pos, 0.4, label="slider position error ΔS")
-    ax.bar(x + 0.2, tilt, 0.4, label="tilt error Δβ")
+    ax.bar(x - 0.2, pos, 0.4, label="position error ΔS (|λ| share, Fig 6)")
+    ax.bar(x + 0.2, tilt, 0.4, label="tilt error Δβ (variance share, Fig 7)")
     ax.set_xticks(x, [r.source for r in rows], rotation=30)
     ax.set_ylabel("significance coefficient λ (1)")
     ax.set_title(f"{model.name}: significance of each error source ({model.output_label})")
@@ -141,4 +144,4 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     add_preset_argument(p, default="dong2022", accepts=("dong2022", *CLAMP_PRESETS),
                         why="dong2022 is a press, the others clamps")
     add_out_argument(p)
-    p.set_defaults(handler=plot)
+    p.set_defaults(handler=plot, checks_outputs=True)

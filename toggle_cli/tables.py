@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 
 from toggle.args import path
-from toggle.files import check_writable_dir
+from toggle.files import check_writable, check_writable_dir
 from toggle.rig_calibration import (
     FORCE_FITTABLE,
     MAX_FORCE_FITTED,
@@ -44,6 +44,8 @@ LABELS = {**STAT_LABELS, "stroke": "S"}
 def run(args: argparse.Namespace) -> int:
     if args.plot is not None:
         check_writable_dir(args.plot, "--plot")  # before the simulation, not after it
+        for stat in STATISTICS:  # plot_tables draws every statistic
+            check_writable(args.plot / f"tables_{stat}.png", "--plot")
     tables = load_paper_tables()
     nominal = mechanism(args)
     model, fit = RigModel(), None
@@ -141,4 +143,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", type=path, default=None, metavar="DIR",
                    help="write one PNG per statistic into DIR")
     add_json_argument(p)
-    p.set_defaults(handler=run)
+    p.set_defaults(handler=run, checks_outputs=True)

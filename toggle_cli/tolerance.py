@@ -16,6 +16,7 @@ from toggle_cli.common import (
     add_json_argument,
     add_out_argument,
     add_preset_argument,
+    declare_outputs,
     mechanism,
     print_json,
     table,
@@ -102,4 +103,5 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     add_preset_argument(p)
     p.add_argument("--it", type=IT_GRADE, default=10, help="IT grade of the error curves")
     add_out_argument(p)
+    declare_outputs(p, "sensitivity_IT{it}.png", "asymmetry_vs_it.png")
     p.set_defaults(handler=plot)
