@@ -18,6 +18,7 @@ An access the models do not implement raises :class:`Unsupported`: the run stops
 from __future__ import annotations
 
 import struct
+import subprocess
 from collections.abc import Callable
 from pathlib import Path
 
@@ -48,11 +49,10 @@ from unicorn.arm_const import (
 UNITS_PER_S = 1_440_000_000
 #: The longest run of instructions between two looks at the peripherals and interrupts:
 #: also the worst interrupt latency, and the most a WFI's time can be over-counted.
-MAX_CHUNK_S = 10e-6
+MAX_CHUNK_S = 50e-6
 EXC_RETURN_THREAD = 0xFFFFFFF9  # return to thread mode, main stack, basic frame
 EXCP_EXCEPTION_EXIT = 8  # unicorn's interrupt number for a branch to EXC_RETURN
 HARDFAULT = 3
-WFI = 0xBF30
 
 
 def seconds(t: float) -> int:
@@ -142,6 +142,8 @@ class Machine:
         self.reset_reasons: list[tuple[int, str]] = []
         self._fault_pending = False
         self._reset_request: str | None = None
+        #: addresses after each WFI instruction of the image (:meth:`find_wfi`)
+        self.wfi_returns: set[int] = set()
 
     # --- memory ---------------------------------------------------------------------------
 
@@ -330,7 +332,7 @@ class Machine:
             self.now += n * self.insn_units
 
     def _execute(self, n: int) -> None:
-        pc = self.pc
+        pc = self.uc.reg_read(UC_ARM_REG_PC)
         try:
             self.uc.emu_start(pc | 1, 0xFFFFFFFF, count=n)
         except Unsupported:
@@ -340,9 +342,20 @@ class Machine:
             self._fault_pending = True
             return
         self.instructions += n
-        here = self.pc
-        if here >= 2 and int.from_bytes(self.uc.mem_read(here - 2, 2), "little") == WFI:
+        here = self.uc.reg_read(UC_ARM_REG_PC)
+        if here in self.wfi_returns:  # stopped by a WFI (or its count ended there)
             self.sleeping = True
+
+
+def find_wfi(machine: Machine, elf: Path) -> None:
+    """Note where the image's WFI instructions are (arm-none-eabi-objdump's disassembly):
+    an emulation that stops just after one has gone to sleep."""
+    out = subprocess.run(["arm-none-eabi-objdump", "-d", str(elf)], capture_output=True,
+                         text=True, check=True).stdout
+    for line in out.splitlines():
+        parts = line.split("\t")
+        if len(parts) >= 3 and parts[2].strip() == "wfi":
+            machine.wfi_returns.add(int(parts[0].strip().rstrip(":"), 16) + 2)
 
 
 def load_elf(machine: Machine, elf: Path) -> list[tuple[int, bytes]]:

@@ -43,7 +43,14 @@ from hil.firmware import (
 from hil.mcu_model import RigHardware
 from hil.rehost.ads131m02 import Ads131m02
 from hil.rehost.cortex import DbgMcu, Dwt, SystemControl
-from hil.rehost.machine import UNITS_PER_S, Machine, Unsupported, load_elf, seconds
+from hil.rehost.machine import (
+    UNITS_PER_S,
+    Machine,
+    Unsupported,
+    find_wfi,
+    load_elf,
+    seconds,
+)
 from hil.rehost.stm32f446 import (
     HSE_HZ,
     Dma1,
@@ -204,6 +211,7 @@ class NucleoBoard:
             m.map_mmio(page, 0x1000)
         m.map_mmio(0x08060000, 0x20000)
         self.segments = load_elf(m, self.elf)
+        find_wfi(m, self.elf)
         self.scs = m.add(SystemControl(m))
         m.add(Dwt(m, self.scs))
         self.dbg = m.add(DbgMcu(m))
@@ -414,6 +422,14 @@ class NucleoRig:
                     self.dropped += len(out) - written
         except BaseException as exc:  # the board stopped: keep it for check()
             self.error = exc
+
+    def summary(self) -> str:
+        """One line of counts: bytes in and out, lost ones, resets."""
+        b = self.board
+        return (f"{b.machine.now / UNITS_PER_S:.3f} s emulated, {b.dma.sent} bytes sent "
+                f"({self.dropped} dropped at a full pty), RX overruns {b.usart.overruns}, "
+                f"bytes lost before the USART was on {b.usart.lost}, resets "
+                f"{[reason for _, reason in b.log.resets]}")
 
     def check(self) -> None:
         """Raise what stopped the board, if anything did."""
