@@ -79,10 +79,18 @@ class Session:
         raise AssertionError(f"no reply to {msg}")
 
     def hello(self) -> p.HelloReply:
-        self.board.receive(b"\x00")
-        reply = self.command(p.Hello(host_nonce=0x5EED))
-        assert isinstance(reply, p.HelloReply) and reply.result == p.Result.OK
-        return reply
+        """HELLO, sent again every 50 ms as a host does (bytes sent before the firmware
+        turns its USART on are lost, as on the chip)."""
+        for _ in range(20):
+            seq = self._next()
+            self.board.receive(b"\x00" + p.encode_message(p.Hello(host_nonce=0x5EED), seq,
+                                                          p.FLAG_ACK_REQ))
+            self.run(0.05)
+            for m in self.messages:
+                if isinstance(m, p.HelloReply) and m.acked_seq == seq:
+                    assert m.result == p.Result.OK
+                    return m
+        raise AssertionError("no HELLO_REPLY in 1 s")
 
     def upload(self, points: list[tuple[int, int]]) -> None:
         for first in range(0, len(points), p.MAX_CHUNK_POINTS):

@@ -99,6 +99,8 @@ class Ads131m02:
 
     def select(self, low: bool) -> None:
         """The chip select (PB12) changed to ``low``."""
+        if not self.present:
+            return
         if low and not self.cs_low:
             self.cs_low = True
             self._start_frame()

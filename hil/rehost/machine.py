@@ -201,17 +201,19 @@ class Machine:
         """Mark an exception (16 + IRQ number, or a system exception) pending."""
         self.pending.add(exception)
 
-    def _takeable(self) -> int | None:
-        """The pending exception the core would take now, if any."""
+    def _takeable(self, masked: bool | None = None) -> int | None:
+        """The pending exception the core would take now, if any (``masked``: PRIMASK as
+        given instead of the core's)."""
         if not self.pending:
             return None
         current = self.priority.get(self.active[-1][0], -1) if self.active else 256
         if self.active and self.active[-1][0] == HARDFAULT:
             current = -1
-        primask = self.uc.reg_read(UC_ARM_REG_PRIMASK) & 1
+        if masked is None:
+            masked = bool(self.uc.reg_read(UC_ARM_REG_PRIMASK) & 1)
         best = None
         for exc in self.pending:
-            if exc >= 16 and (exc - 16 not in self.enabled or primask):
+            if exc >= 16 and (exc - 16 not in self.enabled or masked):
                 continue
             prio = -1 if exc == HARDFAULT else self.priority.get(exc, 0)
             if prio < current and (best is None or (prio, exc) < best[0]):
@@ -325,9 +327,9 @@ class Machine:
                 continue
             t = self._next_event(min(end, self.now + chunk))
             n = max(1, (t - self.now) // self.insn_units)
-            if self.wake_pending():
-                n = 1  # masked (PRIMASK) or lower priority: one instruction at a time
-                # until the CPSIE or the exception return that lets it in
+            if self.pending and self._takeable(masked=False) is not None:
+                n = 1  # held back by PRIMASK only: one instruction at a time until the
+                # CPSIE lets it in (a lower priority waits for the exception return)
             self._execute(n)
             self.now += n * self.insn_units
 
