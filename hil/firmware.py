@@ -80,7 +80,8 @@ def build_host_firmware(preset: str = "chang2021", plant_only: bool = False) -> 
 
     ``plant_only``: the simulated rig alone, without the core and the host glue,
     exporting sim_rig_* and the hal_* functions (plant-<preset>-<hash>/librigsim.so: the
-    plant of the rehosted board image, hil/rehost/). The hash covers the firmware's C sources, the generated FMU code and the flags, so an
+    plant of the rehosted board image, hil/rehost/). The hash covers the firmware's C
+    sources, the generated FMU code and the flags, so an
     edit rebuilds and an unchanged tree reuses the library. RuntimeError with gcc's stderr
     when a compilation fails.
     """

@@ -22,7 +22,7 @@ from hil.mcu_model import RigHardware
 
 unicorn = pytest.importorskip("unicorn", reason="needs the unicorn package (pip install unicorn)")
 
-from hil.rehost.machine import UNITS_PER_S, Unsupported  # noqa: E402
+from hil.rehost.machine import UNITS_PER_S, UnsupportedAccessError  # noqa: E402
 from hil.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image  # noqa: E402
 
 # The stepper driver the step generator is checked against: ADI Trinamic TMC5160 in its
@@ -306,9 +306,9 @@ def test_adc_health_faults_are_named(elf: Path, inject: str, value: object) -> N
 
 def test_an_access_no_model_implements_is_an_error(elf: Path) -> None:
     board, _ = _board(elf)
-    with pytest.raises(Unsupported, match="TIM1"):
+    with pytest.raises(UnsupportedAccessError, match="TIM1"):
         board.tim1.write(0x48, 4, 0)  # DCR: DMA bursts are not modelled
-    with pytest.raises(Unsupported, match="no peripheral"):
+    with pytest.raises(UnsupportedAccessError, match="no peripheral"):
         board.machine._mmio_read(board.machine.uc, 0x400, 4, 0x40010000)  # TIM8
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from hil.rehost.machine import UNITS_PER_S, Unsupported
+from hil.rehost.machine import UNITS_PER_S, UnsupportedAccessError
 
 WORD = 3
 FRAME_WORDS = 4
@@ -143,7 +143,7 @@ class Ads131m02:
         self.frames += 1
         data = bytes(self.inp)
         if len(data) < WORD:
-            raise Unsupported(f"ADS131M02: a frame of {len(data)} bytes")
+            raise UnsupportedAccessError(f"ADS131M02: a frame of {len(data)} bytes")
         command = data[0] << 8 | data[1]
         self.response = None  # NULL: STATUS of the next frame
         if command == 0x0000:
@@ -153,21 +153,23 @@ class Ads131m02:
             return
         kind, addr, count = command >> 13, command >> 7 & 0x3F, (command & 0x7F) + 1
         if kind not in (0b011, 0b101) or count != 1:
-            raise Unsupported(f"ADS131M02: command {command:#06x} is not modelled")
+            raise UnsupportedAccessError(f"ADS131M02: command {command:#06x} is not modelled")
         if addr not in RESET_VALUES:
-            raise Unsupported(f"ADS131M02: register {addr:#x} is not modelled")
+            raise UnsupportedAccessError(f"ADS131M02: register {addr:#x} is not modelled")
         if kind == 0b101:  # RREG
             self.response = self.regs[addr]
             return
         if len(data) < 2 * WORD:
-            raise Unsupported("ADS131M02: WREG without its data word")
+            raise UnsupportedAccessError("ADS131M02: WREG without its data word")
         value = data[WORD] << 8 | data[WORD + 1]
         if addr in (REG_ID, REG_STATUS):
-            raise Unsupported(f"ADS131M02: WREG of read-only register {addr:#x}")
+            raise UnsupportedAccessError(f"ADS131M02: WREG of read-only register {addr:#x}")
         if addr == REG_MODE and value & 0x300 != 0x100:
-            raise Unsupported("ADS131M02: word lengths other than 24 bits are not modelled")
+            raise UnsupportedAccessError("ADS131M02: word lengths other than 24 bits are "
+                                         "not modelled")
         if addr == REG_MODE and value & 0x3000:
-            raise Unsupported("ADS131M02: the input and register-map CRC are not modelled")
+            raise UnsupportedAccessError("ADS131M02: the input and register-map CRC are "
+                                         "not modelled")
         self.regs[addr] = value
         self.response = 0x4000 | addr << 7
 

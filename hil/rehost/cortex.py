@@ -1,7 +1,7 @@
 """The Cortex-M4's own memory-mapped parts (ARMv7-M architecture reference manual, Cortex-M4
 generic user guide) and the STM32F446's DBGMCU (RM0390 section 33.16): the NVIC, the SCB,
 SysTick, the DWT cycle counter, the debug freeze bits. Registers the firmware does not
-touch are not modelled (:class:`hil.rehost.machine.Unsupported`)."""
+touch are not modelled (:class:`hil.rehost.machine.UnsupportedAccessError`)."""
 
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ modelled). Interrupts (NVIC: enable, pending, 4-bit priorities, nesting, PRIMASK
 between chunks; exception entry pushes the hardware's 8-word frame and exception return
 (a branch to EXC_RETURN) pops it. WFI sleeps until an enabled interrupt is pending.
 
-An access the models do not implement raises :class:`Unsupported`: the run stops with it
+An access the models do not implement raises :class:`UnsupportedAccessError`: the run stops with it
 (a test failure, never silence).
 """
 
@@ -60,7 +60,7 @@ def seconds(t: float) -> int:
     return round(t * UNITS_PER_S)
 
 
-class Unsupported(RuntimeError):
+class UnsupportedAccessError(RuntimeError):
     """The firmware used a register or a configuration a model does not implement."""
 
 
@@ -69,7 +69,7 @@ class Peripheral:
 
     Subclasses list their registers in ``REGS`` (offset -> name); an access to any other
     offset, or of a size other than 4 bytes unless ``BYTE_OK`` names the offset, raises
-    :class:`Unsupported`. Plain registers keep what was written in :attr:`regs`.
+    :class:`UnsupportedAccessError`. Plain registers keep what was written in :attr:`regs`.
     """
 
     NAME = "peripheral"
@@ -87,8 +87,8 @@ class Peripheral:
         """Power-on reset values."""
         self.regs = {off: self.RESET.get(off, 0) for off in self.REGS}
 
-    def fail(self, what: str) -> Unsupported:
-        return Unsupported(f"{self.NAME}: {what} (pc {self.m.pc:#010x})")
+    def fail(self, what: str) -> UnsupportedAccessError:
+        return UnsupportedAccessError(f"{self.NAME}: {what} (pc {self.m.pc:#010x})")
 
     def _check(self, off: int, size: int, kind: str) -> str:
         name = self.REGS.get(off)
@@ -164,8 +164,8 @@ class Machine:
             self.timed.append(peripheral)
         return peripheral
 
-    def _nothing(self, address: int) -> Unsupported:
-        return Unsupported(f"access to {address:#010x}: no peripheral modelled there "
+    def _nothing(self, address: int) -> UnsupportedAccessError:
+        return UnsupportedAccessError(f"access to {address:#010x}: no peripheral modelled there "
                            f"(pc {self.pc:#010x})")
 
     def _mmio_read(self, uc: Uc, offset: int, size: int, page: int) -> int:
@@ -303,7 +303,7 @@ class Machine:
 
     def run_until(self, end: int) -> None:
         """Run the CPU and the peripherals to time ``end`` (units); raises what stopped
-        the machine (:class:`Unsupported`, an emulator error)."""
+        the machine (:class:`UnsupportedAccessError`, an emulator error)."""
         chunk = seconds(MAX_CHUNK_S)
         while self.now < end:
             self._advance()
@@ -337,7 +337,7 @@ class Machine:
         pc = self.uc.reg_read(UC_ARM_REG_PC)
         try:
             self.uc.emu_start(pc | 1, 0xFFFFFFFF, count=n)
-        except Unsupported:
+        except UnsupportedAccessError:
             raise
         except UcError:
             # a bus error (unmapped address), an instruction the core refuses: HardFault

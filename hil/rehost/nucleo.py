@@ -46,7 +46,7 @@ from hil.rehost.cortex import DbgMcu, Dwt, SystemControl
 from hil.rehost.machine import (
     UNITS_PER_S,
     Machine,
-    Unsupported,
+    UnsupportedAccessError,
     find_wfi,
     load_elf,
     seconds,
@@ -371,7 +371,7 @@ class NucleoRig:
     paces it: emulated time never runs ahead of the wall clock (it may fall behind; the
     ratio of emulated to wall time is :attr:`time_ratio`). ``with NucleoRig(...) as rig``;
     :meth:`close` stops it. :attr:`error`: what stopped the board (an
-    :class:`~hil.rehost.machine.Unsupported` access), re-raised by :meth:`check`."""
+    :class:`~hil.rehost.machine.UnsupportedAccessError` access), re-raised by :meth:`check`."""
 
     SLICE_S = 1e-3
 
@@ -457,5 +457,5 @@ class NucleoRig:
         self.close()
 
 
-__all__ = ["NucleoBoard", "NucleoRig", "Plant", "Unsupported", "build_nucleo_image",
+__all__ = ["NucleoBoard", "NucleoRig", "Plant", "UnsupportedAccessError", "build_nucleo_image",
            "sha256"]

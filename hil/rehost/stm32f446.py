@@ -1,7 +1,7 @@
 """Models of the STM32F446 peripherals the NUCLEO-F446RE firmware touches (RM0390 rev 6).
 
 Each model implements the registers and the fields board_nucleo.c uses and raises
-:class:`hil.rehost.machine.Unsupported` for anything else (another register, a mode it
+:class:`hil.rehost.machine.UnsupportedAccessError` for anything else (another register, a mode it
 does not model, an access with the peripheral's clock off). What each one does not model
 is listed in docs/firmware.md ("The rehosted image").
 """
@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from hil.rehost.cortex import DbgMcu
-from hil.rehost.machine import UNITS_PER_S, Machine, Peripheral, seconds
+from hil.rehost.machine import UNITS_PER_S, Machine, Peripheral, UnsupportedAccessError, seconds
 
 HSI_HZ = 16_000_000
 HSE_HZ = 8_000_000  # the ST-LINK's MCO into OSC_IN (HSE bypass)
@@ -783,7 +783,7 @@ class StepTimer(_Timer):
             self.triggers_while_running += 1
             return
         if not self.regs[CR1] & 0x8:
-            raise Unsupported("TIM1: trigger without one-pulse mode is not modelled")
+            raise UnsupportedAccessError("TIM1: trigger without one-pulse mode is not modelled")
         self.regs[CR1] |= 1
         self.burst = Burst(t, self.shadow[RCR] + 1, self.shadow[ARR] + 1, self.shadow[CCR1],
                            self.tick_units(), self.dir_high, self.dir_since, self.output_on())
