@@ -317,3 +317,51 @@ def test_the_objdump_finds_the_images_wfi(elf: Path) -> None:
     out = subprocess.run(["arm-none-eabi-objdump", "-d", str(elf)], capture_output=True,
                          text=True, check=True).stdout
     assert len(board.machine.wfi_returns) == out.count("\twfi")
+
+
+@pytest.mark.alone
+def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
+                                                                  tmp_path: Path) -> None:
+    """`hil emulate --firmware --board nucleo` and `hil emulate --firmware` (each in its own
+    process, as a user starts them) run the same short job: the same samples and commanded
+    positions, the same stroke to a few encoder counts (the rehosted plant follows the
+    pulses as TIM1 emits them, 1-2 periods behind the host build's sim), forces alike in
+    their statistics (each run draws its own noise). The host's timeouts are widened by hand
+    (the rehost may run slower than the wall clock: docs/firmware.md)."""
+    import csv
+    import json
+    import signal
+    import sys
+
+    from hil_host import SHORT_RUN, hil
+
+    def run_on(emulate: list[str], out: Path) -> tuple[list[dict[str, str]], dict]:
+        proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "emulate", *emulate],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            port = proc.stdout.readline().strip()
+            assert port.startswith("/dev/"), proc.stderr.read()
+            code, stdout, stderr = hil("run", "--real", "--port", port, "--out", str(out),
+                                       *SHORT_RUN, "--ack-ms", "500", "--heartbeat-ms", "1000",
+                                       "--watchdog-ms", "1000", timeout=300.0)
+            assert code == 0 and "1 of 1 cycles complete" in stdout, stderr
+        finally:
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, err
+        print(" ".join(emulate), "|", err.strip().splitlines()[-1:])
+        with (out / "samples.csv").open(newline="") as fh:
+            return list(csv.DictReader(fh)), json.loads((out / "summary.json").read_text())
+
+    rehost, r_summary = run_on(["--firmware", "--board", "nucleo"], tmp_path / "rehost")
+    host, h_summary = run_on(["--firmware"], tmp_path / "host")
+    assert len(rehost) == len(host) > 2000
+    assert [r["x_cmd [m]"] for r in rehost] == [r["x_cmd [m]"] for r in host]
+    strokes = [max(float(r["platen [m]"]) for r in rows) - min(float(r["platen [m]"])
+                                                                for r in rows)
+               for rows in (rehost, host)]
+    assert abs(strokes[0] - strokes[1]) <= 5e-6, strokes  # 5 encoder counts
+    rms = [sum(float(r["force [N]"]) ** 2 for r in rows) / len(rows) for rows in (rehost, host)]
+    assert rms[0] == pytest.approx(rms[1], rel=0.01)
+    print(f"strokes {strokes[0] * 1e3:.4f} / {strokes[1] * 1e3:.4f} mm; samples {len(host)}; "
+          f"cycles {r_summary.get('cycles_complete')} / {h_summary.get('cycles_complete')}")

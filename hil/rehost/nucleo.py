@@ -432,8 +432,9 @@ class NucleoRig:
         b = self.board
         return (f"{b.machine.now / UNITS_PER_S:.3f} s emulated, {b.dma.sent} bytes sent "
                 f"({self.dropped} dropped, the host not reading), RX overruns {b.usart.overruns}, "
-                f"bytes lost before the USART was on {b.usart.lost}, resets "
-                f"{[reason for _, reason in b.log.resets]}")
+                f"bytes lost before the USART was on {b.usart.lost}, step pulses to the "
+                f"driver {b.log.pulses:+d} ({b.log.pulses_ignored} while it was disabled), "
+                f"resets {[reason for _, reason in b.log.resets]}")
 
     def check(self) -> None:
         """Raise what stopped the board, if anything did."""
