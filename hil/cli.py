@@ -299,10 +299,10 @@ def emulate(args: argparse.Namespace) -> int:
                        reconnect_after=None if args.disconnect_at is None else 0.5)
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
     hardware = RigHardware(x_origin=setup.stroke[0])
-    if args.qemu:
-        return _emulate_qemu(args, setup, hardware)
     if args.board == "nucleo":
         return _emulate_nucleo(args, setup, hardware)
+    if args.qemu:
+        return _emulate_qemu(args, setup, hardware)
     # an MCU's timer interrupt is hard real time: SCHED_FIFO when the OS permits it
     emulator = RigEmulator(physics, hardware, faults, realtime=True, firmware=args.firmware)
     print(emulator.open(), flush=True)
@@ -330,10 +330,10 @@ def _no_injection(args: argparse.Namespace, option: str) -> None:
 def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
     """The NUCLEO-F446RE image rehosted (hil/rehost/): print its pty, serve until a signal;
     on stderr the image's SHA-256 and, at the end, the emulated/wall time ratio."""
-    _no_injection(args, "--board nucleo")
     if args.qemu:
         raise ValueError("--board nucleo and --qemu are two ways to run the firmware: "
                          "give one")
+    _no_injection(args, "--board nucleo")
     from hil.firmware_qemu import qemu_available
     from hil.rig_physics import ClampPhysics
 

@@ -365,3 +365,17 @@ def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
     assert rms[0] == pytest.approx(rms[1], rel=0.01)
     print(f"strokes {strokes[0] * 1e3:.4f} / {strokes[1] * 1e3:.4f} mm; samples {len(host)}; "
           f"cycles {r_summary.get('cycles_complete')} / {h_summary.get('cycles_complete')}")
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--board", "nucleo"], "--board nucleo runs the firmware: give --firmware too"),
+    (["--firmware", "--board", "nucleo", "--qemu"], "two ways to run the firmware: give one"),
+    (["--firmware", "--board", "nucleo", "--junk", "0.1"], "injects no faults: drop junk"),
+])
+def test_hil_emulate_board_refuses_what_it_cannot_do(args: list[str], message: str) -> None:
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", "hil.cli", "emulate", *args],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1 and message in result.stderr, result.stderr
+    assert result.stdout == "" and "Traceback" not in result.stderr
