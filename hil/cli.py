@@ -301,6 +301,8 @@ def emulate(args: argparse.Namespace) -> int:
                        reconnect_after=None if args.disconnect_at is None else 0.5)
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
     hardware = RigHardware(x_origin=setup.stroke[0])
+    if args.board == "nucleo":
+        return _emulate_nucleo(args, setup, hardware)
     if args.qemu:
         return _emulate_qemu(args, setup, hardware)
     # an MCU's timer interrupt is hard real time: SCHED_FIFO when the OS permits it
@@ -318,14 +320,58 @@ def emulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
-    """The firmware's Cortex-M build in QEMU: print its pty, serve until a signal."""
+def _no_injection(args: argparse.Namespace, option: str) -> None:
     if not args.firmware:
-        raise ValueError("--qemu runs the firmware: give --firmware too")
+        raise ValueError(f"{option} runs the firmware: give --firmware too")
     injected = [n for n in ("drop_byte", "flip_bit", "junk", "stall_at", "reset_at",
                             "estop_at", "disconnect_at") if getattr(args, n)]
     if injected:
-        raise ValueError(f"--qemu injects no faults: drop {', '.join(injected)}")
+        raise ValueError(f"{option} injects no faults: drop {', '.join(injected)}")
+
+
+def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
+    """The NUCLEO-F446RE image rehosted (hil/rehost/): print its pty, serve until a signal;
+    on stderr the image's SHA-256 and, at the end, the emulated/wall time ratio."""
+    if args.qemu:
+        raise ValueError("--board nucleo and --qemu are two ways to run the firmware: "
+                         "give one")
+    _no_injection(args, "--board nucleo")
+    from hil.firmware_qemu import qemu_available
+    from hil.rig_physics import ClampPhysics
+
+    missing = qemu_available(need_qemu=False)
+    if missing:
+        raise OSError(f"--board nucleo needs the Debian packages {' '.join(missing)} "
+                      f"(apt-get install {' '.join(missing)})")
+    try:
+        from hil.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image
+    except ImportError as exc:
+        raise OSError(f"--board nucleo needs the unicorn package: {exc}") from None
+    elf = build_nucleo_image()
+    physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
+    board = NucleoBoard(elf, physics, hardware, seed=args.seed)
+    guard = SignalGuard()
+    rig = NucleoRig(board)
+    try:
+        print(rig.port, flush=True)
+        print(f"hil emulate: {elf} sha256 {board.elf_sha256}", file=sys.stderr, flush=True)
+        with guard:
+            while rig.error is None:
+                time.sleep(0.2)
+        print(f"hil emulate: the rehosted board stopped: {rig.error}", file=sys.stderr)
+        return 1
+    except Interrupted:
+        pass
+    finally:
+        rig.close()
+        print(f"hil emulate: emulated/wall time {rig.time_ratio:.3f}; {rig.summary()}",
+              file=sys.stderr)
+    return 0
+
+
+def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
+    """The firmware's Cortex-M build in QEMU: print its pty, serve until a signal."""
+    _no_injection(args, "--qemu")
     from hil.firmware_qemu import QemuRig, build_qemu_image, qemu_available
 
     missing = qemu_available()

@@ -59,6 +59,13 @@ def add_emulator_options(e: argparse.ArgumentParser) -> None:
                         "qemu-system-arm (netduinoplus2), its UART on a pty; no fault "
                         "injection (needs gcc-arm-none-eabi, libnewlib-arm-none-eabi, "
                         "qemu-system-arm)")
+    e.add_argument("--board", choices=("nucleo",), default=None,
+                   help="with --firmware: the NUCLEO-F446RE image (make -C firmware/board "
+                        "nucleo, bytes unchanged) rehosted on the unicorn CPU emulator with "
+                        "models of its peripherals, on the simulated rig; paced so its time "
+                        "never runs ahead of the wall clock; prints its pty, then the image's "
+                        "SHA-256 and the time ratio on stderr (needs gcc-arm-none-eabi, "
+                        "libnewlib-arm-none-eabi and the unicorn package)")
 
 
 def add_parser(subparsers: Any) -> None:

@@ -39,6 +39,9 @@ SANITIZE_FLAGS = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all",
                   "-fno-omit-frame-pointer", "-g")
 #: The library exports the rigfw_* API only (not the core's, the HAL's or the FMU's names).
 VERSION_SCRIPT = "{ global: rigfw_*; local: *; };\n"
+#: The plant alone (hil/rehost/): the sim's API and its rig_hal.h functions.
+PLANT_LIBRARY = "librigsim.so"
+PLANT_VERSION_SCRIPT = "{ global: sim_rig_*; hal_*; local: *; };\n"
 #: The firmware's compile-time constants (rig_core.h) that a RigHardware must match.
 CORE_CONSTANTS = {"telemetry_hz": 1000, "buffer_capacity": 2048, "step_nm": 200,
                   "enc_nm": 1000, "adc_min": -8_388_608, "adc_max": 8_388_607,
@@ -72,10 +75,13 @@ def _run(cmd: list[str], cwd: Path) -> None:
                            f"{result.stderr.strip()}")
 
 
-def build_host_firmware(preset: str = "chang2021") -> Path:
+def build_host_firmware(preset: str = "chang2021", plant_only: bool = False) -> Path:
     """Build (or reuse) build/firmware/host-<preset>-<hash>/librigfw.so; return its path.
 
-    The hash covers the firmware's C sources, the generated FMU code and the flags, so an
+    ``plant_only``: the simulated rig alone, without the core and the host glue,
+    exporting sim_rig_* and the hal_* functions (plant-<preset>-<hash>/librigsim.so: the
+    plant of the rehosted board image, hil/rehost/). The hash covers the firmware's C
+    sources, the generated FMU code and the flags, so an
     edit rebuilds and an unchanged tree reuses the library. RuntimeError with gcc's stderr
     when a compilation fails.
     """
@@ -92,7 +98,10 @@ def build_host_firmware(preset: str = "chang2021") -> Path:
     core = core_sources()
     if not core:
         raise RuntimeError(f"no firmware core sources in {CORE_DIR}")
-    ours = [*core, SIM_DIR / "sim_rig.c", HOST_DIR / "rigfw_host.c"]
+    ours = ([SIM_DIR / "sim_rig.c"] if plant_only
+            else [*core, SIM_DIR / "sim_rig.c", HOST_DIR / "rigfw_host.c"])
+    library, exports = ((PLANT_LIBRARY, PLANT_VERSION_SCRIPT) if plant_only
+                        else (LIBRARY, VERSION_SCRIPT))
     for path in ours:
         if not path.is_file():
             raise RuntimeError(f"firmware source {path} is missing")
@@ -111,32 +120,35 @@ def build_host_firmware(preset: str = "chang2021") -> Path:
             name = path.name if path.parent in (gen, headers) else path.relative_to(ROOT)
             digest.update(f"{name}\0".encode() + path.read_bytes() + b"\0")
         sanitize = SANITIZE_FLAGS if os.environ.get("RIGFW_SANITIZE") == "1" else ()
-        digest.update(repr((FIRMWARE_CFLAGS, CFLAGS, GENERATED_CFLAGS, sanitize)).encode())
-        out = BUILD_DIR / f"host-{_safe_name(preset)}-{digest.hexdigest()[:12]}"
-        if (out / LIBRARY).is_file():
-            return out / LIBRARY
+        digest.update(repr((FIRMWARE_CFLAGS, CFLAGS, GENERATED_CFLAGS, sanitize,
+                            plant_only)).encode())
+        kind = "plant" if plant_only else "host"
+        out = BUILD_DIR / f"{kind}-{_safe_name(preset)}-{digest.hexdigest()[:12]}"
+        if (out / library).is_file():
+            return out / library
         includes = ["-I", str(CORE_DIR), "-I", str(SIM_DIR), "-I", str(gen), "-I", str(headers)]
         objects = []
         for i, src in enumerate([*ours, *(gen / name for name in fmu_sources)]):
             if src.parent == gen:
                 flags = [*CFLAGS, *(GENERATED_CFLAGS if src.name.startswith(GENERATED) else ())]
-            else:
-                flags = list(FIRMWARE_CFLAGS)
+            else:  # the plant's library exports the sim's own names (no -fvisibility)
+                flags = [f for f in FIRMWARE_CFLAGS
+                         if not (plant_only and f.startswith("-fvisibility"))]
             obj = work / f"{i:02d}-{src.stem}.o"
             _run(["gcc", *flags, *sanitize, *includes, "-c", str(src), "-o", str(obj)], work)
             objects.append(str(obj))
-        (work / "exports.map").write_text(VERSION_SCRIPT)
+        (work / "exports.map").write_text(exports)
         _run(["gcc", "-shared", *sanitize, "-Wl,-z,defs", "-Wl,--version-script=exports.map",
-              *objects, "-o", LIBRARY, "-lm"], work)
+              *objects, "-o", library, "-lm"], work)
         work.chmod(0o755)
         try:
             work.rename(out)  # atomic: a concurrent build of the same tree keeps its own
         except OSError:
-            if not (out / LIBRARY).is_file():
+            if not (out / library).is_file():
                 raise
-            return out / LIBRARY
+            return out / library
         work = None
-        return out / LIBRARY
+        return out / library
     finally:
         if work is not None:
             shutil.rmtree(work, ignore_errors=True)

@@ -17,8 +17,16 @@
  *   load    ADS131M02 on SPI2 (PB13/14/15, CS PB12), CLKIN 8 MHz from MCO2 (PC9, HSE):
  *           3.9 kSPS, the latest conversion read in the tick
  *   inputs  home PC0, stop PB0 (normally-closed button) or the Nucleo's B1 (PC13), driver
- *           alarm PB4; driver enable PA10
- *   safety  IWDG about 50 ms, kicked from the tick (rig_tick calls hal_watchdog_kick)
+ *           alarm PB4, overtravel limits PC2 (open end) and PC3 (closed end, both normally
+ *           closed to GND), the stop chain's feedback PB5 (the driver's enable after the
+ *           stop contacts), the ADC's DRDY PB1; driver enable PA10
+ *   safety  IWDG about 50 ms, kicked from the tick (rig_tick calls hal_watchdog_kick); IWDG
+ *           and the timers frozen while a debugger halts the core (DBGMCU); every fault
+ *           handler first takes the enable low and stops TIM1 (board_fault_stop); bounded
+ *           clock waits (HSI and the CLOCK fault when the PLL does not lock); the ADC's
+ *           presence, DRDY, CRC and STATUS checked (LOAD_ADC); overtravel (OVERTRAVEL) and
+ *           the stop chain (STOP_CHAIN) read every tick; a late tick or a burst over 256
+ *           steps is INTERNAL
  *   flash   sector 7 (0x08060000): the load-cell calibration record and a boot counter
  *   boot id the RNG mixed with the boot counter, never 0 nor the previous boot's
  */
@@ -34,9 +42,11 @@
 /* ---- constants ----------------------------------------------------------------------------- */
 
 #define HCLK_HZ 180000000u
+#define APB1_HZ 45000000u
 #define APB1_TIMER_HZ 90000000u
 #define APB2_TIMER_HZ 180000000u
-#define TICK_PRESCALER (APB1_TIMER_HZ / 1000000u) /* TIM5 at 1 MHz */
+#define HSI_HZ 16000000u /* the fallback: every bus at 16 MHz, no motion (CLOCK fault) */
+#define CLOCK_WAIT_TRIES 100000u /* each wait: well over the datasheet's lock/ready times */
 #define STEP_TIMER_PSC 3u                         /* TIM1 at 60 MHz */
 #define STEP_TICKS_PER_PERIOD (APB2_TIMER_HZ / STEP_TIMER_PSC / RIG_TELEMETRY_HZ) /* 60000 */
 #define STEP_GUARD_TICKS 60u     /* a burst ends >= 1 us before the next one may start */
@@ -49,8 +59,10 @@
 #define IWDG_RELOAD 200u       /* 200 / 4 kHz = 50 ms */
 
 /* USART2 at 45 MHz: USARTDIV = 45e6 / (16 * 921600) = 3.05 -> 3 + 1/16 = 3.0625:
- * 918 367 baud, -0.35 % (a receiver tolerates about +-3 %). */
+ * 918 367 baud, -0.35 % (a receiver tolerates about +-3 %). On the HSI fallback (16 MHz):
+ * 1 + 1/16 = 1.0625: 941 176 baud, +2.1 % (enough to report the CLOCK fault). */
 #define USART2_BRR ((3u << 4) | 1u)
+#define USART2_BRR_HSI ((1u << 4) | 1u)
 
 /* pins: port, number */
 #define PIN_STEP 8u    /* PA8  TIM1_CH1 AF1 */
@@ -67,7 +79,11 @@
 #define PIN_MISO 14u   /* PB14 SPI2_MISO AF5 */
 #define PIN_MOSI 15u   /* PB15 SPI2_MOSI AF5 */
 #define PIN_ADC_RST 2u /* PB2  ADC SYNC/RESET, GPIO out (high = run) */
+#define PIN_DRDY 1u    /* PB1  ADC DRDY (low: a conversion waits to be read) */
+#define PIN_CHAIN 5u   /* PB5  stop chain feedback: high while the driver's enable is live */
 #define PIN_HOME 0u    /* PC0  home switch (closes to GND when active) */
+#define PIN_LIMIT_OPEN 2u   /* PC2  overtravel beyond the open end (NC to GND: high = hit) */
+#define PIN_LIMIT_CLOSED 3u /* PC3  overtravel beyond the closed end (NC to GND: high = hit) */
 #define PIN_CLKIN 9u   /* PC9  MCO2 AF0: 8 MHz to the ADC's CLKIN */
 #define PIN_B1 13u     /* PC13 the Nucleo's user button B1 (low when pressed) */
 
@@ -87,6 +103,21 @@ typedef struct {
     uint32_t check;     /* cal_check() of the three words */
 } cal_record;
 
+/* FAULT values of the board's faults (docs/rig-protocol.md section 8) */
+#define INTERNAL_STEP_BURST 1 /* a burst over 256 steps or armed too late: not emitted */
+#define INTERNAL_LATE_TICK 2  /* a tick ran more than one period late */
+#define ADC_MISSING 1         /* no ADS131M02 answered at boot (ID register, CRC) */
+#define ADC_DRDY_TIMEOUT 2    /* no conversion for ADC_DRDY_TICKS ticks */
+#define ADC_BAD_CRC 3         /* a frame's output CRC did not match */
+#define ADC_BAD_STATUS 4      /* STATUS: reset, resync, register map or word length */
+#define ADC_SPI_TIMEOUT 5     /* SPI2 did not finish a byte */
+#define CLOCK_NO_HSE 1        /* (a warning only: HSE missing, the PLL runs from HSI) */
+#define CLOCK_NO_PLL 2        /* the PLL did not lock: running on HSI, no motion */
+#define CLOCK_NO_OVERDRIVE 3  /* over-drive not ready: HSI, no motion */
+#define CLOCK_NO_SWITCH 4     /* the switch to the PLL did not take: HSI, no motion */
+#define ADC_DRDY_TICKS 3u     /* ticks without a conversion (one every 256 us) */
+#define STOP_CHAIN_TICKS 20u  /* feedback may lag the enable this long (relays) */
+
 /* ---- state ---------------------------------------------------------------------------------- */
 
 static rig_mcu mcu;
@@ -105,6 +136,12 @@ typedef struct {
 static burst burst_a, burst_b;
 static uint16_t pulse_base;
 static bool step_error; /* a burst that could not be armed in time or was too long */
+static bool late_tick;  /* the main loop found more than one period due */
+static bool driver_on;  /* what hal_driver_enable last set */
+static uint32_t clock_fault, adc_fault; /* CLOCK_*, ADC_* codes (0: none) */
+static uint32_t drdy_missed, chain_mismatch;
+static int32_t adc_last;
+static uint32_t apb1_hz = APB1_HZ, apb1_timer_hz = APB1_TIMER_HZ;
 
 /* what a debugger reads (docs/firmware.md): the tick's cost in CPU cycles (DWT) */
 typedef struct {
@@ -142,7 +179,9 @@ static bool wait_set(volatile uint32_t *reg, uint32_t mask, uint32_t tries) {
     return false;
 }
 
-static void clock_init(void) {
+/* The PLL at 180 MHz, or the HSI at 16 MHz with clock_fault set: every wait is bounded.
+ * Returns true on the PLL. */
+static bool clock_to_pll(void) {
     RCC->APB1ENR |= RCC_APB1_PWR;
     PWR->CR |= PWR_CR_VOS_SCALE1;
     /* 8 MHz from the ST-LINK's MCO into OSC_IN (HSE bypass, Nucleo default SB16/SB50) */
@@ -155,14 +194,37 @@ static void clock_init(void) {
         board_tick_stats.clock_from_hsi = 1u;
     }
     RCC->CR |= RCC_CR_PLLON;
-    (void)wait_set(&RCC->CR, RCC_CR_PLLRDY, 1000000u);
+    if (!wait_set(&RCC->CR, RCC_CR_PLLRDY, CLOCK_WAIT_TRIES)) {
+        clock_fault = CLOCK_NO_PLL;
+        return false;
+    }
     PWR->CR |= PWR_CR_ODEN; /* over-drive: 180 MHz needs it */
-    (void)wait_set(&PWR->CSR, PWR_CSR_ODRDY, 1000000u);
+    if (!wait_set(&PWR->CSR, PWR_CSR_ODRDY, CLOCK_WAIT_TRIES)) {
+        clock_fault = CLOCK_NO_OVERDRIVE;
+        return false;
+    }
     PWR->CR |= PWR_CR_ODSWEN;
-    (void)wait_set(&PWR->CSR, PWR_CSR_ODSWRDY, 1000000u);
+    if (!wait_set(&PWR->CSR, PWR_CSR_ODSWRDY, CLOCK_WAIT_TRIES)) {
+        clock_fault = CLOCK_NO_OVERDRIVE;
+        return false;
+    }
     FLASH->ACR = FLASH_ACR_LATENCY(5) | FLASH_ACR_PRFTEN | FLASH_ACR_ICEN | FLASH_ACR_DCEN;
     RCC->CFGR = RCC_CFGR_MCO2_HSE | RCC_CFGR_PPRE2_DIV2 | RCC_CFGR_PPRE1_DIV4 | RCC_CFGR_SW_PLL;
-    while ((RCC->CFGR & RCC_CFGR_SWS_MASK) != RCC_CFGR_SWS_PLL) {
+    if (!wait_set(&RCC->CFGR, RCC_CFGR_SWS_PLL, CLOCK_WAIT_TRIES) ||
+        (RCC->CFGR & RCC_CFGR_SWS_MASK) != RCC_CFGR_SWS_PLL) {
+        RCC->CFGR = RCC_CFGR_MCO2_HSE | RCC_CFGR_SW_HSI;
+        clock_fault = CLOCK_NO_SWITCH;
+        return false;
+    }
+    return true;
+}
+
+static void clock_init(void) {
+    if (!clock_to_pll()) { /* HSI, every bus at 16 MHz: the link works, nothing moves */
+        RCC->CR &= ~RCC_CR_PLLON;
+        RCC->CFGR = RCC_CFGR_MCO2_HSE | RCC_CFGR_SW_HSI;
+        apb1_hz = HSI_HZ;
+        apb1_timer_hz = HSI_HZ;
     }
     RCC->AHB1ENR |= RCC_AHB1_GPIOA | RCC_AHB1_GPIOB | RCC_AHB1_GPIOC | RCC_AHB1_DMA1;
     RCC->AHB2ENR |= RCC_AHB2_RNG;
@@ -173,6 +235,9 @@ static void clock_init(void) {
     DEMCR |= DEMCR_TRCENA;
     DWT_CYCCNT = 0;
     DWT_CTRL |= DWT_CTRL_CYCCNTENA;
+    /* a debugger's breakpoint stops the watchdog and the timers (no reset, no steps) */
+    DBGMCU_APB1_FZ |= DBGMCU_APB1_TIM2 | DBGMCU_APB1_TIM3 | DBGMCU_APB1_TIM5 | DBGMCU_APB1_IWDG;
+    DBGMCU_APB2_FZ |= DBGMCU_APB2_TIM1;
 }
 
 /* ---- pins ------------------------------------------------------------------------------------ */
@@ -188,6 +253,10 @@ static void pins_init(void) {
     pin_mode(GPIOA, PIN_RX, GPIO_MODE_AF, 7, GPIO_PULL_UP);
     pin_mode(GPIOB, PIN_STOP, GPIO_MODE_INPUT, 0, GPIO_PULL_UP);
     pin_mode(GPIOB, PIN_ALARM, GPIO_MODE_INPUT, 0, GPIO_PULL_UP);
+    pin_mode(GPIOB, PIN_DRDY, GPIO_MODE_INPUT, 0, GPIO_PULL_UP);
+    pin_mode(GPIOB, PIN_CHAIN, GPIO_MODE_INPUT, 0, GPIO_PULL_DOWN);
+    pin_mode(GPIOC, PIN_LIMIT_OPEN, GPIO_MODE_INPUT, 0, GPIO_PULL_UP);
+    pin_mode(GPIOC, PIN_LIMIT_CLOSED, GPIO_MODE_INPUT, 0, GPIO_PULL_UP);
     pin_write(GPIOB, PIN_CS, true);
     pin_mode(GPIOB, PIN_CS, GPIO_MODE_OUTPUT, 0, GPIO_PULL_NONE);
     pin_mode(GPIOB, PIN_SCK, GPIO_MODE_AF, 5, GPIO_PULL_NONE);
@@ -215,7 +284,7 @@ void USART2_IRQHandler(void) {
 void DMA1_Stream6_IRQHandler(void) { DMA1->HIFCR = DMA_HIFCR_S6_ALL; }
 
 static void uart_init(void) {
-    USART2->BRR = USART2_BRR;
+    USART2->BRR = apb1_hz == APB1_HZ ? USART2_BRR : USART2_BRR_HSI;
     USART2->CR3 = USART_CR3_DMAT;
     USART2->CR1 = USART_CR1_UE | USART_CR1_TE | USART_CR1_RE | USART_CR1_RXNEIE;
     DMA1->S[6].CR = 0;
@@ -247,7 +316,7 @@ void TIM5_IRQHandler(void) {
 }
 
 static void tick_init(void) {
-    TIM5->PSC = TICK_PRESCALER - 1u;
+    TIM5->PSC = apb1_timer_hz / 1000000u - 1u; /* 1 MHz */
     TIM5->ARR = 1000u - 1u;
     /* OC1REF (PWM mode 2: high from CCR1 to the period's end) is TRGO: its rising edge
      * STEP_PHASE_US into each period starts that period's step burst (TIM1 ITR0) */
@@ -350,7 +419,10 @@ int32_t hal_step_halt(void) {
     return left;
 }
 
-void hal_driver_enable(bool on) { pin_write(GPIOA, PIN_ENABLE, on); }
+void hal_driver_enable(bool on) {
+    driver_on = on;
+    pin_write(GPIOA, PIN_ENABLE, on);
+}
 
 /* ---- encoder: TIM2 -------------------------------------------------------------------------- */
 
@@ -369,57 +441,163 @@ static void encoder_init(void) {
 #define ADC_WORD 3u                 /* 24-bit words (the ADS131M02's default) */
 #define ADC_FRAME (4u * ADC_WORD)   /* STATUS/response, CH0, CH1, CRC */
 #define ADC_CMD_NULL 0x0000u
+#define ADC_CMD_RREG(addr) (0xA000u | ((uint32_t)(addr) << 7)) /* one register */
 #define ADC_CMD_WREG(addr) (0x6000u | ((uint32_t)(addr) << 7)) /* one register */
+#define ADC_REG_ID 0x00u
+#define ADC_REG_MODE 0x02u
 #define ADC_REG_GAIN 0x04u
+#define ADC_ID_M02 0x22u            /* ID[15:8]: 0x2 and CHANCNT = 2 */
+#define ADC_MODE_24BIT 0x0110u      /* WLENGTH 24 bits, SPI timeout on, RESET flag cleared */
 #define ADC_GAIN_CH0_128 0x0007u
+#define ADC_STATUS_FAULTS 0x7400u   /* F_RESYNC, REG_MAP, CRC_ERR, RESET */
+#define ADC_STATUS_WLENGTH 0x0300u
+#define ADC_STATUS_WLENGTH_24 0x0100u
+#define SPI_WAIT_TRIES 1000u        /* a byte takes 0.7 us: about 128 CPU cycles */
 
-static void spi_frame(const uint8_t *out, uint8_t *in) {
-    pin_write(GPIOB, PIN_CS, false);
-    for (unsigned i = 0; i < ADC_FRAME; i++) {
-        while (!(SPI2->SR & SPI_SR_TXE)) {
-        }
-        SPI2->DR = out[i];
-        while (!(SPI2->SR & SPI_SR_RXNE)) {
-        }
-        in[i] = (uint8_t)SPI2->DR;
-    }
-    while (SPI2->SR & SPI_SR_BSY) {
-    }
-    pin_write(GPIOB, PIN_CS, true);
+static bool spi_wait(uint32_t flag, bool set) {
+    for (uint32_t tries = 0; tries < SPI_WAIT_TRIES; tries++)
+        if (((SPI2->SR & flag) != 0u) == set) return true;
+    return false;
 }
 
+/* One frame; false when SPI2 did not finish a byte (the chip select is released). */
+static bool spi_frame(const uint8_t *out, uint8_t *in) {
+    bool ok = true;
+    pin_write(GPIOB, PIN_CS, false);
+    for (unsigned i = 0; i < ADC_FRAME && ok; i++) {
+        ok = spi_wait(SPI_SR_TXE, true);
+        if (ok) SPI2->DR = out[i];
+        ok = ok && spi_wait(SPI_SR_RXNE, true);
+        in[i] = ok ? (uint8_t)SPI2->DR : 0u;
+    }
+    ok = spi_wait(SPI_SR_BSY, false) && ok;
+    pin_write(GPIOB, PIN_CS, true);
+    return ok;
+}
+
+/* CRC-16-CCITT (0x1021, initial 0xFFFF), the ADS131M02's output CRC over the words before it */
+static uint16_t adc_crc(const uint8_t *data, unsigned n) {
+    uint16_t crc = 0xFFFFu;
+    for (unsigned i = 0; i < n; i++) {
+        crc = (uint16_t)(crc ^ ((uint16_t)data[i] << 8));
+        for (int b = 0; b < 8; b++)
+            crc = (uint16_t)((crc & 0x8000u) ? ((uint32_t)crc << 1) ^ 0x1021u : (uint32_t)crc << 1);
+    }
+    return crc;
+}
+
+static uint16_t word16(const uint8_t *w) { return (uint16_t)((w[0] << 8) | w[1]); }
+
+/* A frame with a command (and one data word); its CRC checked. 0 or an ADC_* code. */
+static uint32_t adc_command(uint32_t cmd, uint32_t data, uint8_t in[ADC_FRAME]) {
+    uint8_t out[ADC_FRAME] = {0};
+    out[0] = (uint8_t)(cmd >> 8);
+    out[1] = (uint8_t)cmd;
+    out[ADC_WORD] = (uint8_t)(data >> 8);
+    out[ADC_WORD + 1u] = (uint8_t)data;
+    if (!spi_frame(out, in)) return ADC_SPI_TIMEOUT;
+    if (adc_crc(in, 3u * ADC_WORD) != word16(&in[3u * ADC_WORD])) return ADC_BAD_CRC;
+    return 0;
+}
+
+/* Configure the converter and check that it is there: the ID register's answer (in the
+ * frame after the RREG) names an ADS131M02 and every frame's CRC holds. */
 static void adc_init(void) {
     /* mode 1 (CPOL 0, CPHA 1), 45 MHz / 4 = 11.25 MHz (the ADC takes up to 25 MHz) */
     SPI2->CR1 = SPI_CR1_MSTR | SPI_CR1_BR_DIV4 | SPI_CR1_CPHA | SPI_CR1_SSM | SPI_CR1_SSI;
     SPI2->CR1 |= SPI_CR1_SPE;
-    uint8_t out[ADC_FRAME] = {0}, in[ADC_FRAME];
-    uint32_t cmd = ADC_CMD_WREG(ADC_REG_GAIN);
-    out[0] = (uint8_t)(cmd >> 8);
-    out[1] = (uint8_t)cmd;
-    out[ADC_WORD] = (uint8_t)(ADC_GAIN_CH0_128 >> 8);
-    out[ADC_WORD + 1u] = (uint8_t)ADC_GAIN_CH0_128;
-    spi_frame(out, in); /* CLOCK keeps its default: both channels, OSR 1024, high resolution */
+    uint8_t in[ADC_FRAME];
+    /* the first frame after power-on answers the reset; its CRC is checked like any */
+    uint32_t err = adc_command(ADC_CMD_WREG(ADC_REG_MODE), ADC_MODE_24BIT, in);
+    if (!err) err = adc_command(ADC_CMD_WREG(ADC_REG_GAIN), ADC_GAIN_CH0_128, in);
+    if (!err) err = adc_command(ADC_CMD_RREG(ADC_REG_ID), 0u, in);
+    if (!err) err = adc_command(ADC_CMD_NULL, 0u, in);
+    if (err || in[0] != ADC_ID_M02) adc_fault = ADC_MISSING;
+    /* CLOCK keeps its default: both channels, OSR 1024, high resolution */
 }
 
+/* The latest conversion when DRDY says there is one; the health checks set adc_fault. */
 static int32_t adc_read(void) {
-    static const uint8_t null_frame[ADC_FRAME] = {(uint8_t)(ADC_CMD_NULL >> 8), 0};
+    if (adc_fault == ADC_MISSING) return adc_last;
+    if (pin_read(GPIOB, PIN_DRDY)) { /* high: nothing new since the last read */
+        if (++drdy_missed >= ADC_DRDY_TICKS && !adc_fault) adc_fault = ADC_DRDY_TIMEOUT;
+        return adc_last;
+    }
+    drdy_missed = 0;
     uint8_t in[ADC_FRAME];
-    spi_frame(null_frame, in);
+    uint32_t err = adc_command(ADC_CMD_NULL, 0u, in);
+    uint16_t status = word16(in);
+    if (!err && ((status & ADC_STATUS_FAULTS) ||
+                 (status & ADC_STATUS_WLENGTH) != ADC_STATUS_WLENGTH_24)) {
+        err = ADC_BAD_STATUS;
+    }
+    if (err) {
+        if (!adc_fault) adc_fault = err;
+        return adc_last;
+    }
     uint32_t raw = ((uint32_t)in[ADC_WORD] << 16) | ((uint32_t)in[ADC_WORD + 1u] << 8) |
                    in[ADC_WORD + 2u];
-    return (int32_t)(raw ^ 0x800000u) - 0x800000; /* sign-extend 24 bits */
+    adc_last = (int32_t)(raw ^ 0x800000u) - 0x800000; /* sign-extend 24 bits */
+    return adc_last;
 }
 
 /* ---- hal_read, watchdog ------------------------------------------------------------------ */
+
+/* The board's faults of this period, each with its FAULT value (the first found). */
+static void board_faults(rig_inputs *in) {
+    uint16_t bits = 0;
+    int32_t detail = 0;
+    if (step_error || late_tick) {
+        bits |= RIG_F_INTERNAL;
+        detail = step_error ? INTERNAL_STEP_BURST : INTERNAL_LATE_TICK;
+        late_tick = false;
+    }
+    bool open_end = pin_read(GPIOC, PIN_LIMIT_OPEN), closed_end = pin_read(GPIOC, PIN_LIMIT_CLOSED);
+    if (open_end || closed_end) {
+        if (!bits) detail = (open_end ? 1 : 0) | (closed_end ? 2 : 0);
+        bits |= RIG_F_OVERTRAVEL;
+    }
+    if (adc_fault) {
+        if (!bits) detail = (int32_t)adc_fault;
+        bits |= RIG_F_LOAD_ADC;
+    }
+    if (clock_fault) {
+        if (!bits) detail = (int32_t)clock_fault;
+        bits |= RIG_F_CLOCK;
+    }
+    /* the stop chain: its feedback follows the enable unless the stop button opened it */
+    bool feedback = pin_read(GPIOB, PIN_CHAIN);
+    if (feedback != driver_on && !in->stop_input) {
+        if (chain_mismatch < STOP_CHAIN_TICKS) chain_mismatch++;
+    } else {
+        chain_mismatch = 0;
+    }
+    if (chain_mismatch >= STOP_CHAIN_TICKS) {
+        if (!bits) detail = driver_on ? 1 : 2; /* 1: chain open, 2: enable stuck live */
+        bits |= RIG_F_STOP_CHAIN;
+    }
+    in->board_faults = bits;
+    in->board_detail = detail;
+}
 
 void hal_read(rig_inputs *in) {
     in->enc = (int32_t)TIM2->CNT;
     in->load_raw = adc_read();
     in->home_switch = !pin_read(GPIOC, PIN_HOME);
     in->stop_input = pin_read(GPIOB, PIN_STOP) || !pin_read(GPIOC, PIN_B1);
-    /* a step burst that could not be emitted is reported as the driver's alarm (a halt)
-     * until rig_hal.h carries the core's INTERNAL fault (docs/firmware.md) */
-    in->driver_alarm = pin_read(GPIOB, PIN_ALARM) || step_error;
+    in->driver_alarm = pin_read(GPIOB, PIN_ALARM);
+    board_faults(in);
+}
+
+/* The first thing every fault handler does (startup.c's Default_Handler): the driver's
+ * enable low and the step timer stopped, touching only what is clocked. */
+void board_fault_stop(void) {
+    if (RCC->AHB1ENR & RCC_AHB1_GPIOA) GPIOA->BSRR = 1u << (PIN_ENABLE + 16u);
+    if (RCC->APB2ENR & RCC_APB2_TIM1) {
+        TIM1->BDTR = 0;                /* outputs off: STEP and DIR idle low */
+        TIM1->SMCR = TIM_SMCR_TS_ITR0; /* no trigger */
+        TIM1->CR1 = 0;                 /* counter stopped */
+    }
 }
 
 void hal_watchdog_kick(void) { IWDG->KR = IWDG_KEY_RELOAD; }
@@ -429,7 +607,8 @@ static void watchdog_init(void) {
     IWDG->KR = IWDG_KEY_UNLOCK;
     IWDG->PR = IWDG_PRESCALER_DIV8;
     IWDG->RLR = IWDG_RELOAD;
-    while (IWDG->SR != 0u) {
+    /* the update takes up to 5 LSI cycles (156 us); bounded: the watchdog runs anyway */
+    for (uint32_t tries = 0; tries < 200000u && IWDG->SR != 0u; tries++) {
     }
     IWDG->KR = IWDG_KEY_RELOAD;
 }
@@ -463,7 +642,8 @@ static rig_calibration load_calibration(const cal_record *r) {
 }
 
 static bool flash_wait(void) {
-    while (FLASH->SR & FLASH_SR_BSY) {
+    /* a word programs in 16 us, the sector erases in up to 4 s (168 MHz: ~10^9 loops) */
+    for (uint32_t tries = 0; tries < 0x40000000u && (FLASH->SR & FLASH_SR_BSY); tries++) {
     }
     bool ok = (FLASH->SR & FLASH_SR_ERRORS) == 0u;
     FLASH->SR = FLASH_SR_ERRORS;
@@ -560,7 +740,10 @@ int main(void) {
         }
         uint32_t due = tick_count;
         if (due != ticks_done) {
-            if (due - ticks_done > 1u) board_tick_stats.late_ticks++;
+            if (due - ticks_done > 1u) {
+                board_tick_stats.late_ticks++;
+                late_tick = true; /* INTERNAL in this tick's reading */
+            }
             tick_now = ticks_done + 1u;
             uint32_t c0 = DWT_CYCCNT;
             rig_tick(&mcu, ticks_done * RIG_POINT_PERIOD_US);

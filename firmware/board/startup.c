@@ -3,8 +3,10 @@
  * handlers. Written for this project; the symbols come from the linker scripts here.
  *
  * Every handler is a weak alias of Default_Handler, so a board defines only those it uses.
- * Default_Handler and the fault handlers spin: the independent watchdog (armed on the
- * F446) then resets the MCU, which the host sees as a new boot id.
+ * Default_Handler and the fault handlers first call board_fault_stop() (the board's: the
+ * driver's enable low, the step timer stopped; weak and empty here), then spin: the
+ * independent watchdog (armed on the F446) then resets the MCU, which the host sees as a
+ * new boot id.
  */
 #include <stdint.h>
 
@@ -14,6 +16,7 @@ extern uint32_t _sidata, _sdata, _edata, _sbss, _ebss, _estack;
 int main(void);
 void Reset_Handler(void);
 void Default_Handler(void);
+void board_fault_stop(void);
 
 #define WEAK_ALIAS __attribute__((weak, alias("Default_Handler")))
 void NMI_Handler(void) WEAK_ALIAS;
@@ -77,7 +80,11 @@ const vector vector_table[16 + IRQ_COUNT_F446] = {
 };
 #undef D
 
+/* The board's safe state for a fault handler (board_nucleo.c); none on QEMU. */
+__attribute__((weak)) void board_fault_stop(void) {}
+
 void Default_Handler(void) {
+    board_fault_stop();
     for (;;) {
     }
 }

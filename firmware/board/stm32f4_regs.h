@@ -41,6 +41,15 @@ static inline void nvic_enable(unsigned irq, uint8_t prio) {
 #define DWT_CTRL_CYCCNTENA 1u
 #define DWT_CYCCNT REG32(0xE0001004u)
 
+/* DBGMCU (RM0390 33.16): what stops while a debugger halts the core */
+#define DBGMCU_APB1_FZ REG32(0xE0042008u)
+#define DBGMCU_APB2_FZ REG32(0xE004200Cu)
+#define DBGMCU_APB1_TIM2 (1u << 0)
+#define DBGMCU_APB1_TIM3 (1u << 1)
+#define DBGMCU_APB1_TIM5 (1u << 3)
+#define DBGMCU_APB1_IWDG (1u << 12)
+#define DBGMCU_APB2_TIM1 (1u << 0)
+
 #define SCB_CPACR REG32(0xE000ED88u) /* coprocessor access: CP10/CP11 = FPU */
 #define SCB_VTOR REG32(0xE000ED08u)
 #define SCB_AIRCR REG32(0xE000ED0Cu)
@@ -83,6 +92,7 @@ typedef struct {
 #define RCC_PLLCFGR(m, n, p, q, r) ((uint32_t)(m) | ((uint32_t)(n) << 6) | \
                                     ((((uint32_t)(p) / 2u) - 1u) << 16) | ((uint32_t)(q) << 24) | \
                                     ((uint32_t)(r) << 28))
+#define RCC_CFGR_SW_HSI 0u
 #define RCC_CFGR_SW_PLL 2u
 #define RCC_CFGR_SWS_MASK (3u << 2)
 #define RCC_CFGR_SWS_PLL (2u << 2)
@@ -236,6 +246,7 @@ typedef struct {
 #define TIM_CCER_CC1E (1u << 0)
 #define TIM_CCER_CC2E (1u << 4)
 #define TIM_BDTR_MOE (1u << 15)
+#define TIM_CCMR_OC1M_MASK (7u << 4)
 
 /* ---- SPI -------------------------------------------------------------------------------- */
 

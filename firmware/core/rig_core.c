@@ -42,7 +42,7 @@
 
 #define HALTING_FAULTS                                                                   \
     (RIG_F_FORCE_LIMIT | RIG_F_TRAVEL_LIMIT | RIG_F_FOLLOWING_ERROR | RIG_F_LOAD_SATURATED | \
-     RIG_F_LOAD_STUCK | RIG_F_DRIVER | RIG_F_INTERNAL)
+     RIG_F_LOAD_STUCK | RIG_F_DRIVER | RIG_BOARD_FAULTS)
 
 #define Q16_ONE 65536LL
 
@@ -528,7 +528,7 @@ static uint8_t cmd_stop(rig_mcu *m) {
 
 static uint8_t cmd_clear_fault(rig_mcu *m) {
     if (m->state != RIG_STATE_FAULT && m->state != RIG_STATE_ESTOP) return RIG_OK;
-    if (check_sensors(m, false)) return RIG_FAULT_ACTIVE;
+    if (check_sensors(m, false) || m->board_faults) return RIG_FAULT_ACTIVE;
     m->faults = 0;
     clear_trajectory(m);
     set_state(m, RIG_STATE_IDLE, RIG_REASON_COMMAND);
@@ -871,6 +871,12 @@ void rig_tick(rig_mcu *m, uint32_t t_us) {
     if (m->stop_input) estop(m);
     /* the driver alarm: every state but BOOT (no check runs in BOOT) */
     if (m->driver_alarm && m->state != RIG_STATE_BOOT) fault(m, RIG_F_DRIVER, 0, 0);
+    /* the board's own faults: every state but BOOT, in bit order */
+    m->board_faults = (uint16_t)(in.board_faults & RIG_BOARD_FAULTS);
+    if (m->board_faults && m->state != RIG_STATE_BOOT) {
+        for (uint16_t bit = RIG_F_INTERNAL; bit <= RIG_F_STOP_CHAIN; bit = (uint16_t)(bit << 1))
+            if (m->board_faults & bit) fault(m, bit, in.board_detail, 0);
+    }
     apply_halt(m);
     sync_driver(m);
     send_telemetry(m);

@@ -80,8 +80,12 @@ enum {
     RIG_F_FORCE_LIMIT = 0x0001, RIG_F_TRAVEL_LIMIT = 0x0002, RIG_F_FOLLOWING_ERROR = 0x0004,
     RIG_F_BUFFER_UNDERRUN = 0x0008, RIG_F_LOAD_SATURATED = 0x0010, RIG_F_LOAD_STUCK = 0x0020,
     RIG_F_HEARTBEAT_LOST = 0x0040, RIG_F_ESTOP = 0x0080, RIG_F_DRIVER = 0x0100,
-    RIG_F_INTERNAL = 0x0200
+    RIG_F_INTERNAL = 0x0200, RIG_F_OVERTRAVEL = 0x0400, RIG_F_LOAD_ADC = 0x0800,
+    RIG_F_CLOCK = 0x1000, RIG_F_STOP_CHAIN = 0x2000
 };
+/* The faults only a board reports (rig_inputs.board_faults). */
+#define RIG_BOARD_FAULTS                                                                   \
+    (RIG_F_INTERNAL | RIG_F_OVERTRAVEL | RIG_F_LOAD_ADC | RIG_F_CLOCK | RIG_F_STOP_CHAIN)
 enum {
     RIG_REASON_COMMAND = 0, RIG_REASON_RUN_COMPLETE = 1, RIG_REASON_FAULT = 2,
     RIG_REASON_STOP_COMPLETE = 3, RIG_REASON_LINK_LOST = 4
@@ -142,6 +146,7 @@ typedef struct {
     int32_t steps_offset, enc_offset;
     int32_t period_start_steps; /* steps before this period's motion: MOVING */
     uint8_t have_reading, home_switch, stop_input, driver_alarm;
+    uint16_t board_faults; /* the board's faults of the last reading (present conditions) */
     uint8_t halt_pending; /* ESTOP from rig_rx: hal_step_halt at the next tick */
     uint32_t same_load;   /* consecutive samples with a bit-identical load_raw */
     /* trajectory ring */

@@ -20,6 +20,12 @@ typedef struct {
     bool home_switch;  /* reference switch at the open position active */
     bool stop_input;   /* operator's stop button pressed (latches ESTOP) */
     bool driver_alarm; /* stepper driver's alarm output active (latches DRIVER) */
+    /* faults the board itself found this period (RIG_F_INTERNAL, RIG_F_OVERTRAVEL,
+     * RIG_F_LOAD_ADC, RIG_F_CLOCK, RIG_F_STOP_CHAIN of rig_core.h): each latches as a
+     * halting fault with board_detail as its FAULT frame's value (which input, which
+     * check: docs/rig-protocol.md section 8); 0 on a board without such checks */
+    uint16_t board_faults;
+    int32_t board_detail;
 } rig_inputs;
 
 /* Emit |delta| step pulses (direction by sign) spread evenly over the coming period;

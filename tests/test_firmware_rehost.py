@@ -1,0 +1,381 @@
+"""The NUCLEO-F446RE image rehosted (hil/rehost/, docs/firmware.md "The rehosted image").
+
+The ELF `make -C firmware/board nucleo` writes, bytes unchanged, runs on the unicorn CPU
+emulator with models of the STM32F446 peripherals and the ADS131M02, joined to the
+simulated rig. Most tests drive the board in-process (protocol frames into its USART, its
+emulated time run without pacing); one serves it on a pty as `hil emulate --firmware
+--board nucleo` does.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from hil import protocol as p
+from hil.backends import RigSetup
+from hil.firmware_qemu import qemu_available
+from hil.mcu_model import RigHardware
+
+unicorn = pytest.importorskip("unicorn", reason="needs the unicorn package (pip install unicorn)")
+
+from hil.rehost.machine import UNITS_PER_S, UnsupportedAccessError  # noqa: E402
+from hil.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image  # noqa: E402
+
+# The stepper driver the step generator is checked against: ADI Trinamic TMC5160 in its
+# STEP/DIR mode (docs/firmware.md "Stepper driver"): STEP high and low at least
+# max(tFILTSD, tCLK + 20 ns), about 100 ns at its 12 MHz clock; DIR set up 20 ns before
+# the STEP edge that uses it.
+STEP_HIGH_MIN_S = 100e-9
+STEP_LOW_MIN_S = 100e-9
+DIR_SETUP_MIN_S = 20e-9
+NO_CHECK = -(2**31)
+
+
+@pytest.fixture(scope="module")
+def elf() -> Path:
+    missing = qemu_available(need_qemu=False)
+    if missing:
+        pytest.skip(f"needs the Debian packages: {' '.join(missing)}")
+    return build_nucleo_image()
+
+
+class Session:
+    """A host in-process: frames into the board's USART, its replies decoded."""
+
+    def __init__(self, board: NucleoBoard) -> None:
+        self.board = board
+        self.decoder = p.FrameDecoder()
+        self.seq = 0
+        self.messages: list[p.Message] = []
+
+    def run(self, seconds: float, heartbeat: float = 0.05) -> None:
+        """Run the board, a heartbeat every ``heartbeat`` s (the MCU's watchdog is 250 ms)."""
+        left = seconds
+        while left > 1e-9:
+            step = min(left, heartbeat)
+            self.board.run(step)
+            left -= step
+            self.messages += [p.parse_message(f)
+                              for f in self.decoder.feed(self.board.take_output())]
+            self.board.receive(p.encode_message(p.Heartbeat(0), self._next(), 0))
+
+    def _next(self) -> int:
+        self.seq = (self.seq + 1) & 0xFFFF
+        return self.seq
+
+    def command(self, msg: p.Message, wait: float = 0.01) -> p.Message:
+        """Send ``msg`` and return its reply (ACK or HELLO_REPLY)."""
+        seq = self._next()
+        self.board.receive(p.encode_message(msg, seq, p.FLAG_ACK_REQ))
+        for _ in range(20):
+            self.run(wait)
+            for m in self.messages:
+                if getattr(m, "acked_seq", None) == seq:
+                    return m
+        raise AssertionError(f"no reply to {msg}")
+
+    def hello(self) -> p.HelloReply:
+        """HELLO, sent again every 50 ms as a host does (bytes sent before the firmware
+        turns its USART on are lost, as on the chip)."""
+        for _ in range(20):
+            seq = self._next()
+            self.board.receive(b"\x00" + p.encode_message(p.Hello(host_nonce=0x5EED), seq,
+                                                          p.FLAG_ACK_REQ))
+            self.run(0.05)
+            for m in self.messages:
+                if isinstance(m, p.HelloReply) and m.acked_seq == seq:
+                    assert m.result == p.Result.OK
+                    return m
+        raise AssertionError("no HELLO_REPLY in 1 s")
+
+    def upload(self, points: list[tuple[int, int]]) -> None:
+        for first in range(0, len(points), p.MAX_CHUNK_POINTS):
+            chunk = tuple(points[first:first + p.MAX_CHUNK_POINTS])
+            final = p.TrajChunk.FINAL if first + len(chunk) == len(points) else 0
+            ack = self.command(p.TrajChunk(first_index=first, flags=final, points=chunk))
+            assert ack.result == p.Result.OK, ack
+
+    def faults(self) -> list[p.FaultReport]:
+        return [m for m in self.messages if isinstance(m, p.FaultReport)]
+
+    def telemetry(self) -> list[p.Telemetry]:
+        return [m for m in self.messages if isinstance(m, p.Telemetry)]
+
+
+def _board(elf: Path, hw: RigHardware | None = None,
+           **inject: object) -> tuple[NucleoBoard, Session]:
+    """A board powered on with the given faults injected (attribute paths: 'adc__present')."""
+    board = NucleoBoard(elf, hw=hw, seed=3, rng_seed=11)
+    for path, value in inject.items():
+        obj, _, name = path.rpartition("__")
+        setattr(getattr(board, obj) if obj else board, name, value)
+    if inject:
+        board.machine.reset("power-on")
+    board.run(0.02)
+    return board, Session(board)
+
+
+def _profile(full: int, periods: int) -> list[tuple[int, int]]:
+    """Out at ``full`` steps per period, a full-rate reversal, back to 0, then a hold."""
+    steps, pos = [], 0
+    for delta in [full] * periods + [-full] * periods + [0] * 5:
+        pos += delta
+        steps.append((pos, NO_CHECK))
+    return steps
+
+
+def test_the_image_is_the_flashed_elf_and_answers_hello_on_a_pty(elf: Path) -> None:
+    serial = pytest.importorskip("serial")
+    board = NucleoBoard(elf)
+    assert board.elf_sha256 == __import__("hashlib").sha256(elf.read_bytes()).hexdigest()
+    flashed = elf.with_suffix(".bin").read_bytes()  # what a programmer writes at 0x08000000
+    assert board.machine.read_bytes(0x08000000, len(flashed)) == flashed
+    print(f"rehosted {elf}: sha256 {board.elf_sha256}")
+    with NucleoRig(board) as rig:
+        port = serial.Serial(rig.port, 921600, timeout=0.05)
+        decoder = p.FrameDecoder()
+        reply = None
+        deadline = time.monotonic() + 20.0
+        while reply is None and time.monotonic() < deadline:
+            port.write(b"\x00" + p.encode_message(p.Hello(host_nonce=77), 5, p.FLAG_ACK_REQ))
+            end = time.monotonic() + 0.5
+            while reply is None and time.monotonic() < end:
+                for f in decoder.feed(port.read(4096)):
+                    m = p.parse_message(f)
+                    if isinstance(m, p.HelloReply) and m.acked_seq == 5:
+                        reply = m
+        port.close()
+        rig.check()
+        ratio = rig.time_ratio
+    assert reply is not None and reply.result == p.Result.OK and reply.host_nonce == 77
+    assert reply.boot_id != 0 and reply.state == p.State.IDLE
+    assert 0 < ratio <= 1.0 + 1e-3  # paced: never ahead of the wall clock
+    print(f"emulated/wall time {ratio:.3f}")
+
+
+def test_step_pulses_equal_the_commanded_steps_and_meet_the_drivers_timing(elf: Path) -> None:
+    # an instant reversal at 51 mm/s takes more than the load cell's 838 N: a load cell
+    # 100 times coarser, and a force limit to match, for this test
+    board, s = _board(elf, hw=RigHardware(x_origin=RigSetup().stroke[0], load_gain_n=1e-2))
+    s.hello()
+    assert s.command(p.Config(max_step_delta=256, force_limit_n=50e3)).result == p.Result.OK
+    points = _profile(256, 12)  # 256 steps per ms: TIM1's longest burst
+    s.upload(points)
+    assert s.command(p.Start()).result == p.Result.OK
+    s.run(len(points) * 1e-3 + 0.02)
+    last = s.telemetry()[-1]
+    assert not s.faults() and last.state == p.State.IDLE, s.faults()
+    assert last.steps == points[-1][0] == 0
+    commanded = sum(abs(b - a) for (a, _), (b, _) in zip([(0, 0), *points], points))
+    bursts = [b for b in board.tim1.bursts if b.output]
+    assert sum(b.rises(b.end) for b in bursts) == commanded  # every pulse on PA8
+    assert board.log.pulses == board.plant.steps == last.steps  # signed: out and back
+    assert board.log.pulses_ignored == 0
+    high = min(b.high_units for b in bursts) / UNITS_PER_S
+    low = min(b.low_units for b in bursts) / UNITS_PER_S
+    assert high >= STEP_HIGH_MIN_S and low >= STEP_LOW_MIN_S
+    # DIR (PA9) is set before the first rising edge of the burst after each reversal
+    setups = []
+    for prev, b in zip(bursts, bursts[1:]):
+        if b.dir_high != prev.dir_high:
+            first_edge = b.start + b.ccr1 * b.tick
+            setups.append((first_edge - b.dir_since) / UNITS_PER_S)
+    assert setups and min(setups) >= DIR_SETUP_MIN_S
+    print(f"{len(bursts)} bursts, {commanded} pulses; STEP high >= {high * 1e6:.2f} us, "
+          f"low >= {low * 1e6:.2f} us; DIR setup at a full-rate reversal "
+          f"{min(setups) * 1e6:.2f} us (TMC5160: 0.1, 0.1, 0.02 us)")
+
+
+def test_a_burst_over_256_steps_is_internal(elf: Path) -> None:
+    board, s = _board(elf)
+    s.hello()
+    assert s.command(p.Config(max_step_delta=300)).result == p.Result.OK
+    s.upload([(300, NO_CHECK), (300, NO_CHECK)])
+    assert s.command(p.Start()).result == p.Result.OK
+    s.run(0.02)
+    faults = s.faults()
+    assert [(f.fault, f.value) for f in faults] == [(p.Fault.INTERNAL, 1)]
+    assert board.log.pulses == 0 and s.telemetry()[-1].steps == 0
+
+
+def _enable_at(board: NucleoBoard, t: int) -> bool:
+    level = False
+    for when, value in board.log.enable:
+        if when <= t:
+            level = value
+    return level
+
+
+def test_a_hardfault_takes_the_enable_low_before_the_watchdog_resets(elf: Path) -> None:
+    board, s = _board(elf)
+    first = s.hello()
+    s.upload(_profile(100, 100))
+    assert s.command(p.Start()).result == p.Result.OK
+    s.run(0.03)
+    t_fault = board.machine.now
+    assert _enable_at(board, t_fault) and board.tim1.burst is not None  # moving
+    board.force_hardfault()
+    board.run(0.1)
+    lows = [t for t, level in board.log.enable if not level and t >= t_fault]
+    resets = [t for t, reason in board.log.resets if reason == "IWDG"]
+    assert lows and resets and lows[0] < resets[0]
+    assert (lows[0] - t_fault) / UNITS_PER_S < 20e-6  # the handler's first instructions
+    assert not [b for b in board.tim1.bursts if b.start > lows[0]]  # no burst after it
+    assert 0.03 < (resets[0] - t_fault) / UNITS_PER_S < 0.06  # IWDG: 50 ms
+    assert s.hello().boot_id != first.boot_id  # it boots again
+    print(f"enable low {(lows[0] - t_fault) / UNITS_PER_S * 1e6:.1f} us after the "
+          f"HardFault, IWDG reset after {(resets[0] - t_fault) / UNITS_PER_S * 1e3:.1f} ms")
+
+
+def test_a_debugger_halt_freezes_the_watchdog_and_the_tick(elf: Path) -> None:
+    board, s = _board(elf)
+    s.hello()
+    ticks = board.tim5.updates
+    board.debug_halt(0.2)  # four times the watchdog's 50 ms
+    assert board.dbg.frozen("IWDG") and board.dbg.frozen("TIM5") and board.dbg.frozen("TIM1")
+    assert board.tim5.updates == ticks
+    s.run(0.02)
+    assert [reason for _, reason in board.log.resets] == ["power-on"]
+
+
+@pytest.mark.parametrize(("inject", "fault", "value"), [
+    ({"rcc__pll_locks": False}, p.Fault.CLOCK, 2),
+    ({"adc__present": False}, p.Fault.LOAD_ADC, 1),
+], ids=["pll-never-locks", "adc-missing"])
+def test_a_board_fault_at_boot_is_named_and_nothing_moves(elf: Path, inject: dict,
+                                                           fault: p.Fault, value: int) -> None:
+    board, s = _board(elf, **inject)
+    s.hello()  # the link works (on the HSI when the PLL failed)
+    s.run(0.01)
+    assert [(f.fault, f.value) for f in s.faults()] == [(fault, value)]
+    assert s.telemetry()[-1].state == p.State.FAULT
+    assert s.command(p.ClearFault()).result == p.Result.FAULT_ACTIVE
+    assert s.command(p.TrajChunk(first_index=0, flags=1, points=((10, NO_CHECK),))
+                     ).result != p.Result.OK or s.command(p.Start()).result != p.Result.OK
+    s.run(0.02)
+    assert board.log.pulses == 0 and not board.tim1.bursts
+
+
+def _moving(elf: Path) -> tuple[NucleoBoard, Session]:
+    board, s = _board(elf)
+    s.hello()
+    s.upload(_profile(50, 200))
+    assert s.command(p.Start()).result == p.Result.OK
+    s.run(0.02)
+    assert board.tim1.burst is not None and not s.faults()
+    return board, s
+
+
+@pytest.mark.parametrize(("poke", "fault", "value", "within"), [
+    ("limit_open", p.Fault.OVERTRAVEL, 1, 1e-3),
+    ("limit_closed", p.Fault.OVERTRAVEL, 2, 1e-3),
+    ("chain_broken", p.Fault.STOP_CHAIN, 1, 21e-3),
+], ids=["overtravel-open-end", "overtravel-closed-end", "stop-chain-open"])
+def test_an_input_fault_while_moving_stops_the_steps(elf: Path, poke: str, fault: p.Fault,
+                                                     value: int, within: float) -> None:
+    board, s = _moving(elf)
+    t0 = board.machine.now
+    setattr(board, poke, True)
+    s.run(0.04)
+    assert [(f.fault, f.value) for f in s.faults()] == [(fault, value)]
+    assert s.telemetry()[-1].state == p.State.FAULT
+    limit = t0 + round((within + 1e-3) * UNITS_PER_S)  # the tick that reads it, + 1 period
+    late = [b for b in board.tim1.bursts if b.start > limit]
+    assert not late
+    cut = [b for b in board.tim1.bursts if b.cut is not None]
+    assert all(b.cut <= limit for b in cut)
+    assert board.log.pulses == board.plant.steps == s.telemetry()[-1].steps
+
+
+@pytest.mark.parametrize(("inject", "value"), [("crc_errors", 1), ("drdy_stuck", True),
+                                               ("status_set", 0x0400)],
+                         ids=["bad-crc", "drdy-timeout", "status-reset"])
+def test_adc_health_faults_are_named(elf: Path, inject: str, value: object) -> None:
+    board, s = _moving(elf)
+    setattr(board.adc, inject, value)
+    s.run(0.02)
+    code = {"crc_errors": 3, "drdy_stuck": 2, "status_set": 4}[inject]
+    assert [(f.fault, f.value) for f in s.faults()] == [(p.Fault.LOAD_ADC, code)]
+    assert s.telemetry()[-1].state == p.State.FAULT
+    assert board.log.pulses == board.plant.steps == s.telemetry()[-1].steps
+
+
+def test_an_access_no_model_implements_is_an_error(elf: Path) -> None:
+    board, _ = _board(elf)
+    with pytest.raises(UnsupportedAccessError, match="TIM1"):
+        board.tim1.write(0x48, 4, 0)  # DCR: DMA bursts are not modelled
+    with pytest.raises(UnsupportedAccessError, match="no peripheral"):
+        board.machine._mmio_read(board.machine.uc, 0x400, 4, 0x40010000)  # TIM8
+
+
+def test_the_objdump_finds_the_images_wfi(elf: Path) -> None:
+    board = NucleoBoard(elf)
+    out = subprocess.run(["arm-none-eabi-objdump", "-d", str(elf)], capture_output=True,
+                         text=True, check=True).stdout
+    assert len(board.machine.wfi_returns) == out.count("\twfi")
+
+
+@pytest.mark.alone
+def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
+                                                                  tmp_path: Path) -> None:
+    """`hil emulate --firmware --board nucleo` and `hil emulate --firmware` (each in its own
+    process, as a user starts them) run the same short job: the same samples and commanded
+    positions, the same stroke to a few encoder counts (the rehosted plant follows the
+    pulses as TIM1 emits them, 1-2 periods behind the host build's sim), forces alike in
+    their statistics (each run draws its own noise). The host's timeouts are widened by hand
+    (the rehost may run slower than the wall clock: docs/firmware.md)."""
+    import csv
+    import json
+    import signal
+    import sys
+
+    from hil_host import SHORT_RUN, hil
+
+    def run_on(emulate: list[str], out: Path) -> tuple[list[dict[str, str]], dict]:
+        proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "emulate", *emulate],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            port = proc.stdout.readline().strip()
+            assert port.startswith("/dev/"), proc.stderr.read()
+            code, stdout, stderr = hil("run", "--real", "--port", port, "--out", str(out),
+                                       *SHORT_RUN, "--ack-ms", "500", "--heartbeat-ms", "1000",
+                                       "--watchdog-ms", "1000", timeout=300.0)
+            assert code == 0 and "1 of 1 cycles complete" in stdout, stderr
+        finally:
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, err
+        print(" ".join(emulate), "|", err.strip().splitlines()[-1:])
+        with (out / "samples.csv").open(newline="") as fh:
+            return list(csv.DictReader(fh)), json.loads((out / "summary.json").read_text())
+
+    rehost, r_summary = run_on(["--firmware", "--board", "nucleo"], tmp_path / "rehost")
+    host, h_summary = run_on(["--firmware"], tmp_path / "host")
+    assert len(rehost) == len(host) > 2000
+    assert [r["x_cmd [m]"] for r in rehost] == [r["x_cmd [m]"] for r in host]
+    strokes = [max(float(r["platen [m]"]) for r in rows) - min(float(r["platen [m]"])
+                                                                for r in rows)
+               for rows in (rehost, host)]
+    assert abs(strokes[0] - strokes[1]) <= 5e-6, strokes  # 5 encoder counts
+    rms = [sum(float(r["force [N]"]) ** 2 for r in rows) / len(rows) for rows in (rehost, host)]
+    assert rms[0] == pytest.approx(rms[1], rel=0.01)
+    print(f"strokes {strokes[0] * 1e3:.4f} / {strokes[1] * 1e3:.4f} mm; samples {len(host)}; "
+          f"cycles {r_summary.get('cycles_complete')} / {h_summary.get('cycles_complete')}")
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--board", "nucleo"], "--board nucleo runs the firmware: give --firmware too"),
+    (["--firmware", "--board", "nucleo", "--qemu"], "two ways to run the firmware: give one"),
+    (["--firmware", "--board", "nucleo", "--junk", "0.1"], "injects no faults: drop junk"),
+])
+def test_hil_emulate_board_refuses_what_it_cannot_do(args: list[str], message: str) -> None:
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", "hil.cli", "emulate", *args],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1 and message in result.stderr, result.stderr
+    assert result.stdout == "" and "Traceback" not in result.stderr
