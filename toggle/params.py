@@ -523,7 +523,8 @@ def _clamp_from_table(table: Any, origin: str) -> ClampData:
 
 
 #: The tables and keys of a clamp preset (a family adds ``groups`` and ``default_group``).
-SECTIONS = ("name", "description", "half", "lower", "upper", "clamp", "drive", "dynamics")
+SECTIONS = ("name", "description", "half", "lower", "upper", "clamp", "drive", "dynamics",
+            "sections")
 
 
 def _unknown(names: Any, known: Any, where: str, kind: str) -> None:
