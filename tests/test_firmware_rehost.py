@@ -172,8 +172,8 @@ def test_the_plain_host_runs_a_trajectory_on_the_paced_pty(elf: Path) -> None:
         answered_at = board.now_s  # the probe's HELLO and BYE were answered by then
         wall0, emu0 = time.monotonic(), board.now_s
         with SerialLink(rig.port) as link:
-            link.open(link.config_for(force_limit_n=50e3))
-            assert link.info is not None and link.info.state == p.State.IDLE
+            assert link.open().state == p.State.IDLE  # measures the link
+            link.configure(link.config_for(force_limit_n=50e3))  # as measured
             points = _profile(5, 145)  # 5 steps per ms out for 145 ms, back, a 5 ms hold
             for first in range(0, len(points), p.MAX_CHUNK_POINTS):
                 chunk = points[first:first + p.MAX_CHUNK_POINTS]
@@ -368,8 +368,8 @@ def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
     process, as a user starts them) run the same short job: the same samples and commanded
     positions, the same stroke to a few encoder counts (the rehosted plant follows the
     pulses as TIM1 emits them, 1-2 periods behind the host build's sim), forces alike in
-    their statistics (each run draws its own noise). The host's timeouts are widened by hand
-    (the rehost may run slower than the wall clock: docs/firmware.md)."""
+    their statistics (each run draws its own noise). The plain command: the host measures
+    the link when the session opens (the rehost runs slower than the wall clock)."""
     import csv
     import json
     import signal
@@ -384,8 +384,7 @@ def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
             port = proc.stdout.readline().strip()
             assert port.startswith("/dev/"), proc.stderr.read()
             code, stdout, stderr = hil("run", "--real", "--port", port, "--out", str(out),
-                                       *SHORT_RUN, "--ack-ms", "500", "--heartbeat-ms", "1000",
-                                       "--watchdog-ms", "1000", timeout=300.0)
+                                       *SHORT_RUN, timeout=300.0)
             assert code == 0 and "1 of 1 cycles complete" in stdout, stderr
         finally:
             proc.send_signal(signal.SIGINT)
