@@ -27,7 +27,7 @@ import tempfile
 import threading
 import time
 import tty
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
 
@@ -231,6 +231,42 @@ def symbol_address(elf: Path, name: str) -> int:
     raise KeyError(f"no symbol {name!r} in {elf}")
 
 
+def await_firmware(send: Callable[[bytes], None], receive: Callable[[float], bytes],
+                   timeout: float, ended: Callable[[], bool], state: Callable[[], str],
+                   what: str) -> None:
+    """Return once an emulated MCU's firmware answered a HELLO and then a BYE: what an
+    emulator does before it publishes its port (docs/rig-protocol.md, section 7, "Emulated
+    MCUs"), so a host that opens the port finds the firmware running, and the BYE ends the
+    session the HELLO opened (no heartbeat watchdog is left armed for the host to find
+    latched). Each is sent every 100 ms until its answer: bytes sent before the firmware
+    enabled its USART are lost.
+
+    ``send``: bytes to the MCU; ``receive(wait)``: what the MCU sent within ``wait`` s
+    (b"" for nothing); ``ended()``: the emulator stopped; ``state()``: a line on it for the
+    error; ``what``: its name. RuntimeError when no answer came within ``timeout`` s.
+    """
+    decoder = p.FrameDecoder()
+    deadline = time.monotonic() + timeout
+    nonce = secrets.randbits(32)
+    for seq, msg in ((1, p.Hello(host_nonce=nonce)), (2, p.Bye())):
+        wire = b"\x00" + p.encode_message(msg, seq, p.FLAG_ACK_REQ)
+        answered = False
+        while not answered:
+            if time.monotonic() > deadline or ended():
+                raise RuntimeError(f"{what} did not answer {msg.TYPE.name} within "
+                                   f"{timeout:g} s ({state()})")
+            send(wire)
+            resend = min(time.monotonic() + 0.1, deadline)
+            while not answered and (left := resend - time.monotonic()) > 0:
+                for frame in decoder.feed(receive(left)):
+                    with contextlib.suppress(p.MessageError):
+                        reply = p.parse_message(frame)
+                        answered = answered or (
+                            isinstance(reply, (p.Ack, p.HelloReply))
+                            and reply.acked_seq == seq
+                            and getattr(reply, "host_nonce", nonce) == nonce)
+
+
 class QemuRig:
     """The firmware's QEMU image running, its USART on a pseudo-terminal (:attr:`port`).
 
@@ -312,38 +348,24 @@ class QemuRig:
                 time.sleep(0.02)
 
     def _await_guest(self, timeout: float) -> None:
-        """Return once the guest's firmware answered a HELLO and then a BYE on QEMU's
-        serial socket (the BYE ends the session the HELLO opened, so no heartbeat watchdog
-        is left armed for the host to find latched). Each is sent every 100 ms until its
-        answer: bytes sent before the firmware enabled its USART are lost."""
-        sock, decoder = self._serial, p.FrameDecoder()
-        deadline = time.monotonic() + timeout
-        nonce = secrets.randbits(32)
-        for seq, msg in ((1, p.Hello(host_nonce=nonce)), (2, p.Bye())):
-            wire = b"\x00" + p.encode_message(msg, seq, p.FLAG_ACK_REQ)
-            answered = False
-            while not answered:
-                if time.monotonic() > deadline or self._proc.poll() is not None:
-                    state = "running" if self.running else "ended"
-                    raise RuntimeError(f"the QEMU image did not answer {msg.TYPE.name} within "
-                                       f"{timeout:g} s (QEMU {state}): "
-                                       + " | ".join(self._output[-5:]))
-                sock.sendall(wire)
-                resend = min(time.monotonic() + 0.1, deadline)
-                while not answered and (left := resend - time.monotonic()) > 0:
-                    if not select.select([sock], [], [], left)[0]:
-                        continue
-                    data = sock.recv(65536)
-                    if not data:
-                        raise RuntimeError("QEMU closed its serial socket before the guest "
-                                           "answered")
-                    for frame in decoder.feed(data):
-                        with contextlib.suppress(p.MessageError):
-                            reply = p.parse_message(frame)
-                            answered = answered or (
-                                isinstance(reply, (p.Ack, p.HelloReply))
-                                and reply.acked_seq == seq
-                                and getattr(reply, "host_nonce", nonce) == nonce)
+        """Return once the guest's firmware answered a HELLO and a BYE on QEMU's serial
+        socket (:func:`await_firmware`)."""
+        sock = self._serial
+
+        def receive(wait: float) -> bytes:
+            if not select.select([sock], [], [], wait)[0]:
+                return b""
+            data = sock.recv(65536)
+            if not data:
+                raise RuntimeError("QEMU closed its serial socket before the guest answered")
+            return data
+
+        def state() -> str:
+            return (f"QEMU {'running' if self.running else 'ended'}: "
+                    + " | ".join(self._output[-5:]))
+
+        await_firmware(sock.sendall, receive, timeout, lambda: self._proc.poll() is not None,
+                       state, "the QEMU image")
 
     def _pump(self) -> None:
         """Relay bytes between QEMU's USART and the pty until close() or QEMU ends; SCHED_FIFO
@@ -472,5 +494,5 @@ class QemuRig:
             proc.kill()
 
 
-__all__ = ["QemuRig", "build_qemu_image", "qemu_available", "rig_setup_header",
+__all__ = ["QemuRig", "await_firmware", "build_qemu_image", "qemu_available", "rig_setup_header",
            "setup_parameters", "symbol_address"]

@@ -435,7 +435,7 @@ class SerialLink:
             return self._heartbeat_timeout_ms
         if self.timing is not None:
             return self.timing.heartbeat_timeout_ms
-        return p.Config.heartbeat_timeout_ms
+        return p.Config().heartbeat_timeout_ms  # (the class attribute is a slot)
 
     def config_for(self, **limits: float) -> p.Config:
         """A CONFIG of ``limits`` (p.Config's fields) with this session's heartbeat timeout:

@@ -157,6 +157,48 @@ def test_the_image_is_the_flashed_elf_and_answers_hello_on_a_pty(elf: Path) -> N
     print(f"emulated/wall time {ratio:.3f}")
 
 
+def test_the_plain_host_runs_a_trajectory_on_the_paced_pty(elf: Path) -> None:
+    """The host with no timeouts given (as `hil run --real --port PTY`: measured when the
+    session opens, docs/rig-protocol.md section 7) on the pty NucleoRig publishes once the
+    image answered HELLO and BYE: 300 ms of trajectory out and back, every sample received,
+    the image's clock never faster than the wall clock. (The default job takes minutes on
+    the rehost: docs/firmware.md "The rehosted image".)"""
+    pytest.importorskip("serial")
+    from hil.serial_link import SerialLink
+
+    board = NucleoBoard(elf, seed=5, rng_seed=7)
+    with NucleoRig(board) as rig:
+        assert rig.port.startswith("/dev/")
+        answered_at = board.now_s  # the probe's HELLO and BYE were answered by then
+        wall0, emu0 = time.monotonic(), board.now_s
+        with SerialLink(rig.port) as link:
+            assert link.open().state == p.State.IDLE  # measures the link
+            link.configure(link.config_for(force_limit_n=50e3))  # as measured
+            points = _profile(5, 145)  # 5 steps per ms out for 145 ms, back, a 5 ms hold
+            for first in range(0, len(points), p.MAX_CHUNK_POINTS):
+                chunk = points[first:first + p.MAX_CHUNK_POINTS]
+                link.send_chunk(first, chunk, final=first + len(chunk) == len(points))
+            start = link.start().sample
+            samples = []
+            while not samples or samples[-1].sample < start + len(points) + 5:
+                samples.append(link.next_sample(timeout=2 * link.telemetry_timeout))
+            timing, stats = link.timing, link.stats
+        wall, emu = time.monotonic() - wall0, board.now_s - emu0
+        rig.check()
+    assert answered_at > 0
+    assert timing is not None and timing.clock_rate <= 1.05, timing  # never faster
+    assert emu <= wall + NucleoRig.SLICE_S
+    assert stats.lost_samples == 0 and stats.duplicates == 0 and stats.queue_dropped == 0
+    assert [s.sample for s in samples] == list(range(samples[0].sample,
+                                                     samples[-1].sample + 1))
+    assert samples[-1].state == p.State.IDLE and samples[-1].steps == points[-1][0] == 0
+    assert max(s.steps for s in samples) == 5 * 145
+    assert board.log.pulses == 0 and board.log.pulses_ignored == 0
+    print(f"{timing.text()}; ACK timeout {link.ack_timeout * 1e3:.0f} ms, watchdog "
+          f"{link.telemetry_timeout * 1e3:.0f} ms, heartbeat {link.heartbeat_timeout_ms} ms; "
+          f"{emu:.3f} s emulated in {wall:.3f} s; {stats.retransmissions} retransmissions")
+
+
 def test_step_pulses_equal_the_commanded_steps_and_meet_the_drivers_timing(elf: Path) -> None:
     # an instant reversal at 51 mm/s takes more than the load cell's 838 N: a load cell
     # 100 times coarser, and a force limit to match, for this test
@@ -326,8 +368,8 @@ def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
     process, as a user starts them) run the same short job: the same samples and commanded
     positions, the same stroke to a few encoder counts (the rehosted plant follows the
     pulses as TIM1 emits them, 1-2 periods behind the host build's sim), forces alike in
-    their statistics (each run draws its own noise). The host's timeouts are widened by hand
-    (the rehost may run slower than the wall clock: docs/firmware.md)."""
+    their statistics (each run draws its own noise). The plain command: the host measures
+    the link when the session opens (the rehost runs slower than the wall clock)."""
     import csv
     import json
     import signal
@@ -342,8 +384,7 @@ def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
             port = proc.stdout.readline().strip()
             assert port.startswith("/dev/"), proc.stderr.read()
             code, stdout, stderr = hil("run", "--real", "--port", port, "--out", str(out),
-                                       *SHORT_RUN, "--ack-ms", "500", "--heartbeat-ms", "1000",
-                                       "--watchdog-ms", "1000", timeout=300.0)
+                                       *SHORT_RUN, timeout=300.0)
             assert code == 0 and "1 of 1 cycles complete" in stdout, stderr
         finally:
             proc.send_signal(signal.SIGINT)

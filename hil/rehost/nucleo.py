@@ -12,7 +12,7 @@ the sim's noise) is what the ADS131M02 converts, and its home switch is PC0.
 
 :class:`NucleoBoard` is the board (run it to a time, poke its inputs, read what it did);
 :class:`NucleoRig` serves it on a pseudo-terminal, paced so emulated time never runs
-ahead of the wall clock.
+faster than the wall clock, and publishes the port once the image answered a HELLO.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import os
 import secrets
 import select
 import subprocess
+import termios
 import threading
 import time
 import tty
@@ -40,6 +41,7 @@ from hil.firmware import (
     check_hardware,
     fmu_start_values,
 )
+from hil.firmware_qemu import await_firmware
 from hil.mcu_model import RigHardware
 from hil.rehost.ads131m02 import Ads131m02
 from hil.rehost.cortex import DbgMcu, Dwt, SystemControl
@@ -368,23 +370,28 @@ class NucleoBoard:
 
 class NucleoRig:
     """:class:`NucleoBoard` served on a pseudo-terminal (:attr:`port`) by a thread that
-    paces it: emulated time never runs ahead of the wall clock (it may fall behind; the
-    ratio of emulated to wall time is :attr:`time_ratio`). ``with NucleoRig(...) as rig``;
-    :meth:`close` stops it. :attr:`error`: what stopped the board (an
-    :class:`~hil.rehost.machine.UnsupportedAccessError` access), re-raised by :meth:`check`."""
+    paces it, as docs/rig-protocol.md (section 7, "Emulated MCUs") asks of an emulator:
+    emulated time never runs faster than the wall clock (a slice that took longer than its
+    emulated millisecond is not made up later: that time is lost, and the image's own
+    clock, its ``t_us``, shows it), and :attr:`port` is published only once the image
+    answered a HELLO and then a BYE on it (:func:`hil.firmware_qemu.await_firmware`).
+    ``answer_timeout`` bounds that wait (s). :attr:`time_ratio`: emulated per wall time.
+    ``with NucleoRig(...) as rig``; :meth:`close` stops it. :attr:`error`: what stopped
+    the board (an :class:`~hil.rehost.machine.UnsupportedAccessError` access), re-raised
+    by :meth:`check`."""
 
     SLICE_S = 1e-3
     #: What the USB link of the ST-LINK's virtual COM port holds while the host is slow to
     #: read (beyond it the oldest bytes are lost, as a full buffer would lose them).
     BACKLOG_BYTES = 64 * 1024
 
-    def __init__(self, board: NucleoBoard) -> None:
+    def __init__(self, board: NucleoBoard, answer_timeout: float = 60.0) -> None:
         self.board = board
         self.error: BaseException | None = None
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)
         os.set_blocking(self._master, False)
-        self.port = os.ttyname(self._slave)
+        self.port = ""
         self.dropped = 0
         self._stop = threading.Event()
         self._lock = threading.Lock()
@@ -393,6 +400,27 @@ class NucleoRig:
         self._thread = threading.Thread(target=self._serve, name="nucleo-rehost",
                                         daemon=True)
         self._thread.start()
+        try:
+            self._await_image(answer_timeout)
+        except BaseException:
+            self.close()
+            raise
+        self.port = os.ttyname(self._slave)
+
+    def _await_image(self, timeout: float) -> None:
+        """HELLO and BYE through the pty's own slave end, so the whole path is tried."""
+        slave = self._slave
+
+        def receive(wait: float) -> bytes:
+            if not select.select([slave], [], [], wait)[0]:
+                return b""
+            return os.read(slave, 65536)
+
+        await_firmware(lambda data: os.write(slave, data) and None, receive, timeout,
+                       lambda: self.error is not None or not self._thread.is_alive(),
+                       lambda: f"board stopped: {self.error}" if self.error
+                       else f"{self.board.now_s:.3f} s emulated", "the rehosted image")
+        termios.tcflush(slave, termios.TCIFLUSH)  # nothing of the probe's for the host
 
     @property
     def time_ratio(self) -> float:
@@ -404,19 +432,26 @@ class NucleoRig:
     def _serve(self) -> None:
         board, master = self.board, self._master
         backlog = bytearray()
+        # the pacing's origin: emulated time may lead the wall clock since it by a slice at
+        # most; when it lags, the origin moves up (the lost time is never run faster)
+        wall_base, emu_base = self._wall0, self._emu0
         try:
             while not self._stop.is_set():
                 writers = [master] if backlog else []
-                ahead = ((board.machine.now - self._emu0) / UNITS_PER_S
-                         - (time.monotonic() - self._wall0))
-                readable, writable, _ = select.select([master], writers, [], max(ahead, 0.0))
+                ahead = ((board.machine.now - emu_base) / UNITS_PER_S
+                         - (time.monotonic() - wall_base))
+                if ahead < 0:
+                    wall_base, emu_base = time.monotonic(), board.machine.now
+                    ahead = 0.0
+                readable, writable, _ = select.select([master], writers, [], ahead)
                 if readable:
                     with contextlib.suppress(BlockingIOError, OSError):
                         board.receive(os.read(master, 4096))
                 if writable:
                     with contextlib.suppress(BlockingIOError, OSError):
                         del backlog[:os.write(master, backlog)]
-                if ahead > 0:
+                if ahead > 0 and (board.machine.now - emu_base) / UNITS_PER_S > (
+                        time.monotonic() - wall_base):
                     continue
                 with self._lock:
                     board.run(self.SLICE_S)
