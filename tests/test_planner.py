@@ -852,3 +852,17 @@ def test_toggle_plan_shows_its_solves_on_a_terminal(chang, monkeypatch, capsys):
         assert (f"| {starts}/{starts} [" in err.getvalue()) is expected
         assert err.getvalue().startswith("\rplanning") is expected
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("masses", [None, SM55_MASSES])
+def test_the_bound_s_inertia_is_one_value_over_its_grid(masses):
+    """peak_lower_bound takes dF/da from every tenth grid point: it holds only while the
+    plant's dF/da after contact does not vary with position or speed."""
+    cfg = plan_config("chang2021", masses=masses)
+    limits = drive_limits(cfg.mechanism)
+    planner = planner_for(cfg, limits)
+    X, V = np.meshgrid(np.linspace(cfg.x_contact, planner.x_final, 301),
+                       np.geomspace(planner.creep_speed, limits.velocity, 150), indexing="ij")
+    inertia = (np.asarray(plant_outputs(X, V, 1.0, cfg).input_force)
+               - np.asarray(plant_outputs(X, V, 0.0, cfg).input_force))
+    assert np.ptp(inertia) <= 1e-9 * abs(inertia.mean())
