@@ -50,6 +50,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import brentq
 
+from controllers import progress as solves
 from controllers.bounds import peak_lower_bound
 from controllers.limits import DriveLimits
 from controllers.plans import (
@@ -385,16 +386,21 @@ class ClampPlanner(StrokeReports):
         key = (self.worst_peak if weights[1] == 0 else (lambda p: p.rms_force)
                if objective == "rms" else (lambda p: float(p.solution["f"][0])))
         good = self.lower_bound() * (1 + _GAP) if weights[1] == 0 else 0.0
+        solves.expect(1 + (previous is not None) + len(_LATE_STARTS))
         plans = [self.solve(duration, objective, warm=False, energy_weight=energy_weight)]
+        solves.advance()
         if previous is not None:
             plans.append(self.solve(duration, objective, start=previous,
                                     energy_weight=energy_weight))
-        for stretch in _LATE_STARTS:
+            solves.advance()
+        for left, stretch in enumerate(_LATE_STARTS):
             if key(min(plans, key=key)) <= good:
+                solves.advance(len(_LATE_STARTS) - left)  # skipped: counted as done
                 break
             plan, ok = self._run(weights, (duration, duration), self.force_limit,
                                  objective, None, False,
                                  guess=self._late_guess(duration, stretch))
+            solves.advance()
             if ok:
                 plans.append(plan)
         self.problem.last = min(plans, key=key)
@@ -437,8 +443,12 @@ class ClampPlanner(StrokeReports):
             raise PlanningError(self._unreachable(limit, None) + (
                 f": no stroke of any duration peaks below {self.lower_bound():.4g} N "
                 "(the lower bound, inertia relief included)"))
-        plan = start if continued and start is not None else self._fastest(
-            self.force_limit, start, warm)
+        if continued and start is not None:
+            plan: Plan | None = start
+        else:
+            solves.expect(1)
+            plan = self._fastest(self.force_limit, start, warm)
+            solves.advance()
         if plan is None:
             raise PlanningError(self._unreachable(limit, None))
         top = min(self.worst_peak(plan), self.force_limit)
@@ -449,9 +459,11 @@ class ClampPlanner(StrokeReports):
                 " (the least peak of any duration it finds)"))
         levels = self._levels(top, limit, _TRADE_STEP if continued else _LIMIT_STEP)
         imposed = limit
+        solves.expect(len(levels))
         for level in levels:
             imposed = level
             reached = self._fastest(level, plan, True)
+            solves.advance()
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
@@ -463,7 +475,9 @@ class ClampPlanner(StrokeReports):
             imposed -= 1.5 * max(excess, 0.0)
             factor /= 1.0 + 1.5 * max(over, 0.0)
             self._torque = self._torque or over > 0
+            solves.expect(1)
             reached = self._fastest(imposed, plan, True, factor)
+            solves.advance()
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
@@ -509,8 +523,10 @@ class ClampPlanner(StrokeReports):
         if self._least is None:
             previous = self.problem.last
             start = self.best(default_duration(self))
+            solves.expect(1)
             plan, ok = self._run(WEIGHTS["peak"], (self.t_ref, self.longest),
                                  self.force_limit, "peak", start, True)
+            solves.advance()
             self._least = min([start, *([plan] if ok else [])], key=self.worst_peak)
             self.problem.last = previous
         return self._least

@@ -792,3 +792,77 @@ def test_ctrl_c_during_a_solve_stops_toggle_plan(monkeypatch, capsys, swallowed_
     out = capsys.readouterr()
     assert swallowed_sigint.solves == 1 and out.out == ""
     assert out.err.strip().splitlines()[-1] == "toggle plan: interrupted"
+
+
+def test_progress_counts_each_solve_against_the_total_it_announced(chang, monkeypatch):
+    """Issue 40: the bar counts solves, not seconds. The best of N starts announces its N
+    (a start skipped on reaching the lower bound counts as done); a minimum-time search
+    counts its fastest stroke and each continuation step and tightening (its _fastest
+    solves), the total known before the count reaches it."""
+    from controllers.planner import _LATE_STARTS
+    from controllers.progress import Progress, reporting
+
+    _, _, planner, _ = chang
+    seen: list[tuple[int, int]] = []
+
+    class Recorded(Progress):
+        def advance(self, steps: int = 1) -> None:  # the total as announced before it
+            seen.append((self.n + steps, self.total))
+            super().advance(steps)
+
+    with reporting(Recorded("best", enabled=False)) as bar:
+        planner.best(DURATION)
+    assert (bar.n, bar.total) == (2 + len(_LATE_STARTS), 2 + len(_LATE_STARTS))  # warm too
+    assert all(n <= total == bar.total for n, total in seen)
+
+    planner.least_peak()  # kept on the planner: not counted below
+    fastest, calls = ClampPlanner._fastest, []
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return fastest(self, *args, **kwargs)
+
+    monkeypatch.setattr(ClampPlanner, "_fastest", counted)
+    seen.clear()
+    with reporting(Recorded("minimum time", enabled=False)) as bar:
+        planner.minimum_time(15.0)
+    assert len(calls) >= 2 and bar.n == bar.total == len(calls)
+    assert [n for n, _ in seen] == list(range(1, len(calls) + 1))
+    assert all(n <= total for n, total in seen)
+
+
+def test_toggle_plan_shows_its_solves_on_a_terminal(chang, monkeypatch, capsys):
+    """``toggle plan`` on a terminal: the bar counts the best plan's starts to its total
+    (shown at once here: SHOW_AFTER 0); with --json nothing is drawn."""
+    import io
+
+    from controllers import progress
+    from controllers.planner import _LATE_STARTS
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(progress, "SHOW_AFTER", 0.0)
+    for json_flag, expected in (([], True), (["--json"], False)):
+        err = Terminal()
+        monkeypatch.setattr("sys.stderr", err)
+        assert main(["plan", "--duration", str(DURATION), *json_flag]) == 0
+        starts = 2 + len(_LATE_STARTS)  # the planner has a previous plan: a warm start too
+        assert (f"| {starts}/{starts} [" in err.getvalue()) is expected
+        assert err.getvalue().startswith("\rplanning") is expected
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("masses", [None, SM55_MASSES])
+def test_the_bound_s_inertia_is_one_value_over_its_grid(masses):
+    """peak_lower_bound takes dF/da from every tenth grid point: it holds only while the
+    plant's dF/da after contact does not vary with position or speed."""
+    cfg = plan_config("chang2021", masses=masses)
+    limits = drive_limits(cfg.mechanism)
+    planner = planner_for(cfg, limits)
+    X, V = np.meshgrid(np.linspace(cfg.x_contact, planner.x_final, 301),
+                       np.geomspace(planner.creep_speed, limits.velocity, 150), indexing="ij")
+    inertia = (np.asarray(plant_outputs(X, V, 1.0, cfg).input_force)
+               - np.asarray(plant_outputs(X, V, 0.0, cfg).input_force))
+    assert np.ptp(inertia) <= 1e-9 * abs(inertia.mean())

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import threading
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +34,7 @@ from controllers.plans import (
     plan_config,
 )
 from controllers.profiles import predict, read_profile_csv, write_profile_csv
+from controllers.progress import Progress, describe, reporting
 from controllers.stroke_problem import OBJECTIVES
 from controllers.stroke_reports import baseline_stroke, baselines
 from toggle.args import integer, number, path, positive
@@ -87,27 +86,11 @@ def _errors(args: argparse.Namespace) -> dict[str, float]:
             if (value := getattr(args, f"delta_{name}", None)) is not None}
 
 
-#: Seconds of planning before the progress bar shows.
-PROGRESS_AFTER = 2.0
-
-
-@contextlib.contextmanager
-def _progress(args: argparse.Namespace) -> Iterator[None]:
-    """A bar on stderr counting the seconds of planning, shown once it takes longer than
-    :data:`PROGRESS_AFTER` (not with ``--json``): the solves' count is not known ahead."""
-    from tqdm import tqdm
-
-    done = threading.Event()
-    with tqdm(desc="planning", unit="s", delay=PROGRESS_AFTER, bar_format="{desc}: {elapsed}",
-              disable=getattr(args, "json", False)) as bar:
-        ticker = threading.Thread(target=lambda: [bar.update(1) for _ in iter(
-            lambda: done.wait(1.0), True)], daemon=True)
-        ticker.start()
-        try:
-            yield
-        finally:
-            done.set()
-            ticker.join()
+def _progress(args: argparse.Namespace, desc: str = "planning", unit: str = "solve",
+              total: int = 0) -> Progress:
+    """The planning's progress on stderr (:mod:`controllers.progress`), none with
+    ``--json``."""
+    return Progress(desc, unit, total, enabled=not getattr(args, "json", False))
 
 
 def _plant(args: argparse.Namespace, errors: bool = True) -> tuple[PlantConfig, DriveLimits]:
@@ -159,28 +142,26 @@ def _trade_off_curves(args: argparse.Namespace, cfg: PlantConfig, limits: DriveL
                       ) -> dict[str, tuple[ClampPlanner, list[Plan]]]:
     """``--trade-off N``: the fastest stroke under N force limits, with the mold and in a
     dry cycle (the mold at the toggle: no clamp force), each with its planner."""
-    from tqdm import tqdm
-
     dry = cfg.with_(x_contact=clamp_stroke(cfg.mechanism)[1] - DRY_CONTACT)
     common = (limits, args.contact_speed, args.intervals, _protection(args), args.trade_off)
     planners = {name: planner_for(plant, *common[:3], protection=common[3])
                 for name, plant in (("mold", cfg), ("dry_cycle", dry))}
     # seconds of IPOPT per curve: the dry cycle's in a second process (two cores), a bar
-    # on stderr counting both curves' limits
-    with tqdm(total=2 * args.trade_off, desc="trade-off", unit="limit",
-              disable=getattr(args, "json", False)) as bar, \
+    # on stderr counting both curves' limits (by limit, not the planner's solves: no
+    # reporting())
+    with contextlib.closing(_progress(args, "trade-off", "limit", 2 * args.trade_off)) as bar, \
             Background(trade_off_curve, dry, *common) as dry_curve:
         seen = 0
 
         def tick() -> None:
             nonlocal seen
-            bar.update(1 + dry_curve.ticks() - seen)
+            bar.advance(1 + dry_curve.ticks() - seen)
             seen = dry_curve.ticks()
 
         mold = planners["mold"].trade_off(args.trade_off, tick)
         curves = {"mold": (planners["mold"], mold),
                   "dry_cycle": (planners["dry_cycle"], dry_curve.result())}
-        bar.update(dry_curve.ticks() - seen)
+        bar.advance(dry_curve.ticks() - seen)
     return curves
 
 
@@ -300,9 +281,11 @@ def run(args: argparse.Namespace) -> int:
     cfg, limits = _plant(args, errors=not args.robust)
     if args.trade_off:
         return _trade_off(args, cfg, limits)
-    with _progress(args):
+    with reporting(_progress(args, "closing stroke" if args.cycle else "planning")):
         planner, plan, robust = _planned(args, cfg, limits)
         bound = planner.lower_bound()
+        if args.cycle:
+            describe("opening stroke")
         opening, opener = _opening(args, cfg, limits) if args.cycle else (None, None)
     zone = planner.protection(plan)
     molding = _molding_cycle(args, plan, opener, limits) if opener else None
