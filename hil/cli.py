@@ -14,7 +14,7 @@ import contextlib
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
@@ -320,6 +320,13 @@ def emulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def serve_until(stopped: Callable[[], bool]) -> None:
+    """Serve an emulated rig (its own threads do the work) until ``stopped()``; a signal
+    meanwhile raises :class:`~hil.interrupts.Interrupted` out of it."""
+    while not stopped():
+        time.sleep(0.2)
+
+
 def _no_injection(args: argparse.Namespace, option: str) -> None:
     if not args.firmware:
         raise ValueError(f"{option} runs the firmware: give --firmware too")
@@ -356,16 +363,17 @@ def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) ->
         print(rig.port, flush=True)
         print(f"hil emulate: {elf} sha256 {board.elf_sha256}", file=sys.stderr, flush=True)
         with guard:
-            while rig.error is None:
-                time.sleep(0.2)
-        print(f"hil emulate: the rehosted board stopped: {rig.error}", file=sys.stderr)
-        return 1
+            serve_until(lambda: rig.error is not None)
+        stopped = f"the rehosted board stopped: {rig.error}"
     except Interrupted:
-        pass
+        stopped = None
     finally:
         rig.close()
         print(f"hil emulate: emulated/wall time {rig.time_ratio:.3f}; {rig.summary()}",
               file=sys.stderr)
+    if stopped is not None:
+        print(f"hil emulate: error: {stopped}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -383,9 +391,9 @@ def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> i
     try:
         with guard, QemuRig(image) as rig:
             print(rig.port, flush=True)
-            while rig.running:
-                time.sleep(0.2)
-            print(f"hil emulate: QEMU ended: {' '.join(rig.output[-3:])}", file=sys.stderr)
+            serve_until(lambda: not rig.running)
+            print(f"hil emulate: error: QEMU ended: {' '.join(rig.output[-3:])}",
+                  file=sys.stderr)
             return 1
     except Interrupted:
         pass
