@@ -259,7 +259,7 @@ def test_cli_exports_the_table_and_refuses_bad_options(tmp_path, capsys):
     assert main(["plan", "--drive-cycle", "1ms", "--out", str(tmp_path / "p.csv")]) == 2
     assert "--export cam" in capsys.readouterr().err
     assert main(["plan", "--export", "cam", "--format", "pvt", "--master", "position",
-                 "--out", str(out)]) == 2
+                 "--out", str(tmp_path / "cam.pvt")]) == 2
     assert "--master time --units counts" in capsys.readouterr().err
 
 
