@@ -14,6 +14,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from hil import protocol as p
@@ -25,6 +26,16 @@ from hil.rig_physics import ClampPhysics
 X_OPEN = RigSetup().stroke[0]
 #: A short experiment: one cycle at 40 mm/s (about 2.5 s of motion).
 SHORT_RUN = ("--speed", "40e-3", "--cycles", "1", "--quiet")
+
+
+def wait_for(condition: Callable[[], bool], timeout: float = 2.0) -> bool:
+    """Poll ``condition`` every 5 ms until it holds (True) or ``timeout`` s pass (False)."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
 
 
 def spawn(faults: FaultPlan | None = None, delta_r8: float = 0.0,

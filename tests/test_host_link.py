@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
-from hil_host import SHORT_RUN, Host
+from hil_host import SHORT_RUN, Host, wait_for
 
 from hil import protocol as p
 from hil.backends import RigPlant, RigSetup, RunStoppedError
@@ -241,15 +241,6 @@ def fake() -> Iterator[Callable[..., FakeMcu]]:
     yield make
     for mcu in made:
         mcu.close()
-
-
-def wait_for(condition: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.005)
-    return True
 
 
 def ramp(n: int, rate: int = 20) -> list[tuple[int, int]]:

@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable, Iterator
 
 import pytest
+from hil_host import wait_for
 
 from hil import protocol as p
 from hil.mcu_model import RigHardware
@@ -92,15 +93,6 @@ def fail_by_injection(make: Callable[..., Rig], faults: FaultPlan, name: str,
         if injected is not None and link.stats.failed_at >= injected:
             return emulator, link, samples, error
     pytest.fail(f"the watchdog tripped before the injected {name} in {attempts} attempts")
-
-
-def wait_for(condition: Callable[[], bool], timeout: float = 2.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.005)
-    return True
 
 
 def test_handshake_reports_identity_and_scalings(rig: Callable[..., Rig]) -> None:
