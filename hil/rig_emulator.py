@@ -361,7 +361,7 @@ class RigEmulator:
         wire = body + b"\x00"
         tel = ((msg.boot_id, msg.sample, msg.state, wire == original)
                if isinstance(msg, p.Telemetry) else None)
-        if rng.random() < f.split:
+        if len(wire) > 1 and rng.random() < f.split:  # a frame truncated to its 0 stays whole
             cut = rng.randrange(1, len(wire))
             self._backlog += [(now, wire[:cut], None), (now + 3e-4, wire[cut:], tel)]
         else:

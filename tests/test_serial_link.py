@@ -350,3 +350,15 @@ def test_homing_runs_under_the_sessions_heartbeat_timeout(given: int | None,
     finally:
         emulator.close()
     assert len(sent) == 2 and [c.heartbeat_timeout_ms for c in sent] == [expected] * 2
+
+
+def test_a_frame_truncated_to_nothing_is_sent_as_its_delimiter_even_when_split() -> None:
+    # seed 3 once truncated a frame to no bytes and then tried to split the lone delimiter:
+    # the serving thread died and the host saw "TRAJ_CHUNK not acknowledged"
+    emulator = RigEmulator(placeholder_plant, faults=FaultPlan(truncate=1.0, split=1.0))
+    ack = p.encode_message(p.Ack(acked_seq=1, result=p.Result.OK, state=p.State.IDLE,
+                                 sample=0), 0, 0)
+    for _ in range(200):  # randrange(len(body)) gives 0 about once in len(body) draws
+        emulator._send(ack)
+    assert all(wire for _, wire, _ in emulator._backlog)
+    assert any(wire == b"\x00" for _, wire, _ in emulator._backlog)
