@@ -9,7 +9,8 @@ count 0 is x_open and encoder count 0 is the platen there.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import overload
 
 from controllers.limits import DriveLimits
 from hil import protocol as p
@@ -32,7 +33,7 @@ class HomingError(RigError):
     """The home switch was not found, or the rig faulted while referencing."""
 
 
-def _unrecorded(link: SerialLink, points: list[tuple[int, int]],
+def _unrecorded(link: SerialLink, points: Sequence[tuple[int, int]],
                 until: Callable[[p.Telemetry], bool]) -> p.Telemetry | None:
     """Stream ``points`` until ``until(sample)`` holds (that sample) or they end (None).
 
@@ -47,6 +48,35 @@ def _unrecorded(link: SerialLink, points: list[tuple[int, int]],
         link.finish_run()
 
 
+class ConstantSpeed(Sequence[tuple[int, int]]):
+    """The points of a constant-speed move, made as they are streamed.
+
+    A search over SEARCH_RANGE at FINE_SPEED is 240 000 points: built as a list it held the
+    host's interpreter lock for hundreds of ms on a loaded machine, and the host's
+    heartbeats to the MCU waited behind it (HEARTBEAT_LOST while homing)."""
+
+    def __init__(self, start: int, per_period: float, count: int) -> None:
+        self.start, self.per_period, self.count = start, per_period, count
+
+    def __len__(self) -> int:
+        return self.count
+
+    def _point(self, i: int) -> tuple[int, int]:
+        return self.start + round(self.per_period * (i + 1)), p.NO_CHECK
+
+    @overload
+    def __getitem__(self, i: int) -> tuple[int, int]: ...
+    @overload
+    def __getitem__(self, i: slice) -> list[tuple[int, int]]: ...
+
+    def __getitem__(self, i: int | slice) -> tuple[int, int] | list[tuple[int, int]]:
+        if isinstance(i, slice):
+            return [self._point(k) for k in range(*i.indices(self.count))]
+        if not -self.count <= i < self.count:
+            raise IndexError(i)
+        return self._point(i % self.count)
+
+
 def _move_until(link: SerialLink, direction: int, speed: float, switch: bool) -> p.Telemetry:
     """Move at constant ``speed`` (m/s) until the home switch reads ``switch``; then stop.
 
@@ -56,8 +86,7 @@ def _move_until(link: SerialLink, direction: int, speed: float, switch: bool) ->
     start = link.status.steps
     per_period = direction * speed * sc.period / sc.step_m
     count = math.ceil(SEARCH_RANGE / (speed * sc.period))
-    points = [(start + round(per_period * (i + 1)), p.NO_CHECK) for i in range(count)]
-    hit = _unrecorded(link, points,
+    hit = _unrecorded(link, ConstantSpeed(start, per_period, count),
                        lambda tel: bool(tel.flags & p.TelemetryFlag.HOME_SWITCH) == switch)
     if hit is None:
         state = "active" if switch else "inactive"

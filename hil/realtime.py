@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import threading
+from collections.abc import Callable
 
 REALTIME_PRIORITY = 20  # SCHED_FIFO priority: above ordinary processes, below kernel threads
+#: The nice value of the thread that runs a rig session: its commands and the samples it
+#: takes hold the interpreter lock that the SCHED_FIFO reader needs for each heartbeat, so
+#: behind a CPU hog at nice 0 the reader waited behind it for 150-400 ms (HEARTBEAT_LOST).
+SESSION_NICE = -10
 
 
 def set_realtime(priority: int = REALTIME_PRIORITY) -> bool:
@@ -19,3 +26,22 @@ def set_realtime(priority: int = REALTIME_PRIORITY) -> bool:
     except (PermissionError, OSError, AttributeError):
         return False
     return True
+
+
+def raise_thread_priority(nice: int = SESSION_NICE) -> Callable[[], None]:
+    """Give the calling thread the nice value ``nice`` if the OS permits it (root or
+    CAP_SYS_NICE; otherwise nothing changes); returns what puts its old value back."""
+    tid = threading.get_native_id()
+    try:
+        old = os.getpriority(os.PRIO_PROCESS, tid)
+        if nice >= old:
+            return lambda: None
+        os.setpriority(os.PRIO_PROCESS, tid, nice)
+    except (PermissionError, OSError, AttributeError):
+        return lambda: None
+
+    def restore() -> None:
+        with contextlib.suppress(OSError):  # the thread has ended
+            os.setpriority(os.PRIO_PROCESS, tid, old)
+
+    return restore

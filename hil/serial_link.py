@@ -27,7 +27,7 @@ import serial
 
 from hil import protocol as p
 from hil.link_timing import ACK_TIMEOUT_MAX, ACK_TIMEOUT_MIN, WATCHDOG_MAX, AckTimer, LinkTiming
-from hil.realtime import set_realtime
+from hil.realtime import raise_thread_priority, set_realtime
 
 ESTOP_REPEATS = 3  # an emergency stop is sent this many times back to back
 #: Attempts of the STOP that ends a session before the host escalates to ESTOP (section 6).
@@ -280,6 +280,7 @@ class SerialLink:
         self.timing: LinkTiming | None = None  # measured at open
         self.heartbeat_period = heartbeat_period
         self.realtime = realtime
+        self._restore_priority: Callable[[], None] = lambda: None  # the session thread's nice
         self.clock_slack = clock_slack
         self.clear_faults_on_close = clear_faults_on_close
         self.point_period_us = point_period_us
@@ -334,6 +335,8 @@ class SerialLink:
             self._ser.write(b"\x00")  # resynchronise the MCU's receiver (section 2)
         if self._telemetry_timeout is None:
             self._silence.timeout = WATCHDOG_MAX  # until the link is measured
+        if self.realtime:
+            self._restore_priority = raise_thread_priority()
         self._reader = threading.Thread(target=self._read_loop, name="rig-reader", daemon=True)
         self._reader.start()
         try:
@@ -528,6 +531,8 @@ class SerialLink:
             self._ser.close()
         self._ser = None
         self.info = None
+        self._restore_priority()
+        self._restore_priority = lambda: None
 
     def __enter__(self) -> SerialLink:
         return self

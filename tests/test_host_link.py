@@ -336,7 +336,10 @@ def test_a_deaf_rig_ends_hil_run_with_one_stop_sequence_and_a_quick_exit(
             time.sleep(0.001)
         exited = time.monotonic()
         code, stdout, stderr = host.finish()
-        assert code == 1 and "no telemetry for" in stderr and "Traceback" not in stderr, stderr
+        # deaf in motion: the telemetry watchdog gives up, or on a loaded machine (where that
+        # watchdog restarts each time the host itself ran late) a chunk's ACK attempts do
+        assert code == 1 and "Traceback" not in stderr, stderr
+        assert "no telemetry for" in stderr or "TRAJ_CHUNK not acknowledged" in stderr, stderr
         # the process may end before the fake MCU's thread read its last frames
         wait_for(lambda m=mcu: p.MsgType.ESTOP in [r.kind for r in m.after_deaf()], 1.0)
         time.sleep(0.05)

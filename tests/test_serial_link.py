@@ -7,6 +7,8 @@ timing is not the point, the host watchdog is generous so a loaded machine canno
 
 from __future__ import annotations
 
+import os
+import threading
 import time
 from collections.abc import Callable, Iterator
 
@@ -15,6 +17,7 @@ from hil_host import wait_for
 
 from hil import protocol as p
 from hil.mcu_model import RigHardware
+from hil.realtime import SESSION_NICE
 from hil.rig_emulator import FaultPlan, RigEmulator
 from hil.serial_link import (
     CommandError,
@@ -362,3 +365,17 @@ def test_a_frame_truncated_to_nothing_is_sent_as_its_delimiter_even_when_split()
         emulator._send(ack)
     assert all(wire for _, wire, _ in emulator._backlog)
     assert any(wire == b"\x00" for _, wire, _ in emulator._backlog)
+
+
+def test_a_realtime_session_raises_its_thread_until_it_closes(rig: Callable[..., Rig]) -> None:
+    """The thread that runs a session holds the interpreter lock the reader's heartbeats
+    need: it runs at SESSION_NICE while the session is open (where permitted)."""
+    tid = threading.get_native_id()
+    before = os.getpriority(os.PRIO_PROCESS, tid)
+    _, link = rig(realtime=True)
+    during = os.getpriority(os.PRIO_PROCESS, tid)
+    link.close()
+    assert os.getpriority(os.PRIO_PROCESS, tid) == before
+    assert during in (before, min(before, SESSION_NICE))
+    if os.geteuid() == 0:
+        assert during == min(before, SESSION_NICE)
