@@ -221,6 +221,11 @@ class LinkStats:
         return self.max_arrival_gap
 
 
+#: Commands that make the rig move: once the session has failed (its stop sequence has
+#: begun) an unacknowledged one is not sent again.
+MOTION_COMMANDS = frozenset({p.MsgType.TRAJ_CHUNK, p.MsgType.START})
+
+
 class _Pending:
     """A command waiting for its ACK."""
 
@@ -569,6 +574,11 @@ class SerialLink:
                             self.ack_timeout = self._ack_timer.timeout
                         break
                     if isinstance(self._failure, LinkLostError):
+                        raise self._failure
+                    if self._failure is not None and msg.TYPE in MOTION_COMMANDS:
+                        # the session failed meanwhile: the command has failed too (its
+                        # stop sequence, as below), and no motion is resent into it
+                        self._arm_stop(unless_begun_after=began)
                         raise self._failure
                     self.stats.retransmissions += 1
                     if (time.monotonic() - sent > wait + HOST_LATE
