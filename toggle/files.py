@@ -93,6 +93,26 @@ def in_words(text: str) -> str:
     return _CODEC.sub(lambda m: f"not UTF-8 text (byte {m.group(2)})", text)
 
 
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line, in words (an OSError with its file name and its
+    reason, no "[Errno N]": :func:`in_words`): what both command lines print after
+    ``error:``."""
+    if isinstance(exc, OSError) and exc.filename is not None:
+        text = f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"
+    else:
+        text = str(exc) or "failed"
+    return " ".join(in_words(text).split())
+
+
+def print_results(folder: Path, names: list[str], *, to_stderr: bool = False) -> None:
+    """The last line of a command that wrote files: its one results folder and the files in
+    it, ``results in DIR/ (a.png, b.csv)``; on stdout, or on stderr where stdout carries
+    ``--json``."""
+    stream = sys.stderr if to_stderr else sys.stdout
+    sys.stdout.flush()
+    print(f"results in {folder}/ ({', '.join(names)})", file=stream, flush=True)
+
+
 def allow_overwrite(allowed: bool) -> None:
     """Whether :func:`check_writable` lets an existing file be replaced when its caller does
     not say (the command line's ``--force``)."""

@@ -34,6 +34,7 @@ from toggle.args import (  # noqa: E402
     use_help_formatter,
     version,
 )
+from toggle.files import allow_overwrite, one_line  # noqa: E402
 from toggle.interrupts import Terminated, unwind_on_signals  # noqa: E402
 
 #: Commands (their words) whose modules check their output files with
@@ -115,7 +116,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
     finally:  # the policy is the command's: a library caller in this process keeps replacing
-        from toggle.files import allow_overwrite
 
         allow_overwrite(True)
 
@@ -123,7 +123,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def check_outputs(args: argparse.Namespace) -> None:
     """Before the work: the process's overwrite policy from ``--force``, and the files the
     command declared (:func:`toggle_cli.common.declare_outputs`) checked writable."""
-    from toggle.files import allow_overwrite, check_writable, check_writable_dir
+    from toggle.files import check_writable, check_writable_dir
     from toggle_cli.common import outputs
 
     allow_overwrite(getattr(args, "force", False))
@@ -145,18 +145,6 @@ def signal_cause(exc: BaseException) -> KeyboardInterrupt | None:
             return seen
         seen = seen.__cause__ or seen.__context__
     return None
-
-
-def one_line(exc: BaseException) -> str:
-    """The message of ``exc`` on one line, in words (an OSError with its file name and its
-    reason, no "[Errno N]": :func:`toggle.files.in_words`)."""
-    from toggle.files import in_words
-
-    if isinstance(exc, OSError) and exc.filename is not None:
-        text = f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"
-    else:
-        text = str(exc) or "failed"
-    return " ".join(in_words(text).split())
 
 
 if __name__ == "__main__":  # pragma: no cover
