@@ -288,7 +288,7 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
         print(f"hil run: the run completed with link errors: {link_errors(summary['link'])}",
               file=sys.stderr)
         reason = "link errors"
-    print_results(rec.dir, [name for name in RUN_FILES if (rec.dir / name).is_file()],
+    print_results([rec.dir / name for name in RUN_FILES if (rec.dir / name).is_file()],
                   to_stderr=s.json)
     if interrupted is not None:
         return interrupted.exit_code

@@ -109,5 +109,5 @@ def run(args: argparse.Namespace) -> int:
 
 def _results(args: argparse.Namespace, payload: dict[str, Any]) -> None:
     if args.out is not None:
-        print_results(args.out, [RSM_JSON, *(Path(f).name for f in payload["figures"])],
+        print_results([args.out / RSM_JSON, *map(Path, payload["figures"])],
                       to_stderr=args.json)

@@ -40,6 +40,9 @@ else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
 _POLICY = {"overwrite": True}
+#: Every file :func:`atomic_path` completed since :func:`take_written` last emptied it:
+#: what a command wrote, for its last line (:func:`results_line`).
+_WRITTEN: list[Path] = []
 
 
 class OutputError(OSError, ValueError):
@@ -104,13 +107,34 @@ def one_line(exc: BaseException) -> str:
     return " ".join(in_words(text).split())
 
 
-def print_results(folder: Path, names: list[str], *, to_stderr: bool = False) -> None:
-    """The last line of a command that wrote files: its one results folder and the files in
-    it, ``results in DIR/ (a.png, b.csv)``; on stdout, or on stderr where stdout carries
-    ``--json``."""
-    stream = sys.stderr if to_stderr else sys.stdout
-    sys.stdout.flush()
-    print(f"results in {folder}/ ({', '.join(names)})", file=stream, flush=True)
+def take_written() -> list[Path]:
+    """The files written through :func:`atomic_path` since the last call (emptied)."""
+    written = list(dict.fromkeys(_WRITTEN))
+    _WRITTEN.clear()
+    return written
+
+
+def results_line(files: list[Path]) -> str:
+    """``results in DIR/ (a.png, b.csv, presets/)``: the one folder that holds ``files``
+    and what is in it (a sub-folder's files as the sub-folder, once)."""
+    if len({p.is_absolute() for p in files}) > 1:
+        files = [p.absolute() for p in files]
+    folder = Path(os.path.commonpath([str(p.parent) for p in files]))
+    names: list[str] = []
+    for p in files:
+        parts = p.relative_to(folder).parts
+        name = parts[0] + ("/" if len(parts) > 1 else "")
+        if name not in names:
+            names.append(name)
+    return f"results in {folder}/ ({', '.join(names)})"
+
+
+def print_results(files: list[Path], *, to_stderr: bool = False) -> None:
+    """The last line of a command that wrote files (:func:`results_line`): on stdout, or on
+    stderr where stdout carries ``--json``."""
+    if files:
+        sys.stdout.flush()
+        print(results_line(files), file=sys.stderr if to_stderr else sys.stdout, flush=True)
 
 
 def allow_overwrite(allowed: bool) -> None:
@@ -224,6 +248,7 @@ def atomic_path(target: Path) -> Iterator[Path]:
             with contextlib.suppress(OSError):  # a file system without modes (FAT)
                 os.chmod(tmp, _file_mode(target))
         os.replace(tmp, target)
+        _WRITTEN.append(target)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

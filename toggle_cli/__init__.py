@@ -34,7 +34,7 @@ from toggle.args import (  # noqa: E402
     use_help_formatter,
     version,
 )
-from toggle.files import allow_overwrite, one_line  # noqa: E402
+from toggle.files import allow_overwrite, one_line, print_results, take_written  # noqa: E402
 from toggle.interrupts import Terminated, unwind_on_signals  # noqa: E402
 
 #: Commands (their words) whose modules check their output files with
@@ -95,7 +95,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         try:
             check_outputs(args)
-            return int(args.handler(args) or 0)
+            take_written()  # what this command writes from here is named on its last line
+            code = int(args.handler(args) or 0)
+            print_results(take_written(), to_stderr=getattr(args, "json", False))
+            return code
         except Exception as exc:  # a signal's exception wrapped by C code: the signal
             stop = signal_cause(exc)
             if stop is None:
@@ -123,12 +126,15 @@ def main(argv: Sequence[str] | None = None) -> int:
 def check_outputs(args: argparse.Namespace) -> None:
     """Before the work: the process's overwrite policy from ``--force``, and the files the
     command declared (:func:`toggle_cli.common.declare_outputs`) checked writable."""
-    from toggle.files import check_writable, check_writable_dir
+    from toggle.files import OutputError, check_writable, check_writable_dir
     from toggle_cli.common import outputs
 
     allow_overwrite(getattr(args, "force", False))
     targets = outputs(args)
     if targets:
+        if args.out.suffix.lower() in (".png", ".gif", ".csv") and not args.out.is_dir():
+            raise OutputError(f"--out {args.out}: names a file; --out is the folder the "
+                              f"results go into ({', '.join(t.name for t in targets)})")
         check_writable_dir(args.out, "--out")
     for target in targets:
         check_writable(target, "--out")
