@@ -39,6 +39,7 @@ from hil.run_settings import (
 )
 from hil.samples import Trajectory, TrajectoryError
 from toggle.args import (
+    add_completion,
     add_force_options,
     add_version,
     join_negative_numbers,
@@ -453,6 +454,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(handler=emulate)
     cli_rig.add_parser(sub)
     cli_rsm.add_parser(sub)
+    add_completion(sub, "hil", build_parser)
     add_force_options(parser)
     use_help_formatter(parser)
     remember_parsers(parser)

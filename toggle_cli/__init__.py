@@ -25,6 +25,7 @@ import sys  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 
 from toggle.args import (  # noqa: E402
+    add_completion,
     add_force_options,
     add_version,
     join_negative_numbers,
@@ -55,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"toggle_cli.{name}").add_parser(sub)
+    add_completion(sub, "toggle", build_parser)
     for words in CHECKS_OUTPUTS:
         command = parser
         for word in words:
