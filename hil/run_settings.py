@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 import hashlib
 import math
+import os
+import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -21,7 +23,7 @@ from hil.backends import MAX_SPEED, RigSetup, simulated_speed_limit
 from hil.recording import RUN_FILES
 from hil.samples import Trajectory, TrajectoryError
 from toggle.elastics import clamp_stroke
-from toggle.files import check_writable, check_writable_dir, read_text, read_toml
+from toggle.files import InputError, check_writable, check_writable_dir, read_text, read_toml
 from toggle.params import ParameterError, load_preset
 
 #: Built-in defaults of every setting a --config file may hold.
@@ -154,6 +156,8 @@ def check(v: dict[str, Any]) -> None:
                              "without it the simulated rig runs and the port is not used")
     if v["backend"] == "real" and not v["port"]:
         raise ParameterError("--real needs --port (a device, a pty, socket://host:port)")
+    if v["backend"] == "real":
+        check_port(v["port"])
     if v["fmu"] is not None and v["backend"] == "real":
         raise ParameterError("--fmu selects the simulated rig's FMU; it cannot go with --real")
     if v["cycles"] < 1:
@@ -178,6 +182,14 @@ def check(v: dict[str, Any]) -> None:
         raise bad("delta_r8", "must be a finite error below 5 mm (in m)")
     if v["x_contact"] is not None:
         check_mold(v["preset"], v["x_contact"])
+
+
+def check_port(port: str) -> None:
+    """Refuse a rig port that names a device path where there is none, before the work (a
+    URL such as socket://host:port is tried when the session opens)."""
+    if "://" not in port and not os.path.exists(port):
+        raise ParameterError(f"--port {port}: no such device (a serial device such as "
+                             "/dev/ttyACM0, the pty hil emulate printed, or socket://host:port)")
 
 
 def check_mold(preset: str, x_contact: float) -> None:
@@ -226,6 +238,24 @@ def _check_whole(path: Path, planned: dict[str, Any], duration: float) -> None:
             return
 
 
+def _check_fmu(path: Path) -> None:
+    """Refuse a --fmu that is not an FMU file (a zip archive holding modelDescription.xml)
+    before the work, in words."""
+    if not path.exists():
+        raise InputError(f"--fmu {path}: no such file")
+    if path.is_dir():
+        raise InputError(f"--fmu {path}: is a folder, not a file")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            archive.getinfo("modelDescription.xml")
+    except (zipfile.BadZipFile, KeyError):
+        raise InputError(f"--fmu {path}: not an FMU (a zip archive with "
+                         "modelDescription.xml); build one with toggle build-fmu") from None
+    except OSError as exc:
+        raise InputError(f"--fmu {path}: cannot be read ({(exc.strerror or '').lower()})"
+                         ) from None
+
+
 def resolve_settings(args: argparse.Namespace) -> RunSettings:
     """Merge the command line, the --config file, a profile's settings and the defaults."""
     config = read_config(args.config) if args.config is not None else {}
@@ -250,6 +280,8 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     for key in ("profile", "out", "fmu"):
         if values[key] is not None:
             values[key] = Path(values[key])
+    if values["fmu"] is not None:
+        _check_fmu(values["fmu"])
     if values["out"] is not None:  # an earlier run's files only with --force
         check_writable_dir(values["out"], "--out")
         for name in RUN_FILES:

@@ -210,3 +210,19 @@ def test_hil_run_says_when_it_builds_the_fmu(tmp_path: Path, monkeypatch) -> Non
     said.clear()
     ensure_fmu(target, notify=said.append)  # new enough: nothing built, nothing said
     assert said == []
+
+
+@pytest.mark.parametrize("content, says", [
+    (None, "no such file"),
+    (b"\x89PNG\r\n", "not an FMU"),
+    (b"", "not an FMU"),
+])
+def test_a_bad_fmu_is_exit_2_before_the_work(tmp_path: Path, capsys, content, says,
+                                             no_planning) -> None:
+    fmu = tmp_path / "rig.fmu"
+    if content is not None:
+        fmu.write_bytes(content)
+    code, _, err = answer(["run", "--fmu", str(fmu)], capsys)
+    assert code == 2 and err.strip() == f"hil run: error: --fmu {fmu}: {says}" + (
+        "" if content is None else " (a zip archive with modelDescription.xml); build one "
+                                   "with toggle build-fmu")

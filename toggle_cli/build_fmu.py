@@ -13,12 +13,14 @@ from pathlib import Path
 from fmu_src.build import build_fmu
 from toggle.args import path
 from toggle.files import check_writable, check_writable_dir
+from toggle.params import load_preset
 
 
 def run(args: argparse.Namespace) -> int:
     if not args.native and (args.fmi_version, args.interface) != (2, "cs"):
         raise ValueError("--fmi-version 3 and --interface me|both need --native (the "
                          "pythonfmu FMU is FMI 2.0 Co-Simulation)")
+    load_preset(args.preset)  # an unreadable or invalid preset: told before the build
     check_writable_dir(args.out, "--out")  # before the build, not after it
     check_writable(args.out / _file_name(args), "--out")  # an existing FMU: only with --force
     if args.native:
