@@ -193,7 +193,9 @@ def _mistake(rng: random.Random, kind: str, base: list[str],
         return _put(base, action, rng.choice(NOT_NUMBERS)), "not a number"
     if kind == "choice":
         return _put(base, action, rng.choice(["nope", "", "BASH"])), "a choice not offered"
-    what = rng.choice(sorted(fixture[kind]))
+    # an empty --config is a valid one (every setting at its default): not a mistake
+    what = rng.choice([w for w in sorted(fixture[kind])
+                       if not (action.dest == "config" and w == "empty")])
     return _put(base, action, fixture[kind][what]), f"{kind}: {what}"
 
 
