@@ -3,8 +3,10 @@
 ``hil run`` uses the FMU back-end unless ``--real`` (or ``backend = "real"`` in
 a ``--config`` TOML file) selects the rig on ``--port``; nothing else changes.
 Options are SI (m, m/s, N); the run directory gets samples.csv (units in the
-header), meta.json, summary.json and the force plot. Exit codes: 0 done, 1 the
-run stopped early or could not start, 2 a usage error, 130/143 SIGINT/SIGTERM.
+header), meta.json, summary.json and the force plot, named on the last line. Outputs,
+errors and exit codes follow ``toggle``'s convention (README, "Outputs and errors"): 0
+done, 1 the run stopped early or could not start, 2 a usage error or unusable input,
+130/143 SIGINT/SIGTERM.
 """
 
 from __future__ import annotations
@@ -415,7 +417,8 @@ def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> i
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="hil", description=__doc__.splitlines()[0],
+    parser = argparse.ArgumentParser(prog="hil", description="Run experiments on the simulated "
+                                     "or the real rig, emulate a rig, fit response surfaces.",
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     add_version(parser)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

@@ -87,11 +87,12 @@ def path(text: str) -> Path:
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows ``(default: X)`` unless the help already says its default or there is none."""
+    """Shows ``(default: X)`` unless the help already says its default or there is none
+    (None, False, an empty list)."""
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        if "default" in text or action.default is None or action.default is False \
+        if "default" in text or action.default in (None, False, [], ()) \
                 or not action.option_strings:
             return text
         return super()._get_help_string(action)
