@@ -107,6 +107,10 @@ def one_line(exc: BaseException) -> str:
     return " ".join(in_words(text).split())
 
 
+#: A results line names a sub-folder instead of its files when it holds more than this.
+CROWDED = 3
+
+
 def take_written() -> list[Path]:
     """The files written through :func:`atomic_path` since the last call (emptied)."""
     written = list(dict.fromkeys(_WRITTEN))
@@ -116,17 +120,17 @@ def take_written() -> list[Path]:
 
 def results_line(files: list[Path]) -> str:
     """``results in DIR/ (a.png, b.csv, presets/)``: the one folder that holds ``files``
-    and what is in it (a sub-folder's files as the sub-folder, once)."""
+    and what is in it, by the path from there (several files of one sub-folder as the
+    sub-folder, once, when it holds more than :data:`CROWDED`)."""
     if len({p.is_absolute() for p in files}) > 1:
         files = [p.absolute() for p in files]
     folder = Path(os.path.commonpath([str(p.parent) for p in files]))
-    names: list[str] = []
-    for p in files:
-        parts = p.relative_to(folder).parts
-        name = parts[0] + ("/" if len(parts) > 1 else "")
-        if name not in names:
-            names.append(name)
-    return f"results in {folder}/ ({', '.join(names)})"
+    relative = [p.relative_to(folder) for p in files]
+    crowded = {r.parts[0] for r in relative if len(r.parts) > 1
+               and sum(q.parts[0] == r.parts[0] for q in relative) > CROWDED}
+    names = list(dict.fromkeys(f"{r.parts[0]}/" if r.parts[0] in crowded else str(r)
+                               for r in relative))
+    return f"results in {str(folder).rstrip('/')}/ ({', '.join(names)})"
 
 
 def print_results(files: list[Path], *, to_stderr: bool = False) -> None:
