@@ -444,7 +444,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", type=path, default=None,
                    help="planned profile CSV (toggle plan --out); replayed forward and back, "
                         "with the preset, mold and friction it was planned for")
-    p.add_argument("--out", type=path, default=None, help="run directory (default runs/<time>)")
+    p.add_argument("--out", type=path, default=None, metavar="DIR",
+                   help="results folder of the run, named on the last line (default "
+                        "runs/<time>-<backend>)")
     p.add_argument("--fmu", type=path, default=None,
                    help="the simulated rig's FMU (default build/ToggleClamp.fmu, built when "
                         "missing or older than the model)")

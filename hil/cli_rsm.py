@@ -42,8 +42,9 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--preset", default=None,
                    help="nominal mechanism: plot against the platen error at the toggle "
                         "dL_TP (as the paper's Figures 17-20) instead of delta_r8")
-    p.add_argument("--out", type=path, default=None,
-                   help="directory for rsm.json and the contour maps (PNG)")
+    p.add_argument("--out", type=path, default=None, metavar="DIR",
+                   help="results folder for rsm.json and the contour maps (PNG), named on "
+                        "the last line")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.set_defaults(handler=run, checks_outputs=True)
 

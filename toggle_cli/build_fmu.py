@@ -43,7 +43,8 @@ def _file_name(args: argparse.Namespace) -> str:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("build-fmu", help="build the FMI 2.0 Co-Simulation FMU into build/")
-    p.add_argument("--out", type=path, default=Path("build"), help="output folder (default build)")
+    p.add_argument("--out", type=path, default=Path("build"), metavar="DIR",
+                   help="folder of the FMU (default build)")
     p.add_argument("--native", action="store_true",
                    help="build ToggleClampNative.fmu: generated C, no Python at run time")
     p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,

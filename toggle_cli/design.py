@@ -54,7 +54,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "figures (docs/design.md).")
     p.add_argument("targets", type=path, help="targets TOML file (examples in "
                    f"design/examples/); objectives: {', '.join(OBJECTIVES)}")
-    p.add_argument("--out", type=path, default=Path("design-out"),
+    p.add_argument("--out", type=path, default=Path("design-out"), metavar="DIR",
                    help="results folder; a search of the same targets interrupted there is "
                         "resumed, a finished one's files are replaced only with --force")
     where = p.add_mutually_exclusive_group()
