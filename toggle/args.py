@@ -92,10 +92,16 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        if "default" in text or action.default in (None, False, [], ()) \
-                or not action.option_strings:
+        if "default" in text or not has_default(action) or not action.option_strings:
             return text
         return super()._get_help_string(action)
+
+
+def has_default(action: argparse.Action) -> bool:
+    """Whether an option has a default worth showing (not None, False or an empty list)."""
+    default = action.default
+    return not (default is None or default is False
+                or (isinstance(default, (list, tuple)) and not default))
 
 
 def use_help_formatter(parser: argparse.ArgumentParser) -> None:
