@@ -247,9 +247,10 @@ def default_fmu_path(preset: str = "chang2021") -> Path:
     return (base if preset == "chang2021" else base / preset) / "ToggleClamp.fmu"
 
 
-def ensure_fmu(path: Path | None = None, preset: str = "chang2021") -> Path:
+def ensure_fmu(path: Path | None = None, preset: str = "chang2021",
+               notify: Callable[[str], None] = lambda _msg: None) -> Path:
     """The FMU of ``preset`` at ``path``, built first if it is missing or older than the
-    model sources."""
+    model sources (``notify`` is told so, before and after the build)."""
     from fmu_src.build import FMU_SRC_DIR, PACKAGE_DIR, build_fmu
     from fmu_src.guard_build import GUARD_SOURCE
 
@@ -258,9 +259,12 @@ def ensure_fmu(path: Path | None = None, preset: str = "chang2021") -> Path:
                *FMU_SRC_DIR.glob("*.py"), GUARD_SOURCE]
     newest = max(p.stat().st_mtime for p in sources if p.is_file())
     if not path.is_file() or path.stat().st_mtime < newest:
+        why = "missing" if not path.is_file() else "older than the model"
+        notify(f"building the FMU {path} of {preset} ({why})")
         built = build_fmu(path.parent, preset=preset)
         if built != path:
             shutil.move(built, path)
+        notify(f"built the FMU {path}")
     return path
 
 
@@ -273,9 +277,11 @@ class FmuPlant(Plant):
         """The rig's :data:`MAX_SPEED`, or the simulated clamp's drive limit if faster."""
         return simulated_speed_limit(self.setup.preset)
 
-    def __init__(self, fmu_path: Path | None = None) -> None:
+    def __init__(self, fmu_path: Path | None = None,
+                 notify: Callable[[str], None] = lambda _msg: None) -> None:
         super().__init__()
         self.fmu_path = fmu_path
+        self._notify = notify
         self._slave = None
         self._dir: str | None = None
         self.log: list[str] = []
@@ -287,7 +293,8 @@ class FmuPlant(Plant):
 
         s = self.setup
         x_open = s.stroke[0]
-        path = ensure_fmu(preset=s.preset) if self.fmu_path is None else Path(self.fmu_path)
+        path = (ensure_fmu(preset=s.preset, notify=self._notify) if self.fmu_path is None
+                else Path(self.fmu_path))
         if not path.is_file():
             raise RunStoppedError(f"no FMU at {path}")
         self._dir = extract(str(path), tempfile.mkdtemp(prefix="toggle_hil_"))

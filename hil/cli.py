@@ -3,8 +3,10 @@
 ``hil run`` uses the FMU back-end unless ``--real`` (or ``backend = "real"`` in
 a ``--config`` TOML file) selects the rig on ``--port``; nothing else changes.
 Options are SI (m, m/s, N); the run directory gets samples.csv (units in the
-header), meta.json, summary.json and the force plot. Exit codes: 0 done, 1 the
-run stopped early or could not start, 2 a usage error, 130/143 SIGINT/SIGTERM.
+header), meta.json, summary.json and the force plot, named on the last line. Outputs,
+errors and exit codes follow ``toggle``'s convention (README, "Outputs and errors"): 0
+done, 1 the run stopped early or could not start, 2 a usage error or unusable input,
+130/143 SIGINT/SIGTERM.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from pathlib import Path
 from typing import Any, NoReturn
 
 from hil import cli_rig, cli_rsm, experiment
@@ -28,7 +29,8 @@ from hil.experiment import (
     reciprocating_trajectory,
 )
 from hil.interrupts import Interrupted, SignalGuard, exit_cleanly_on_signals
-from hil.recording import RecordingError, RunMeta, RunRecorder
+from hil.recording import RUN_FILES, RecordingError, RunMeta, RunRecorder
+from hil.rsm import RsmError
 from hil.run_settings import (
     BYTES_PER_SAMPLE,
     RUN_DEFAULTS,
@@ -39,13 +41,18 @@ from hil.run_settings import (
 )
 from hil.samples import Trajectory, TrajectoryError
 from toggle.args import (
+    add_completion,
+    add_force_options,
     add_version,
     join_negative_numbers,
+    parse_command_line,
     path,
     quiet_broken_pipe,
+    remember_parsers,
     use_help_formatter,
 )
 from toggle.elastics import clamp_stroke
+from toggle.files import InputError, OutputError, allow_overwrite, one_line, print_results
 from toggle.json_text import json_text
 from toggle.params import DYNAMICS_PARAMETERS, ParameterError, load_preset
 from toggle.rig_calibration import load_paper_tables
@@ -107,7 +114,7 @@ def _backend(s: RunSettings) -> Plant:
                         ack_timeout=None if s.ack_ms is None else s.ack_ms * 1e-3,
                         heartbeat_ms=s.heartbeat_ms,
                         notify=lambda msg: print(f"hil run: {msg}", file=sys.stderr))
-    return FmuPlant(s.fmu)
+    return FmuPlant(s.fmu, notify=lambda msg: print(f"hil run: {msg}", file=sys.stderr))
 
 
 def _guard_duration(duration: float, s: RunSettings) -> None:
@@ -148,11 +155,10 @@ def paper_statistics(s: RunSettings) -> dict[str, Any] | None:
                for key in tables.mean}}
 
 
-def _print_summary(summary: dict, run_dir: Path, count: int, cycles: int, backend: str,
+def _print_summary(summary: dict, count: int, cycles: int, backend: str,
                    paper: dict[str, Any] | None = None) -> None:
     done = summary["cycles_complete"]
-    print(f"{count} samples, {done} of {cycles} cycles complete, in {run_dir} "
-          f"(samples.csv, summary.json, meta.json, plots)")
+    print(f"{count} samples, {done} of {cycles} cycles complete")
     for key, label, scale, unit in SUMMARY_ROWS:
         stat = summary.get(key)
         if not isinstance(stat, dict):
@@ -242,7 +248,13 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
     trajectory, source = _trajectory(s, guard, setup)
     plant = _backend(s)
     plant.configure(setup)
-    plant.check(trajectory)
+    try:
+        plant.check(trajectory)
+    except TrajectoryError as exc:
+        if s.profile is None:
+            raise
+        raise ParameterError(f"--profile {s.profile}: {exc} (its positions in m, times in "
+                             "s)") from None
     nominal = load_preset(s.preset)
     meta = RunMeta.for_experiment(nominal, backend=plant.name, cycles=s.cycles,
                                   delta_r8=s.delta_r8, period=setup.period, speed=s.speed,
@@ -250,7 +262,7 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
     counter = CycleCounter(*setup.stroke)
     plant.activate()  # before the run directory: a refused start leaves none
     try:
-        with RunRecorder(meta, s.out) as rec:
+        with RunRecorder(meta, s.out, overwrite=s.force) as rec:
             try:
                 reason, interrupted = _record(plant, trajectory, rec, guard, s, counter)
             finally:
@@ -264,7 +276,7 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
         print(json_text({"run_dir": str(rec.dir), "samples": rec.count, **summary,
                          "paper": paper_statistics(s)}))
     else:
-        _print_summary(summary, rec.dir, rec.count, s.cycles, plant.name, paper_statistics(s))
+        _print_summary(summary, rec.count, s.cycles, plant.name, paper_statistics(s))
     if reason is None and summary["cycles_complete"] < s.cycles:
         print(f"hil run: {summary['cycles_complete']} of {s.cycles} cycles went from the open "
               f"position {meta.x_open * 1e3:.4g} mm to the toggle {meta.x_toggle * 1e3:.4g} mm "
@@ -275,13 +287,17 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
         interrupted = Interrupted(guard.received)
         print(f"hil run: {interrupted} after the run completed; its record is whole",
               file=sys.stderr)
-    if interrupted is not None:
-        return interrupted.exit_code
     if reason is None and link_errors(summary.get("link") or {}):
         print(f"hil run: the run completed with link errors: {link_errors(summary['link'])}",
               file=sys.stderr)
-        return 1
+        reason = "link errors"
+    print_results([rec.dir / name for name in RUN_FILES if (rec.dir / name).is_file()],
+                  to_stderr=s.json)
+    if interrupted is not None:
+        return interrupted.exit_code
     return 1 if reason is not None else 0
+
+
 
 
 def emulate(args: argparse.Namespace) -> int:
@@ -329,18 +345,18 @@ def serve_until(stopped: Callable[[], bool]) -> None:
 
 def _no_injection(args: argparse.Namespace, option: str) -> None:
     if not args.firmware:
-        raise ValueError(f"{option} runs the firmware: give --firmware too")
+        raise ParameterError(f"{option} runs the firmware: give --firmware too")
     injected = [n for n in ("drop_byte", "flip_bit", "junk", "stall_at", "reset_at",
                             "estop_at", "disconnect_at") if getattr(args, n)]
     if injected:
-        raise ValueError(f"{option} injects no faults: drop {', '.join(injected)}")
+        raise ParameterError(f"{option} injects no faults: drop {', '.join(injected)}")
 
 
 def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
     """The NUCLEO-F446RE image rehosted (hil/rehost/): print its pty, serve until a signal;
     on stderr the image's SHA-256 and, at the end, the emulated/wall time ratio."""
     if args.qemu:
-        raise ValueError("--board nucleo and --qemu are two ways to run the firmware: "
+        raise ParameterError("--board nucleo and --qemu are two ways to run the firmware: "
                          "give one")
     _no_injection(args, "--board nucleo")
     from hil.firmware_qemu import qemu_available
@@ -401,7 +417,8 @@ def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> i
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="hil", description=__doc__.splitlines()[0],
+    parser = argparse.ArgumentParser(prog="hil", description="Run experiments on the simulated "
+                                     "or the real rig, emulate a rig, fit response surfaces.",
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     add_version(parser)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -427,40 +444,54 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", type=path, default=None,
                    help="planned profile CSV (toggle plan --out); replayed forward and back, "
                         "with the preset, mold and friction it was planned for")
-    p.add_argument("--out", type=path, default=None, help="run directory (default runs/<time>)")
+    p.add_argument("--out", type=path, default=None, metavar="DIR",
+                   help="results folder of the run, named on the last line (default "
+                        "runs/<time>-<backend>)")
     p.add_argument("--fmu", type=path, default=None,
                    help="the simulated rig's FMU (default build/ToggleClamp.fmu, built when "
                         "missing or older than the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(handler=run)
+    p.set_defaults(handler=run, checks_outputs=True)
     e = sub.add_parser("emulate", help="serve an emulated rig on a pseudo-terminal",
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     cli_rig.add_emulator_options(e)
     e.set_defaults(handler=emulate)
     cli_rig.add_parser(sub)
     cli_rsm.add_parser(sub)
+    add_completion(sub, "hil", build_parser)
+    add_force_options(parser)
     use_help_formatter(parser)
+    remember_parsers(parser)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``hil`` script."""
+    """Entry point of the ``hil`` script; returns the exit status.
+
+    The convention is ``toggle``'s (README, "Outputs and errors"): 2 a usage error or
+    unreadable or invalid input (an option, a --config, --profile or run file; an output
+    refused before the work), 1 a run that failed or stopped early, 130/143 SIGINT/SIGTERM;
+    every error one ``hil COMMAND: error:`` line in words.
+    """
     exit_cleanly_on_signals()  # from here a signal unwinds (hil/__init__.py: at once before)
-    parser = build_parser()
-    args = parser.parse_args(join_negative_numbers(
+    args = parse_command_line(build_parser(), join_negative_numbers(
         sys.argv[1:] if argv is None else list(argv)))
+    command = " ".join(filter(None, (args.command, getattr(args, "action", None))))
+    allow_overwrite(getattr(args, "force", False))
     try:
         return int(args.handler(args) or 0)
     except BrokenPipeError:
         return quiet_broken_pipe()
-    except ParameterError as exc:
-        print(f"hil {args.command}: error: {exc}", file=sys.stderr)
+    except (ParameterError, InputError, OutputError, RsmError) as exc:
+        print(f"hil {command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except (TrajectoryError, RecordingError, RunStoppedError, cli_rig.RigCommandError,
             ValueError, OSError) as exc:
-        print(f"hil {args.command}: error: {exc}", file=sys.stderr)
+        print(f"hil {command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
+    finally:  # the policy is the command's: a library caller in this process keeps replacing
+        allow_overwrite(True)
 
 
 def entry() -> NoReturn:

@@ -13,6 +13,7 @@ from typing import Any
 from hil import protocol as p
 from hil.backends import fault_names
 from hil.homing import home
+from hil.run_settings import check_port
 from hil.serial_link import CommandError, RigError, SerialLink
 from toggle.args import PROBABILITY, TIME, number
 
@@ -84,6 +85,7 @@ def add_parser(subparsers: Any) -> None:
 
 def _session(port: str) -> SerialLink:
     """An open session that leaves every latched fault as it found it."""
+    check_port(port)
     link = SerialLink(port, clear_faults_on_close=False)
     try:
         link.open()

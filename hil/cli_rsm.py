@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from hil.rsm import (
     RESPONSES,
+    RSM_FIGURE,
     TERMS,
     RsmError,
     fit_rsm,
@@ -16,8 +18,12 @@ from hil.rsm import (
     toggle_cos_theta8,
 )
 from toggle.args import path
+from toggle.files import atomic_path, check_writable, check_writable_dir, print_results
 from toggle.json_text import json_text
 from toggle.params import load_preset
+
+#: The fit's coefficients (SI and the paper's units) in ``--out``.
+RSM_JSON = "rsm.json"
 
 
 def add_parser(subparsers: Any) -> None:
@@ -36,10 +42,11 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--preset", default=None,
                    help="nominal mechanism: plot against the platen error at the toggle "
                         "dL_TP (as the paper's Figures 17-20) instead of delta_r8")
-    p.add_argument("--out", type=path, default=None,
-                   help="directory for rsm.json and the contour maps (PNG)")
+    p.add_argument("--out", type=path, default=None, metavar="DIR",
+                   help="results folder for rsm.json and the contour maps (PNG), named on "
+                        "the last line")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
-    p.set_defaults(handler=run)
+    p.set_defaults(handler=run, checks_outputs=True)
 
 
 def _printed_comparison(fit_paper: dict[str, tuple[float, ...]]) -> dict[str, Any]:
@@ -57,9 +64,18 @@ def _printed_comparison(fit_paper: dict[str, tuple[float, ...]]) -> dict[str, An
     return out
 
 
+def _outputs(out: Path) -> list[Path]:
+    """The files ``--out`` may get: rsm.json and a contour map per response."""
+    return [out / RSM_JSON, *(out / RSM_FIGURE.format(name) for name in RESPONSES)]
+
+
 def run(args: argparse.Namespace) -> int:
     if args.paper_tables == bool(args.runs):
         raise RsmError("give run directories or --paper-tables (one of the two)")
+    if args.out is not None:  # before the work: an earlier fit's files only with --force
+        check_writable_dir(args.out, "--out")
+        for target in _outputs(args.out):
+            check_writable(target, "--out")
     fit = fit_rsm(load_paper_tables() if args.paper_tables else load_summaries(args.runs))
     payload = fit.to_dict()
     paper = {name: r.paper_coefficients for name, r in fit.responses.items()}
@@ -67,14 +83,13 @@ def run(args: argparse.Namespace) -> int:
         payload["printed_equations"] = _printed_comparison(paper)
     cos8 = toggle_cos_theta8(load_preset(args.preset)) if args.preset else None
     if args.out is not None:
-        try:
-            args.out.mkdir(parents=True, exist_ok=True)
-            (args.out / "rsm.json").write_text(json_text(payload) + "\n", encoding="utf-8")
-            payload["figures"] = [str(p) for p in plot_rsm(fit, args.out, cos_theta8=cos8)]
-        except OSError as exc:
-            raise RsmError(f"--out {args.out}: cannot write there ({exc.strerror})") from exc
+        figures = plot_rsm(fit, args.out, cos_theta8=cos8)
+        payload["figures"] = [str(p) for p in figures]
+        with atomic_path(args.out / RSM_JSON) as tmp:
+            tmp.write_text(json_text(payload) + "\n", encoding="utf-8")
     if args.json:
         print(json_text(payload))
+        _results(args, payload)
         return 0
     print(f"modified cubic model fitted to {len(fit.speed)} points "
           "(v in mm/s, delta_r8 = D in mm; coefficients in mm or N)")
@@ -89,6 +104,11 @@ def run(args: argparse.Namespace) -> int:
                 mark = "agrees" if rows[i]["agrees"] else "differs"
                 line += f"   printed {rows[i]['printed_text']:>12}  {mark}"
             print(line)
-    for fig in payload.get("figures", []):
-        print(f"wrote {fig}")
+    _results(args, payload)
     return 0
+
+
+def _results(args: argparse.Namespace, payload: dict[str, Any]) -> None:
+    if args.out is not None:
+        print_results([args.out / RSM_JSON, *map(Path, payload["figures"])],
+                      to_stderr=args.json)

@@ -29,6 +29,7 @@ sample standard deviations, None with a single cycle), following section 5.1:
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import math
@@ -57,6 +58,8 @@ SAMPLES_CSV = "samples.csv"
 META_JSON = "meta.json"
 SUMMARY_JSON = "summary.json"
 FORCE_PNG = "force_curves.png"
+#: Every file a run directory holds (``hil run --out`` refuses them without ``--force``).
+RUN_FILES = (META_JSON, SAMPLES_CSV, SUMMARY_JSON, FORCE_PNG)
 STATISTICS = (
     "stroke_initial", "stroke_final", "stroke", "stroke_error",
     "force_forward_max", "force_forward_rms", "force_backward_min", "force_backward_rms",
@@ -164,16 +167,23 @@ class RunRecorder:
     seconds, whichever comes first, and on close. Leaving the ``with`` block by an
     exception (Ctrl-C included) marks the run aborted with the reason, then writes the
     summary and plot of what was measured, and lets the exception propagate.
+    A directory that holds a run is refused unless ``overwrite`` (``hil run --force``): then
+    the earlier run's files are removed first, so none of them is mixed into the new run.
     """
 
     def __init__(self, meta: RunMeta, out_dir: str | Path | None = None, *,
-                 flush_every: int = 250, flush_interval: float = 0.5, plot: bool = True) -> None:
+                 flush_every: int = 250, flush_interval: float = 0.5, plot: bool = True,
+                 overwrite: bool = False) -> None:
         if flush_every < 1 or not flush_interval > 0:
             raise RecordingError("flush_every must be >= 1 and flush_interval > 0")
         self.dir = Path(out_dir) if out_dir is not None else default_run_dir(meta.backend)
         self.csv_path = self.dir / SAMPLES_CSV
-        if self.csv_path.exists():
-            raise RecordingError(f"{self.dir} already holds a run; choose another --out")
+        if self.csv_path.exists() and not overwrite:
+            raise RecordingError(f"{self.dir} already holds a run; choose another --out "
+                                 "or give --force")
+        for name in RUN_FILES if overwrite else ():
+            with contextlib.suppress(FileNotFoundError):
+                (self.dir / name).unlink()
         self.meta = replace(meta, started=meta.started or _now())
         self.summary: dict[str, Any] | None = None
         self._flush_every, self._flush_interval, self._plot = flush_every, flush_interval, plot

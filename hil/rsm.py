@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from toggle.calibration import PAPER_TABLES
+from toggle.files import InputError, read_text
 from toggle.kinematics import half_pose, toggle_position
 from toggle.params import Mechanism, tomllib
 
@@ -51,6 +52,8 @@ RESPONSES = {
 }
 #: Paper units of the inputs: v in mm/s and D in mm are SI values times 1e3.
 _INPUT_FACTOR = 1e3
+#: The file name of a response's contour map (``str.format`` with the response's name).
+RSM_FIGURE = "rsm_{}.png"
 
 
 class RsmError(ValueError):
@@ -201,9 +204,9 @@ def fit_rsm(source: PaperTables | Iterable[Mapping[str, Any]]) -> RsmFit:
     try:
         v = np.array([float(s["meta"]["speed"]) for s in summaries], dtype=float)
         d = np.array([float(s["meta"]["delta_r8"]) for s in summaries], dtype=float)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise RsmError(f"every run needs meta.speed and meta.delta_r8 (a reciprocating "
-                       f"run, not a profile): {exc}") from exc
+    except (KeyError, TypeError, ValueError):
+        raise RsmError("every run needs numbers meta.speed and meta.delta_r8 (a "
+                       "reciprocating run, hil run --speed, not a profile)") from None
     v_mm, d_mm = v * _INPUT_FACTOR, d * _INPUT_FACTOR
     points = {(round(a, 9), round(b, 9)) for a, b in zip(v_mm, d_mm)}
     if np.linalg.matrix_rank(design_matrix(v_mm, d_mm)) < len(TERMS):
@@ -258,17 +261,32 @@ def plot_rsm(fit: RsmFit, out_dir: str | Path, *, cos_theta8: float | None = Non
         ax.set_ylabel("input speed v (mm/s)")
         ax.set_title(f"Response surface of {name} ({eq} model)")
         ax.legend(loc="upper right", fontsize="small")
-        paths.append(save_figure(fig, out / f"rsm_{name}.png"))
+        paths.append(save_figure(fig, out / RSM_FIGURE.format(name)))
     return paths
 
 
 def load_summaries(paths: Sequence[str | Path]) -> list[dict[str, Any]]:
-    """Summaries from run directories or summary.json files."""
+    """Summaries from run directories or summary.json files; a file that cannot be read or
+    is not a reciprocating run's summary is an :class:`RsmError` naming it."""
     out = []
     for p in map(Path, paths):
         file = p / "summary.json" if p.is_dir() else p
         try:
-            out.append(json.loads(file.read_text(encoding="utf-8")))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise RsmError(f"cannot read run summary {file}: {exc}") from exc
+            summary = json.loads(read_text(file, "run summary"))
+        except json.JSONDecodeError as exc:
+            raise RsmError(f"run summary {file}: not JSON (line {exc.lineno}: "
+                           f"{exc.msg.lower()})") from None
+        except InputError as exc:
+            raise RsmError(str(exc)) from None
+        meta = summary.get("meta") if isinstance(summary, dict) else None
+        if not isinstance(meta, dict):
+            raise RsmError(f"run summary {file}: not a hil run's summary.json (no meta)")
+        for key, what in (("speed", "m/s"), ("delta_r8", "m")):
+            value = meta.get(key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value):
+                raise RsmError(f"run summary {file}: meta.{key} must be a number ({what}); "
+                               "hil rsm fits reciprocating runs (hil run --speed), not "
+                               "planned profiles")
+        out.append(summary)
     return out

@@ -12,15 +12,19 @@ from __future__ import annotations
 import argparse
 import hashlib
 import math
+import os
+import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from controllers.profiles import read_profile_settings
+from controllers.profiles import ProfileError, read_profile_settings
 from hil.backends import MAX_SPEED, RigSetup, simulated_speed_limit
+from hil.recording import RUN_FILES
+from hil.samples import Trajectory, TrajectoryError
 from toggle.elastics import clamp_stroke
-from toggle.files import check_writable_dir
-from toggle.params import ParameterError, load_preset, tomllib
+from toggle.files import InputError, check_writable, check_writable_dir, read_text, read_toml
+from toggle.params import ParameterError, load_preset
 
 #: Built-in defaults of every setting a --config file may hold.
 RUN_DEFAULTS: dict[str, Any] = {
@@ -65,12 +69,13 @@ class RunSettings:
     heartbeat_ms: float | None = None  # the MCU's heartbeat watchdog (docs/rig-protocol.md §7)
     json: bool = False
     quiet: bool = False
+    force: bool = False  # --force: replace the files of an earlier run in --out
     profile_sha256: str | None = None
 
     def record(self) -> dict[str, Any]:
         """JSON-ready copy for meta.json."""
         return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()
-                if k not in ("json", "quiet")}
+                if k not in ("json", "quiet", "force")}
 
 
 def add_number_options(p: argparse.ArgumentParser) -> None:
@@ -115,25 +120,23 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
 
 def read_config(path: Path) -> dict[str, Any]:
     """The keys of a --config TOML file; unknown keys and wrong types are refused by name."""
-    try:
-        table = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ParameterError(f"cannot read config {path}: {exc}") from exc
+    table = read_toml(path, "--config")
     unknown = sorted(set(table) - set(RUN_DEFAULTS))
     if unknown:
-        raise ParameterError(f"config {path}: unknown key(s) {', '.join(unknown)}; known: "
+        raise ParameterError(f"--config {path}: unknown key(s) {', '.join(unknown)}; known: "
                              f"{', '.join(RUN_DEFAULTS)}")
     for key, value in table.items():
         if key in _TEXT:
-            ok = isinstance(value, str)
+            ok, kind = isinstance(value, str), "text"
         elif key in _INTEGER:
-            ok = isinstance(value, int) and not isinstance(value, bool)
+            ok, kind = isinstance(value, int) and not isinstance(value, bool), "a whole number"
         elif key in _BOOLEAN:
-            ok = isinstance(value, bool)
+            ok, kind = isinstance(value, bool), "true or false"
         else:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            kind = "a number"
         if not ok:
-            raise ParameterError(f"config {path}: {key} = {value!r} has the wrong type")
+            raise ParameterError(f"--config {path}: {key} = {value!r} must be {kind}")
     return table
 
 
@@ -153,6 +156,8 @@ def check(v: dict[str, Any]) -> None:
                              "without it the simulated rig runs and the port is not used")
     if v["backend"] == "real" and not v["port"]:
         raise ParameterError("--real needs --port (a device, a pty, socket://host:port)")
+    if v["backend"] == "real":
+        check_port(v["port"])
     if v["fmu"] is not None and v["backend"] == "real":
         raise ParameterError("--fmu selects the simulated rig's FMU; it cannot go with --real")
     if v["cycles"] < 1:
@@ -179,6 +184,14 @@ def check(v: dict[str, Any]) -> None:
         check_mold(v["preset"], v["x_contact"])
 
 
+def check_port(port: str) -> None:
+    """Refuse a rig port that names a device path where there is none, before the work (a
+    URL such as socket://host:port is tried when the session opens)."""
+    if "://" not in port and not os.path.exists(port):
+        raise ParameterError(f"--port {port}: no such device (a serial device such as "
+                             "/dev/ttyACM0, the pty hil emulate printed, or socket://host:port)")
+
+
 def check_mold(preset: str, x_contact: float) -> None:
     """Refuse a mold position (m) outside the preset's stroke, where no mold is clamped
     (``hil run`` and ``hil emulate``)."""
@@ -189,22 +202,58 @@ def check_mold(preset: str, x_contact: float) -> None:
 
 
 def _apply_profile(values: dict[str, Any], explicit: set[str]) -> str:
-    """Adopt the settings the profile was planned with; refuse a clash. Returns its hash."""
+    """Adopt the settings the profile was planned with; refuse a clash, a file that is not a
+    profile and a truncated one (before any work). Returns the file's SHA-256."""
     path = Path(values["profile"])
+    digest = hashlib.sha256(read_text(path, "--profile").encode("utf-8")).hexdigest()
     try:
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()
-    except OSError as exc:
-        raise ParameterError(f"cannot read profile {path}: {exc}") from exc
-    planned = read_profile_settings(path)
+        planned = read_profile_settings(path)
+        trajectory = Trajectory.from_csv(path, period=RigSetup.period)
+    except (ProfileError, TrajectoryError) as exc:  # "profile FILE is empty", ...
+        why = str(exc).replace(f"profile {path}", "", 1).lstrip(": ")
+        raise ParameterError(f"--profile {path}: {why}") from None
+    _check_whole(path, planned, trajectory.duration)
     for key in PROFILE_KEYS:
         if key not in planned:
             continue
         if key in explicit and values[key] != planned[key]:
             raise ParameterError(
-                f"profile {path} was planned with {key} = {planned[key]!r}, but "
+                f"--profile {path} was planned with {key} = {planned[key]!r}, but "
                 f"{_option(key)} gives {values[key]!r}; drop the option or re-plan")
         values[key] = planned[key]
     return digest
+
+
+def _check_whole(path: Path, planned: dict[str, Any], duration: float) -> None:
+    """Refuse a profile that ends before the time its header says the plan lasts
+    (``duration`` of a stroke, ``cycle_time`` of a molding cycle): a file cut short would
+    run part of a stroke and complete no cycle."""
+    for key in ("cycle_time", "duration"):
+        said = planned.get(key)
+        if isinstance(said, (int, float)) and math.isfinite(said):
+            if duration < said - 2 * RigSetup.period:
+                raise ParameterError(
+                    f"--profile {path}: truncated: its samples end at {duration:.4g} s, its "
+                    f"header says {key} = {said:.4g} s; write it again (toggle plan --out)")
+            return
+
+
+def _check_fmu(path: Path) -> None:
+    """Refuse a --fmu that is not an FMU file (a zip archive holding modelDescription.xml)
+    before the work, in words."""
+    if not path.exists():
+        raise InputError(f"--fmu {path}: no such file")
+    if path.is_dir():
+        raise InputError(f"--fmu {path}: is a folder, not a file")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            archive.getinfo("modelDescription.xml")
+    except (zipfile.BadZipFile, KeyError):
+        raise InputError(f"--fmu {path}: not an FMU (a zip archive with "
+                         "modelDescription.xml); build one with toggle build-fmu") from None
+    except OSError as exc:
+        raise InputError(f"--fmu {path}: cannot be read ({(exc.strerror or '').lower()})"
+                         ) from None
 
 
 def resolve_settings(args: argparse.Namespace) -> RunSettings:
@@ -231,9 +280,11 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     for key in ("profile", "out", "fmu"):
         if values[key] is not None:
             values[key] = Path(values[key])
-    if values["out"] is not None:
-        try:
-            check_writable_dir(values["out"], "--out")
-        except OSError as exc:
-            raise ParameterError(str(exc)) from exc
-    return RunSettings(**values, json=args.json, quiet=args.quiet, profile_sha256=digest)
+    if values["fmu"] is not None:
+        _check_fmu(values["fmu"])
+    if values["out"] is not None:  # an earlier run's files only with --force
+        check_writable_dir(values["out"], "--out")
+        for name in RUN_FILES:
+            check_writable(values["out"] / name, "--out")
+    return RunSettings(**values, json=args.json, quiet=args.quiet, profile_sha256=digest,
+                       force=getattr(args, "force", False))

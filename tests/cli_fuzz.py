@@ -94,6 +94,57 @@ def invocations(draw: st.DrawFn, parser: argparse.ArgumentParser, paths: list[st
     return argv + extra(words)
 
 
+def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
+    """Fakes for the expensive parts of both command lines, with ``mp``: figures are not
+    rendered (a few bytes written where matplotlib writes the file, through the same
+    writer), FMUs not built, the default HIL job not planned (a canned profile) and no
+    emulated rig served (as if Ctrl-C came once its port was printed); the current folder
+    is ``workdir`` (what a command writes by default lands there)."""
+    import signal
+
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    import fmu_src.native_build as native
+    import toggle.linkage as linkage
+    import toggle_cli.build_fmu as build_cli
+    from hil import cli as hil_cli
+    from hil import experiment
+    from hil.interrupts import Interrupted
+    from hil.rig_emulator import RigEmulator
+    from hil.samples import Trajectory
+    from toggle.files import atomic_path
+
+    def fake_build(out: Path, *_args: object, **_kwargs: object) -> Path:
+        path = Path(out) / "ToggleClamp.fmu"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(b"PK")
+        return path
+
+    def fake_savefig(fig: object, path: Path, **_kw: object) -> None:
+        Path(path).write_bytes(b"\x89PNG")  # rendering is matplotlib's; the writing is ours
+
+    def fake_animation(mech: object, path: Path, frames: int = 2, **_kw: object) -> Path:
+        with atomic_path(Path(path)) as tmp:  # the GIF writer renders through savefig
+            tmp.write_bytes(b"GIF89a")
+        return Path(path)
+
+    def stop_at_once(_stopped: object) -> None:
+        raise Interrupted(signal.SIGINT)
+
+    canned = Trajectory.from_positions(np.linspace(-3.4386e-3, 51.5e-3, 50), 1e-3)
+    mp.setattr(Figure, "savefig", fake_savefig)
+    mp.setattr(Figure, "tight_layout", lambda fig, **_kw: None)
+    mp.setattr(linkage, "animate_linkage", fake_animation)
+    mp.setattr(build_cli, "build_fmu", fake_build)
+    mp.setattr(native, "build_native_fmu", fake_build)
+    mp.setattr(experiment, "planned_trajectory", lambda *a, **k: canned)
+    mp.setattr(RigEmulator, "serve", lambda self: None)
+    mp.setattr(hil_cli, "serve_until", stop_at_once)  # QEMU, the rehosted board
+    workdir.mkdir(parents=True, exist_ok=True)
+    mp.chdir(workdir)
+
+
 def _files(root: Path | None) -> set[Path]:
     return set() if root is None else {p for p in root.rglob("*") if p.is_file()}
 

@@ -244,12 +244,13 @@ def test_plan_masses_take_commas_or_words_and_refuse_a_field_twice(capsys):
 def test_every_option_with_a_default_shows_it(capsys):
     from cli_fuzz import commands
 
+    from toggle.args import has_default
+
     for parser in (toggle_parser(), hil_parser()):
         for words, sub in commands(parser).items():
             formatter = sub._get_formatter()  # noqa: SLF001
             for action in sub._actions:  # noqa: SLF001
-                if (action.option_strings and action.default is not None
-                        and action.default is not False
+                if (action.option_strings and has_default(action)
                         and action.help not in (None, "==SUPPRESS==")
                         and "help" not in action.dest and action.dest != "version"):
                     text = formatter._expand_help(action)  # noqa: SLF001

@@ -150,7 +150,8 @@ def test_force_is_offered_only_where_outputs_are_checked() -> None:
         return "--force" in parser._option_string_actions  # noqa: SLF001
 
     for words in (("plan",), ("tables",), ("plot", "kinematics"), ("plot", "linkage"),
-                  ("plot", "synthesize"), ("plot", "clamp")):
+                  ("plot", "synthesize"), ("plot", "clamp"), ("plot", "plan"),
+                  ("plot", "trade-off"), ("build-fmu",), ("design",)):
         assert takes_force(*words), words
-    for words in (("kinematics",), ("cache",), ("build-fmu",)):
+    for words in (("kinematics",), ("cache",)):
         assert not takes_force(*words), words

@@ -8,19 +8,14 @@ port is printed, and rig ports fail at once.
 
 from __future__ import annotations
 
-import signal
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import pytest
-from cli_fuzz import check_answer, invocations, path_values
+from cli_fuzz import cheap_commands, check_answer, invocations, path_values
 from hypothesis import HealthCheck, given, settings
 
-from hil import cli as hil_cli
 from hil.cli import build_parser, main
-from hil.interrupts import Interrupted
-from hil.samples import Trajectory
 
 ROOT = Path(tempfile.mkdtemp(prefix="hil_fuzz_"))
 PATHS = path_values(ROOT)
@@ -33,21 +28,9 @@ def caps(words: tuple[str, ...]) -> list[str]:
     return []
 
 
-def stop_at_once(_stopped: object) -> None:
-    """An emulated rig served for no time: as if Ctrl-C came once its port was printed."""
-    raise Interrupted(signal.SIGINT)
-
-
 @pytest.fixture(autouse=True, scope="module")
 def cheap(monkeypatch_module) -> None:
-    from hil import experiment
-    from hil.rig_emulator import RigEmulator
-
-    canned = Trajectory.from_positions(np.linspace(-3.4386e-3, 51.5e-3, 50), 1e-3)
-    monkeypatch_module.setattr(experiment, "planned_trajectory", lambda *a, **k: canned)
-    monkeypatch_module.setattr(RigEmulator, "serve", lambda self: None)
-    monkeypatch_module.setattr(hil_cli, "serve_until", stop_at_once)  # QEMU, the rehost
-    monkeypatch_module.chdir(ROOT)  # what a command writes by default lands here
+    cheap_commands(monkeypatch_module, ROOT)  # the emulators serve for no time
 
 
 @pytest.fixture(scope="module")

@@ -37,9 +37,9 @@ def test_command_line_wins_over_config(tmp_path) -> None:
 
 @pytest.mark.parametrize("text, message", [
     ("force_limt = 50.0\n", "unknown key(s) force_limt"),
-    ('cycles = "3"\n', "cycles = '3' has the wrong type"),
-    ("force_limit = true\n", "wrong type"),
-    ("as_built = 1\n", "as_built = 1 has the wrong type"),
+    ('cycles = "3"\n', "cycles = '3' must be a whole number"),
+    ("force_limit = true\n", "must be a number"),
+    ("as_built = 1\n", "as_built = 1 must be true or false"),
     ('backend = "moon"\n', "backend"),
     ('backend = "real"\nport = "loop://"\nforce_limit = 900.0\n', "load cell"),
     ("force_limit = nan\n", "--force-limit"),
@@ -146,8 +146,10 @@ def test_profile_away_from_the_start_is_approached_and_a_too_fast_one_refused(
                  "--quiet"]) == 0
     bad = tmp_path / "bad.csv"
     bad.write_text("time [s],position [m]\n0,0.0\n0.001,0.0001\n0.002,0.0002\n")
-    assert main(["run", "--profile", str(bad), "--out", str(tmp_path / "b")]) == 1
-    assert "mm/s" in capsys.readouterr().err
+    # invalid input, refused before anything moves: exit 2, naming the file
+    assert main(["run", "--profile", str(bad), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert "mm/s" in err and f"--profile {bad}:" in err
     assert not Path(tmp_path / "b").exists()
 
 
@@ -213,5 +215,5 @@ def test_either_fmu_gives_the_same_run(tmp_path) -> None:
     for key in ("stroke", "force_forward_max", "force_forward_rms", "force_backward_min",
                 "force_backward_rms", "force_toggle"):
         assert a[key]["mean"] == pytest.approx(b[key]["mean"], rel=1e-9, abs=1e-9), key
-    assert main([*argv, "--fmu", str(tmp_path / "none.fmu"), "--out", str(tmp_path / "c")]) == 1
+    assert main([*argv, "--fmu", str(tmp_path / "none.fmu"), "--out", str(tmp_path / "c")]) == 2
     assert not (tmp_path / "c").exists()

@@ -95,9 +95,9 @@ def test_plot_linkage_writes_the_figure_and_the_animation(tmp_path: Path,
                                                           capsys: pytest.CaptureFixture) -> None:
     assert main(["plot", "linkage", "--preset", "lin2003_sm55", "--out", str(tmp_path),
                  "--animate", "--frames", "3"]) == 0
-    printed = capsys.readouterr().out.split()
-    assert printed == [str(tmp_path / "linkage.png"), str(tmp_path / "linkage.gif")]
-    assert all(Path(p).stat().st_size > 1000 for p in printed)
+    printed = capsys.readouterr().out
+    assert printed == f"results in {tmp_path}/ (linkage.png, linkage.gif)\n"
+    assert all((tmp_path / name).stat().st_size > 1000 for name in ("linkage.png", "linkage.gif"))
 
 
 def test_a_position_where_the_clamp_cannot_assemble_is_one_line(

@@ -443,8 +443,9 @@ def test_cli_writes_the_profile_and_the_json(tmp_path, capsys):
     assert samples.peak_force == pytest.approx(report["peak_force"], rel=1e-9)
     copy = write_profile_csv(tmp_path / "copy.csv", samples)
     np.testing.assert_allclose(read_profile_csv(copy).position, samples.position, rtol=1e-11)
-    png = tmp_path / "plan.png"
-    assert main(["plot", "plan", str(out), "--out", str(png)]) == 0
+    assert main(["plot", "plan", str(out), "--out", str(tmp_path / "figs")]) == 0
+    png = tmp_path / "figs" / "plan.png"  # the --out folder, named on the last line
+    assert capsys.readouterr().out.rstrip().endswith(f"results in {png.parent}/ (plan.png)")
     assert png.stat().st_size > 10_000
 
 
@@ -650,9 +651,8 @@ def test_trade_off_with_the_mold_and_in_a_dry_cycle(tmp_path, capsys, monkeypatc
     # the figure from the same plans (each curve costs tens of seconds to plan again)
     monkeypatch.setattr(ClampPlanner, "trade_off",
                         lambda self, points=6, progress=None: computed[self.config.x_contact])
-    out = tmp_path / "t.png"
-    assert main(["plot", "trade-off", "--points", "2", "--out", str(out)]) == 0
-    assert out.stat().st_size > 10_000
+    assert main(["plot", "trade-off", "--points", "2", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "trade_off.png").stat().st_size > 10_000
 
 
 def test_the_best_peak_does_not_grow_with_the_duration(chang):

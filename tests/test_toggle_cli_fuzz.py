@@ -4,7 +4,7 @@
 the edge pools. Runs stay cheap without stubbing the checks: the expensive counts are
 capped after the drawn options (argparse still judges every drawn value; the last one
 wins), and the FMU builds and matplotlib's rendering are replaced by fakes that write a
-few bytes where the real ones write the file.
+few bytes where the real ones write the file (:func:`cli_fuzz.cheap_commands`).
 """
 
 from __future__ import annotations
@@ -13,9 +13,8 @@ import tempfile
 from pathlib import Path
 
 import pytest
-from cli_fuzz import check_answer, invocations, path_values
+from cli_fuzz import cheap_commands, check_answer, invocations, path_values
 from hypothesis import HealthCheck, given, settings
-from matplotlib.figure import Figure
 
 from toggle_cli import build_parser, main
 
@@ -53,31 +52,7 @@ def monkeypatch_module():
 
 @pytest.fixture(autouse=True, scope="module")
 def cheap(monkeypatch_module) -> None:
-    import fmu_src.native_build as native
-    import toggle.linkage as linkage
-    import toggle_cli.build_fmu as build_cli
-    from toggle.files import atomic_path
-
-    def fake_build(out: Path, *_args: object, **_kwargs: object) -> Path:
-        path = Path(out) / "ToggleClamp.fmu"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(b"PK")
-        return path
-
-    def fake_savefig(fig: object, path: Path, **_kw: object) -> None:
-        Path(path).write_bytes(b"\x89PNG")  # rendering is matplotlib's; the writing is ours
-
-    def fake_animation(mech: object, path: Path, frames: int = 2, **_kw: object) -> Path:
-        with atomic_path(Path(path)) as tmp:  # the GIF writer renders through savefig
-            tmp.write_bytes(b"GIF89a")
-        return Path(path)
-
-    monkeypatch_module.setattr(Figure, "savefig", fake_savefig)
-    monkeypatch_module.setattr(linkage, "animate_linkage", fake_animation)
-    monkeypatch_module.setattr(Figure, "tight_layout", lambda fig, **_kw: None)
-    monkeypatch_module.setattr(build_cli, "build_fmu", fake_build)
-    monkeypatch_module.setattr(native, "build_native_fmu", fake_build)
-    monkeypatch_module.chdir(ROOT)  # what a command writes by default lands here
+    cheap_commands(monkeypatch_module, ROOT)
 
 
 @settings(max_examples=2000, derandomize=True, deadline=None,

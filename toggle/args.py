@@ -15,6 +15,7 @@ import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 #: A negative number as the value of an option (argparse takes '-1e-3' for an option).
 _NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
@@ -86,14 +87,21 @@ def path(text: str) -> Path:
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows ``(default: X)`` unless the help already says its default or there is none."""
+    """Shows ``(default: X)`` unless the help already says its default or there is none
+    (None, False, an empty list)."""
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        if "default" in text or action.default is None or action.default is False \
-                or not action.option_strings:
+        if "default" in text or not has_default(action) or not action.option_strings:
             return text
         return super()._get_help_string(action)
+
+
+def has_default(action: argparse.Action) -> bool:
+    """Whether an option has a default worth showing (not None, False or an empty list)."""
+    default = action.default
+    return not (default is None or default is False
+                or (isinstance(default, (list, tuple)) and not default))
 
 
 def use_help_formatter(parser: argparse.ArgumentParser) -> None:
@@ -147,6 +155,41 @@ def parse_command_line(parser: argparse.ArgumentParser, argv: list[str]) -> argp
         getattr(args, "command_parser", parser).error(
             f"unrecognized arguments: {' '.join(extra)}")
     return args
+
+
+#: The shells ``COMMAND completion SHELL`` writes a script for.
+SHELLS = ("bash", "zsh")
+
+
+def add_completion(subparsers: Any, prog: str,
+                   build_parser: Callable[[], argparse.ArgumentParser]) -> None:
+    """``PROG completion bash|zsh``: print the shell completion script of the whole command
+    line, generated from its parsers by shtab (a static script: no Python runs at <Tab>)."""
+    text = (f"print the shell completion script of {prog} (bash: "
+            f"`eval \"$({prog} completion bash)\"` in ~/.bashrc; zsh: save it as _{prog} "
+            "in a folder of $fpath)")
+    p = subparsers.add_parser("completion", help=f"print the {prog} shell completion script",
+                              description=text)
+    p.add_argument("shell", choices=SHELLS, help="the shell the script is for")
+    p.set_defaults(handler=lambda args: _print_completion(build_parser(), args.shell))
+
+
+def _print_completion(parser: argparse.ArgumentParser, shell: str) -> int:
+    import shtab
+
+    _complete_paths(parser, shtab.FILE)
+    print(shtab.complete(parser, shell=shell))
+    return 0
+
+
+def _complete_paths(parser: argparse.ArgumentParser, how: dict[str, str]) -> None:
+    """Every argument of type :func:`path` (in every sub-command) completes file names."""
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for sub in action.choices.values():
+                _complete_paths(sub, how)
+        elif action.type is path:
+            action.complete = how  # type: ignore[attr-defined]  # shtab's attribute
 
 
 def add_version(parser: argparse.ArgumentParser) -> None:

@@ -40,6 +40,9 @@ else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
 _POLICY = {"overwrite": True}
+#: Every file :func:`atomic_path` completed since :func:`take_written` last emptied it:
+#: what a command wrote, for its last line (:func:`results_line`).
+_WRITTEN: list[Path] = []
 
 
 class OutputError(OSError, ValueError):
@@ -91,6 +94,51 @@ def in_words(text: str) -> str:
     can't decode byte 0xff in position 3: ..." as "not UTF-8 text (byte 3)"."""
     text = _ERRNO.sub("", text)
     return _CODEC.sub(lambda m: f"not UTF-8 text (byte {m.group(2)})", text)
+
+
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line, in words (an OSError with its file name and its
+    reason, no "[Errno N]": :func:`in_words`): what both command lines print after
+    ``error:``."""
+    if isinstance(exc, OSError) and exc.filename is not None:
+        text = f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"
+    else:
+        text = str(exc) or "failed"
+    return " ".join(in_words(text).split())
+
+
+#: A results line names a sub-folder instead of its files when it holds more than this.
+CROWDED = 3
+
+
+def take_written() -> list[Path]:
+    """The files written through :func:`atomic_path` since the last call (emptied)."""
+    written = list(dict.fromkeys(_WRITTEN))
+    _WRITTEN.clear()
+    return written
+
+
+def results_line(files: list[Path]) -> str:
+    """``results in DIR/ (a.png, b.csv, presets/)``: the one folder that holds ``files``
+    and what is in it, by the path from there (several files of one sub-folder as the
+    sub-folder, once, when it holds more than :data:`CROWDED`)."""
+    if len({p.is_absolute() for p in files}) > 1:
+        files = [p.absolute() for p in files]
+    folder = Path(os.path.commonpath([str(p.parent) for p in files]))
+    relative = [p.relative_to(folder) for p in files]
+    crowded = {r.parts[0] for r in relative if len(r.parts) > 1
+               and sum(q.parts[0] == r.parts[0] for q in relative) > CROWDED}
+    names = list(dict.fromkeys(f"{r.parts[0]}/" if r.parts[0] in crowded else str(r)
+                               for r in relative))
+    return f"results in {str(folder).rstrip('/')}/ ({', '.join(names)})"
+
+
+def print_results(files: list[Path], *, to_stderr: bool = False) -> None:
+    """The last line of a command that wrote files (:func:`results_line`): on stdout, or on
+    stderr where stdout carries ``--json``."""
+    if files:
+        sys.stdout.flush()
+        print(results_line(files), file=sys.stderr if to_stderr else sys.stdout, flush=True)
 
 
 def allow_overwrite(allowed: bool) -> None:
@@ -204,6 +252,7 @@ def atomic_path(target: Path) -> Iterator[Path]:
             with contextlib.suppress(OSError):  # a file system without modes (FAT)
                 os.chmod(tmp, _file_mode(target))
         os.replace(tmp, target)
+        _WRITTEN.append(target)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

@@ -25,6 +25,7 @@ import sys  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 
 from toggle.args import (  # noqa: E402
+    add_completion,
     add_force_options,
     add_version,
     join_negative_numbers,
@@ -34,6 +35,7 @@ from toggle.args import (  # noqa: E402
     use_help_formatter,
     version,
 )
+from toggle.files import allow_overwrite, one_line, print_results, take_written  # noqa: E402
 from toggle.interrupts import Terminated, unwind_on_signals  # noqa: E402
 
 #: Commands (their words) whose modules check their output files with
@@ -54,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"toggle_cli.{name}").add_parser(sub)
+    add_completion(sub, "toggle", build_parser)
     for words in CHECKS_OUTPUTS:
         command = parser
         for word in words:
@@ -94,7 +97,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         try:
             check_outputs(args)
-            return int(args.handler(args) or 0)
+            take_written()  # what this command writes from here is named on its last line
+            code = int(args.handler(args) or 0)
+            print_results(take_written(), to_stderr=getattr(args, "json", False))
+            return code
         except Exception as exc:  # a signal's exception wrapped by C code: the signal
             stop = signal_cause(exc)
             if stop is None:
@@ -115,7 +121,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
     finally:  # the policy is the command's: a library caller in this process keeps replacing
-        from toggle.files import allow_overwrite
 
         allow_overwrite(True)
 
@@ -123,12 +128,15 @@ def main(argv: Sequence[str] | None = None) -> int:
 def check_outputs(args: argparse.Namespace) -> None:
     """Before the work: the process's overwrite policy from ``--force``, and the files the
     command declared (:func:`toggle_cli.common.declare_outputs`) checked writable."""
-    from toggle.files import allow_overwrite, check_writable, check_writable_dir
+    from toggle.files import OutputError, check_writable, check_writable_dir
     from toggle_cli.common import outputs
 
     allow_overwrite(getattr(args, "force", False))
     targets = outputs(args)
     if targets:
+        if args.out.suffix.lower() in (".png", ".gif", ".csv") and not args.out.is_dir():
+            raise OutputError(f"--out {args.out}: names a file; --out is the folder the "
+                              f"results go into ({', '.join(t.name for t in targets)})")
         check_writable_dir(args.out, "--out")
     for target in targets:
         check_writable(target, "--out")
@@ -145,18 +153,6 @@ def signal_cause(exc: BaseException) -> KeyboardInterrupt | None:
             return seen
         seen = seen.__cause__ or seen.__context__
     return None
-
-
-def one_line(exc: BaseException) -> str:
-    """The message of ``exc`` on one line, in words (an OSError with its file name and its
-    reason, no "[Errno N]": :func:`toggle.files.in_words`)."""
-    from toggle.files import in_words
-
-    if isinstance(exc, OSError) and exc.filename is not None:
-        text = f"{exc.filename}: {(exc.strerror or str(exc)).lower()}"
-    else:
-        text = str(exc) or "failed"
-    return " ".join(in_words(text).split())
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -79,8 +79,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def plot(args: argparse.Namespace) -> int:
-    path = plot_force_curves(mechanism(args), args.out / "asymmetry.png", speed=args.speed)
-    print(path)
+    plot_force_curves(mechanism(args), args.out / "asymmetry.png", speed=args.speed)
     return 0
 
 

@@ -12,26 +12,39 @@ from pathlib import Path
 
 from fmu_src.build import build_fmu
 from toggle.args import path
-from toggle.files import check_writable_dir
+from toggle.files import check_writable, check_writable_dir
+from toggle.params import load_preset
 
 
 def run(args: argparse.Namespace) -> int:
+    if not args.native and (args.fmi_version, args.interface) != (2, "cs"):
+        raise ValueError("--fmi-version 3 and --interface me|both need --native (the "
+                         "pythonfmu FMU is FMI 2.0 Co-Simulation)")
+    load_preset(args.preset)  # an unreadable or invalid preset: told before the build
     check_writable_dir(args.out, "--out")  # before the build, not after it
+    check_writable(args.out / _file_name(args), "--out")  # an existing FMU: only with --force
     if args.native:
         from fmu_src.native_build import build_native_fmu
 
         print(build_native_fmu(args.out, args.preset, args.fmi_version, args.interface))
     else:
-        if (args.fmi_version, args.interface) != (2, "cs"):
-            raise ValueError("--fmi-version 3 and --interface me|both need --native (the "
-                             "pythonfmu FMU is FMI 2.0 Co-Simulation)")
         print(build_fmu(args.out, preset=args.preset))
     return 0
 
 
+def _file_name(args: argparse.Namespace) -> str:
+    """The FMU's file name in ``--out``: ToggleClamp.fmu, ToggleClampNative[3][ME|CSME].fmu."""
+    if not args.native:
+        return "ToggleClamp.fmu"
+    from fmu_src.native_build import model_name
+
+    return f"{model_name(args.fmi_version, args.interface)}.fmu"
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("build-fmu", help="build the FMI 2.0 Co-Simulation FMU into build/")
-    p.add_argument("--out", type=path, default=Path("build"), help="output folder (default build)")
+    p.add_argument("--out", type=path, default=Path("build"), metavar="DIR",
+                   help="folder of the FMU (default build)")
     p.add_argument("--native", action="store_true",
                    help="build ToggleClampNative.fmu: generated C, no Python at run time")
     p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
@@ -42,4 +55,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", default="chang2021",
                    help="the preset the FMU is built for: its values are the parameters' start "
                         "values; it needs [dynamics] and [drive] (default chang2021)")
-    p.set_defaults(handler=run)
+    p.set_defaults(handler=run, checks_outputs=True)

@@ -10,11 +10,10 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 import numpy as np
 
-from toggle.args import path, positive
+from toggle.args import positive
 from toggle.drive import encoder_pulses, motor_torque, torque_history, travel_per_radian
 from toggle.elastics import ClampingResult, analyse_clamping, clamping_curves
 from toggle.params import Mechanism
@@ -24,6 +23,7 @@ from toggle_cli.common import (
     MM,
     POSITION,
     add_json_argument,
+    add_out_argument,
     add_preset_argument,
     declare_outputs,
     deg,
@@ -158,7 +158,7 @@ def plot(args: argparse.Namespace) -> int:
         ax.invert_xaxis()  # clamping runs from alpha_C down to the straight toggle
         ax.legend()
         ax.set_title(f"{mech.name}: real-mold clamping")
-        print(save_figure(fig, out / name))
+        save_figure(fig, out / name)
         plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -166,7 +166,7 @@ def plot(args: argparse.Namespace) -> int:
     ax.set_xlabel(r"Friction coefficient $\mu$ (1)")
     ax.set_ylabel(r"Maximum thrust $F_{0,\max}$ (kN)")
     ax.set_title(f"{mech.name}: maximum crosshead thrust")
-    print(save_figure(fig, out / "fig7_thrust_max.png"))
+    save_figure(fig, out / "fig7_thrust_max.png")
     plt.close(fig)
 
     if histories:
@@ -177,7 +177,7 @@ def plot(args: argparse.Namespace) -> int:
         ax.set_ylabel("Motor torque $T_m$ (N m)")
         ax.legend()
         ax.set_title(f"{mech.name}: {args.rpm:g} rpm, $\\eta$ = {mech.drive.efficiency:g}")
-        print(save_figure(fig, out / "fig8_motor_torque.png"))
+        save_figure(fig, out / "fig8_motor_torque.png")
         plt.close(fig)
     return 0
 
@@ -190,8 +190,7 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
                         f"{' '.join(map(str, PAPER_MUS))})")
     p.add_argument("--rpm", type=positive("motor speed in rpm", 1e5), default=200.0,
                    help="motor speed of the torque figure, rpm (default 200)")
-    p.add_argument("--out", type=path, default=Path("build/figures/clamp"),
-                   help="output folder for the PNG files (default build/figures/clamp)")
+    add_out_argument(p)
     declare_outputs(p, "fig4_tiebar_force.png", "fig5_mechanical_advantage.png",
                     "fig6_thrust.png", "fig7_thrust_max.png", "fig8_motor_torque.png")
     p.set_defaults(handler=plot)

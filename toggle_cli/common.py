@@ -51,8 +51,8 @@ def add_json_argument(parser: argparse.ArgumentParser) -> None:
 
 def add_out_argument(parser: argparse.ArgumentParser) -> None:
     """The ``--out`` folder of a ``toggle plot`` figure."""
-    parser.add_argument("--out", type=path, default=Path("figures"),
-                        help="output folder (default figures)")
+    parser.add_argument("--out", type=path, default=Path("figures"), metavar="DIR",
+                        help="results folder, named on the last line (default figures)")
 
 
 def declare_outputs(parser: argparse.ArgumentParser, *names: str) -> None:

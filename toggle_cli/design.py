@@ -18,8 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from toggle.args import integer, path, positive
-from toggle.files import check_writable_dir
-from toggle_cli.common import SEED, add_json_argument, print_json
+from toggle_cli.common import SEED, add_json_argument, declare_outputs, print_json
 
 GENERATIONS = integer(1, 100_000, "must be a number of generations between 1 and 100000")
 POPULATION = integer(4, 100_000, "must be a population between 4 and 100000")
@@ -55,8 +54,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "figures (docs/design.md).")
     p.add_argument("targets", type=path, help="targets TOML file (examples in "
                    f"design/examples/); objectives: {', '.join(OBJECTIVES)}")
-    p.add_argument("--out", type=path, default=Path("design-out"),
-                   help="results folder; an existing one of the same targets is resumed")
+    p.add_argument("--out", type=path, default=Path("design-out"), metavar="DIR",
+                   help="results folder; a search of the same targets interrupted there is "
+                        "resumed, a finished one's files are replaced only with --force")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                        help="an existing Dask scheduler (start one with `dask scheduler` and "
@@ -78,6 +78,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=SEED, default=0, help="seed of the search (a seed replays)")
     p.add_argument("--no-figures", action="store_true", help="write no figures")
     add_json_argument(p)
+    # checked before the search (the evaluations.jsonl an interrupted search left is not)
+    declare_outputs(p, "pareto.csv", "pareto.parquet", "all.csv", "front.png", "parallel.png")
     p.set_defaults(handler=run)
 
 
@@ -92,7 +94,6 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError("--doe replaces the genetic algorithm: give it without "
                              "--generations and --population")
     targets = load_targets(args.targets)
-    check_writable_dir(args.out, "--out")
     method, samples = args.doe or (None, 0)
     try:
         result = run_search(targets, args.out,
@@ -149,6 +150,4 @@ def run(args: argparse.Namespace) -> int:
               f" (design-{p.nearest.key[:12]} is {100 * p.shortfall:.3g} % short of "
               "dominating it)" if p.nearest else "")
         print(f"{p.name}: {p.status}{by}")
-    print(f"written: {files['pareto_csv']}, {files['pareto_parquet']}, {files['presets']}/"
-          + ("" if args.no_figures else f", {files['front_png']}, {files['parallel_png']}"))
     return 0

@@ -110,8 +110,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def plot(args: argparse.Namespace) -> int:
     from toggle.plots import plot_kinematics
 
-    path = plot_kinematics(mechanism(args), args.out / "kinematics.png")
-    print(path)
+    plot_kinematics(mechanism(args), args.out / "kinematics.png")
     return 0
 
 
@@ -123,11 +122,9 @@ def linkage(args: argparse.Namespace) -> int:
     for name in names:  # before the drawing
         check_writable(args.out / name, "--out")
     mech = mechanism(args)
-    paths = [plot_linkage(mech, args.out / "linkage.png", args.x)]
+    plot_linkage(mech, args.out / "linkage.png", args.x)
     if args.animate:
-        paths.append(animate_linkage(mech, args.out / "linkage.gif", args.frames))
-    for path in paths:
-        print(path)
+        animate_linkage(mech, args.out / "linkage.gif", args.frames)
     return 0
 
 

@@ -48,7 +48,9 @@ from toggle_cli.common import (
     LINK_ERROR,
     POSITION,
     add_json_argument,
+    add_out_argument,
     add_preset_argument,
+    declare_outputs,
     print_json,
     table,
 )
@@ -419,8 +421,6 @@ def run(args: argparse.Namespace) -> int:
         print("peak input force (N) on each clamp of the robust plan, the nominal clamp's "
               "plan and the S-curve:")
         print(table(("clamp", "robust", "nominal", "S-curve"), rows))
-    if args.out and not exported:
-        print(f"profile written to {args.out}")
     return 0
 
 
@@ -471,6 +471,7 @@ def plot(args: argparse.Namespace) -> int:
 
     samples = read_profile_csv(args.csv)
     cfg, limits = _plant(args)
+    _check_positions(args.csv, samples.position, cfg)
     duration = float(samples.time[-1] - samples.time[0])
     base = baselines(cfg, limits, duration)
     fig, axes = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
@@ -487,10 +488,20 @@ def plot(args: argparse.Namespace) -> int:
     for ax in axes:
         ax.legend()
     axes[0].set_title(f"{cfg.mechanism.name}: planned stroke against the baselines")
-    print(save_figure(fig, args.out))
+    save_figure(fig, args.out / "plan.png")
     return 0
 
 
+def _check_positions(csv: Path, x: np.ndarray, cfg: PlantConfig) -> None:
+    """Refuse a profile whose positions leave the preset's stroke by more than a tenth of
+    it: a file in mm (a 45 mm stroke read as 45 m), or one planned for another preset."""
+    x_open, x_tp = clamp_stroke(cfg.mechanism)
+    margin = 0.1 * (x_tp - x_open)
+    if x.min() < x_open - margin or x.max() > x_tp + margin:
+        raise ParameterError(
+            f"profile {csv}: its positions span {x.min():.4g} to {x.max():.4g} m, outside "
+            f"{cfg.mechanism.name}'s stroke {x_open:.4g} to {x_tp:.4g} m (a profile's "
+            "positions are in m; was it planned for another --preset?)")
 
 
 def plot_trade_off(args: argparse.Namespace) -> int:
@@ -511,7 +522,7 @@ def plot_trade_off(args: argparse.Namespace) -> int:
     ax.set_ylabel("peak input force (N)")
     ax.set_title(f"{cfg.mechanism.name}: fastest stroke under each input-force limit")
     ax.legend()
-    print(save_figure(fig, args.out))
+    save_figure(fig, args.out / "trade_off.png")
     return 0
 
 
@@ -680,7 +691,8 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("plan", help="a planned profile (CSV) against the baselines")
     p.add_argument("csv", type=path, help="profile CSV written by toggle plan --out")
     _add_plant_arguments(p)
-    p.add_argument("--out", type=path, default=Path("plan.png"), help="PNG file (default plan.png)")
+    add_out_argument(p)
+    declare_outputs(p, "plan.png")
     p.set_defaults(handler=plot)
     p = kinds.add_parser("trade-off", help="stroke time against peak input force, with the "
                          "mold and in a dry cycle")
@@ -693,6 +705,6 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
                    default=INTERVALS, help=f"time intervals N (default {INTERVALS})")
     _add_protection_arguments(p)
-    p.add_argument("--out", type=path, default=Path("trade_off.png"),
-                   help="PNG file (default trade_off.png)")
+    add_out_argument(p)
+    declare_outputs(p, "trade_off.png")
     p.set_defaults(handler=plot_trade_off)

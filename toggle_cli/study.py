@@ -258,14 +258,14 @@ def _plot_study(args: argparse.Namespace) -> int:
     results, _ = _run_study(args)
     title = (f"{args.preset} ({args.half} half): seed 004 Figs 3-6, "
              f"alpha {args.alpha_lock:g} to {args.alpha_max:g} deg")
-    print(plot_study(results, title, args.out / "study.png"))
+    plot_study(results, title, args.out / "study.png")
     return 0
 
 
 def _plot_sweep(args: argparse.Namespace) -> int:
     result = _run_sweep(args)  # checks --dim first
     title = f"{args.preset} ({args.half} half): criteria over {' and '.join(result.names)}"
-    print(plot_sweep(result, title, args.out / "sweep.png"))
+    plot_sweep(result, title, args.out / "sweep.png")
     return 0
 
 

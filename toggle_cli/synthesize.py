@@ -134,7 +134,7 @@ def plot(args: argparse.Namespace) -> int:
     ax.set_ylabel("significance coefficient λ (1)")
     ax.set_title(f"{model.name}: significance of each error source ({model.output_label})")
     ax.legend()
-    print(save_figure(fig, args.out / f"significance_{model.name}.png"))
+    save_figure(fig, args.out / f"significance_{model.name}.png")
     return 0
 
 

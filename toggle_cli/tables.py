@@ -89,8 +89,6 @@ def run(args: argparse.Namespace) -> int:
                       "role": role(r)}
                      for r in rows]})
         return 0
-    for figure in figures:
-        print(f"wrote {figure}")
     if fit:
         print(f"{nominal.name}: fitted on {', '.join(f'{s * MM:g}' for s in fit.speeds)} mm/s, "
               f"statistics {', '.join(LABELS[s] for s in fit.statistics)}")

@@ -93,8 +93,8 @@ def plot(args: argparse.Namespace) -> int:
     from toggle.plots import plot_it_grades, plot_sensitivity
 
     mech = mechanism(args)
-    print(plot_sensitivity(mech, args.it, args.out / f"sensitivity_IT{args.it}.png"))
-    print(plot_it_grades(mech, args.out / "asymmetry_vs_it.png"))
+    plot_sensitivity(mech, args.it, args.out / f"sensitivity_IT{args.it}.png")
+    plot_it_grades(mech, args.out / "asymmetry_vs_it.png")
     return 0
 
 
