@@ -219,11 +219,8 @@ class Evaluator:
                                 f"{slowest:.3g} at a toggle angle of {where:.4g} deg)")
         m.update(criteria(measures))
         m["velocity_ratio_peak"] = m.pop("velocity_ratio")
-        # seed 004's Mp is its Eq 6, the strokes' ratio from lock-up (8.19 for group 1 at
-        # 1 deg); Eq 5's 1 / Mv, the force ratio at the angle, is half of it near lock-up
-        m["mechanical_advantage_lock"] = m.pop("force_amplification")
-        m["force_amplification"] = float(measures.crosshead_stroke[0]
-                                         / measures.platen_stroke[0])
+        # seed 004's Mp (Eq 6) is toggle study's; Eq 5's force ratio is half of it near lock-up
+        m["mechanical_advantage_lock"] = float(measures.mechanical_advantage[0])
         m["x_open"], m["x_toggle"] = float(measures.x[-1]), x_toggle
         m["platen_stroke"] = float(measures.platen_stroke[-1])
         m["crosshead_stroke"] = float(measures.crosshead_stroke[-1])

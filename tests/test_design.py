@@ -91,13 +91,16 @@ def test_seed_004_criteria_are_the_studys(sm55) -> None:
     for name, values in reference_designs(targets).items():
         e = evaluator(evaluator.vector(values))
         dims = load_preset(name).lower
-        expect = criteria(angle_measures(dims, angle_grid(math.radians(1), math.pi / 2, 90)))
+        measures = angle_measures(dims, angle_grid(math.radians(1), math.pi / 2, 90))
+        expect = criteria(measures)
         # e follows gamma0 (settings.lockup_angle): the preset's e to its 10 digits
         assert e.metrics["stroke_ratio"] == pytest.approx(expect["stroke_ratio"], rel=1e-7)
         assert e.metrics["velocity_ratio_peak"] == pytest.approx(expect["velocity_ratio"],
                                                                  rel=1e-7)
-        assert e.metrics["mechanical_advantage_lock"] == pytest.approx(
+        assert e.metrics["force_amplification"] == pytest.approx(  # Eq 6, one function
             expect["force_amplification"], rel=1e-7)
+        assert e.metrics["mechanical_advantage_lock"] == pytest.approx(
+            measures.mechanical_advantage[0], rel=1e-7)
         assert e.feasible, (name, e.reason)  # the targets are the groups' envelope
 
 
