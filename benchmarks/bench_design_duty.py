@@ -5,8 +5,9 @@ closing-time bound's profile, not on a plan; the search weighs them in place of 
 (docs/design.md). This script runs a reduced SM-55 search (``design/examples/sm55.toml``),
 takes designs spread along its front (by closing-time bound) and the SM-55 itself, opens
 each to the targets' mold stroke (the comparison's rule, :func:`design.placement.compare`),
-and for each prints the estimates beside the minimum-time plan's RMS torque and energy
-without regeneration over the same stroke (``toggle plan --min-time --force-limit 1e5``,
+and for each prints the estimates beside the minimum-time plan's RMS torque and shaft energy
+without regeneration over the same stroke (what ``close_energy`` measures: the plan's
+electrical energy adds the copper losses) (``toggle plan --min-time --force-limit 1e5``,
 one compile per design: minutes on a loaded machine).
 
 The tolerance, stated before the run: the search uses the estimates to rank designs, so
@@ -54,7 +55,7 @@ def planned(preset: Path) -> dict:
             raise SystemExit(f"toggle plan --preset {preset} failed")
     duty = json.loads(text.getvalue())["duty"]
     return {"close_rms_torque": duty["rms_torque"],
-            "close_energy": duty["energy_without_regeneration"]}
+            "close_energy": duty["shaft_energy_without_regeneration"]}
 
 
 def spread(front: list[Evaluation], n: int) -> list[Evaluation]:
