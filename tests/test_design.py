@@ -295,6 +295,19 @@ def test_the_default_back_end_takes_the_free_cores_or_stays_in_the_process() -> 
     assert default_workers(50, cores=16, load=0.0) == 0  # too small to pay for a cluster
 
 
+def test_busy_cores_sees_a_new_hog_before_the_load_average(tmp_path) -> None:
+    """A hog started a moment ago: the load average still says 0.2, /proc/loadavg's count
+    of runnable tasks says two (the hog and this process); the rule takes the hog."""
+    from design.runner import busy_cores, default_workers
+    fake = tmp_path / "loadavg"
+    fake.write_text("0.20 0.10 0.05 2/180 4242\n")
+    assert busy_cores(fake, average=0.2) == 1.0
+    assert default_workers(2400, cores=2, load=busy_cores(fake, average=0.2)) == 0
+    assert busy_cores(fake, average=3.5) == 3.5  # a load that just ended still counts
+    fake.write_text("garbled\n")
+    assert busy_cores(fake, average=0.7) == 0.7  # no count: the load average alone
+
+
 def test_one_progress_bar_counts_the_whole_search(tmp_path: Path, monkeypatch) -> None:
     import tqdm
     bars: list[dict] = []
