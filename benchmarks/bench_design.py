@@ -52,16 +52,22 @@ def candidates(n: int) -> np.ndarray:
 
 
 def rates(vectors: np.ndarray, repeats: int, search: int, folder: Path
-          ) -> tuple[dict[str, list[float]], int]:
-    """Candidates per second of each back-end, round by round; the default's workers."""
+          ) -> tuple[dict[str, list[float]], dict[str, float], int]:
+    """Candidates per second of each back-end, round by round; the seconds each took to
+    start (the cluster, the workers' imports and first evaluations, less the time of those
+    evaluations at the back-end's rate); the default's workers."""
     targets = load_targets(TARGETS)
     out: dict[str, list[float]] = {name: [] for name, _ in BACKENDS}
+    starts, warm = {}, {}
     with contextlib.ExitStack() as stack:
         runners = {}
         for name, workers in BACKENDS:
             store = Store(folder / f"warm-{workers}", targets.digest())
+            t0 = time.perf_counter()
             runner = stack.enter_context(Runner(targets, store, workers=workers, total=search))
-            runner.evaluate(vectors[:4 * max(runner.workers or 0, 1)])  # imports, builds
+            warm[name] = 4 * max(runner.workers or 0, 1)
+            runner.evaluate(vectors[:warm[name]])  # imports, builds
+            starts[name] = time.perf_counter() - t0
             runners[name] = runner
         for r in range(repeats):
             for name, runner in runners.items():
@@ -69,7 +75,9 @@ def rates(vectors: np.ndarray, repeats: int, search: int, folder: Path
                 t0 = time.perf_counter()
                 runner.evaluate(vectors)
                 out[name].append(len(vectors) / (time.perf_counter() - t0))
-        return out, runners["default"].workers
+        for name in starts:
+            starts[name] = max(0.0, starts[name] - warm[name] / statistics.median(out[name]))
+        return out, starts, runners["default"].workers
 
 
 def main() -> None:
@@ -91,7 +99,7 @@ def main() -> None:
         time.sleep(args.settle if hogs else 0.0)
         seen = (os.getloadavg()[0], busy_cores(), default_workers(args.search))
         with tempfile.TemporaryDirectory() as tmp:
-            got, chosen = rates(vectors, args.repeats, args.search, Path(tmp))
+            got, starts, chosen = rates(vectors, args.repeats, args.search, Path(tmp))
         after = os.getloadavg()[0]
     finally:
         for hog in hogs:
@@ -110,6 +118,14 @@ def main() -> None:
         rounds = ", ".join(f"{v:.1f}" for v in got[name])
         print(f"  {name:<18} {med[name]:7.1f} candidates/s  ({med[name] / faster:.2f} x the "
               f"faster of the process and 2 workers; rounds {rounds})")
+    pair = [b / a for a, b in zip(got["in this process"], got["Dask, 2 workers"])]
+    print(f"  2 workers over the process, round by round: "
+          f"{', '.join(f'{r:.2f}' for r in pair)} (median {statistics.median(pair):.2f})")
+    whole = {name: starts[name] + args.search / med[name] for name in med}
+    best = min(whole["in this process"], whole["Dask, 2 workers"])
+    print(f"  a {args.search}-candidate search, start included (s): " + ", ".join(
+        f"{name} {whole[name]:.0f} (start {starts[name]:.1f}; {best / whole[name]:.2f} x "
+        f"the faster)" for name in med))
 
 
 if __name__ == "__main__":

@@ -14,7 +14,9 @@ The tolerance, stated before the run: the search uses the estimates to rank desi
 each design's change against the SM-55 by the estimate must be within
 ``TOLERANCE_PP`` percentage points of the planner's change, and the two must order the
 designs alike (Kendall's tau printed). Levels are not compared (the bound's profile has no
-jerk limit: its RMS torque is above the plan's).
+jerk limit: its RMS torque is above the plan's). Also printed: the stroke's integral of the
+torque squared (its share of a molding cycle's RMS torque, which does not depend on how
+the stroke's own duration divides it) and the duration, by the same rule.
 
     .venv/bin/python benchmarks/bench_design_duty.py [--designs 7] [--generations 6]
 """
@@ -55,7 +57,17 @@ def planned(preset: Path) -> dict:
             raise SystemExit(f"toggle plan --preset {preset} failed")
     duty = json.loads(text.getvalue())["duty"]
     return {"close_rms_torque": duty["rms_torque"],
-            "close_energy": duty["shaft_energy_without_regeneration"]}
+            "close_energy": duty["shaft_energy_without_regeneration"],
+            "close_time": duty["cycle_time"],
+            "torque_squared": duty["torque_squared_integral"]}
+
+
+def estimated(metrics: dict) -> dict:
+    """The search's estimates, and the integral of the torque squared they imply (N^2 m^2 s:
+    the stroke's share of a molding cycle's RMS torque, whatever the stroke's duration)."""
+    return {"close_rms_torque": metrics["close_rms_torque"],
+            "close_energy": metrics["close_energy"], "close_time": metrics["close_time"],
+            "torque_squared": metrics["close_rms_torque"] ** 2 * metrics["close_time"]}
 
 
 def spread(front: list[Evaluation], n: int) -> list[Evaluation]:
@@ -89,18 +101,19 @@ def main() -> None:
             name = "SM-55" if design is None else f"design-{des.key[:12]}"
             path = write_preset(Path(tmp) / f"d{i}.toml", targets, des, name=f"d{i}")
             plan = planned(path)
-            rows.append((name, {k: des.metrics[k] for k in plan}, plan))
+            rows.append((name, estimated(des.metrics), plan))
             print(f"  {name}: estimate {des.metrics['close_rms_torque']:.4g} N m "
                   f"{des.metrics['close_energy']:.4g} J, planner "
                   f"{plan['close_rms_torque']:.4g} N m {plan['close_energy']:.4g} J",
                   flush=True)
     base_est, base_plan = rows[0][1], rows[0][2]
-    print(f"\n| design | RMS torque est. (N m) | planner | change est. | planner | "
-          f"energy est. (J) | planner | change est. | planner |\n{'|---' * 9}|")
-    worst = dict.fromkeys(base_est, 0.0)
+    keys = ("close_rms_torque", "close_energy", "torque_squared", "close_time")
+    print("\n| design | " + " | ".join(f"{k} est. | planner | change est. | planner"
+                                     for k in keys) + f" |\n{'|---' * (1 + 4 * len(keys))}|")
+    worst = dict.fromkeys(keys, 0.0)
     for name, est, plan in rows:
         cells = []
-        for k in ("close_rms_torque", "close_energy"):
+        for k in keys:
             ce = 100 * (est[k] / base_est[k] - 1)
             cp = 100 * (plan[k] / base_plan[k] - 1)
             worst[k] = max(worst[k], abs(ce - cp))
