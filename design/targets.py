@@ -238,7 +238,8 @@ OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
     Objective("close_time", "closing time bound under the motor's limits", "s", -1,
               ("clamp", "drive", "dynamics")),
     Objective("close_rms_torque", "motor RMS torque over the closing stroke, on the time "
-              "bound's profile (an estimate of the minimum-time plan's)", "N m", -1,
+              "bound's profile (not the minimum-time plan's: it ranks designs unlike the "
+              "planner, docs/design.md)", "N m", -1,
               ("clamp", "drive", "dynamics")),
     Objective("close_energy", "motor energy (no regeneration) over the closing stroke, on "
               "the time bound's profile", "J", -1, ("clamp", "drive", "dynamics")),
