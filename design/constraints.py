@@ -1,5 +1,6 @@
 """What a clamp designer checks beyond the objectives: transmission, envelope, strength,
-buckling, pin pressure, lock-up, mold-height sensitivity and link masses of one candidate.
+buckling, pin pressure, lock-up, mold-height sensitivity, the die-height range and link
+masses of one candidate.
 
 Every position comes from the one model (:func:`toggle.kinematics.half_pose` gives the
 angles; the joints are placed along them) and every force from the real-mold clamping of
@@ -21,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
-from toggle.elastics import ClampingResult, clamp_state
+from toggle.elastics import ClampingResult, analyse_clamping, at_mold_height, clamp_state
 from toggle.kinematics import half_pose
 from toggle.params import HalfDims, LinkSection, Mechanism
 from toggle.statics import OPENING
@@ -174,6 +175,25 @@ def structure(mech: Mechanism, result: ClampingResult) -> dict[str, float]:
                        n.n3 / n.n2 * abs(f3) / (2 * pins.D * tri.thickness),  # D, triangle
                        at_c * per_plate / (2 * pins.C * tri.thickness))       # C, triangle
     return {"link_utilisation": util, "buckling_utilisation": buckle, "pin_pressure": pressure}
+
+
+def die_height(mech: Mechanism, thrust_limit: float | None, sensitivity_limit: float
+               ) -> dict[str, float]:
+    """The clamp at both ends of the tailstock's die-height range, the tailstock set for the
+    clamp's final tie-bar force (:func:`toggle.elastics.at_mold_height`): the larger peak
+    crosshead thrust (N), the larger sensitivity of the clamp force to mold height (dF/F
+    per metre, 1 over the elastic interference: the thinnest mold's, the stiffest clamp),
+    and their utilisation, the worse of thrust over ``thrust_limit`` (None: no motor) and
+    sensitivity over ``sensitivity_limit``. ClampingError if an end cannot be clamped."""
+    die = mech.clamp.die_height
+    ends = [analyse_clamping(at_mold_height(mech, h)) for h in (die.min, die.max)]
+    thrust = max(r.thrust_max for r in ends)
+    sensitivity = max(1.0 / float(r.final.toggle_stretch) for r in ends)
+    util = sensitivity / sensitivity_limit
+    if thrust_limit is not None:
+        util = max(util, thrust / thrust_limit)
+    return {"die_height_thrust": thrust, "die_height_sensitivity": sensitivity,
+            "die_height_range": util}
 
 
 def lockup(mech: Mechanism, result: ClampingResult) -> dict[str, float]:

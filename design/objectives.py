@@ -40,7 +40,8 @@ MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_tog
             "platen_side_load": "1", "radial_envelope": "m", "tiebar_clearance": "m",
             "link_mass": "kg", "lockup_angle": "rad", "breakaway_force": "N",
             "self_locking_travel": "m", "clamp_force_sensitivity": "1/m",
-            "link_utilisation": "1", "buckling_utilisation": "1", "pin_pressure": "Pa"}
+            "link_utilisation": "1", "buckling_utilisation": "1", "pin_pressure": "Pa",
+            "die_height_range": "1", "die_height_thrust": "N", "die_height_sensitivity": "1/m"}
 
 #: The constraints, in the order of the G matrix; each is active when its target is set
 #: (assembly always; drive_thrust when the preset has a drive and clamp data; the
@@ -123,6 +124,8 @@ class Evaluator:
         base = self.base
         if need == "spacing":
             return base.clamp is not None and base.clamp.tiebars.spacing is not None
+        if need == "die_height":
+            return base.clamp is not None and base.clamp.die_height is not None
         return getattr(base, need) is not None
 
     def _limits_in_force(self) -> dict[str, float]:
@@ -219,11 +222,8 @@ class Evaluator:
                                 f"{slowest:.3g} at a toggle angle of {where:.4g} deg)")
         m.update(criteria(measures))
         m["velocity_ratio_peak"] = m.pop("velocity_ratio")
-        # seed 004's Mp is its Eq 6, the strokes' ratio from lock-up (8.19 for group 1 at
-        # 1 deg); Eq 5's 1 / Mv, the force ratio at the angle, is half of it near lock-up
-        m["mechanical_advantage_lock"] = m.pop("force_amplification")
-        m["force_amplification"] = float(measures.crosshead_stroke[0]
-                                         / measures.platen_stroke[0])
+        # seed 004's Mp (Eq 6) is toggle study's; Eq 5's force ratio is half of it near lock-up
+        m["mechanical_advantage_lock"] = float(measures.mechanical_advantage[0])
         m["x_open"], m["x_toggle"] = float(measures.x[-1]), x_toggle
         m["platen_stroke"] = float(measures.platen_stroke[-1])
         m["crosshead_stroke"] = float(measures.crosshead_stroke[-1])
@@ -312,6 +312,15 @@ class Evaluator:
             m.update(checks.structure(mech, result))
             if mech.dynamics is not None:
                 m["link_mass"] = mech.dynamics.links
+        if "die_height_range" in g:
+            try:
+                m.update(checks.die_height(
+                    mech, self._limits.force(mech.drive) if self._limits else None,
+                    self.limits.get("clamp_force_sensitivity",
+                                    DESIGN_LIMITS["clamp_force_sensitivity"].default)))
+            except (ClampingError, StaticsError, ParameterError) as exc:
+                g["die_height_range"] = 1.0
+                out.reason = out.reason or f"die_height_range: {exc}"
         for key in DESIGN_LIMITS:
             if key not in _GEOMETRIC and key in m:
                 self._limit(key, m[key], g, out)

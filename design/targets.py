@@ -62,7 +62,7 @@ TARGETS: dict[str, tuple[str, str]] = {
 class Limit:
     """A designer's limit: ``most`` True for an upper bound; ``default`` (SI) and the
     source of that default; ``needs`` the preset data it takes (``sections``, ``spacing``,
-    ``clamp``)."""
+    ``clamp``, ``die_height``)."""
 
     key: str
     unit: str
@@ -104,6 +104,14 @@ DESIGN_LIMITS: dict[str, Limit] = {lim.key: lim for lim in (
           "load (assumption: the top of the 25-100 MPa range bush makers rate; bronze bushes "
           "take about 60 MPa)",
           ("sections", "clamp")),
+    Limit("die_height_range", "1", True, 1.0,
+          "the clamp serves the tailstock's whole die-height range ([clamp.die_height] of the "
+          "preset: the tie bars' span grows with the mold, so the clamp is stiffest at the "
+          "thinnest mold and softest at the thickest): at both ends, the tailstock set for "
+          "the target clamp force, the peak crosshead thrust within the motor's force (the "
+          "drive_thrust rule) and the clamp force's sensitivity to mold height within "
+          "clamp_force_sensitivity's limit; 1 is the worse of the two at its limit",
+          ("clamp", "die_height")),
     Limit("platen_side_load", "1", True, math.tan(math.radians(50.0)),
           "transverse over axial force at the platen joint, tan 50 deg: link 5 within 50 "
           "deg of the platen's line (the 40 deg transmission rule at A)"),
@@ -230,7 +238,8 @@ OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
     Objective("close_time", "closing time bound under the motor's limits", "s", -1,
               ("clamp", "drive", "dynamics")),
     Objective("close_rms_torque", "motor RMS torque over the closing stroke, on the time "
-              "bound's profile (an estimate of the minimum-time plan's)", "N m", -1,
+              "bound's profile (not the minimum-time plan's: it ranks designs unlike the "
+              "planner, docs/design.md)", "N m", -1,
               ("clamp", "drive", "dynamics")),
     Objective("close_energy", "motor energy (no regeneration) over the closing stroke, on "
               "the time bound's profile", "J", -1, ("clamp", "drive", "dynamics")),

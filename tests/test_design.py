@@ -91,13 +91,16 @@ def test_seed_004_criteria_are_the_studys(sm55) -> None:
     for name, values in reference_designs(targets).items():
         e = evaluator(evaluator.vector(values))
         dims = load_preset(name).lower
-        expect = criteria(angle_measures(dims, angle_grid(math.radians(1), math.pi / 2, 90)))
+        measures = angle_measures(dims, angle_grid(math.radians(1), math.pi / 2, 90))
+        expect = criteria(measures)
         # e follows gamma0 (settings.lockup_angle): the preset's e to its 10 digits
         assert e.metrics["stroke_ratio"] == pytest.approx(expect["stroke_ratio"], rel=1e-7)
         assert e.metrics["velocity_ratio_peak"] == pytest.approx(expect["velocity_ratio"],
                                                                  rel=1e-7)
-        assert e.metrics["mechanical_advantage_lock"] == pytest.approx(
+        assert e.metrics["force_amplification"] == pytest.approx(  # Eq 6, one function
             expect["force_amplification"], rel=1e-7)
+        assert e.metrics["mechanical_advantage_lock"] == pytest.approx(
+            measures.mechanical_advantage[0], rel=1e-7)
         assert e.feasible, (name, e.reason)  # the targets are the groups' envelope
 
 
@@ -290,6 +293,19 @@ def test_the_default_back_end_takes_the_free_cores_or_stays_in_the_process() -> 
     assert default_workers(2400, cores=2, load=13.0) == 0  # the loaded machine of issue 38
     assert default_workers(2400, cores=16, load=3.6) == 12
     assert default_workers(50, cores=16, load=0.0) == 0  # too small to pay for a cluster
+
+
+def test_busy_cores_sees_a_new_hog_before_the_load_average(tmp_path) -> None:
+    """A hog started a moment ago: the load average still says 0.2, /proc/loadavg's count
+    of runnable tasks says two (the hog and this process); the rule takes the hog."""
+    from design.runner import busy_cores, default_workers
+    fake = tmp_path / "loadavg"
+    fake.write_text("0.20 0.10 0.05 2/180 4242\n")
+    assert busy_cores(fake, average=0.2) == 1.0
+    assert default_workers(2400, cores=2, load=busy_cores(fake, average=0.2)) == 0
+    assert busy_cores(fake, average=3.5) == 3.5  # a load that just ended still counts
+    fake.write_text("garbled\n")
+    assert busy_cores(fake, average=0.7) == 0.7  # no count: the load average alone
 
 
 def test_one_progress_bar_counts_the_whole_search(tmp_path: Path, monkeypatch) -> None:

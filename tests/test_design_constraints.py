@@ -6,6 +6,8 @@ loads and pin pressures are computed here from those, not by design.constraints.
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +17,7 @@ from scipy.optimize import brentq
 from design.objectives import Evaluator
 from design.placement import design_values
 from design.targets import DESIGN_LIMITS, load_targets, targets_from_dict
-from toggle.elastics import analyse_clamping, clamp_state
+from toggle.elastics import ClampingError, analyse_clamping, at_mold_height, clamp_state
 from toggle.kinematics import half_pose, stroke_limits
 from toggle.params import ParameterError, load_preset
 from toggle.statics import OPENING
@@ -127,6 +129,70 @@ def test_mold_height_sensitivity_and_self_locking_by_finite_differences(sm55) ->
 
     assert opening(result.x_final - 0.99 * travel) < 0 < opening(result.x_final - 1.01 * travel)
     assert ref.metrics["breakaway_force"] == pytest.approx(-opening(result.x_final), rel=1e-12)
+
+
+def _final_tiebar_force_contact(mech, x_final: float, force: float) -> float:
+    """Where the molds must touch for the final tie-bar force ``force``, by bisection on the
+    model's clamp state (not toggle.elastics.contact_position)."""
+    x_open = mech.clamp.x_open
+    return brentq(lambda xc: float(clamp_state(x_final, xc, mech).tiebar_force) - force,
+                  x_open, x_final - 1e-9, xtol=1e-15)
+
+
+def test_die_height_range_of_the_sm55_by_hand(sm55) -> None:
+    """The tailstock's range (150-350 mm, the tie bars' 1250 mm span at 250 mm): at the
+    thinnest mold the span is 100 mm shorter, the bars' stretch at the same tie-bar force
+    F L / (n A E) (Eq 24) 23.4 um less, so the sensitivity 1 / S_bar rises from 2586 to
+    2752 /m; at the thickest the peak thrust is the larger. Both against the motor's force
+    and the sensitivity's limit give the constraint."""
+    mech, evaluator, ref = sm55
+    die, bars, force = mech.clamp.die_height, mech.clamp.tiebars, mech.clamp.final_tiebar_force
+    assert (die.min, die.max, die.reference) == (0.150, 0.350, 0.250)
+    s_ref = 1.0 / ref.metrics["clamp_force_sensitivity"]
+    thin = s_ref + force * (die.min - die.reference) / (bars.count * bars.area * bars.modulus)
+    assert ref.metrics["die_height_sensitivity"] == pytest.approx(1.0 / thin, rel=1e-6)
+    assert 1.0 / thin == pytest.approx(2752.0, abs=1.0)
+    x_final = stroke_limits(mech.lower)[1]
+    peaks = []
+    for height in (die.min, die.max):  # the bars' span set by hand, the peak by scanning
+        span = bars.length + height - die.reference
+        adjusted = replace(mech, clamp=replace(mech.clamp, tiebars=replace(bars, length=span)))
+        xc = _final_tiebar_force_contact(adjusted, x_final, force)
+        xs = np.linspace(xc, x_final, 200001)
+        peaks.append(float(np.max(clamp_state(xs, xc, adjusted).thrust)))
+    assert peaks[1] > peaks[0] and peaks[1] > ref.metrics["thrust_peak"]
+    assert ref.metrics["die_height_thrust"] == pytest.approx(max(peaks), rel=1e-6)
+    motor = evaluator._limits.force(mech.drive)
+    util = max(max(peaks) / motor, 1.0 / thin / DESIGN_LIMITS["clamp_force_sensitivity"].default)
+    assert ref.metrics["die_height_range"] == pytest.approx(util, rel=1e-6)
+    assert ref.constraints["die_height_range"] == pytest.approx(util - 1.0, rel=1e-6)
+    assert 0.9 < util < 1.0  # the SM-55 meets it, its thinnest mold near the limit
+
+
+def test_die_height_range_is_a_targets_key_and_a_preset_table(tmp_path: Path) -> None:
+    bounds = {v: 0.1 for v in ("d", "r3", "r4a", "r4b", "r5")}
+    bounds.update(e=0.005, alpha4=0.5, alpha_open=1.0)
+    table = {"preset": "lin2003_sm55", "objectives": ["thrust_peak", "link_mass"],
+             "targets": {"die_height_range": 0.8}, "bounds": bounds}
+    evaluator = Evaluator(targets_from_dict(table))
+    assert evaluator.limits["die_height_range"] == 0.8
+    mech = load_preset("lin2003_sm55")
+    values = design_values(mech)
+    e = evaluator(evaluator.vector(values))
+    assert e.constraints["die_height_range"] > 0 and not e.feasible
+    with pytest.raises(ClampingError, match="outside the die-height range"):
+        at_mold_height(mech, 0.4)
+    assert at_mold_height(mech, 0.15).clamp.tiebars.length == pytest.approx(1.15)
+    text = (Path(__file__).resolve().parents[1] / "toggle" / "presets"
+            / "lin2003_sm55.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("min = 0.150", "min = 0.400"))
+    with pytest.raises(ParameterError, match="die height min 0.4 m must be below max"):
+        load_preset(str(bad))
+    bare = tmp_path / "bare.toml"
+    bare.write_text(re.sub(r"\[clamp\.die_height\][^\[]*", "", text))
+    table["preset"] = str(bare)
+    assert "die_height_range" not in Evaluator(targets_from_dict(table)).limits
 
 
 def test_link_masses_scale_with_length(sm55) -> None:

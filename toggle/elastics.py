@@ -29,7 +29,7 @@ crosshead position x for a given contact position, friction and direction of mot
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -69,6 +69,24 @@ def clamp_data(mech: Mechanism) -> ClampData:
             f"preset {mech.name!r} has no [clamp] section (pins, sections, tie bars)"
         )
     return mech.clamp
+
+
+def at_mold_height(mech: Mechanism, height: float) -> Mechanism:
+    """The clamp with its tailstock set for a mold ``height`` m thick: the tie bars' span
+    between their nuts is [clamp.tiebars] length plus the mold's excess over
+    [clamp.die_height] reference (the tailstock moves along the bars with the mold; the
+    linkage and its stroke move with it unchanged). Outside the die-height range it is
+    refused."""
+    clamp = clamp_data(mech)
+    die = clamp.die_height
+    if die is None:
+        raise ClampingError(f"preset {mech.name!r} has no [clamp.die_height] (the tailstock's "
+                            f"die-height range)")
+    if not (math.isfinite(height) and die.min <= height <= die.max):
+        raise ClampingError(f"mold height {height!r} m is outside the die-height range "
+                            f"[{die.min:.6g}, {die.max:.6g}] m of {mech.name}")
+    bars = replace(clamp.tiebars, length=clamp.tiebars.length + height - die.reference)
+    return replace(mech, clamp=replace(clamp, tiebars=bars))
 
 
 def compliance(

@@ -243,6 +243,23 @@ class TieBars:
 
 
 @dataclass(frozen=True)
+class DieHeight:
+    """The tailstock's die-height (mold thickness) adjustment, m: the thinnest and thickest
+    mold the machine takes, and the mold height at which the tie bars' free length
+    ([clamp.tiebars] length) holds. The tailstock moves along the bars with the mold, so
+    the bars' span between their nuts grows with it mm for mm."""
+
+    min: float
+    max: float
+    reference: float
+
+    def __post_init__(self) -> None:
+        _check_positive(self)
+        if not self.min < self.max:
+            raise ParameterError(f"die height min {self.min!r} m must be below max {self.max!r} m")
+
+
+@dataclass(frozen=True)
 class ClampData:
     """What the real-mold clamping model needs beyond the link lengths.
 
@@ -250,7 +267,8 @@ class ClampData:
     mu: kinetic friction coefficient at the pins; static_factor: mu_s / mu_d,
     used once the final position is reached (the paper's 1.25); x_open:
     crosshead position with the clamp open, m, for clamps whose crosshead link
-    never becomes horizontal (then the kinematic open position does not exist).
+    never becomes horizontal (then the kinematic open position does not exist);
+    die_height: the tailstock's adjustment range ([clamp.die_height], optional).
     """
 
     pins: PinRadii
@@ -261,6 +279,7 @@ class ClampData:
     mu: float = 0.0
     static_factor: float = 1.25
     x_open: float | None = None
+    die_height: DieHeight | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.final_tiebar_force) and self.final_tiebar_force > 0):
@@ -510,13 +529,16 @@ def _section(cls: type, table: Any, origin: str, where: str) -> Any:
 
 
 def _clamp_from_table(table: Any, origin: str) -> ClampData:
-    """[clamp] with sub-tables pins, counts, links, tiebars."""
+    """[clamp] with sub-tables pins, counts, links, tiebars (and die_height, optional)."""
     if not isinstance(table, dict):
         raise ParameterError(f"{origin}: [clamp] must be a table")
-    parts = {"pins": PinRadii, "counts": MemberCounts, "links": LinkSections, "tiebars": TieBars}
+    parts = {"pins": PinRadii, "counts": MemberCounts, "links": LinkSections, "tiebars": TieBars,
+             "die_height": DieHeight}
     values = {k: v for k, v in table.items() if k not in parts}
     for key, cls in parts.items():
         if key not in table:
+            if key == "die_height":
+                continue
             raise ParameterError(f"{origin}: [clamp.{key}] is missing")
         values[key] = _section(cls, table[key], origin, f"clamp.{key}")
     return _section(ClampData, values, origin, "clamp")

@@ -6,10 +6,13 @@ angle; the ranking of a preset family's groups by four criteria; and a sweep of
 any two dimensions of a half over a grid with the same criteria.
 
 Every measure comes from the one mechanism model: positions and dL/dx from
-:mod:`toggle.kinematics` (``half_pose``, ``half_motion``), the force
-amplification from the frictionless force balance of :mod:`toggle.statics` on
-the pose's angles. So "force amplification = 1 / velocity ratio" (virtual
-work) is a check of two computations, not an identity.
+:mod:`toggle.kinematics` (``half_pose``, ``half_motion``), the frictionless
+force ratio from the force balance of :mod:`toggle.statics` on the pose's
+angles. So "force ratio = 1 / velocity ratio" (virtual work) is a check of two
+computations, not an identity. The force amplification Mp is the paper's, its
+Eq 6: the strokes' ratio S0 / Sm from lock-up (8.19 for group 1 at 1 deg), which
+``toggle design`` takes too; near lock-up it is twice the force ratio (the
+platen stroke grows as the angle squared).
 
 Definitions (seed 004's names; mapping in docs/li-micro-mapping.md):
 
@@ -19,7 +22,9 @@ Definitions (seed 004's names; mapping in docs/li-micro-mapping.md):
   away from lock-up; opening moves the crosshead to smaller x.
 * crosshead stroke S0 = x_lock - x, platen stroke Sm = L(x_lock) - L(x),
   stroke ratio Ms = Sm / S0 (Eq 3), velocity ratio Mv = dSm/dS0 = dL/dx (Eq 4),
-  force amplification Mp = platen force / crosshead force (Eq 5).
+  force amplification Mp = S0 / Sm (Eq 6, the strokes of Eqs 1 and 2 exact),
+  mechanical advantage = platen force / crosshead force without friction (Eq 5's
+  V0 / Vm read as speeds: 1 / Mv).
 * coping angle psi = 2 pi - theta3: inclination of the crosshead link to the
   crosshead's line of motion, signed as the paper's Eq 7,
   sin psi = (H - h - L3 sin(gamma0 + theta + alpha)) / L4.
@@ -167,6 +172,7 @@ class AngleMeasures(NamedTuple):
     velocity_ratio: np.ndarray
     force_amplification: np.ndarray
     coping_angle: np.ndarray
+    mechanical_advantage: np.ndarray
 
 
 #: Smallest toggle angle the measures take, rad: the crosshead's distance from lock-up,
@@ -185,7 +191,8 @@ def angle_grid(alpha_lock: float, alpha_max: float, points: int) -> np.ndarray:
 
 
 def angle_measures(dims: HalfDims, alphas: Any, *, label: str = "half") -> AngleMeasures:
-    """Strokes, stroke/velocity ratios, force amplification and coping angle at ``alphas``.
+    """Strokes, stroke/velocity ratios, force amplification (Eq 6), coping angle and the
+    frictionless force ratio at ``alphas``.
 
     Angles must be > 0: at lock-up the ratios are 0/0 and the force
     amplification is infinite.
@@ -207,9 +214,9 @@ def angle_measures(dims: HalfDims, alphas: Any, *, label: str = "half") -> Angle
     return AngleMeasures(
         alpha=alphas, x=x, crosshead_stroke=crosshead, platen_stroke=platen,
         stroke_ratio=platen / crosshead, velocity_ratio=motion.dL_dx,
-        force_amplification=np.asarray(
+        force_amplification=crosshead / platen, coping_angle=coping,
+        mechanical_advantage=np.asarray(
             mechanical_advantage(x, dims, _FRICTIONLESS_PINS, 0.0), dtype=float),
-        coping_angle=coping,
     )
 
 
@@ -229,7 +236,7 @@ CRITERIA = (
               lambda m: float(m.stroke_ratio[-1])),
     Criterion("velocity_ratio", "peak velocity ratio", "1",
               lambda m: float(np.max(m.velocity_ratio))),
-    Criterion("force_amplification", "force amplification at the smallest angle", "1",
+    Criterion("force_amplification", "force amplification (Eq 6) at the smallest angle", "1",
               lambda m: float(m.force_amplification[0])),
     # psi <= 0 over the li_micro range: the minimum is minus the largest inclination
     Criterion("coping_angle_min", "minimum coping angle", "rad",
