@@ -420,3 +420,74 @@ def test_hil_emulate_board_refuses_what_it_cannot_do(args: list[str], message: s
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 1 and message in result.stderr, result.stderr
     assert result.stdout == "" and "Traceback" not in result.stderr
+
+
+@pytest.mark.real_time
+def test_hil_run_pulses_on_the_timer_equal_the_commanded_steps(elf: Path, tmp_path: Path) -> None:
+    """`hil run --real --port PTY` (homing, the move to the start, one cycle at 40 mm/s:
+    tests/hil_host.py SHORT_RUN, the shortest job that homes and runs a whole cycle; the
+    default 3 cycles take three times as long) on the paced rehosted image. Counted on the
+    emulator's side: the rising edges TIM1's model put on PA8 (and TIM3's model counted)
+    equal the steps the firmware commanded, period by period, in every telemetry sample it
+    sent (homing included); over the recorded cycle they equal the host's commanded
+    positions; the table stands where the firmware's and the host's last position says."""
+    import csv
+
+    from hil_host import SHORT_RUN, X_OPEN, hil
+
+    board = NucleoBoard(elf, seed=9, rng_seed=13)
+    decoder, telemetry = p.FrameDecoder(), []
+    take = board.take_output
+
+    def tap() -> bytes:  # every byte the image sent, decoded beside the pty
+        data = take()
+        telemetry.extend(m for m in map(p.parse_message, decoder.feed(data))
+                         if isinstance(m, p.Telemetry))
+        return data
+
+    board.take_output = tap  # type: ignore[method-assign]
+    out = tmp_path / "run"
+    with NucleoRig(board) as rig:
+        code, stdout, stderr = hil("run", "--real", "--port", rig.port, "--out", str(out),
+                                   *SHORT_RUN, timeout=120.0)
+        with rig.paused():
+            rig.check()
+            pulses_pa8 = sum(b.rises(b.end) for b in board.tim1.bursts if b.output)
+            tim3_count = board.tim3.read(0x24, 4)  # CNT, as the firmware reads it
+    assert code == 0 and "1 of 1 cycles complete" in stdout, stderr
+    assert [reason for _, reason in board.log.resets] == ["power-on"]
+    samples = [t.sample for t in telemetry]
+    assert samples == list(range(samples[0], samples[0] + len(samples)))  # none lost
+    moves = [(t.steps - prev.steps) for prev, t in zip(telemetry, telemetry[1:])
+             if t.flags & p.TelemetryFlag.MOVING]  # a SET_POSITION is no move
+    commanded = sum(abs(d) for d in moves)
+    assert pulses_pa8 == commanded > 0
+    assert tim3_count == commanded & 0xFFFF  # TIM3 (16 bits) counted TIM1's TRGO from boot
+    assert board.log.pulses_ignored == 0
+    assert board.log.pulses == board.plant.steps == sum(moves)  # signed: the table's place
+    # the recorded cycle: the host's commanded positions, step by step
+    with (out / "samples.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    step_m = 200e-9
+    x_cmd = [float(r["x_cmd [m]"]) for r in rows]
+    host_steps = sum(abs(round((b - a) / step_m)) for a, b in zip(x_cmd, x_cmd[1:]))
+    first, last = int(rows[0]["sample"]), int(rows[-1]["sample"])
+    by_sample = {t.sample: t for t in telemetry}
+    in_run = sum(abs(by_sample[s].steps - by_sample[s - 1].steps)
+                 for s in range(first + 1, last + 1)
+                 if by_sample[s].flags & p.TelemetryFlag.MOVING)
+    assert host_steps == in_run > 0
+    homing = commanded - in_run
+    assert homing > 0  # the homing and the approach moved too
+    # the final position: the firmware's last count is the host's last x_cmd, and the table
+    # stands where the pulses put it, shifted only by homing's SET_POSITION (no pulses)
+    final = telemetry[-1]
+    assert round((x_cmd[-1] - X_OPEN) / step_m) == final.steps
+    reference = board.plant.steps - final.steps  # table steps at the host's step 0
+    status = board.plant.status()
+    assert status.x == pytest.approx(X_OPEN + board.plant.steps * step_m, abs=1e-12)
+    print(f"{len(board.tim1.bursts)} bursts: {pulses_pa8} pulses on PA8, TIM3 "
+          f"{tim3_count}; commanded {commanded} steps ({in_run} in the recorded cycle, "
+          f"{homing} homing and approach); table at {status.x * 1e3:.4f} mm, host's last "
+          f"x_cmd {x_cmd[-1] * 1e3:.4f} mm; the host's step 0 is the table's step {reference} "
+          f"(the home switch opens at step 1); {rig.summary()}")
