@@ -246,3 +246,59 @@ def test_a_failed_build_names_gcc_and_its_complaint(monkeypatch: pytest.MonkeyPa
 
 def test_split_frames() -> None:
     assert split_frames(b"ab\x00\x00cd\x00ef") == ([b"ab\x00", b"\x00", b"cd\x00"], b"ef")
+
+
+def _nucleo_rises(n: int, ticks: int) -> int:
+    """firmware/core/step_burst.h's law, written out: rising edges of an n-step burst of
+    TIM1 (60 MHz) within ``ticks`` of its start."""
+    period = (60_000 - 60) // n
+    first = period - min(period // 2, 150)
+    return 0 if ticks < first else min(n, (ticks - first) // period + 1)
+
+
+@pytest.mark.parametrize("timing", ["at-once", "nucleo"])
+def test_the_step_timing_moves_the_table_when_the_pulses_leave(library: Path,
+                                                              timing: str) -> None:
+    """"nucleo": a tick's steps leave in a burst from 300 us after it over the period, so the
+    table trails the count by the armed burst and the running one's unemitted pulses; a stop
+    (the stop input: a halt) gives the unemitted back and the count is where the table is.
+    "at-once": the table is at the count in every reading."""
+    setup = RigSetup()
+    fw = FirmwareMcu(ClampPhysics(), RigHardware(x_origin=setup.stroke[0]), 1,
+                     library=library, step_timing=timing)
+    now, seq = 0.0, 0
+
+    def send(msg: p.Message) -> None:
+        nonlocal seq
+        seq += 1
+        reply = decode(fw.receive(p.encode_message(msg, seq, p.FLAG_ACK_REQ), now))
+        assert reply[0].result == p.Result.OK, reply
+
+    send(p.Hello(host_nonce=1))
+    send(CONFIG)
+    deltas = [min(200, 5 * (i + 1)) for i in range(60)]  # up to 40 mm/s at 1 m/s^2
+    points = [(sum(deltas[:i + 1]), p.NO_CHECK) for i in range(len(deltas))]
+    for first in range(0, len(points), p.MAX_CHUNK_POINTS):
+        final = p.TrajChunk.FINAL if first + p.MAX_CHUNK_POINTS >= len(points) else 0
+        send(p.TrajChunk(first, final, tuple(points[first:first + p.MAX_CHUNK_POINTS])))
+    send(p.Start())
+    for _ in range(50):
+        fw.tick(now)
+        now += 1e-3
+    st = fw.sim_status()
+    lag = st["hw_steps"] - st["table_steps"]
+    burst_to_next_tick = 60 * (1000 - 300)  # TIM1 ticks from a burst's start to the tick
+    assert st["hw_steps"] > 0
+    assert lag == (0 if timing == "at-once" else 200 + 200 - _nucleo_rises(200,
+                                                                          burst_to_next_tick))
+    fw.press_stop()
+    fw.tick(now)
+    st = fw.sim_status()
+    steps, _, _, hw_steps = fw.counts()
+    assert st["table_steps"] == st["hw_steps"] == hw_steps == steps  # nothing in flight
+
+
+def test_an_unknown_step_timing_is_refused(library: Path) -> None:
+    with pytest.raises(ValueError, match="step_timing 'tim1': expected one of at-once, nucleo"):
+        FirmwareMcu(ClampPhysics(), RigHardware(x_origin=RigSetup().stroke[0]), 1,
+                    library=library, step_timing="tim1")
