@@ -27,12 +27,18 @@ from hil.rehost.machine import UNITS_PER_S, UnsupportedAccessError  # noqa: E402
 from hil.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image  # noqa: E402
 
 # The stepper driver the step generator is checked against: ADI Trinamic TMC5160 in its
-# STEP/DIR mode (docs/firmware.md "Stepper driver"): STEP high and low at least
-# max(tFILTSD, tCLK + 20 ns), about 100 ns at its 12 MHz clock; DIR set up 20 ns before
-# the STEP edge that uses it.
-STEP_HIGH_MIN_S = 100e-9
-STEP_LOW_MIN_S = 100e-9
+# STEP/DIR mode (docs/firmware.md "Stepper driver"), from the TMC5160/TMC5160A datasheet
+# Rev. 1.14 (2020-05-19), section 15.1 "Timing", table "STEP and DIR interface timing"
+# (p. 94): STEP input high and low time tSH, tSL >= max(tFILTSD, tCLK + 20 ns); DIR to STEP
+# setup tDSU >= 20 ns; DIR after STEP hold tDSH >= 20 ns; the spike filter tFILTSD at most
+# 30 ns. tCLK is the internal oscillator's period at its slowest, 11.5 MHz (chapter 28,
+# table "Clock oscillator and input", p. 122: fCLKOSC 11.5/12.0/12.5 MHz at tJ = 50 C).
+TMC_T_FILTSD_MAX_S = 30e-9
+TMC_F_CLK_MIN_HZ = 11.5e6
+STEP_HIGH_MIN_S = max(TMC_T_FILTSD_MAX_S, 1 / TMC_F_CLK_MIN_HZ + 20e-9)  # 107 ns
+STEP_LOW_MIN_S = STEP_HIGH_MIN_S
 DIR_SETUP_MIN_S = 20e-9
+DIR_HOLD_MIN_S = 20e-9
 NO_CHECK = -(2**31)
 
 
@@ -221,16 +227,22 @@ def test_step_pulses_equal_the_commanded_steps_and_meet_the_drivers_timing(elf: 
     high = min(b.high_units for b in bursts) / UNITS_PER_S
     low = min(b.low_units for b in bursts) / UNITS_PER_S
     assert high >= STEP_HIGH_MIN_S and low >= STEP_LOW_MIN_S
-    # DIR (PA9) is set before the first rising edge of the burst after each reversal
-    setups = []
+    # DIR (PA9) changes after the last rising edge of the burst before each reversal (its
+    # hold) and before the first rising edge of the burst after it (its setup)
+    setups, holds = [], []
     for prev, b in zip(bursts, bursts[1:]):
         if b.dir_high != prev.dir_high:
+            last_edge = prev.start + ((prev.n - 1) * prev.period + prev.ccr1) * prev.tick
             first_edge = b.start + b.ccr1 * b.tick
+            holds.append((b.dir_since - last_edge) / UNITS_PER_S)
             setups.append((first_edge - b.dir_since) / UNITS_PER_S)
     assert setups and min(setups) >= DIR_SETUP_MIN_S
+    assert holds and min(holds) >= DIR_HOLD_MIN_S
     print(f"{len(bursts)} bursts, {commanded} pulses; STEP high >= {high * 1e6:.2f} us, "
-          f"low >= {low * 1e6:.2f} us; DIR setup at a full-rate reversal "
-          f"{min(setups) * 1e6:.2f} us (TMC5160: 0.1, 0.1, 0.02 us)")
+          f"low >= {low * 1e6:.2f} us; at a full-rate reversal DIR hold "
+          f"{min(holds) * 1e6:.2f} us, setup {min(setups) * 1e6:.2f} us (TMC5160: "
+          f"{STEP_HIGH_MIN_S * 1e6:.3f}, {STEP_LOW_MIN_S * 1e6:.3f}, "
+          f"{DIR_HOLD_MIN_S * 1e6:.2f}, {DIR_SETUP_MIN_S * 1e6:.2f} us)")
 
 
 def test_a_burst_over_256_steps_is_internal(elf: Path) -> None:
