@@ -381,8 +381,9 @@ def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
     process, as a user starts them) run the same short job: the same samples and commanded
     positions, the same stroke to a few encoder counts (the rehosted plant follows the
     pulses as TIM1 emits them, about 1.7 periods behind the host build's sim, which `hil
-    emulate --firmware` runs with its steps at once), forces alike in their statistics (each run draws its own noise). The plain command: the host measures
-    the link when the session opens (the rehost runs slower than the wall clock)."""
+    emulate --firmware` runs with its steps at once), forces alike in their statistics
+    (each run draws its own noise). The plain command: the host measures the link when the
+    session opens (the rehost runs slower than the wall clock)."""
     import csv
     import json
     import signal
