@@ -25,20 +25,8 @@ unicorn = pytest.importorskip("unicorn", reason="needs the unicorn package (pip 
 
 from hil.rehost.machine import UNITS_PER_S, UnsupportedAccessError  # noqa: E402
 from hil.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image  # noqa: E402
+from hil.rehost.pulses import TMC5160, full_rate_reversal  # noqa: E402
 
-# The stepper driver the step generator is checked against: ADI Trinamic TMC5160 in its
-# STEP/DIR mode (docs/firmware.md "Stepper driver"), from the TMC5160/TMC5160A datasheet
-# Rev. 1.14 (2020-05-19), section 15.1 "Timing", table "STEP and DIR interface timing"
-# (p. 94): STEP input high and low time tSH, tSL >= max(tFILTSD, tCLK + 20 ns); DIR to STEP
-# setup tDSU >= 20 ns; DIR after STEP hold tDSH >= 20 ns; the spike filter tFILTSD at most
-# 30 ns. tCLK is the internal oscillator's period at its slowest, 11.5 MHz (chapter 28,
-# table "Clock oscillator and input", p. 122: fCLKOSC 11.5/12.0/12.5 MHz at tJ = 50 C).
-TMC_T_FILTSD_MAX_S = 30e-9
-TMC_F_CLK_MIN_HZ = 11.5e6
-STEP_HIGH_MIN_S = max(TMC_T_FILTSD_MAX_S, 1 / TMC_F_CLK_MIN_HZ + 20e-9)  # 107 ns
-STEP_LOW_MIN_S = STEP_HIGH_MIN_S
-DIR_SETUP_MIN_S = 20e-9
-DIR_HOLD_MIN_S = 20e-9
 NO_CHECK = -(2**31)
 
 
@@ -207,42 +195,24 @@ def test_the_plain_host_runs_a_trajectory_on_the_paced_pty(elf: Path) -> None:
 
 
 def test_step_pulses_equal_the_commanded_steps_and_meet_the_drivers_timing(elf: Path) -> None:
-    # an instant reversal at 51 mm/s takes more than the load cell's 838 N: a load cell
-    # 100 times coarser, and a force limit to match, for this test
-    board, s = _board(elf, hw=RigHardware(x_origin=RigSetup().stroke[0], load_gain_n=1e-2))
-    s.hello()
-    assert s.command(p.Config(max_step_delta=256, force_limit_n=50e3)).result == p.Result.OK
-    points = _profile(256, 12)  # 256 steps per ms: TIM1's longest burst
-    s.upload(points)
-    assert s.command(p.Start()).result == p.Result.OK
-    s.run(len(points) * 1e-3 + 0.02)
-    last = s.telemetry()[-1]
-    assert not s.faults() and last.state == p.State.IDLE, s.faults()
-    assert last.steps == points[-1][0] == 0
-    commanded = sum(abs(b - a) for (a, _), (b, _) in zip([(0, 0), *points], points))
-    bursts = [b for b in board.tim1.bursts if b.output]
-    assert sum(b.rises(b.end) for b in bursts) == commanded  # every pulse on PA8
+    """256 steps per period (TIM1's longest burst) out, back at once: every commanded step
+    is a rising edge on PA8, and STEP high and low, DIR setup and hold meet the TMC5160's
+    minimums (hil.rehost.pulses.TMC5160, from its datasheet)."""
+    board, timing, telemetry = full_rate_reversal(elf, periods=12, steps=256)
+    last = telemetry[-1]
+    assert not [m for m in telemetry if m.faults] and last.state == p.State.IDLE
+    assert last.steps == 0  # out and back
+    assert timing.pulses == 2 * 12 * 256  # every pulse on PA8
     assert board.log.pulses == board.plant.steps == last.steps  # signed: out and back
     assert board.log.pulses_ignored == 0
-    high = min(b.high_units for b in bursts) / UNITS_PER_S
-    low = min(b.low_units for b in bursts) / UNITS_PER_S
-    assert high >= STEP_HIGH_MIN_S and low >= STEP_LOW_MIN_S
-    # DIR (PA9) changes after the last rising edge of the burst before each reversal (its
-    # hold) and before the first rising edge of the burst after it (its setup)
-    setups, holds = [], []
-    for prev, b in zip(bursts, bursts[1:]):
-        if b.dir_high != prev.dir_high:
-            last_edge = prev.start + ((prev.n - 1) * prev.period + prev.ccr1) * prev.tick
-            first_edge = b.start + b.ccr1 * b.tick
-            holds.append((b.dir_since - last_edge) / UNITS_PER_S)
-            setups.append((first_edge - b.dir_since) / UNITS_PER_S)
-    assert setups and min(setups) >= DIR_SETUP_MIN_S
-    assert holds and min(holds) >= DIR_HOLD_MIN_S
-    print(f"{len(bursts)} bursts, {commanded} pulses; STEP high >= {high * 1e6:.2f} us, "
-          f"low >= {low * 1e6:.2f} us; at a full-rate reversal DIR hold "
-          f"{min(holds) * 1e6:.2f} us, setup {min(setups) * 1e6:.2f} us (TMC5160: "
-          f"{STEP_HIGH_MIN_S * 1e6:.3f}, {STEP_LOW_MIN_S * 1e6:.3f}, "
-          f"{DIR_HOLD_MIN_S * 1e6:.2f}, {DIR_SETUP_MIN_S * 1e6:.2f} us)")
+    assert timing.dir_setup_s is not None and timing.dir_hold_s is not None
+    assert timing.step_high_s >= TMC5160.step_high_s and timing.step_low_s >= TMC5160.step_low_s
+    assert timing.dir_setup_s >= TMC5160.dir_setup_s and timing.dir_hold_s >= TMC5160.dir_hold_s
+    assert timing.meets(TMC5160)
+    print(f"{timing.bursts} bursts, {timing.pulses} pulses; STEP high >= "
+          f"{timing.step_high_s * 1e6:.2f} us, low >= {timing.step_low_s * 1e6:.2f} us; at a "
+          f"full-rate reversal DIR hold {timing.dir_hold_s * 1e6:.2f} us, setup "
+          f"{timing.dir_setup_s * 1e6:.2f} us ({TMC5160.source})")
 
 
 def test_a_burst_over_256_steps_is_internal(elf: Path) -> None:
