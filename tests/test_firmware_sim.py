@@ -188,14 +188,19 @@ def test_reset_gives_new_boot_id_and_counts_at_zero(library: Path) -> None:
     assert fw.boot_id not in boot_ids and fw.boot_id != 0
     assert fw.state == p.State.BOOT
     assert fw.counts()[:2] == (0, 0)
-    (tel,) = [m for m in decode(fw.tick(10.0)) if isinstance(m, p.Telemetry)]
-    assert (tel.boot_id, tel.steps, tel.enc, tel.t_us) == (fw.boot_id, 0, 0, 0)
-    assert tel.state == p.State.BOOT and not tel.flags & p.TelemetryFlag.SESSION
+    # no session after the reset: no telemetry (docs/rig-protocol.md, section 5)
+    assert not [m for m in decode(fw.tick(10.0)) if isinstance(m, p.Telemetry)]
     after = fw.sim_status()  # the rig did not move: a reset is the MCU's, not the rig's
     assert after["hw_steps"] == before["hw_steps"]
     assert after["platen_position"] == pytest.approx(before["platen_position"], abs=1e-9)
+    (reply,) = [m for m in decode(fw.receive(p.encode_message(p.Hello(host_nonce=9), 1,
+                                                              p.FLAG_ACK_REQ), 10.0005))
+                if isinstance(m, p.HelloReply)]
+    assert reply.boot_id == fw.boot_id and reply.state == p.State.IDLE
     (tel,) = [m for m in decode(fw.tick(10.001)) if isinstance(m, p.Telemetry)]
+    assert (tel.boot_id, tel.steps, tel.enc) == (fw.boot_id, 0, 0)
     assert tel.t_us == 1000  # the first tick after the reset is the boot's time
+    assert tel.state == p.State.IDLE and tel.flags & p.TelemetryFlag.SESSION
     boot_ids.add(fw.boot_id)
     for _ in range(20):
         previous = fw.boot_id
@@ -209,7 +214,9 @@ def test_sensor_faults_and_seeded_noise(library: Path) -> None:
     setup = RigSetup()
 
     def idle_raws(seed: int, n: int, fw: FirmwareMcu | None = None) -> list[int]:
-        fw = fw or make_twin(setup, library, noise=0.2, seed=seed).fw
+        if fw is None:  # a session: telemetry flows only in one
+            fw = make_twin(setup, library, noise=0.2, seed=seed).fw
+            fw.receive(p.encode_message(p.Hello(host_nonce=1), 1, p.FLAG_ACK_REQ), 0.0)
         out = []
         for i in range(n):
             out += [m.load_raw for m in decode(fw.tick(i * 1e-3)) if isinstance(m, p.Telemetry)]
@@ -221,6 +228,7 @@ def test_sensor_faults_and_seeded_noise(library: Path) -> None:
     force = (np.array(a) - hw.load_offset) * hw.load_gain_n
     assert force.std() == pytest.approx(0.2, rel=0.15)  # load_noise_n rms
     fw = make_twin(setup, library, noise=0.2, seed=5).fw
+    fw.receive(p.encode_message(p.Hello(host_nonce=1), 1, p.FLAG_ACK_REQ), 0.0)
     idle_raws(0, 10, fw)
     fw.force_spike(50.0, 3)
     spiked = idle_raws(0, 5, fw)
