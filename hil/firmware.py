@@ -154,19 +154,24 @@ def build_host_firmware(preset: str = "chang2021", plant_only: bool = False) -> 
             shutil.rmtree(work, ignore_errors=True)
 
 
+#: firmware/sim/sim_rig.h's step timings (sim_rig_hw.step_timing) by name.
+STEP_TIMINGS = {"at-once": 0, "nucleo": 1}
+
+
 class SimRigHw(ctypes.Structure):
     """firmware/sim/sim_rig.h: sim_rig_hw."""
 
     _fields_ = [("x_origin", ctypes.c_double), ("home_x", ctypes.c_double),
                 ("load_gain_n", ctypes.c_double), ("load_noise_n", ctypes.c_double),
                 ("period_s", ctypes.c_double), ("noise_seed", ctypes.c_uint64),
-                ("load_offset", ctypes.c_int32)]
+                ("load_offset", ctypes.c_int32), ("step_timing", ctypes.c_int32)]
 
 
 class SimRigStatus(ctypes.Structure):
     """firmware/sim/sim_rig.h: sim_rig_status."""
 
-    _fields_ = [("hw_steps", ctypes.c_int32), ("driver_enabled", ctypes.c_bool),
+    _fields_ = [("hw_steps", ctypes.c_int32), ("table_steps", ctypes.c_int32),
+                ("driver_enabled", ctypes.c_bool),
                 ("reads", ctypes.c_uint32), ("watchdog_kicks", ctypes.c_uint32),
                 ("fmu_failures", ctypes.c_uint32), ("time_s", ctypes.c_double),
                 ("x", ctypes.c_double), ("platen_position", ctypes.c_double),
@@ -222,11 +227,18 @@ class FirmwareMcu:
 
     def __init__(self, physics: ClampPhysics, hw: RigHardware, seed: int,
                  library: Path | None = None,
-                 parameters: Mapping[str, float] | None = None) -> None:
+                 parameters: Mapping[str, float] | None = None,
+                 step_timing: str = "at-once") -> None:
         """``library``: a built librigfw.so (default: :func:`build_host_firmware` of the
         physics' preset); ``parameters``: FMU start values beyond or replacing those of
-        ``physics``. ValueError naming a parameter the FMU refuses."""
+        ``physics``; ``step_timing``: when the table takes a period's steps (one of
+        :data:`STEP_TIMINGS`, firmware/sim/sim_rig.h: "at-once" as hil.mcu_model, "nucleo"
+        as the NUCLEO board's TIM1 emits them). ValueError naming a parameter the FMU
+        refuses or an unknown step timing."""
         check_hardware(hw, physics.period)
+        if step_timing not in STEP_TIMINGS:
+            raise ValueError(f"step_timing {step_timing!r}: expected one of "
+                             f"{', '.join(STEP_TIMINGS)}")
         self.physics, self.hw, self.seed = physics, hw, seed
         library = library or os.environ.get("RIGFW_LIBRARY")  # a prebuilt one (sanitized)
         built = Path(library) if library else build_host_firmware(physics.preset)
@@ -236,7 +248,8 @@ class FirmwareMcu:
         self._hw = SimRigHw(
             x_origin=hw.x_origin, home_x=hw.x_origin if hw.home_x is None else hw.home_x,
             load_gain_n=hw.load_gain_n, load_noise_n=hw.load_noise_n, period_s=physics.period,
-            noise_seed=seed & 0xFFFF_FFFF_FFFF_FFFF, load_offset=hw.load_offset)
+            noise_seed=seed & 0xFFFF_FFFF_FFFF_FFFF, load_offset=hw.load_offset,
+            step_timing=STEP_TIMINGS[step_timing])
         self._open(self.parameters)
         self._partial = b""
         self._release_stop = False
@@ -370,5 +383,5 @@ class FirmwareMcu:
         return (self._lib.rigfw_sim_message() or b"").decode(errors="replace")
 
 
-__all__ = ["FirmwareMcu", "build_host_firmware", "core_sources", "fmu_start_values",
+__all__ = ["STEP_TIMINGS", "FirmwareMcu", "build_host_firmware", "core_sources", "fmu_start_values",
            "split_frames"]

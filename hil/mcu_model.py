@@ -402,7 +402,8 @@ class McuModel:
         if self.state in (p.State.IDLE, *MOTION_STATES):
             self._check_sensors(apply=True)
         t_us = round((now - self._boot_time) * 1e6) & 0xFFFFFFFF
-        self._out.append(self._telemetry(t_us))
+        if self.session:  # no host, no telemetry (docs/rig-protocol.md, section 5)
+            self._out.append(self._telemetry(t_us))
         self.sample = (self.sample + 1) & 0xFFFFFFFF
         return self._drain()
 

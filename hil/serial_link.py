@@ -306,6 +306,7 @@ class SerialLink:
         self._write_lock = threading.Lock()
         self._cmd_lock = threading.Lock()
         self._seq = random.getrandbits(16)
+        self._reset_probe: tuple[int, int] | None = None  # (seq, nonce) of the silence's HELLO
         self._pending: dict[int, _Pending] = {}
         self._failure: RigError | None = None
         self._last_sample: int | None = None
@@ -949,13 +950,31 @@ class SerialLink:
                 next_heartbeat = now + self.heartbeat_period
                 self._send_quietly(p.Heartbeat(int(now * 1e3) & 0xFFFFFFFF))
             if now >= self._watchdog_deadline() and not self._pending_input():
-                silence = now - self.stats.last_telemetry_rx
-                counted = now - self._silence.since
-                since_late = (f", {counted * 1e3:.1f} ms of it since the host was late"
-                              if silence - counted > 1e-3 else "")
-                self._fail(LinkTimeoutError(
-                    f"no telemetry for {silence * 1e3:.1f} ms{since_late} (watchdog "
-                    f"{self.telemetry_timeout * 1e3:.1f} ms): rig stalled or link broken"))
+                if self._reset_probe is None:
+                    self._probe_for_reset(now)
+                    continue
+                self._fail(self._silence_error(now))
+
+    def _silence_error(self, now: float) -> LinkTimeoutError:
+        silence = now - self.stats.last_telemetry_rx
+        counted = now - self._silence.since
+        since_late = (f", {counted * 1e3:.1f} ms of it since the host was late"
+                      if silence - counted > 1e-3 else "")
+        return LinkTimeoutError(
+            f"no telemetry for {silence * 1e3:.1f} ms{since_late} (watchdog "
+            f"{self.telemetry_timeout * 1e3:.1f} ms): rig stalled or link broken")
+
+    def _probe_for_reset(self, now: float) -> None:
+        """The telemetry fell silent: an MCU that reset has no session and sends none
+        (docs/rig-protocol.md, sections 5 and 10), so ask it with a HELLO, answered within
+        an ACK timeout. A new boot id is :class:`RigResetError`, the same one (a stall:
+        the HELLO may have taken the session over) or none the watchdog's
+        :class:`LinkTimeoutError`, as before the probe."""
+        seq, nonce = self._next_seq(), random.getrandbits(32)
+        self._reset_probe = (seq, nonce)
+        self._silence.since = now + self.ack_timeout - self._silence.timeout
+        with contextlib.suppress(LinkLostError):
+            self._write(p.encode_message(p.Hello(host_nonce=nonce), seq, p.FLAG_ACK_REQ))
 
     def _read(self, timeout: float) -> bytes:
         ser = self._ser
@@ -987,6 +1006,18 @@ class SerialLink:
             return
         if isinstance(msg, p.Telemetry):
             self._on_telemetry(dataclasses.replace(msg, rx_time=now), now)
+        elif (isinstance(msg, p.HelloReply) and self._reset_probe is not None
+              and (msg.acked_seq, msg.host_nonce) == self._reset_probe):
+            if self.info is not None and msg.boot_id != self.info.boot_id:
+                self._send_quietly(p.Bye())  # the probe's session: none is left open
+                self._fail(RigResetError(
+                    f"MCU reset detected mid-session: boot id changed from "
+                    f"{self.info.boot_id:#010x} to {msg.boot_id:#010x} after sample "
+                    f"{self._last_sample} (its telemetry stopped: no session after a "
+                    f"reset); the rig's position reference is lost, re-home and open a new "
+                    f"session"))
+            else:
+                self._fail(self._silence_error(now))
         elif isinstance(msg, (p.Ack, p.HelloReply)):
             pending = self._pending.get(msg.acked_seq)
             if pending is not None and pending.reply is None:

@@ -162,3 +162,43 @@ def test_qemu_image_hello_and_telemetry(qemu_elf: Path) -> None:
                for s in everything)
     counts = [len(w) for w in windows]
     assert any(LOW <= n <= HIGH for n in counts), counts
+
+
+def _until(port: _Port, wanted: type, seq: int | None = None,
+           timeout: float = 5.0) -> tuple[p.Message | None, list[p.Message]]:
+    """Read until a ``wanted`` message (with ``acked_seq`` ``seq`` if given) or ``timeout``;
+    it (or None) and everything read."""
+    seen: list[p.Message] = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for msg in port.read():
+            seen.append(msg)
+            if isinstance(msg, wanted) and (seq is None or getattr(msg, "acked_seq", seq) == seq):
+                return msg, seen
+    return None, seen
+
+
+def test_qemu_image_sends_no_telemetry_without_a_session(qemu_elf: Path) -> None:
+    """Issue 35: after the probe's BYE the QEMU image streamed telemetry without a session,
+    about 1800 samples by the time a host opened the port 2 s later, and the host's
+    HELLO_REPLY came 200 ms late behind them. Telemetry flows only in a session
+    (docs/rig-protocol.md, section 5): nothing before the HELLO, samples with SESSION in
+    it, nothing after the BYE."""
+    with QemuRig(qemu_elf) as rig:
+        port = _Port(rig.port)
+        try:
+            time.sleep(1.0)  # the guest runs on, no host
+            _, before = _until(port, p.Telemetry, timeout=0.5)
+            port.ser.write(b"\x00")
+            reply, _ = _until(port, p.HelloReply, port.send(p.Hello(host_nonce=0x5EED)))
+            assert reply is not None and reply.result == p.Result.OK
+            _, during = _until(port, type(None), timeout=0.3)  # 0.3 s of the session
+            assert _until(port, p.Ack, port.send(p.Bye()))[0] is not None
+            _until(port, type(None), timeout=0.1)  # what was on its way
+            _, after = _until(port, type(None), timeout=0.5)
+        finally:
+            port.close()
+    assert not [m for m in before if isinstance(m, p.Telemetry)], before[:3]
+    samples = [m for m in during if isinstance(m, p.Telemetry)]
+    assert samples and all(s.flags & p.TelemetryFlag.SESSION for s in samples)
+    assert not [m for m in after if isinstance(m, p.Telemetry)], after[:3]

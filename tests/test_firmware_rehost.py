@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import subprocess
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -24,14 +25,8 @@ unicorn = pytest.importorskip("unicorn", reason="needs the unicorn package (pip 
 
 from hil.rehost.machine import UNITS_PER_S, UnsupportedAccessError  # noqa: E402
 from hil.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image  # noqa: E402
+from hil.rehost.pulses import TMC5160, full_rate_reversal  # noqa: E402
 
-# The stepper driver the step generator is checked against: ADI Trinamic TMC5160 in its
-# STEP/DIR mode (docs/firmware.md "Stepper driver"): STEP high and low at least
-# max(tFILTSD, tCLK + 20 ns), about 100 ns at its 12 MHz clock; DIR set up 20 ns before
-# the STEP edge that uses it.
-STEP_HIGH_MIN_S = 100e-9
-STEP_LOW_MIN_S = 100e-9
-DIR_SETUP_MIN_S = 20e-9
 NO_CHECK = -(2**31)
 
 
@@ -200,36 +195,24 @@ def test_the_plain_host_runs_a_trajectory_on_the_paced_pty(elf: Path) -> None:
 
 
 def test_step_pulses_equal_the_commanded_steps_and_meet_the_drivers_timing(elf: Path) -> None:
-    # an instant reversal at 51 mm/s takes more than the load cell's 838 N: a load cell
-    # 100 times coarser, and a force limit to match, for this test
-    board, s = _board(elf, hw=RigHardware(x_origin=RigSetup().stroke[0], load_gain_n=1e-2))
-    s.hello()
-    assert s.command(p.Config(max_step_delta=256, force_limit_n=50e3)).result == p.Result.OK
-    points = _profile(256, 12)  # 256 steps per ms: TIM1's longest burst
-    s.upload(points)
-    assert s.command(p.Start()).result == p.Result.OK
-    s.run(len(points) * 1e-3 + 0.02)
-    last = s.telemetry()[-1]
-    assert not s.faults() and last.state == p.State.IDLE, s.faults()
-    assert last.steps == points[-1][0] == 0
-    commanded = sum(abs(b - a) for (a, _), (b, _) in zip([(0, 0), *points], points))
-    bursts = [b for b in board.tim1.bursts if b.output]
-    assert sum(b.rises(b.end) for b in bursts) == commanded  # every pulse on PA8
+    """256 steps per period (TIM1's longest burst) out, back at once: every commanded step
+    is a rising edge on PA8, and STEP high and low, DIR setup and hold meet the TMC5160's
+    minimums (hil.rehost.pulses.TMC5160, from its datasheet)."""
+    board, timing, telemetry = full_rate_reversal(elf, periods=12, steps=256)
+    last = telemetry[-1]
+    assert not [m for m in telemetry if m.faults] and last.state == p.State.IDLE
+    assert last.steps == 0  # out and back
+    assert timing.pulses == 2 * 12 * 256  # every pulse on PA8
     assert board.log.pulses == board.plant.steps == last.steps  # signed: out and back
     assert board.log.pulses_ignored == 0
-    high = min(b.high_units for b in bursts) / UNITS_PER_S
-    low = min(b.low_units for b in bursts) / UNITS_PER_S
-    assert high >= STEP_HIGH_MIN_S and low >= STEP_LOW_MIN_S
-    # DIR (PA9) is set before the first rising edge of the burst after each reversal
-    setups = []
-    for prev, b in zip(bursts, bursts[1:]):
-        if b.dir_high != prev.dir_high:
-            first_edge = b.start + b.ccr1 * b.tick
-            setups.append((first_edge - b.dir_since) / UNITS_PER_S)
-    assert setups and min(setups) >= DIR_SETUP_MIN_S
-    print(f"{len(bursts)} bursts, {commanded} pulses; STEP high >= {high * 1e6:.2f} us, "
-          f"low >= {low * 1e6:.2f} us; DIR setup at a full-rate reversal "
-          f"{min(setups) * 1e6:.2f} us (TMC5160: 0.1, 0.1, 0.02 us)")
+    assert timing.dir_setup_s is not None and timing.dir_hold_s is not None
+    assert timing.step_high_s >= TMC5160.step_high_s and timing.step_low_s >= TMC5160.step_low_s
+    assert timing.dir_setup_s >= TMC5160.dir_setup_s and timing.dir_hold_s >= TMC5160.dir_hold_s
+    assert timing.meets(TMC5160)
+    print(f"{timing.bursts} bursts, {timing.pulses} pulses; STEP high >= "
+          f"{timing.step_high_s * 1e6:.2f} us, low >= {timing.step_low_s * 1e6:.2f} us; at a "
+          f"full-rate reversal DIR hold {timing.dir_hold_s * 1e6:.2f} us, setup "
+          f"{timing.dir_setup_s * 1e6:.2f} us ({TMC5160.source})")
 
 
 def test_a_burst_over_256_steps_is_internal(elf: Path) -> None:
@@ -367,9 +350,10 @@ def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
     """`hil emulate --firmware --board nucleo` and `hil emulate --firmware` (each in its own
     process, as a user starts them) run the same short job: the same samples and commanded
     positions, the same stroke to a few encoder counts (the rehosted plant follows the
-    pulses as TIM1 emits them, 1-2 periods behind the host build's sim), forces alike in
-    their statistics (each run draws its own noise). The plain command: the host measures
-    the link when the session opens (the rehost runs slower than the wall clock)."""
+    pulses as TIM1 emits them, about 1.7 periods behind the host build's sim, which `hil
+    emulate --firmware` runs with its steps at once), forces alike in their statistics
+    (each run draws its own noise). The plain command: the host measures the link when the
+    session opens (the rehost runs slower than the wall clock)."""
     import csv
     import json
     import signal
@@ -420,3 +404,193 @@ def test_hil_emulate_board_refuses_what_it_cannot_do(args: list[str], message: s
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 1 and message in result.stderr, result.stderr
     assert result.stdout == "" and "Traceback" not in result.stderr
+
+
+@pytest.mark.real_time
+def test_hil_run_pulses_on_the_timer_equal_the_commanded_steps(elf: Path, tmp_path: Path) -> None:
+    """`hil run --real --port PTY` (homing, the move to the start, one cycle at 40 mm/s:
+    tests/hil_host.py SHORT_RUN, the shortest job that homes and runs a whole cycle; the
+    default 3 cycles take three times as long) on the paced rehosted image. Counted on the
+    emulator's side: the rising edges TIM1's model put on PA8 (and TIM3's model counted)
+    equal the steps the firmware commanded, period by period, in every telemetry sample it
+    sent (homing included); over the recorded cycle they equal the host's commanded
+    positions; the table stands where the firmware's and the host's last position says."""
+    import csv
+
+    from hil_host import SHORT_RUN, X_OPEN, hil
+
+    board = NucleoBoard(elf, seed=9, rng_seed=13)
+    decoder, telemetry = p.FrameDecoder(), []
+    take = board.take_output
+
+    def tap() -> bytes:  # every byte the image sent, decoded beside the pty
+        data = take()
+        telemetry.extend(m for m in map(p.parse_message, decoder.feed(data))
+                         if isinstance(m, p.Telemetry))
+        return data
+
+    board.take_output = tap  # type: ignore[method-assign]
+    out = tmp_path / "run"
+    with NucleoRig(board) as rig:
+        code, stdout, stderr = hil("run", "--real", "--port", rig.port, "--out", str(out),
+                                   *SHORT_RUN, timeout=120.0)
+        with rig.paused():
+            rig.check()
+            pulses_pa8 = sum(b.rises(b.end) for b in board.tim1.bursts if b.output)
+            tim3_count = board.tim3.read(0x24, 4)  # CNT, as the firmware reads it
+    assert code == 0 and "1 of 1 cycles complete" in stdout, stderr
+    assert [reason for _, reason in board.log.resets] == ["power-on"]
+    # telemetry flows in sessions only (the probe's, the host's): none lost within one,
+    # and the table does not move between them
+    pairs = list(zip(telemetry, telemetry[1:]))
+    gaps = [(a, b) for a, b in pairs if b.sample != a.sample + 1]
+    assert all(b.sample > a.sample and b.steps == a.steps for a, b in gaps), gaps
+    assert all(t.flags & p.TelemetryFlag.SESSION for t in telemetry)
+    moves = [(t.steps - prev.steps) for prev, t in pairs
+             if t.sample == prev.sample + 1 and t.flags & p.TelemetryFlag.MOVING]
+    # (a SET_POSITION is no move)
+    commanded = sum(abs(d) for d in moves)
+    assert pulses_pa8 == commanded > 0
+    assert tim3_count == commanded & 0xFFFF  # TIM3 (16 bits) counted TIM1's TRGO from boot
+    assert board.log.pulses_ignored == 0
+    assert board.log.pulses == board.plant.steps == sum(moves)  # signed: the table's place
+    # the recorded cycle: the host's commanded positions, step by step
+    with (out / "samples.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    step_m = 200e-9
+    x_cmd = [float(r["x_cmd [m]"]) for r in rows]
+    host_steps = sum(abs(round((b - a) / step_m)) for a, b in zip(x_cmd, x_cmd[1:]))
+    first, last = int(rows[0]["sample"]), int(rows[-1]["sample"])
+    by_sample = {t.sample: t for t in telemetry}
+    in_run = sum(abs(by_sample[s].steps - by_sample[s - 1].steps)
+                 for s in range(first + 1, last + 1)
+                 if by_sample[s].flags & p.TelemetryFlag.MOVING)
+    assert host_steps == in_run > 0
+    homing = commanded - in_run
+    assert homing > 0  # the homing and the approach moved too
+    # the final position: the firmware's last count is the host's last x_cmd, and the table
+    # stands where the pulses put it, shifted only by homing's SET_POSITION (no pulses)
+    final = telemetry[-1]
+    assert round((x_cmd[-1] - X_OPEN) / step_m) == final.steps
+    reference = board.plant.steps - final.steps  # table steps at the host's step 0
+    status = board.plant.status()
+    assert status.x == pytest.approx(X_OPEN + board.plant.steps * step_m, abs=1e-12)
+    print(f"{len(board.tim1.bursts)} bursts: {pulses_pa8} pulses on PA8, TIM3 "
+          f"{tim3_count}; commanded {commanded} steps ({in_run} in the recorded cycle, "
+          f"{homing} homing and approach); table at {status.x * 1e3:.4f} mm, host's last "
+          f"x_cmd {x_cmd[-1] * 1e3:.4f} mm; the host's step 0 is the table's step {reference} "
+          f"(the home switch opens at step 1); {rig.summary()}")
+
+
+def _chunks(points: list[tuple[int, int]]) -> list[p.TrajChunk]:
+    return [p.TrajChunk(first_index=first, points=tuple(points[first:first + p.MAX_CHUNK_POINTS]),
+                        flags=p.TrajChunk.FINAL if first + p.MAX_CHUNK_POINTS >= len(points)
+                        else 0)
+            for first in range(0, len(points), p.MAX_CHUNK_POINTS)]
+
+
+PREFILL_CHUNKS = 50  # 1500 points before START (the MCU buffers 2048)
+
+
+def _stream(command: Callable[[p.Message], p.Message], wait: Callable[[], None],
+            points: list[tuple[int, int]]) -> None:
+    """Prefill, START, the rest of the chunks as the buffer takes them (no underrun)."""
+    chunks = _chunks(points)
+    for chunk in chunks[:PREFILL_CHUNKS]:
+        assert command(chunk).result == p.Result.OK
+    assert command(p.Start()).result == p.Result.OK
+    for chunk in chunks[PREFILL_CHUNKS:]:
+        while (ack := command(chunk)).result == p.Result.NO_SPACE:
+            wait()
+        assert ack.result == p.Result.OK, ack
+
+
+def _host_build_run(hw: RigHardware, config: p.Config, points: list[tuple[int, int]],
+                    seconds_: float) -> list[p.Telemetry]:
+    """The host build with the NUCLEO's step timing, the same session as the board's (HELLO,
+    CONFIG, the trajectory streamed, START, heartbeats), one tick per millisecond."""
+    from hil.firmware import FirmwareMcu
+    from hil.rig_physics import ClampPhysics
+
+    fw = FirmwareMcu(ClampPhysics(), hw, seed=3, step_timing="nucleo")
+    now, seq = 0.0, 0
+    decoded: list[p.Message] = []
+
+    def take(frames: list[bytes]) -> None:
+        decoded.extend(p.parse_message(p.decode_frame(f[:-1])) for f in frames)
+
+    def tick() -> None:
+        nonlocal now
+        take(fw.tick(now))
+        now += 1e-3
+
+    def command(msg: p.Message) -> p.Message:
+        nonlocal seq
+        seq += 1
+        take(fw.receive(p.encode_message(msg, seq, p.FLAG_ACK_REQ), now))
+        for _ in range(10):  # as the board's session: 10 ms per command
+            tick()
+        return next(m for m in decoded if getattr(m, "acked_seq", None) == seq)
+
+    for _ in range(3):
+        tick()
+    assert command(p.Hello(host_nonce=0x5EED)).result == p.Result.OK
+    assert command(config).result == p.Result.OK
+    _stream(command, lambda: [tick() for _ in range(50)], points)
+    while now < seconds_:
+        seq += 1
+        take(fw.receive(p.encode_message(p.Heartbeat(0), seq, 0), now))
+        for _ in range(50):
+            tick()
+    return [m for m in decoded if isinstance(m, p.Telemetry)]
+
+
+def _the_run(telemetry: list[p.Telemetry]) -> list[p.Telemetry]:
+    """From the START's first RUNNING sample to 20 samples after the first IDLE after it."""
+    start = next(i for i, t in enumerate(telemetry) if t.state == p.State.RUNNING)
+    end = next(i for i in range(start, len(telemetry))
+               if telemetry[i].state == p.State.IDLE)
+    assert len(telemetry) >= end + 20, "the run did not end in time"
+    return telemetry[start:end + 20]
+
+
+def test_the_host_build_with_the_boards_step_timing_agrees_sample_by_sample(elf: Path) -> None:
+    """The plant of the rehosted image (stepped at its ticks, fed the pulses TIM1's model
+    emitted) and the host build's with step_timing "nucleo" (sim_rig.c emitting a period's
+    steps as step_burst.h says the board does) see the same table positions at the same
+    instants: a stroke to the toggle and back at 40 mm/s (200 steps per period, the whole
+    force range) gives the same encoder count in every sample and load-cell codes within
+    1 LSB (the load cell's noise off: each draws it from its own sequence)."""
+    from hil.experiment import stroke_positions
+
+    setup = RigSetup()
+    hw = RigHardware(x_origin=setup.stroke[0], load_noise_n=0.0)
+    x_open, x_toggle = setup.stroke
+    forward = list(stroke_positions(x_open, x_toggle, 40e-3, setup.period, setup.limits))
+    points = [(round((x - x_open) / 200e-9), NO_CHECK) for x in forward + forward[-2::-1]]
+    config = p.Config(force_limit_n=400.0, steps_min=-50_000, steps_max=400_000,
+                      enc_min=-500_000, enc_max=500_000, max_step_delta=400)
+    board, s = _board(elf, hw=hw)
+    s.hello()
+    assert s.command(config).result == p.Result.OK
+    _stream(s.command, lambda: s.run(0.05), points)
+    for _ in range(50):
+        s.run(0.1)
+        if s.telemetry()[-1].exec_index == len(points):
+            break
+    s.run(0.05)
+    assert not s.faults()
+    rehost = _the_run(s.telemetry())
+    host = _the_run(_host_build_run(hw, config, points, len(points) * 1e-3 + 1.0))
+    assert len(rehost) == len(host) > 2000
+    assert [t.steps for t in rehost] == [t.steps for t in host]
+    assert max(t.steps for t in host) == max(pt[0] for pt in points)
+    enc_r, enc_h = [t.enc for t in rehost], [t.enc for t in host]
+    assert max(enc_h) - min(enc_h) > 40_000  # the platen travelled its 45 mm
+    differ = [i for i, (a, b) in enumerate(zip(enc_r, enc_h)) if a != b]
+    assert not differ, (differ[:5], [(enc_r[i], enc_h[i]) for i in differ[:5]])
+    raw = [abs(a.load_raw - b.load_raw) for a, b in zip(rehost, host)]
+    assert max(raw) <= 1, max(raw)
+    loads = [t.load_raw for t in host]
+    print(f"{len(host)} samples: enc equal in all, load_raw differs by at most {max(raw)} "
+          f"LSB over {min(loads)}..{max(loads)}; table (TIM1 pulses) {board.plant.steps}")

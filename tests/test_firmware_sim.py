@@ -188,14 +188,19 @@ def test_reset_gives_new_boot_id_and_counts_at_zero(library: Path) -> None:
     assert fw.boot_id not in boot_ids and fw.boot_id != 0
     assert fw.state == p.State.BOOT
     assert fw.counts()[:2] == (0, 0)
-    (tel,) = [m for m in decode(fw.tick(10.0)) if isinstance(m, p.Telemetry)]
-    assert (tel.boot_id, tel.steps, tel.enc, tel.t_us) == (fw.boot_id, 0, 0, 0)
-    assert tel.state == p.State.BOOT and not tel.flags & p.TelemetryFlag.SESSION
+    # no session after the reset: no telemetry (docs/rig-protocol.md, section 5)
+    assert not [m for m in decode(fw.tick(10.0)) if isinstance(m, p.Telemetry)]
     after = fw.sim_status()  # the rig did not move: a reset is the MCU's, not the rig's
     assert after["hw_steps"] == before["hw_steps"]
     assert after["platen_position"] == pytest.approx(before["platen_position"], abs=1e-9)
+    (reply,) = [m for m in decode(fw.receive(p.encode_message(p.Hello(host_nonce=9), 1,
+                                                              p.FLAG_ACK_REQ), 10.0005))
+                if isinstance(m, p.HelloReply)]
+    assert reply.boot_id == fw.boot_id and reply.state == p.State.IDLE
     (tel,) = [m for m in decode(fw.tick(10.001)) if isinstance(m, p.Telemetry)]
+    assert (tel.boot_id, tel.steps, tel.enc) == (fw.boot_id, 0, 0)
     assert tel.t_us == 1000  # the first tick after the reset is the boot's time
+    assert tel.state == p.State.IDLE and tel.flags & p.TelemetryFlag.SESSION
     boot_ids.add(fw.boot_id)
     for _ in range(20):
         previous = fw.boot_id
@@ -209,7 +214,9 @@ def test_sensor_faults_and_seeded_noise(library: Path) -> None:
     setup = RigSetup()
 
     def idle_raws(seed: int, n: int, fw: FirmwareMcu | None = None) -> list[int]:
-        fw = fw or make_twin(setup, library, noise=0.2, seed=seed).fw
+        if fw is None:  # a session: telemetry flows only in one
+            fw = make_twin(setup, library, noise=0.2, seed=seed).fw
+            fw.receive(p.encode_message(p.Hello(host_nonce=1), 1, p.FLAG_ACK_REQ), 0.0)
         out = []
         for i in range(n):
             out += [m.load_raw for m in decode(fw.tick(i * 1e-3)) if isinstance(m, p.Telemetry)]
@@ -221,6 +228,7 @@ def test_sensor_faults_and_seeded_noise(library: Path) -> None:
     force = (np.array(a) - hw.load_offset) * hw.load_gain_n
     assert force.std() == pytest.approx(0.2, rel=0.15)  # load_noise_n rms
     fw = make_twin(setup, library, noise=0.2, seed=5).fw
+    fw.receive(p.encode_message(p.Hello(host_nonce=1), 1, p.FLAG_ACK_REQ), 0.0)
     idle_raws(0, 10, fw)
     fw.force_spike(50.0, 3)
     spiked = idle_raws(0, 5, fw)
@@ -246,3 +254,59 @@ def test_a_failed_build_names_gcc_and_its_complaint(monkeypatch: pytest.MonkeyPa
 
 def test_split_frames() -> None:
     assert split_frames(b"ab\x00\x00cd\x00ef") == ([b"ab\x00", b"\x00", b"cd\x00"], b"ef")
+
+
+def _nucleo_rises(n: int, ticks: int) -> int:
+    """firmware/core/step_burst.h's law, written out: rising edges of an n-step burst of
+    TIM1 (60 MHz) within ``ticks`` of its start."""
+    period = (60_000 - 60) // n
+    first = period - min(period // 2, 150)
+    return 0 if ticks < first else min(n, (ticks - first) // period + 1)
+
+
+@pytest.mark.parametrize("timing", ["at-once", "nucleo"])
+def test_the_step_timing_moves_the_table_when_the_pulses_leave(library: Path,
+                                                              timing: str) -> None:
+    """"nucleo": a tick's steps leave in a burst from 300 us after it over the period, so the
+    table trails the count by the armed burst and the running one's unemitted pulses; a stop
+    (the stop input: a halt) gives the unemitted back and the count is where the table is.
+    "at-once": the table is at the count in every reading."""
+    setup = RigSetup()
+    fw = FirmwareMcu(ClampPhysics(), RigHardware(x_origin=setup.stroke[0]), 1,
+                     library=library, step_timing=timing)
+    now, seq = 0.0, 0
+
+    def send(msg: p.Message) -> None:
+        nonlocal seq
+        seq += 1
+        reply = decode(fw.receive(p.encode_message(msg, seq, p.FLAG_ACK_REQ), now))
+        assert reply[0].result == p.Result.OK, reply
+
+    send(p.Hello(host_nonce=1))
+    send(CONFIG)
+    deltas = [min(200, 5 * (i + 1)) for i in range(60)]  # up to 40 mm/s at 1 m/s^2
+    points = [(sum(deltas[:i + 1]), p.NO_CHECK) for i in range(len(deltas))]
+    for first in range(0, len(points), p.MAX_CHUNK_POINTS):
+        final = p.TrajChunk.FINAL if first + p.MAX_CHUNK_POINTS >= len(points) else 0
+        send(p.TrajChunk(first, final, tuple(points[first:first + p.MAX_CHUNK_POINTS])))
+    send(p.Start())
+    for _ in range(50):
+        fw.tick(now)
+        now += 1e-3
+    st = fw.sim_status()
+    lag = st["hw_steps"] - st["table_steps"]
+    burst_to_next_tick = 60 * (1000 - 300)  # TIM1 ticks from a burst's start to the tick
+    assert st["hw_steps"] > 0
+    assert lag == (0 if timing == "at-once" else 200 + 200 - _nucleo_rises(200,
+                                                                          burst_to_next_tick))
+    fw.press_stop()
+    fw.tick(now)
+    st = fw.sim_status()
+    steps, _, _, hw_steps = fw.counts()
+    assert st["table_steps"] == st["hw_steps"] == hw_steps == steps  # nothing in flight
+
+
+def test_an_unknown_step_timing_is_refused(library: Path) -> None:
+    with pytest.raises(ValueError, match="step_timing 'tim1': expected one of at-once, nucleo"):
+        FirmwareMcu(ClampPhysics(), RigHardware(x_origin=RigSetup().stroke[0]), 1,
+                    library=library, step_timing="tim1")

@@ -92,6 +92,14 @@ class Bench:
                 self.beat()
         return self.tel[-1]
 
+    def silent(self, n: int = 1) -> None:
+        """``n`` periods without a session: no telemetry (docs/rig-protocol.md, section 5)."""
+        for _ in range(n):
+            self.now += 1e-3
+            msgs = self._decode(self.mcu.tick(self.now))
+            assert not [m for m in msgs if isinstance(m, p.Telemetry)], msgs
+            self.events += msgs
+
     def session(self, **config: float) -> Bench:
         """HELLO and CONFIG (a noiseless load cell reads alike for long: stuck_samples is
         raised unless given)."""
@@ -355,21 +363,26 @@ def test_a_calibration_override_lasts_one_session(kind: str) -> None:
 # --- telemetry, boots and homing -------------------------------------------------------
 
 
-def test_telemetry_every_period_and_new_boot_ids(kind: str) -> None:
+def test_telemetry_every_period_of_a_session_only_and_new_boot_ids(kind: str) -> None:
     b = Bench(kind)
-    b.tick(5)
+    b.silent(5)  # no host, no telemetry; the sample count runs on
     b.session()
     b.ack(p.EStop())
     b.tick(5)
     samples = [t.sample for t in b.tel]
     assert samples == list(range(samples[0], samples[0] + len(samples)))
-    assert [t.t_us for t in b.tel[:3]] == [0, 1000, 2000]  # since the MCU's boot
+    assert samples[0] == 5 and b.tel[0].t_us == 5000  # since the MCU's boot
+    assert all(t.flags & p.TelemetryFlag.SESSION for t in b.tel)
     first = b.tel[-1].boot_id
     b.mcu.reset()
+    b.silent(1)  # the reset ended the session
+    assert b.ack(p.Hello(1, 1, 43)).result == p.Result.OK
     tel = b.tick()
-    assert tel.boot_id not in (0, first) and tel.sample == 0 and tel.t_us == 0
-    assert (tel.state, tel.steps, tel.enc) == (p.State.BOOT, 0, 0)
+    assert tel.boot_id not in (0, first) and tel.sample == 1 and tel.t_us == 1000
+    assert (tel.state, tel.steps, tel.enc) == (p.State.IDLE, 0, 0)
     assert not tel.flags & p.TelemetryFlag.REFERENCED
+    assert b.ack(p.Bye()).result == p.Result.OK
+    b.silent(3)  # BYE ended it
 
 
 def test_home_switch_follows_the_table(bench: Bench) -> None:
@@ -402,7 +415,7 @@ def script(b: Bench) -> None:
     b.ack(p.ClearFault())
     b.tick(3)
     b.ack(p.Bye())
-    b.tick(3)
+    b.silent(3)
 
 
 @pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")

@@ -37,6 +37,7 @@
 
 #include "rig_core.h"
 #include "rx_ring.h"
+#include "step_burst.h"
 #include "stm32f4_regs.h"
 
 /* ---- constants ----------------------------------------------------------------------------- */
@@ -49,10 +50,10 @@
 #define CLOCK_WAIT_TRIES 100000u /* each wait: well over the datasheet's lock/ready times */
 #define STEP_TIMER_PSC 3u                         /* TIM1 at 60 MHz */
 #define STEP_TICKS_PER_PERIOD (APB2_TIMER_HZ / STEP_TIMER_PSC / RIG_TELEMETRY_HZ) /* 60000 */
-#define STEP_GUARD_TICKS 60u     /* a burst ends >= 1 us before the next one may start */
-#define STEP_PULSE_TICKS 150u    /* 2.5 us high (shorter when the period is under 5 us) */
-#define STEP_MAX_PER_PERIOD 256u /* TIM1's 8-bit repetition counter: one burst */
-#define STEP_PHASE_US 300u       /* a burst starts this long after its tick */
+_Static_assert(STEP_TICKS_PER_PERIOD == STEP_BURST_PERIOD_TICKS &&
+                   APB2_TIMER_HZ / STEP_TIMER_PSC == STEP_BURST_CLOCK_HZ,
+               "step_burst.h describes TIM1 at these clocks");
+/* STEP_GUARD_TICKS, STEP_PULSE_TICKS, STEP_MAX_PER_PERIOD, STEP_PHASE_US: step_burst.h */
 #define STEP_ARM_DEADLINE_US (STEP_PHASE_US - 10u) /* hal_step later than this: an error */
 #define TX_DMA_BYTES 128u
 #define IWDG_PRESCALER_DIV8 1u /* LSI 32 kHz / 8 = 4 kHz */
@@ -373,8 +374,8 @@ void hal_step(int32_t delta) {
         board_tick_stats.step_errors++;
         return;
     }
-    uint32_t period = (STEP_TICKS_PER_PERIOD - STEP_GUARD_TICKS) / n; /* timer ticks */
-    uint32_t high = period / 2u < STEP_PULSE_TICKS ? period / 2u : STEP_PULSE_TICKS;
+    uint32_t period = step_burst_period(n); /* timer ticks */
+    uint32_t high = step_burst_high(period);
     /* no interrupt between the deadline check above and the last write: the running burst
      * (the last period's) ends >= 4.8 us after the deadline and takes these at its end */
     irq_disable();

@@ -5,5 +5,5 @@
 CORE_DIR := $(patsubst %/,%,$(dir $(lastword $(MAKEFILE_LIST))))
 CORE_SRC := $(CORE_DIR)/rig_core.c $(CORE_DIR)/rig_frame.c $(CORE_DIR)/rig_wire.c
 CORE_HDR := $(CORE_DIR)/rig_core.h $(CORE_DIR)/rig_frame.h $(CORE_DIR)/rig_wire.h \
-            $(CORE_DIR)/rig_hal.h
+            $(CORE_DIR)/rig_hal.h $(CORE_DIR)/step_burst.h
 CORE_CFLAGS := -std=c11 -Wall -Wextra -Werror -Wconversion -Wshadow -I$(CORE_DIR)

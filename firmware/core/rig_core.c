@@ -879,6 +879,6 @@ void rig_tick(rig_mcu *m, uint32_t t_us) {
     }
     apply_halt(m);
     sync_driver(m);
-    send_telemetry(m);
+    if (m->session) send_telemetry(m); /* no host, no telemetry (docs/rig-protocol.md 5) */
     m->sample++;
 }

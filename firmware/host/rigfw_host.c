@@ -89,6 +89,7 @@ EXPORT void rigfw_tick(double now_s) {
     }
     double us = nearbyint((now_s - boot_s) * 1e6);
     uint32_t t_us = (uint32_t)(int64_t)fmod(us, 4294967296.0);
+    sim_rig_tick(); /* the tick's instant: the board's step bursts in flight age */
     rig_tick(&mcu, t_us);
 }
 
@@ -97,9 +98,12 @@ EXPORT size_t rigfw_tx_take(uint8_t *out, size_t max) {
     return opened ? rig_tx_take(&mcu, out, max) : 0;
 }
 
-/* MCU reset: new boot id, no session, counts at 0; the rig's physics is untouched. */
+/* MCU reset: new boot id, no session, counts at 0; the rig's physics is untouched, but the
+ * step pulses not yet emitted are (the reset stops the step timer). */
 EXPORT void rigfw_reset(void) {
-    if (opened) boot();
+    if (!opened) return;
+    (void)hal_step_halt();
+    boot();
 }
 
 EXPORT void rigfw_link_lost(void) {

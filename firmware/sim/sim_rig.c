@@ -22,6 +22,7 @@
 
 #include "fmi2Functions.h"
 #include "clamp_model_data.h"
+#include "step_burst.h"
 
 #ifndef SIM_RIG_ARENA_BYTES
 #define SIM_RIG_ARENA_BYTES 4096u
@@ -41,6 +42,9 @@ static struct {
     bool ready;
     /* actuators and counters */
     int32_t hw_steps;
+    /* the table: steps taken (all of hw_steps but the bursts in flight, NUCLEO timing);
+     * the bursts armed at the last tick (running) and at this one (starting later) */
+    int32_t table_steps, burst_running, burst_armed;
     bool driver_enabled, stop_pressed;
     uint32_t reads, kicks, fmu_failures;
     double time_s, platen, force;
@@ -168,6 +172,13 @@ static void release(void) {
     arena_used = 0;
 }
 
+/* Pulses of a signed burst whose rising edge came by the tick after its start. */
+static int32_t emitted_by_tick(int32_t burst) {
+    uint32_t n = (uint32_t)(burst < 0 ? -(int64_t)burst : burst);
+    int32_t done = (int32_t)step_burst_rises(n, STEP_BURST_TICKS_TO_TICK);
+    return burst < 0 ? -done : done;
+}
+
 /* ---- sim_rig.h ------------------------------------------------------------------------- */
 
 int sim_rig_init(const sim_rig_hw *hw, const char *const *names, const double *values, int n,
@@ -196,6 +207,11 @@ int sim_rig_init(const sim_rig_hw *hw, const char *const *names, const double *v
     }
     if (!(isfinite(hw->x_origin) && isfinite(hw->home_x))) {
         fail(err, err_len, "hardware: x_origin and home_x must be finite");
+        return -1;
+    }
+    if (hw->step_timing != SIM_RIG_STEPS_AT_ONCE && hw->step_timing != SIM_RIG_STEPS_NUCLEO) {
+        fail(err, err_len, "hardware: step_timing must be %d (at once) or %d (NUCLEO), got %ld",
+             SIM_RIG_STEPS_AT_ONCE, SIM_RIG_STEPS_NUCLEO, (long)hw->step_timing);
         return -1;
     }
     if (hw->load_offset < (int32_t)ADC_MIN || hw->load_offset > (int32_t)ADC_MAX) {
@@ -296,12 +312,13 @@ void sim_rig_press_stop(bool pressed) { sim.stop_pressed = pressed; }
 
 void sim_rig_get_status(sim_rig_status *out) {
     out->hw_steps = sim.hw_steps;
+    out->table_steps = sim.table_steps + emitted_by_tick(sim.burst_running);
     out->driver_enabled = sim.driver_enabled;
     out->reads = sim.reads;
     out->watchdog_kicks = sim.kicks;
     out->fmu_failures = sim.fmu_failures;
     out->time_s = sim.time_s;
-    out->x = table_x(sim.hw_steps);
+    out->x = table_x(out->table_steps);
     out->platen_position = sim.platen;
     out->input_force = sim.force;
     out->arena_used = arena_used;
@@ -311,16 +328,39 @@ const char *sim_rig_last_message(void) { return log_text; }
 
 /* ---- rig_hal.h ------------------------------------------------------------------------- */
 
-void hal_step(int32_t delta) { sim.hw_steps += delta; } /* no pulses: the move is at once */
+void sim_rig_tick(void) {
+    if (sim.hw.step_timing != SIM_RIG_STEPS_NUCLEO) return;
+    sim.table_steps += sim.burst_running; /* it ended STEP_PHASE_US after the last tick */
+    sim.burst_running = sim.burst_armed;
+    sim.burst_armed = 0;
+}
 
-int32_t hal_step_halt(void) { return 0; }
+void hal_step(int32_t delta) {
+    sim.hw_steps += delta;
+    if (sim.hw.step_timing == SIM_RIG_STEPS_NUCLEO) {
+        sim.burst_armed += delta; /* one hal_step per tick: the burst of this period */
+    } else {
+        sim.table_steps += delta; /* no pulses: the move is at once */
+    }
+}
+
+int32_t hal_step_halt(void) {
+    /* the pulses not emitted at this tick's instant: the rest of the running burst and the
+     * armed one (at once: none) */
+    int32_t done = emitted_by_tick(sim.burst_running);
+    int32_t left = sim.burst_running - done + sim.burst_armed;
+    sim.table_steps += done;
+    sim.hw_steps -= left;
+    sim.burst_running = sim.burst_armed = 0;
+    return left;
+}
 
 void hal_driver_enable(bool on) { sim.driver_enabled = on; }
 
 void hal_watchdog_kick(void) { sim.kicks++; }
 
 void hal_read(rig_inputs *in) {
-    double x = table_x(sim.hw_steps);
+    double x = table_x(sim.table_steps + emitted_by_tick(sim.burst_running));
     memset(in, 0, sizeof *in);
     if (!sim.ready) return;
     /* the plant: one FMU step of the period toward the table's position */

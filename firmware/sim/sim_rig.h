@@ -30,7 +30,19 @@ typedef struct {
     double period_s;     /* one hal_read() is one FMU step of this length, s (> 0) */
     uint64_t noise_seed; /* seed of the noise generator: the same seed, the same noise */
     int32_t load_offset; /* ADC counts at zero force */
+    int32_t step_timing; /* SIM_RIG_STEPS_AT_ONCE or SIM_RIG_STEPS_NUCLEO (below) */
 } sim_rig_hw;
+
+/* When the table takes a period's steps (sim_rig_hw.step_timing):
+ * AT_ONCE  all of them before the period's reading (hil.mcu_model's idealised board: the
+ *          reading of a tick shows that tick's steps; hal_step_halt() has nothing left);
+ * NUCLEO   as the NUCLEO-F446RE's TIM1 emits them (step_burst.h): a tick's steps leave in
+ *          a burst that starts STEP_PHASE_US after it and lasts the period, and the reading
+ *          at a tick shows the pulses whose rising edge came by that tick; the board calls
+ *          sim_rig_tick() at each tick's instant, before the core's rig_tick, and
+ *          hal_step_halt() gives back the pulses not yet emitted at that instant. */
+#define SIM_RIG_STEPS_AT_ONCE 0
+#define SIM_RIG_STEPS_NUCLEO 1
 
 #define SIM_RIG_STEP_M 200e-9 /* table travel of one step (RIG_STEP_NM) */
 #define SIM_RIG_ENC_M 1e-6    /* platen travel of one encoder count (RIG_ENC_NM) */
@@ -43,6 +55,9 @@ typedef struct {
 int sim_rig_init(const sim_rig_hw *hw, const char *const *names, const double *values, int n,
                  char *err, size_t err_len);
 
+/* The board's tick instant (SIM_RIG_STEPS_NUCLEO): the bursts in flight age by a period. */
+void sim_rig_tick(void);
+
 /* Sensor faults (hil.rig_emulator.FaultPlan). */
 void sim_rig_force_spike(double newtons, uint32_t samples); /* add to the next readings */
 void sim_rig_stick_load(bool on);    /* the load-cell reading freezes (true) / recovers */
@@ -51,7 +66,8 @@ void sim_rig_press_stop(bool pressed); /* the operator's stop button (stop_input
 
 /* What the rig is doing (for tests and the board's diagnostics). */
 typedef struct {
-    int32_t hw_steps;         /* steps output since power-on */
+    int32_t hw_steps;         /* steps output since power-on (hal_step's sum) */
+    int32_t table_steps;      /* of them, those the table took by the last reading */
     bool driver_enabled;      /* last hal_driver_enable() */
     uint32_t reads;           /* hal_read() calls = FMU steps attempted */
     uint32_t watchdog_kicks;  /* hal_watchdog_kick() calls */

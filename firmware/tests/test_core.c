@@ -202,9 +202,18 @@ static rig_msg_state state_of(size_t nth) {
     return s;
 }
 
+/* n ticks without a session: no telemetry (docs/rig-protocol.md, section 5). */
+static void silent_ticks(int n) {
+    for (int i = 0; i < n; i++) {
+        tick();
+        drain();
+        for (size_t k = 0; k < nout; k++) CHECK(out[k].type != RIG_MSG_TELEMETRY);
+    }
+}
+
 static void session(void) {
     boot();
-    ticks(1);
+    silent_ticks(1);
     CHECK_EQ(hello(), RIG_OK);
     CHECK_EQ(M.state, RIG_STATE_IDLE);
 }
@@ -884,9 +893,9 @@ static void test_heartbeat_loss_at_rest(void) {
     CHECK_EQ(t.state, RIG_STATE_IDLE);
     /* BYE disarms it */
     CHECK_EQ(simple(RIG_MSG_BYE), RIG_OK);
-    t = ticks(600);
-    CHECK_EQ(t.state, RIG_STATE_BOOT);
-    CHECK_EQ(t.faults, 0);
+    silent_ticks(600);
+    CHECK_EQ(M.state, RIG_STATE_BOOT);
+    CHECK_EQ(M.faults, 0);
 }
 
 static void test_heartbeat_loss_running(void) {
@@ -1037,16 +1046,22 @@ static void test_config_rechecks_buffered_points(void) {
     CHECK_EQ(config(&c), RIG_OK);
 }
 
-static void test_telemetry_every_state_and_tx_fifo(void) {
+static void test_telemetry_only_in_a_session_and_tx_fifo(void) {
     boot();
-    for (int i = 0; i < 3; i++) {
+    silent_ticks(3); /* no host, no telemetry; the sample count runs on */
+    CHECK_EQ(hello(), RIG_OK);
+    for (int i = 3; i < 6; i++) {
         rig_msg_telemetry t = ticks(1);
-        CHECK_EQ(t.state, RIG_STATE_BOOT);
+        CHECK_EQ(t.state, RIG_STATE_IDLE);
         CHECK_EQ(t.sample, (uint32_t)i);
         CHECK_EQ(t.t_us, (uint32_t)i * 1000u);
         CHECK_EQ(t.boot_id, 0x5EED0001u);
-        CHECK_EQ(out[0].flags, 0);
+        CHECK(t.flags & RIG_TF_SESSION);
+        CHECK_EQ(out[nout - 1].flags, 0);
     }
+    CHECK_EQ(simple(RIG_MSG_BYE), RIG_OK); /* the session ends: telemetry stops */
+    silent_ticks(3);
+    CHECK_EQ(hello(), RIG_OK);
     fake.home_switch = true;
     rig_msg_telemetry t = ticks(1);
     CHECK(t.flags & RIG_TF_HOME_SWITCH);
@@ -1104,11 +1119,10 @@ static void test_set_position_and_bye(void) {
     rig_link_lost(&M);
     drain();
     CHECK_EQ(state_of(0).reason, RIG_REASON_LINK_LOST);
-    t = ticks(1);
-    CHECK_EQ(t.steps, 30 + 5);
-    CHECK(!(t.flags & RIG_TF_SESSION));
-    t = ticks(2);
-    CHECK_EQ(t.state, RIG_STATE_IDLE);
+    silent_ticks(1); /* the session ended: the stop goes on, without telemetry */
+    CHECK_EQ(M.steps, 30 + 5);
+    silent_ticks(2);
+    CHECK_EQ(M.state, RIG_STATE_IDLE);
 }
 
 /* ---- main ---------------------------------------------------------------------------------- */
@@ -1144,7 +1158,7 @@ static const test_case tests[] = {
     T(test_estop_and_driver),
     T(test_config_rules),
     T(test_config_rechecks_buffered_points),
-    T(test_telemetry_every_state_and_tx_fifo),
+    T(test_telemetry_only_in_a_session_and_tx_fifo),
     T(test_set_position_and_bye),
 };
 

@@ -5,10 +5,15 @@ unchanged on :mod:`hil.rehost.machine` with the peripheral models of
 
 The rig is the host build's plant (firmware/sim/sim_rig.c on the native FMU, built by
 :func:`hil.firmware.build_host_firmware` with ``plant_only``), stepped once per millisecond
-of emulated time: its input is the table position the step pulses have driven (rising
-edges on PA8 in TIM1's bursts, direction PA9, counted only while the driver is enabled on
-PA10), its platen position is the encoder TIM2 counts, its force (as load-cell counts with
-the sim's noise) is what the ADS131M02 converts, and its home switch is PC0.
+of emulated time, at the firmware's tick instants (TIM5's update events) while the tick
+runs, so the image reads the plant as it stands at its tick (a free 1 ms grid would put a
+boot-dependent phase of up to a period between the two): its input is the table position
+the step pulses have driven (rising edges on PA8 in TIM1's bursts, direction PA9, counted
+only while the driver is enabled on PA10), its platen position is the encoder TIM2 counts,
+its force (as load-cell counts with the sim's noise) is what the ADS131M02 converts, and its
+home switch is PC0. The host build with ``step_timing="nucleo"`` feeds the same plant the
+same positions at the same instants (docs/firmware.md "Host build and rehost, sample by
+sample").
 
 :class:`NucleoBoard` is the board (run it to a time, poke its inputs, read what it did);
 :class:`NucleoRig` serves it on a pseudo-terminal, paced so emulated time never runs
@@ -148,7 +153,8 @@ class Plant:
 
 
 class PlantClock:
-    """The plant's 1 ms steps as an event of the machine (physics runs on its own)."""
+    """The plant's 1 ms steps as an event of the machine (physics runs on its own): a period
+    after the last step, unless a tick (TIM5's update) stepped it first."""
 
     def __init__(self, board: NucleoBoard) -> None:
         self.board = board
@@ -230,6 +236,7 @@ class NucleoBoard:
         self.tim2 = m.add(EncoderTimer(m, self.rcc, self.dbg, self._encoder))
         self.tim5 = m.add(TickTimer(m, self.rcc, self.dbg))
         self.tim5.on_trgo = self.tim1.trigger
+        self.tim5.on_update = self.plant_period  # the plant steps at the image's ticks
         self.adc = Ads131m02(lambda: m.now, self._clkin)
         self.spi = m.add(Spi(m, self.rcc, self.adc.exchange))
         self.iwdg = m.add(Iwdg(m, self.rcc))
@@ -313,8 +320,12 @@ class NucleoBoard:
         return total
 
     def plant_period(self, t: int) -> None:
+        """One step of the plant at ``t`` with the pulses since its last (once per instant)."""
+        if t <= self._last_period:
+            return
         delta = self.pulses_between(self._last_period, t)
         self._last_period = t
+        self.plant_clock.next = t + seconds(PLANT_PERIOD_S)
         if delta and not (self.enable_level() and self.step_pin_connected()):
             self.log.pulses_ignored += abs(delta)
             delta = 0

@@ -610,7 +610,8 @@ class _Timer(Peripheral):
 class TickTimer(_Timer):
     """TIM5 as the tick (RM0390 17.4): upcounting from the prescaled APB1 timer clock,
     update at ARR with UIF and its interrupt (URS), OC1REF in PWM mode 2 as TRGO, whose
-    rising edge (CNT reaching CCR1) triggers TIM1 (TIM1's ITR0)."""
+    rising edge (CNT reaching CCR1) triggers TIM1 (TIM1's ITR0). ``on_trgo(t)`` and
+    ``on_update(t)`` are called at those instants (the board's wiring)."""
 
     NAME = "TIM5"
     BASE = 0x40000C00
@@ -625,6 +626,7 @@ class TickTimer(_Timer):
         self.next_update: int | None = None
         self.next_edge: int | None = None
         self.on_trgo: Callable[[int], None] = getattr(self, "on_trgo", lambda t: None)
+        self.on_update: Callable[[int], None] = getattr(self, "on_update", lambda t: None)
         self.updates = 0
 
     def _schedule(self, now: int) -> None:
@@ -653,6 +655,7 @@ class TickTimer(_Timer):
                 self.regs[SR] |= 1
                 if self.regs[DIER] & 1:
                     self.m.pend(16 + self.IRQ)
+                self.on_update(t)
 
     def next_event(self) -> int | None:
         if not self.regs[CR1] & 1:
