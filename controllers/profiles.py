@@ -240,18 +240,35 @@ def read_profile_columns(path: str | Path, columns: tuple[str, ...] = CSV_COLUMN
     header = [h.strip() for h in next(csv.reader(lines[:1]))]
     missing = [c for c in columns if c not in header]
     if missing:
-        raise ProfileError(f"profile {path} lacks column(s) {missing}; header is {header}")
-    try:
-        data = np.loadtxt(lines[1:], delimiter=",", ndmin=2,
-                          usecols=[header.index(c) for c in columns])
-    except ValueError as exc:
-        raise ProfileError(f"profile {path}: {exc}") from exc
+        raise ProfileError(f"profile {path} lacks the column(s) {', '.join(missing)}; its "
+                           f"header is: {', '.join(header)}")
+    data = np.empty((len(lines) - 1, len(columns)))
+    at = [header.index(c) for c in columns]
+    for row, fields in enumerate(csv.reader(lines[1:])):
+        try:
+            data[row] = [float(fields[i]) for i in at]
+        except (ValueError, IndexError):
+            raise ProfileError(f"profile {path}, line {_line_of(text, row + 1)}: expected "
+                               f"{len(header)} numbers ({', '.join(header)}), got "
+                               f"{','.join(fields)!r}") from None
     if not np.all(np.isfinite(data)):
         raise ProfileError(f"profile {path} holds non-finite numbers")
     time = data[:, columns.index(CSV_COLUMNS[0])] if CSV_COLUMNS[0] in columns else None
     if data.shape[0] < 2 or (time is not None and np.any(np.diff(time) <= 0)):
         raise ProfileError(f"profile {path}: need >= 2 rows with increasing time")
     return data
+
+
+def _line_of(text: str, data_row: int) -> int:
+    """The 1-based line number in ``text`` of its ``data_row``-th non-comment line (0: the
+    header)."""
+    seen = -1
+    for number, line in enumerate(text.splitlines(), 1):
+        if line.strip() and not line.lstrip().startswith("#"):
+            seen += 1
+            if seen == data_row:
+                return number
+    return number
 
 
 def read_profile_csv(path: str | Path) -> ProfileSamples:

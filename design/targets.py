@@ -168,10 +168,22 @@ def _preset_text(preset: str) -> str:
     return json.dumps(preset_table(preset)[0], sort_keys=True, default=str)
 
 
+def _given(value: Any) -> str:
+    """What the file gave for a key, in TOML's words (not Python's: no None, no quotes)."""
+    if value is None:
+        return "but it is missing"
+    if isinstance(value, dict):
+        return "got a table"
+    try:
+        return f"got {json.dumps(value)}"
+    except (TypeError, ValueError):  # a TOML date or time
+        return f"got {value}"
+
+
 def _number(value: Any, where: str, unit: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(
             value):
-        raise ParameterError(f"{where} must be a finite number ({unit}), got {value!r}")
+        raise ParameterError(f"{where} must be a finite number ({unit}), {_given(value)}")
     return float(value)
 
 
@@ -189,7 +201,7 @@ def _bounds(table: Any, origin: str) -> dict[str, tuple[float, float]]:
         pair = value if isinstance(value, list) else [value, value]
         if len(pair) != 2:
             raise ParameterError(f"{where} must be [low, high] or one number ({unit}), "
-                                 f"got {value!r}")
+                                 f"{_given(value)}")
         lo, hi = (_number(v, where, unit) for v in pair)
         if lo > hi:
             raise ParameterError(f"{where}: low {lo:g} is above high {hi:g} {unit}")
@@ -270,13 +282,13 @@ def targets_from_dict(table: dict[str, Any], origin: str = "<targets>") -> Targe
     preset = table.get("preset")
     if not isinstance(preset, str):
         raise ParameterError(f"{origin}: preset must be a preset name or TOML path, "
-                             f"got {preset!r}")
+                             f"{_given(preset)}")
     base = load_preset(preset)
     objectives = table.get("objectives")
     if not (isinstance(objectives, list) and len(objectives) >= 2
             and all(isinstance(o, str) for o in objectives)):
         raise ParameterError(f"{origin}: objectives must be a list of at least two names "
-                             f"from {', '.join(OBJECTIVES)}, got {objectives!r}")
+                             f"from {', '.join(OBJECTIVES)}, {_given(objectives)}")
     for name in objectives:
         if name not in OBJECTIVES:
             raise ParameterError(f"{origin}: objectives: unknown {name!r}; "
@@ -295,7 +307,7 @@ def targets_from_dict(table: dict[str, Any], origin: str = "<targets>") -> Targe
         targets[key] = _number(value, f"{origin}: targets.{key}", TARGETS[key][0])
         if targets[key] <= 0:
             raise ParameterError(f"{origin}: targets.{key} must be > 0 {TARGETS[key][0]}, "
-                                 f"got {value!r}")
+                                 f"{_given(value)}")
     if "clamp_force" in targets and base.clamp is None:
         raise ParameterError(f"{origin}: targets.clamp_force needs a preset with [clamp] "
                              f"data; {preset} has none")

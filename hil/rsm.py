@@ -208,12 +208,12 @@ def fit_rsm(source: PaperTables | Iterable[Mapping[str, Any]]) -> RsmFit:
         raise RsmError("every run needs numbers meta.speed and meta.delta_r8 (a "
                        "reciprocating run, hil run --speed, not a profile)") from None
     v_mm, d_mm = v * _INPUT_FACTOR, d * _INPUT_FACTOR
-    points = {(round(a, 9), round(b, 9)) for a, b in zip(v_mm, d_mm)}
+    points = {(round(float(a), 9), round(float(b), 9)) for a, b in zip(v_mm, d_mm)}
     if np.linalg.matrix_rank(design_matrix(v_mm, d_mm)) < len(TERMS):
         raise RsmError(
             f"the {len(TERMS)}-term model needs >= 3 speeds, >= 3 values of delta_r8 and "
-            f">= {len(TERMS)} distinct points; got {len(points)} point(s): {sorted(points)} "
-            "(mm/s, mm)"
+            f">= {len(TERMS)} distinct points; got {len(points)} point(s): "
+            + ", ".join(f"{a:g} mm/s at {b:g} mm" for a, b in sorted(points))
         )
     responses = {}
     for name in RESPONSES:

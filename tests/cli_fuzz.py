@@ -150,8 +150,9 @@ def _files(root: Path | None) -> set[Path]:
 
 
 #: Phrases of Python's internals that an answer in the user's words does not contain.
-INTERNALS = ("[Errno", "codec can't", "NoneType", "<class ", "object has no attribute",
-             "unsupported operand", "takes 1 positional")
+INTERNALS = ("Traceback", "[Errno", "codec can't", "NoneType", "got None", "<class ",
+             "object has no attribute", "unsupported operand", "takes 1 positional",
+             "np.float64", "float64", "could not convert")
 
 
 def check_answer(main: Callable[[Sequence[str]], int], argv: list[str],

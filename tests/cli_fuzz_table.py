@@ -34,11 +34,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cli_fuzz import cheap_commands, commands  # noqa: E402
+from cli_fuzz import INTERNALS, cheap_commands, commands  # noqa: E402
 
 #: Phrases that name Python's internals instead of saying the problem in words.
-INTERNALS = ("Traceback", "NoneType", "[Errno", "codec can't decode", "<class ",
-             "object has no attribute", "unsupported operand")
 #: A line that takes longer is stopped and counted as such, s.
 TIMEOUT = 120
 ROOT_DIR = Path(__file__).resolve().parent.parent

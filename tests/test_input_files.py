@@ -140,3 +140,19 @@ def test_an_unknown_option_is_answered_with_the_sub_commands_usage(
     assert info.value.code == 2 and err.startswith(usage)
     assert err.rstrip().endswith(f"error: unrecognized arguments: {' '.join(argv[-2:])}"
                                  if argv[-1] == "1" else "error: unrecognized arguments: --bogus")
+
+
+@pytest.mark.parametrize("text, says", [
+    ("", "preset must be a preset name or TOML path, but it is missing"),
+    ('preset = "lin2003_sm55"\n', "objectives must be a list of at least two names"),
+    ('preset = "lin2003_sm55"\nobjectives = "close_time"\n', 'got "close_time"'),
+])
+def test_a_design_targets_file_says_what_is_missing_in_toml_words(
+        tmp_path: Path, capsys: pytest.CaptureFixture, text: str, says: str) -> None:
+    from cli_fuzz import INTERNALS
+    targets = tmp_path / "targets.toml"
+    targets.write_text(text)
+    assert main(["design", str(targets), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert says in err and err.count("\n") == 1, err
+    assert not [s for s in INTERNALS if s in err], err
