@@ -10,13 +10,14 @@ from __future__ import annotations
 import argparse
 import contextlib
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from controllers import cam, cam_formats
 from controllers.background import Background
 from controllers.cycle import MoldingCycle
-from controllers.duty import check_motor, motor_duty
+from controllers.duty import Duty, check_motor, motor_duty
 from controllers.limits import DriveLimits, drive_limits
 from controllers.planner import (
     ClampPlanner,
@@ -54,6 +55,9 @@ from toggle_cli.common import (
     print_json,
     table,
 )
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 MASS_FIELDS = tuple(field for field, _, _ in DYNAMICS_PARAMETERS.values())
 #: The dimensional errors, named as the FMU names its delta_* parameters.
@@ -527,36 +531,75 @@ def plot_trade_off(args: argparse.Namespace) -> int:
 
 
 def _plot_duty(out: Path, cycle: MoldingCycle, limits: DriveLimits) -> str:
-    """``--duty-plot``: the motor's torque and speed over the molding cycle, in time and on
-    the torque-speed curve."""
-    from toggle.plots import plt, save_figure
+    """``--duty-plot``: :func:`duty_figure` of the molding cycle, saved."""
+    from toggle.plots import save_figure
 
-    duty = cycle.duty()
-    mech = cycle.closing.config.mechanism
-    fig, (ax_t, ax_c) = plt.subplots(1, 2, figsize=(12, 5))
-    ax_t.plot(duty.time, duty.torque, label="motor torque (N m)")
-    ax_t.axhline(duty.rms_torque, ls=":", color="C0", label=f"RMS {duty.rms_torque:.3g} N m")
+    mech, phases = cycle.closing.config.mechanism, cycle.phases
+    return save_figure(duty_figure(
+        cycle.duty(), limits, mech.drive.rated_torque,
+        f"{mech.name}: the motor over a {cycle.cycle_time:.4g} s molding cycle "
+        f"(hold {phases['hold']:g} s, eject {phases['eject']:g} s)"), out)
+
+
+#: The torque-speed plane shows the cycle at this fraction of its height at least: a motor
+#: far larger than the cycle needs squashed the cycle into the axis (1.2 N m for 0.1 N m).
+DUTY_FILL = 0.5
+
+
+def duty_figure(duty: Duty, limits: DriveLimits, rated_torque: float | None,
+                title: str) -> Figure:
+    """The motor's torque and speed over a cycle, in time and on the torque-speed plane
+    (SI; axes labelled with units). The plane is scaled to the cycle: the motor's curve
+    and rated torque are drawn where they fall inside it, and the text says how much of
+    them the cycle uses. Legends sit below the axes, never over the curves."""
+    from toggle.plots import plt
+
+    fig, (ax_t, ax_c) = plt.subplots(1, 2, figsize=(12, 5.6))
+    lines = ax_t.plot(duty.time, duty.torque, color="C0", label="motor torque (N m)")
+    lines.append(ax_t.axhline(duty.rms_torque, ls=":", color="C0",
+                              label=f"RMS torque {duty.rms_torque:.3g} N m"))
     ax_t.set_xlabel("time (s)")
     ax_t.set_ylabel("motor torque (N m)")
     ax_s = ax_t.twinx()
-    ax_s.plot(duty.time, duty.speed, color="C1", label="motor speed (rad/s)")
+    lines += ax_s.plot(duty.time, duty.speed, color="C1", label="motor speed (rad/s)")
     ax_s.set_ylabel("motor speed (rad/s)")
-    ax_t.legend(loc="upper left")
-    ax_s.legend(loc="upper right")
-    w = np.linspace(0.0, max(duty.peak_speed, limits.curve[-1][0]) * 1.1, 200)
-    ax_c.plot(w, limits.torque_at(w), "k", label="usable torque (torque-speed curve)")
-    if mech.drive.rated_torque is not None:
-        ax_c.axhline(mech.drive.rated_torque, ls="--", color="k", lw=1,
-                     label=f"rated (continuous) torque {mech.drive.rated_torque:.3g} N m")
-    ax_c.plot(np.abs(duty.speed), np.abs(duty.torque), ".", ms=2, label="the cycle (1 ms)")
-    ax_c.plot([0.0], [duty.rms_torque], "o", label=f"RMS torque {duty.rms_torque:.3g} N m")
+    ax_t.legend(handles=lines, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3,
+                fontsize=9, frameon=False)
+    speed = np.abs(duty.speed)
+    torque = np.abs(duty.torque)
+    top_w, top_t = 1.15 * max(float(speed.max()), 1e-9), 1.15 * max(float(torque.max()), 1e-9)
+    curve_w = np.linspace(0.0, top_w, 200)
+    usable = limits.torque_at(curve_w)
+    top_t = max(top_t, min(float(np.max(usable)), top_t / DUTY_FILL))
+    if rated_torque is not None and rated_torque <= top_t / DUTY_FILL:
+        top_t = max(top_t, 1.1 * rated_torque)
+    ax_c.plot(curve_w, usable, "k", label="usable torque (torque-speed curve)")
+    if rated_torque is not None:
+        ax_c.axhline(rated_torque, ls="--", color="k", lw=1,
+                     label=f"rated (continuous) torque {rated_torque:.3g} N m")
+    ax_c.plot(speed, torque, ".", ms=2, color="C0", label="the cycle (1 ms samples)")
+    ax_c.plot([0.0], [duty.rms_torque], "o", color="C3",
+              label=f"RMS torque {duty.rms_torque:.3g} N m")
+    ax_c.set_xlim(0.0, top_w)
+    ax_c.set_ylim(0.0, top_t)
     ax_c.set_xlabel("motor speed (rad/s)")
     ax_c.set_ylabel("motor torque (N m)")
-    ax_c.legend()
-    phases = cycle.phases
-    fig.suptitle(f"{mech.name}: the motor over a {cycle.cycle_time:.4g} s molding cycle "
-                 f"(hold {phases['hold']:g} s, eject {phases['eject']:g} s)")
-    return save_figure(fig, out)
+    use = float(np.max(torque / np.maximum(limits.torque_at(speed), 1e-12)))
+    said = f"peak {use:.0%} of the usable torque at its speed"
+    if rated_torque is not None:
+        said += f"\nRMS {duty.rms_torque / rated_torque:.0%} of the rated torque"
+    above = [f"{name} {value:.3g} N m" for name, value in
+             (("usable", float(np.min(usable))), ("rated", rated_torque))
+             if value is not None and value > top_t]
+    if above:
+        said += f"\nabove this view: {', '.join(above)}"
+    ax_c.text(0.98, 0.97, said, transform=ax_c.transAxes, ha="right", va="top", fontsize=9,
+              bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "none"})
+    ax_c.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=9,
+                frameon=False)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
 
 
 def _add_protection_arguments(p: argparse.ArgumentParser) -> None:
