@@ -255,6 +255,13 @@ def parse_cycle(text: str) -> float:
     return value
 
 
+def over_limits(check: dict[str, float]) -> list[str]:
+    """What a table that keeps the plan still puts above a limit (a ratio over 1, within
+    :data:`TOLERANCE`), each in % of it: a drive that enforces that limit exactly trips."""
+    return [f"{name.replace('_', ' ')} {100 * check[name]:.2f} %"
+            for name in RATIOS if name in check and 1.0 < check[name] <= TOLERANCE]
+
+
 def breaches(check: dict[str, float]) -> list[str]:
     """What a check breaks, each with its figure in % (of its limit, of the plan's peak
     force, of the stroke, of the plan's peak velocity); empty: it keeps the plan."""

@@ -270,3 +270,12 @@ def test_drive_cycles_parse_with_their_units():
     for bad in ("0us", "nan", "2s", "ms", "10us", "20ms"):
         with pytest.raises(ParameterError, match="drive cycle"):
             cam.parse_cycle(bad)
+
+
+def test_a_kept_table_over_a_limit_within_the_tolerance_is_named_for_a_warning() -> None:
+    from controllers.cam import TOLERANCE, breaches, over_limits
+    check = {"velocity": 1.0001, "acceleration": 0.99, "motor_torque": 1.0,
+             "peak_force": TOLERANCE, "position_error": 0.0, "velocity_error": 0.0}
+    assert over_limits(check) == ["velocity 100.01 %", f"peak force {100 * TOLERANCE:.2f} %"]
+    assert breaches(check) == []  # kept: a warning, not a refusal
+    assert over_limits({**check, "velocity": 1.02, "peak_force": 1.0}) == []  # refused instead

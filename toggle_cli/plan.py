@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -301,6 +302,12 @@ def run(args: argparse.Namespace) -> int:
         exported = _export(args, plan, cfg, limits, {
             "preset": args.preset, "x_contact": cfg.x_contact, "mu": cfg.friction,
             "objective": plan.objective, "peak_force": plan.peak_force})
+        exported["over_limit"] = cam.over_limits(exported["as_interpolated"])
+        for over in exported["over_limit"]:
+            print(f"toggle plan: warning: as the drive interpolates the cam table, its {over} "
+                  f"of its limit (kept within the check's {100 * (cam.TOLERANCE - 1):g} %; a "
+                  f"drive that enforces the limit exactly trips: give more --points or a "
+                  f"lower limit)", file=sys.stderr)
     elif args.out:
         with atomic_path(args.out) as tmp:  # no half-written CSV
             write_profile_csv(tmp, plan.samples, {
