@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from controllers.progress import Progress
 from design.objectives import Evaluation, Evaluator, candidate_key
 from design.store import Store
 from design.targets import Targets
@@ -120,7 +121,7 @@ class Runner:
                  connect_timeout: float = CONNECT_TIMEOUT, total: int | None = None) -> None:
         self.targets, self.store, self.progress = targets, store, progress
         self.total = total
-        self._bar: Any = None
+        self._bar: Progress | None = None
         self.connect_timeout = connect_timeout
         self.scheduler, self.workers = scheduler, workers
         self.client: Any = None
@@ -128,11 +129,11 @@ class Runner:
         self.evaluated = 0  # candidates evaluated by this runner (not found in the store)
 
     def __enter__(self) -> Runner:
-        from tqdm import tqdm
         if self.workers is None and self.scheduler is None:
             self.workers = default_workers(self.total or 0)
-        self._bar = tqdm(total=self.total, unit="design", disable=not self.progress or None,
-                         desc="toggle design", leave=False)
+        # a bar on a terminal, a line a minute in a log (it was silent there for minutes)
+        self._bar = Progress("toggle design", unit="design", total=self.total or 0,
+                             enabled=self.progress)
         if self.scheduler is not None:
             self.client = _connect(check_address(self.scheduler), self.connect_timeout)
         elif self.workers != 0:
@@ -175,7 +176,7 @@ class Runner:
         for k, v in zip(keys, vectors):
             if k not in self.store and k not in todo:
                 todo[k] = v
-        self._bar.update(len(vectors) - len(todo))  # found in the record: done
+        self._bar.advance(len(vectors) - len(todo))  # found in the record: done
         if todo:
             self._compute(list(todo.values()))
         return [self.store.get(k) for k in keys]
@@ -185,12 +186,12 @@ class Runner:
             evaluator = evaluator_for(self.targets)
             for v in vectors:
                 self.store.append([evaluator(v)])
-                self._bar.update()
+                self._bar.advance()
         else:
             self._on_dask(vectors, self._bar)
         self.evaluated += len(vectors)
 
-    def _on_dask(self, vectors: list[Sequence[float]], bar: Any) -> None:
+    def _on_dask(self, vectors: list[Sequence[float]], bar: Progress) -> None:
         from dask.distributed import as_completed
         size = max(1, min(MAX_CHUNK, math.ceil(
             len(vectors) / (TASKS_PER_WORKER * self.worker_count))))
@@ -203,7 +204,7 @@ class Runner:
             for future in as_completed(futures):
                 records = future.result()
                 self.store.append(Evaluation.from_record(r) for r in records)
-                bar.update(len(records))
+                bar.advance(len(records))
         except BaseException:
             self.client.cancel(futures)
             raise

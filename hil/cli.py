@@ -20,6 +20,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Any, NoReturn
 
+from controllers.progress import Progress
 from hil import cli_rig, cli_rsm, experiment
 from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
 from hil.experiment import (
@@ -201,11 +202,10 @@ def _record(plant: Plant, trajectory: Trajectory, rec: RunRecorder, guard: Signa
 
     Returns why the run ended early (None when complete) and the signal, if one ended it.
     """
-    from tqdm import tqdm
-
     reason, interrupted = None, None
     print(f"run directory: {rec.dir}", file=sys.stderr)
-    bar = tqdm(total=s.cycles, unit="cycle", desc=f"hil run ({plant.name})", disable=s.quiet)
+    # a bar on a terminal, a line a minute in a log
+    bar = Progress(f"hil run ({plant.name})", unit="cycle", total=s.cycles, enabled=not s.quiet)
     # from here a signal only gets noted; the loop acts on it between samples, so the
     # recording and the link are never cut mid-operation
     guard.shield = True
@@ -214,7 +214,7 @@ def _record(plant: Plant, trajectory: Trajectory, rec: RunRecorder, guard: Signa
         for sample in samples:
             rec.append(sample)
             if counter.update(sample.x_cmd):
-                bar.update(1)
+                bar.advance()
             guard.check()
     except (RunStoppedError, TrajectoryError) as exc:
         reason = str(exc)

@@ -309,22 +309,34 @@ def test_busy_cores_sees_a_new_hog_before_the_load_average(tmp_path) -> None:
 
 
 def test_one_progress_bar_counts_the_whole_search(tmp_path: Path, monkeypatch) -> None:
-    import tqdm
+    from design import runner
     bars: list[dict] = []
 
-    class Bar:  # records what the search tells its bar (a terminal would draw it)
-        def __init__(self, **kwargs: object) -> None:
-            bars.append({"total": kwargs["total"], "done": 0, "closed": False})
+    class Bar:  # records what the search tells its progress
+        def __init__(self, desc: str, *, unit: str, total: int, enabled: bool) -> None:
+            bars.append({"total": total, "done": 0, "closed": False})
 
-        def update(self, n: int = 1) -> None:
+        def advance(self, n: int = 1) -> None:
             bars[-1]["done"] += n
 
         def close(self) -> None:
             bars[-1]["closed"] = True
 
-    monkeypatch.setattr(tqdm, "tqdm", Bar)
+    monkeypatch.setattr(runner, "Progress", Bar)
     targets = load_targets(LI_MICRO)
     run_search(targets, tmp_path, generations=2, population=12, workers=0, progress=True)
     assert bars == [{"total": 24, "done": 24, "closed": True}]  # one bar, 2 x 12 designs
     run_search(targets, tmp_path, generations=3, population=12, workers=0, progress=True)
     assert bars[1] == {"total": 36, "done": 36, "closed": True}  # the record's 24 counted
+
+
+def test_a_search_off_a_terminal_writes_progress_lines(tmp_path: Path, monkeypatch,
+                                                      capsys) -> None:
+    """Off a terminal (a log, CI) the search said nothing for minutes: now a line with the
+    count once the work has taken progress.SHOW_AFTER, then one a minute."""
+    from controllers import progress
+    monkeypatch.setattr(progress, "SHOW_AFTER", 0.0)
+    run_search(load_targets(LI_MICRO), tmp_path, generations=2, population=12, workers=0,
+               progress=True)
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("toggle design")]
+    assert len(lines) == 1 and "/24 " in lines[0], lines
