@@ -271,9 +271,33 @@ def _line_of(text: str, data_row: int) -> int:
     return number
 
 
+#: How far before the time its header states a plan's samples may end, s (two periods of
+#: the 1 ms sampling).
+TRUNCATION_SLACK = 2e-3
+
+
+def truncation(settings: dict[str, Any], end: float, slack: float = TRUNCATION_SLACK
+               ) -> str | None:
+    """Why samples ending at ``end`` (s) are a plan cut short, or None: its header's
+    ``cycle_time`` (a molding cycle) or else ``duration`` (a stroke) says it lasts longer."""
+    for key in ("cycle_time", "duration"):
+        said = settings.get(key)
+        if isinstance(said, (int, float)) and math.isfinite(said):
+            if end < said - slack:
+                return (f"truncated: its samples end at {end:.4g} s, its header says {key} = "
+                        f"{said:.4g} s")
+            return None
+    return None
+
+
 def read_profile_csv(path: str | Path) -> ProfileSamples:
-    """Read a CSV written by :func:`write_profile_csv` (all columns required)."""
-    return ProfileSamples(*read_profile_columns(path).T)
+    """Read a CSV written by :func:`write_profile_csv` (all columns required); a file that
+    ends before its header's time is refused (:func:`truncation`)."""
+    samples = ProfileSamples(*read_profile_columns(path).T)
+    cut = truncation(read_profile_settings(path), float(samples.time[-1]))
+    if cut is not None:
+        raise ProfileError(f"profile {path}: {cut}")
+    return samples
 
 
 def read_profile_settings(path: str | Path) -> dict[str, Any]:

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from controllers.profiles import ProfileError, read_profile_settings
+from controllers.profiles import ProfileError, read_profile_settings, truncation
 from hil.backends import MAX_SPEED, RigSetup, simulated_speed_limit
 from hil.recording import RUN_FILES
 from hil.samples import Trajectory, TrajectoryError
@@ -228,14 +228,9 @@ def _check_whole(path: Path, planned: dict[str, Any], duration: float) -> None:
     """Refuse a profile that ends before the time its header says the plan lasts
     (``duration`` of a stroke, ``cycle_time`` of a molding cycle): a file cut short would
     run part of a stroke and complete no cycle."""
-    for key in ("cycle_time", "duration"):
-        said = planned.get(key)
-        if isinstance(said, (int, float)) and math.isfinite(said):
-            if duration < said - 2 * RigSetup.period:
-                raise ParameterError(
-                    f"--profile {path}: truncated: its samples end at {duration:.4g} s, its "
-                    f"header says {key} = {said:.4g} s; write it again (toggle plan --out)")
-            return
+    cut = truncation(planned, duration, 2 * RigSetup.period)
+    if cut is not None:
+        raise ParameterError(f"--profile {path}: {cut}; write it again (toggle plan --out)")
 
 
 def _check_fmu(path: Path) -> None:

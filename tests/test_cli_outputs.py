@@ -89,6 +89,18 @@ def test_plot_plan_refuses_a_profile_in_mm(tmp_path: Path, capsys) -> None:
     assert "positions are in m" in err and not (tmp_path / "plan.png").exists()
 
 
+def test_plot_plan_refuses_a_plan_cut_short_naming_it(tmp_path: Path, capsys) -> None:
+    columns = ("time [s],position [m],velocity [m/s],acceleration [m/s^2],input_force [N],"
+               "platen_position [m]")
+    csv = tmp_path / "cut.csv"
+    csv.write_text("# duration = 0.5\n" + columns + "\n" + "".join(
+        f"{t / 1000},{-3.4e-3 + 1e-5 * t},0.01,0,1,0\n" for t in range(301)))
+    code, _, err = answer(["plot", "plan", str(csv), "--out", str(tmp_path)], capsys)
+    assert code == 2 and err.count("\n") == 1, err
+    assert (f"profile {csv}: truncated: its samples end at 0.3 s, its header says duration = "
+            "0.5 s") in err and not (tmp_path / "plan.png").exists()
+
+
 def test_plot_clamp_writes_into_figures_by_default(tmp_path: Path, monkeypatch,
                                                    capsys) -> None:
     monkeypatch.chdir(tmp_path)
