@@ -402,7 +402,7 @@ def test_hil_emulate_board_refuses_what_it_cannot_do(args: list[str], message: s
 
     result = subprocess.run([sys.executable, "-m", "hil.cli", "emulate", *args],
                             capture_output=True, text=True, timeout=60)
-    assert result.returncode == 1 and message in result.stderr, result.stderr
+    assert result.returncode == 2 and message in result.stderr, result.stderr  # usage
     assert result.stdout == "" and "Traceback" not in result.stderr
 
 

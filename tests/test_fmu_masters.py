@@ -417,5 +417,5 @@ def test_one_fmu_per_preset_with_its_values_as_start_values(tmp_path: Path,
     start = {v.name: v.start for v in md.modelVariables}
     dyn = configure("lin2003_sm55").dynamics
     assert start["preset"] == "lin2003_sm55" and float(start["m_platen"]) == dyn.platen
-    assert main(["build-fmu", "--preset", "li_micro", "--out", str(tmp_path)]) == 2
+    assert main(["build-fmu", "--preset", "li_micro", "--out", str(tmp_path / "li")]) == 2
     assert "no [dynamics] section" in capsys.readouterr().err
