@@ -526,6 +526,7 @@ class ClampPlanner(StrokeReports):
         job: Background | None = None
         asked = 0  # the index into plans of the point that asked for the least peak
         torque = []  # self._torque before each point, to restore where the curve ends
+        broke = False  # the last point's continuation failed
         with contextlib.ExitStack() as stack:
             for limit in limits:
                 top = min(self.worst_peak(plans[-1]), self.force_limit)
@@ -540,6 +541,7 @@ class ClampPlanner(StrokeReports):
                     plan = self.minimum_time(limit, start=plans[-1], continued=True,
                                              ask_least=job is None)
                 except PlanningError:
+                    broke = True
                     break
                 finally:
                     tick()
@@ -556,7 +558,9 @@ class ClampPlanner(StrokeReports):
             return self._trade_off_points(plans[:asked], limits[asked - 1:], lambda: None,
                                           False)
         least = self.worst_peak(self._least) * (1 - _LEAST_MARGIN)
-        for k in range(asked, len(plans)):  # the refusals minimum_time left to this
+        # the refusals minimum_time left to this, the failed point's too (refused, it
+        # would not have been tried)
+        for k in range(asked, len(plans) + broke):
             top = min(self.worst_peak(plans[k - 1]), self.force_limit)
             if self._asks_least(limits[k - 1], top) and limits[k - 1] < least:
                 return self._ended(plans, k, torque[k - 1])
