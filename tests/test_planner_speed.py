@@ -69,3 +69,30 @@ def test_the_nominal_twin_given_the_bound_plans_the_same():
                        protection=NO_PROTECTION)._bound == robust.lower_bound()
     assert given.peak_force == pytest.approx(plain.peak_force, rel=1e-4)
     assert given.duration == pytest.approx(plain.duration, rel=1e-4)
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_a_robust_plans_bar_counts_its_nominal_twins_solves(monkeypatch, capsys, parallel):
+    """Issue 37: ``toggle plan --robust`` on a terminal counts the nominal twin's starts
+    (in the second process, or here on one core) with its own: the bar ends at a total of
+    both best plans' starts, reached."""
+    import io
+    import re
+
+    from controllers import progress
+    from toggle_cli import main
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(progress, "SHOW_AFTER", 0.0)
+    monkeypatch.setattr(background, "parallel", lambda: parallel)
+    err = Terminal()
+    monkeypatch.setattr("sys.stderr", err)
+    assert main(["plan", "--delta-r8", "0.25e-3", "--robust", "--intervals",
+                 str(INTERVALS)]) == 0
+    counts = re.findall(r"\| (\d+)/(\d+) \[", err.getvalue())
+    done, total = map(int, counts[-1])
+    assert done == total >= 2 * (1 + len(planner._LATE_STARTS))
+    capsys.readouterr()
