@@ -10,16 +10,19 @@ the CPU time is the steadier figure) of each side, their ratio, the exit status 
 input force of the first / last plan; a refusal's exit status), and whether the answers
 agree within 1e-4 relative. ``--hog``: with one CPU hog running throughout (a process
 spinning on one core, started here and ended by its id), as issue 37 asks answers to come
-within 10 s on this machine with one.
+within 10 s on this machine with one. The load average (1 min) is printed before and
+after each command: the machine is shared, and the wall time follows it. ``--json PATH``:
+the same rows (every run's wall and CPU time, the answers, the load) as JSON.
 
     python benchmarks/bench_planner_speed.py --before PATH [--repeat N] [--warm-up SIDE]
-        [--hog]
+        [--hog] [--json PATH]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import statistics
 import subprocess
@@ -82,6 +85,8 @@ def main() -> int:
                         "first, to fill the cache (default after: this checkout's changed code)")
     parser.add_argument("--hog", action="store_true",
                         help="keep one CPU-bound process running while the commands run")
+    parser.add_argument("--json", type=Path, default=None,
+                        help="also write the rows (every run, the answers, the load) here")
     args = parser.parse_args()
     hog = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if args.hog else None
     try:
@@ -93,22 +98,34 @@ def main() -> int:
 
 
 def _table(args: argparse.Namespace) -> int:
-    """Each command on both sides, a row of the table each."""
+    """Each command on both sides, a row of the table each (and of ``--json``)."""
     print(f"{'command':38} {'before wall/cpu (s)':>20} {'after wall/cpu (s)':>19} "
-          f"{'cpu ratio':>9}  exit  answer (peak N) before -> after  same")
+          f"{'cpu ratio':>9}  exit  answer (peak N) before -> after  same  load")
+    rows = []
     for name, argv in COMMANDS:
-        results = {}
+        results, load = {}, [os.getloadavg()[0]]
         for side, toggle in (("before", args.before), ("after", AFTER)):
             if args.warm_up in (side, "both"):
                 run(toggle, argv)
             runs = [run(toggle, argv) for _ in range(args.repeat)]
             results[side] = (statistics.median(r[0] for r in runs),
-                             statistics.median(r[1] for r in runs), runs[-1][2], runs[-1][3])
-        (wb, cb, eb, ab), (wa, ca, ea, aa) = results["before"], results["after"]
+                             statistics.median(r[1] for r in runs), runs[-1][2], runs[-1][3],
+                             runs)
+        load.append(os.getloadavg()[0])
+        (wb, cb, eb, ab, rb), (wa, ca, ea, aa, ra) = results["before"], results["after"]
         shown = (f"{ab[0]:.5g} -> {aa[0]:.5g}" if ab and aa else "(refusal)" if eb == ea != 0
                  else "(figure)")
+        agree = same(ab, aa) and eb == ea
         print(f"{name:38} {wb:9.1f} /{cb:8.1f}  {wa:9.1f} /{ca:7.1f}  {cb / ca:8.1f}x  "
-              f"{eb}->{ea}  {shown:30}  {same(ab, aa) and eb == ea}", flush=True)
+              f"{eb}->{ea}  {shown:30}  {agree}  {load[0]:.1f}-{load[1]:.1f}", flush=True)
+        rows.append({"command": name, "argv": argv, "same_answer": agree, "load": load,
+                     **{side: {"wall": [r[0] for r in runs], "cpu": [r[1] for r in runs],
+                               "exit": runs[-1][2], "answer": runs[-1][3]}
+                        for side, runs in (("before", rb), ("after", ra))}})
+    if args.json:
+        args.json.write_text(json.dumps({"hog": args.hog, "repeat": args.repeat,
+                                         "warm_up": args.warm_up, "cores": os.cpu_count(),
+                                         "rows": rows}, indent=1) + "\n")
     return 0
 
 

@@ -14,8 +14,14 @@ if the parent dies without a word (``PR_SET_PDEATHSIG``, Linux). The child ignor
 from the terminal from its first instruction: it is spawned with SIGINT blocked (the mask is
 inherited across exec; a Ctrl-C during the child's seconds of imports ended it with a
 traceback, and the parent with exit status 1), then ignores it and unblocks; the parent
-decides, and stops it. With one core for this process
-(:func:`parallel`) the job runs in this process when its result is asked for, as before.
+decides, and stops it. With one core for this process, or in a job's process itself
+(:func:`parallel`), the job runs in this process when its result is asked for, as before.
+
+The job's ``progress`` is a :class:`controllers.progress.Relay`: called, it counts one
+step; as a :class:`~controllers.progress.Progress` (``reporting(progress)``) it counts the
+planner's solves. Its counts reach :meth:`Background.ticks` and, where the block runs in
+a ``reporting()`` context, that progress (count and total: a robust plan's bar counts its
+nominal twin's solves too), drained whenever that progress counts.
 """
 
 from __future__ import annotations
@@ -32,13 +38,18 @@ from multiprocessing.connection import Connection
 from types import FrameType, TracebackType
 from typing import Any
 
+from controllers import progress as solves
+from controllers.progress import Relay
 from toggle.interrupts import Terminated, signals_held
 
 _PR_SET_PDEATHSIG = 1
 
 
 def parallel() -> bool:
-    """Whether a second process would run beside this one: two cores or more for it."""
+    """Whether a second process would run beside this one: two cores or more for it, and
+    this process not a job's itself (a daemonic process has no children)."""
+    if multiprocessing.current_process().daemon:
+        return False
     return len(os.sched_getaffinity(0)) >= 2 if hasattr(os, "sched_getaffinity") else (
         (os.cpu_count() or 1) >= 2)
 
@@ -57,7 +68,7 @@ def _child(conn: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> N
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a pending one is dropped
     try:
-        result = ("result", fn(*args, progress=lambda: conn.send(("tick", None))))
+        result = ("result", fn(*args, progress=Relay(lambda kind, n: conn.send((kind, n)))))
     except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it
         result = ("error", exc)
     conn.send(result)
@@ -71,6 +82,10 @@ class Background:
     def __init__(self, fn: Callable[..., Any], *args: Any) -> None:
         self._job, self._done = (fn, args), None
         self._ticks = 0
+        self._receiving = False
+        self._target = solves.current()  # the parent's progress the job's counts join
+        if self._target is not None:
+            self._target.add_source(self._drain)
         self._previous_term: Any = None
         self._process: Any = None
         if parallel():
@@ -95,14 +110,33 @@ class Background:
     def _terminate(signum: int, frame: FrameType | None) -> None:
         raise Terminated(f"signal {signum}")
 
-    def _tick(self) -> None:
-        self._ticks += 1
+    def _count(self, kind: str, steps: int) -> None:
+        """A count of the job's: its ticks, and the parent's progress."""
+        if kind == "tick":
+            self._ticks += steps
+            if self._target is not None:
+                self._target.advance(steps)
+        elif self._target is not None:
+            self._target.expect(steps)
+
+    def _drain(self) -> None:
+        self._receive(block=False)
 
     def _receive(self, block: bool) -> None:
+        if self._receiving:  # the parent's progress drains while a count is handed to it
+            return
+        self._receiving = True
+        try:
+            self._receive_now(block)
+        finally:
+            self._receiving = False
+
+    def _receive_now(self, block: bool) -> None:
         if self._process is None:  # in this process, when asked
             if block and self._done is None:
                 fn, args = self._job
-                self._done = ("result", fn(*args, progress=self._tick))
+                relay = Relay(self._count)
+                self._done = ("result", fn(*args, progress=relay))
             return
         while self._done is None and (block or self._conn.poll()):
             try:
@@ -111,8 +145,8 @@ class Background:
                 self._process.join()
                 raise RuntimeError(f"the planning process ended without an answer "
                                    f"(exit status {self._process.exitcode})") from None
-            if kind == "tick":
-                self._tick()
+            if kind in ("tick", "expect"):
+                self._count(kind, value)
             else:
                 self._done = (kind, value)
 
@@ -132,6 +166,9 @@ class Background:
 
     def close(self) -> None:
         """Stop the child if it still runs, and restore SIGTERM's handler."""
+        if self._target is not None:
+            self._target.remove_source(self._drain)
+            self._target = None
         if self._process is not None:
             if self._process.is_alive():
                 self._process.terminate()

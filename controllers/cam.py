@@ -28,7 +28,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import BPoly, CubicHermiteSpline, CubicSpline, PPoly
 
 from controllers.limits import DriveLimits
 from controllers.profiles import Profile, sample_times
@@ -129,6 +128,9 @@ def drive_samples(table: CamTable, interpolation: str, cycle: float = DRIVE_CYCL
     the drive's position setpoints give them (central first and second differences over
     the cycle: what its feed-forward and its following error see). Time, position,
     velocity, acceleration, SI."""
+    # imported here: a tenth of a second of every `toggle plan`, needed only by an export
+    from scipy.interpolate import BPoly, CubicHermiteSpline, CubicSpline, PPoly
+
     choice("interpolation", interpolation, INTERPOLATIONS)
     if not (math.isfinite(cycle) and CYCLES[0] <= cycle <= CYCLES[1]):
         raise ParameterError(f"drive cycle must be 50 us to 10 ms, got {cycle!r} s")

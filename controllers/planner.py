@@ -41,6 +41,7 @@ code it uses) compiles for about 10 s.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import time
@@ -50,7 +51,9 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import brentq
 
+from controllers import background
 from controllers import progress as solves
+from controllers.background import Background
 from controllers.bounds import peak_lower_bound
 from controllers.limits import DriveLimits
 from controllers.plans import (
@@ -63,6 +66,7 @@ from controllers.plans import (
     Protection,
 )
 from controllers.profiles import Profile, s_curve
+from controllers.progress import Progress, reporting
 from controllers.stroke_problem import (
     REGULARISATION,
     WEIGHTS,
@@ -126,6 +130,9 @@ class ClampPlanner(StrokeReports):
     _torque: bool = False
     _least: Plan | None = None
     _bound: float | None = None
+    #: :func:`planner_for`'s arguments that made this planner, for a job that needs the
+    #: same planner in a second process (:func:`least_peak_job`); None if made otherwise.
+    recipe: tuple[object, ...] | None = None
 
     def _bounds(self, force_limit: float) -> tuple[np.ndarray, np.ndarray]:
         N, S, t_ref, lim = self.n1 + self.n2, self.stroke, self.t_ref, self.limits
@@ -419,7 +426,8 @@ class ClampPlanner(StrokeReports):
         return self._bound
 
     def minimum_time(self, force_limit: float | None = None, *, start: Plan | None = None,
-                     warm: bool = True, continued: bool = False) -> Plan:
+                     warm: bool = True, continued: bool = False, ask_least: bool = True
+                     ) -> Plan:
         """The fastest stroke with |input force| at most ``force_limit`` N (default: the
         motor-torque limit) at every instant, also between the nodes.
 
@@ -435,7 +443,9 @@ class ClampPlanner(StrokeReports):
         (a minute and a half on chang2021 at 14.91 N). The limit and the motor's
         torque-speed curve are imposed at the nodes and interval
         midpoints; where the plan's 1 ms samples through the plant still exceed either, it
-        is tightened by the excess and the plan repeated."""
+        is tightened by the excess and the plan repeated. ``ask_least`` false: the least
+        peak's refusal is left to the caller (:meth:`trade_off`, which has it computed in a
+        second process meanwhile)."""
         limit = self.force_limit if force_limit is None else min(force_limit, self.force_limit)
         if not (math.isfinite(limit) and limit > 0):
             raise ParameterError(f"force limit must be > 0 N, got {force_limit!r}")
@@ -452,8 +462,7 @@ class ClampPlanner(StrokeReports):
         if plan is None:
             raise PlanningError(self._unreachable(limit, None))
         top = min(self.worst_peak(plan), self.force_limit)
-        near = limit < self.lower_bound() * (1 + _NEAR_BOUND)
-        if limit < top and near and limit < self.worst_peak(
+        if ask_least and self._asks_least(limit, top) and limit < self.worst_peak(
                 least := self.least_peak()) * (1 - _LEAST_MARGIN):
             raise PlanningError(self._unreachable(limit, least) + (
                 " (the least peak of any duration it finds)"))
@@ -500,19 +509,79 @@ class ClampPlanner(StrokeReports):
             raise PlanningError(self._unreachable(self.force_limit, None))
         tick()
         top = min(self.worst_peak(fastest), self.force_limit)
-        plans, start = [fastest], fastest
         bound = self.lower_bound()
         bottom = bound * (1 + _GAP) if bound > 0 else top / 4
-        for limit in np.geomspace(top, bottom, points)[1:]:
+        limits = [float(v) for v in np.geomspace(top, bottom, points)[1:]]
+        return self._trade_off_points([fastest], limits, tick, background.parallel())
+
+    def _trade_off_points(self, plans: list[Plan], limits: list[float],
+                          tick: Callable[[], object], ahead: bool) -> list[Plan]:
+        """The trade-off's points under ``limits`` after ``plans``, each continued from the
+        last, up to the first no stroke meets. ``ahead``: where a limit first asks for the
+        least peak (:meth:`minimum_time`), it is computed in a second process
+        (:func:`least_peak_job`, from this planner's state then) while the points go on
+        here, and their refusals are decided once it is known: the same points, and a
+        mold curve's seconds of :meth:`best` off this process's path."""
+        plans = list(plans)
+        job: Background | None = None
+        asked = 0  # the index into plans of the point that asked for the least peak
+        torque = []  # self._torque before each point, to restore where the curve ends
+        broke = False  # the last point's continuation failed
+        with contextlib.ExitStack() as stack:
+            for limit in limits:
+                top = min(self.worst_peak(plans[-1]), self.force_limit)
+                if (ahead and job is None and self._least is None and self.recipe
+                        and self._asks_least(limit, top)):
+                    job = stack.enter_context(Background(
+                        least_peak_job, self.recipe, self.lower_bound(), self._torque,
+                        self.problem.last))
+                    asked = len(plans)
+                torque.append(self._torque)
+                try:
+                    plan = self.minimum_time(limit, start=plans[-1], continued=True,
+                                             ask_least=job is None)
+                except PlanningError:
+                    broke = True
+                    break
+                finally:
+                    tick()
+                plans.append(plan)
+            if job is None:
+                return plans
             try:
-                plan = self.minimum_time(float(limit), start=start, continued=True)
-            except PlanningError:
-                break
-            finally:
-                tick()
-            plans.append(plan)
-            start = plan
+                self._least, needs_torque = job.result()
+            except PlanningError:  # where the least peak was asked, the curve ended
+                return self._ended(plans, asked, torque[asked - 1])
+        if needs_torque and not torque[asked - 1]:  # its solves switched the torque rows on
+            self._torque = True  # for every later point, as here they would have: again
+            self._restore(plans[asked - 1], asked)
+            return self._trade_off_points(plans[:asked], limits[asked - 1:], lambda: None,
+                                          False)
+        least = self.worst_peak(self._least) * (1 - _LEAST_MARGIN)
+        # the refusals minimum_time left to this, the failed point's too (refused, it
+        # would not have been tried)
+        for k in range(asked, len(plans) + broke):
+            top = min(self.worst_peak(plans[k - 1]), self.force_limit)
+            if self._asks_least(limits[k - 1], top) and limits[k - 1] < least:
+                return self._ended(plans, k, torque[k - 1])
         return plans
+
+    def _ended(self, plans: list[Plan], k: int, torque: bool) -> list[Plan]:
+        """The curve up to point ``k`` (its limit refused), the planner as it was then."""
+        self._torque = torque
+        self._restore(plans[k - 1], k)
+        return plans[:k]
+
+    def _restore(self, last: Plan, k: int) -> None:
+        """The latest plan as it was before point ``k``: the previous point's (the
+        fastest stroke's, k = 1, was never kept as the latest)."""
+        if k > 1:
+            self.problem.last = last
+
+    def _asks_least(self, limit: float, top: float) -> bool:
+        """Whether :meth:`minimum_time` asks :meth:`least_peak` for ``limit`` below a
+        plan's peak ``top``: within :data:`_NEAR_BOUND` of the lower bound."""
+        return limit < top and limit < self.lower_bound() * (1 + _NEAR_BOUND)
 
     def least_peak(self) -> Plan:
         """The stroke of least peak input force the planner finds over every duration up
@@ -593,9 +662,12 @@ def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CO
     open position instead of the closing one (:class:`ClampPlanner`)."""
     problem = problem_for(neutral(cfg), intervals, tuple(neutral(v) for v in variants),
                           opening=opening)
-    return ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
-                        problem=problem, variants=variants, scales=scales,
-                        protection=protection)
+    planner = ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
+                           problem=problem, variants=variants, scales=scales,
+                           protection=protection)
+    planner.recipe = (cfg, limits, contact_speed, intervals, variants, scales, protection,
+                      opening)
+    return planner
 
 
 def trade_off_curve(cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
@@ -609,11 +681,29 @@ def trade_off_curve(cfg: PlantConfig, limits: DriveLimits, contact_speed: float,
 
 def best_plan(cfg: PlantConfig, limits: DriveLimits, contact_speed: float, intervals: int,
               protection: Protection, duration: float, objective: str,
-              progress: Callable[[], object] | None = None) -> Plan:
+              bound: float | None = None, progress: Progress | None = None) -> Plan:
     """:meth:`ClampPlanner.best` of the plant's planner (:func:`planner_for`): a job for
-    :class:`controllers.background.Background` (``progress`` is not called)."""
-    return planner_for(cfg, limits, contact_speed, intervals,
-                       protection=protection).best(duration, objective)
+    :class:`controllers.background.Background`, its solves counted on ``progress``.
+    ``bound``: the plant's :meth:`ClampPlanner.lower_bound` if the caller has it (the same
+    value, not computed again)."""
+    planner = planner_for(cfg, limits, contact_speed, intervals, protection=protection)
+    if bound is not None and planner._bound is None:
+        planner._bound = bound
+    with reporting(progress) if progress is not None else contextlib.nullcontext():
+        return planner.best(duration, objective)
+
+
+def least_peak_job(recipe: tuple[object, ...], bound: float, torque: bool,
+                   last: Plan | None, progress: Callable[[], object] | None = None
+                   ) -> tuple[Plan, bool]:
+    """:meth:`ClampPlanner.least_peak` of the planner ``planner_for(*recipe)`` in the state
+    of the one that asks (its lower bound, whether it solves with the torque rows, its
+    latest plan, the warm start of :meth:`ClampPlanner.best`): the same plan it would find
+    itself; and whether the torque rows are on after it. A job for
+    :class:`controllers.background.Background` in :meth:`ClampPlanner.trade_off`."""
+    planner = planner_for(*recipe)  # type: ignore[arg-type]
+    planner._bound, planner._torque, planner.problem.last = bound, torque, last
+    return planner.least_peak(), planner._torque
 
 
 def default_duration(planner: ClampPlanner) -> float:

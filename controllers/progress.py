@@ -12,6 +12,11 @@ On a terminal the bar (tqdm: count, total, rate and ETA) shows once the work has
 :data:`SHOW_AFTER` s; elsewhere (a log, a pipe) the same line is written, ended, at most
 once every :data:`LINE_EVERY` s. The bar moves between solves: one long solve (a first
 plan's compilation) shows at its end.
+
+A job in a second process (:mod:`controllers.background`) counts its solves on a
+:class:`Relay`, which sends them to the parent; the parent adds them to its own
+:class:`Progress` (:meth:`Progress.add_source`: drained at each of its own counts), so
+that a robust plan's bar and ETA cover its nominal twin's solves too.
 """
 
 from __future__ import annotations
@@ -45,19 +50,42 @@ class Progress:
         self.enabled, self._clock = enabled, clock
         self._start = self._last_line = clock()
         self._bar: Any = None
+        self._sources: list[Callable[[], object]] = []
+        self._draining = False
         if enabled and self.file.isatty():
             from tqdm import tqdm
             self._bar = tqdm(total=total, desc=desc, unit=unit, delay=SHOW_AFTER,
                              file=self.file, dynamic_ncols=True)
 
+    def add_source(self, drain: Callable[[], object]) -> None:
+        """Call ``drain`` at each count here: it brings in the counts of a job in another
+        process (:meth:`expect` and :meth:`advance` with that job's steps)."""
+        self._sources.append(drain)
+
+    def remove_source(self, drain: Callable[[], object]) -> None:
+        if drain in self._sources:
+            self._sources.remove(drain)
+
+    def _drain(self) -> None:
+        if self._draining:  # a source's own counts come back here
+            return
+        self._draining = True
+        try:
+            for drain in list(self._sources):
+                drain()
+        finally:
+            self._draining = False
+
     def expect(self, steps: int) -> None:
         """``steps`` more solves are coming."""
+        self._drain()
         self.total += steps
         if self._bar is not None:
             self._bar.total = self.total
 
     def advance(self, steps: int = 1) -> None:
         """``steps`` solves are done (or skipped)."""
+        self._drain()
         if steps <= 0:
             return
         self.n += steps
@@ -88,6 +116,34 @@ class Progress:
     def close(self) -> None:
         if self._bar is not None:
             self._bar.close()
+
+
+class Relay(Progress):
+    """The progress of a job in another process: each :meth:`expect` and :meth:`advance`
+    is sent (``send(kind, steps)``, kind ``"expect"`` or ``"tick"``) to the parent, which
+    shows it; nothing is shown here."""
+
+    def __init__(self, send: Callable[[str, int], object]) -> None:
+        super().__init__("job", enabled=False)
+        self._send = send
+
+    def expect(self, steps: int) -> None:
+        super().expect(steps)
+        self._send("expect", steps)
+
+    def advance(self, steps: int = 1) -> None:
+        super().advance(steps)
+        if steps > 0:
+            self._send("tick", steps)
+
+    def __call__(self) -> None:
+        """One step done: the plain progress callback of a job that counts its own."""
+        self.advance()
+
+
+def current() -> Progress | None:
+    """The :class:`Progress` of the current context (:func:`reporting`), if any."""
+    return _current.get()
 
 
 @contextlib.contextmanager

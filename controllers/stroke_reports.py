@@ -54,6 +54,7 @@ from toggle.plant import PlantConfig, plant_outputs
 
 _BINDING = 0.99  # a limit counts as binding above this fraction of its value
 _BASELINE_STEP = 0.8  # factor on a baseline's acceleration while it breaks the torque curve
+_KEPT_PEAKS = 32  # worst peaks kept per planner (worst_peak), a best plan's and a curve's
 
 
 class StrokeReports:
@@ -96,6 +97,7 @@ class StrokeReports:
         #: share one interval length (the problem of a plain two-phase stroke)
         self.capped = (protection.speed, protection.force) != (None, None)
         self.force_limit = limits.force(cfg.mechanism.drive)
+        self._worst_peaks: dict[int, tuple[Plan, float]] = {}
         self.f_ref = self._reference_force()
 
     @property
@@ -212,9 +214,19 @@ class StrokeReports:
 
     def worst_peak(self, plan: Plan) -> float:
         """The plan's peak input force (1 ms samples through the plant), N: the worst over
-        the plant and its variants (each divided by its scale)."""
-        return max([plan.peak_force, *(predict(plan.profile, v).peak_force / k
-                                       for v, k in zip(self.variants, self.scales))])
+        the plant and its variants (each divided by its scale). Kept for the latest plans
+        asked about (a best plan compares its starts' peaks after each: with variants each
+        is a prediction per variant)."""
+        if not self.variants:
+            return plan.peak_force  # kept by the plan itself
+        kept = self._worst_peaks.get(id(plan))
+        if kept is None or kept[0] is not plan:
+            if len(self._worst_peaks) >= _KEPT_PEAKS:
+                self._worst_peaks.clear()
+            kept = self._worst_peaks[id(plan)] = (plan, max([plan.peak_force, *(
+                predict(plan.profile, v).peak_force / k
+                for v, k in zip(self.variants, self.scales))]))
+        return kept[1]
 
     def torque_ratio(self, plan: Plan) -> float:
         """The plan's largest motor torque over the torque-speed curve at the motor's speed

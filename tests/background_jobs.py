@@ -24,3 +24,23 @@ def sleep_forever(pid_file: str, progress: Callable[[], object]) -> None:
         f.write(str(os.getpid()))
     while True:
         time.sleep(0.05)
+
+
+def solves(n: int, progress) -> int:
+    """Announce ``n`` solves and count each, as a planner does (``reporting(progress)``)."""
+    from controllers import progress as counted
+    from controllers.progress import reporting
+
+    with reporting(progress):
+        counted.expect(n)
+        for _ in range(n):
+            counted.advance()
+    return n
+
+
+def nested(progress: Callable[[], object]) -> bool:
+    """Whether a job's own Background would run a second process (it must not: a daemonic
+    process has no children)."""
+    from controllers import background
+
+    return background.parallel()

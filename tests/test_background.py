@@ -158,3 +158,26 @@ def test_toggle_plan_trade_off_stopped_leaves_no_process(how, after, status, sai
     assert proc.returncode == status and out == "", err
     assert err.strip().splitlines()[-1] == said and "Traceback" not in err
     assert wait_for(lambda: not any(alive(pid) for pid in helpers), 5)
+
+
+@pytest.mark.parametrize("parallel", [True, False])
+def test_the_jobs_solves_join_the_parents_progress(monkeypatch, parallel):
+    """Issue 37: a robust plan's bar counts its nominal twin's solves in the second process
+    too: the job's announced and counted solves reach the parent's progress (count and
+    total, hence the ETA), in a second process or here."""
+    from controllers.progress import Progress, reporting
+
+    monkeypatch.setattr(background, "parallel", lambda: parallel)
+    with reporting(Progress("planning", enabled=False)) as bar:
+        bar.expect(2)
+        with Background(jobs.solves, 3) as job:
+            bar.advance()  # the parent's own count drains what has come meanwhile
+            assert job.result() == 3 and job.ticks() == 3
+        bar.advance()
+        assert (bar.n, bar.total) == (5, 5)
+    assert bar._sources == []  # the job is no source of it after its block
+
+
+def test_a_job_runs_its_own_jobs_in_its_process(two_cores):
+    with Background(jobs.nested) as job:
+        assert job.result() is False

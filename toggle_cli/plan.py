@@ -133,9 +133,11 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     scale = curve["erroneous"].peak_force / curve["nominal"].peak_force
     planner = planner_for(cfg, limits, args.contact_speed, args.intervals, (erroneous,), (scale,),
                           _protection(args))
-    # the nominal plan, to compare, in a second process while this one plans the robust one
+    # the nominal plan, to compare, in a second process while this one plans the robust one;
+    # the bound is the nominal plant's for both (computed here once, not in each process)
+    bound = planner.lower_bound()
     with Background(best_plan, cfg, limits, args.contact_speed, args.intervals,
-                    _protection(args), duration, args.objective) as nominal_plan:
+                    _protection(args), duration, args.objective, bound) as nominal_plan:
         plan, plain = planner.best(duration, args.objective), nominal_plan.result()
     report = {}
     for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
