@@ -13,6 +13,7 @@ import argparse
 import contextlib
 import io
 import json
+import os
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -150,6 +151,10 @@ def _files(root: Path | None) -> set[Path]:
 
 
 #: Phrases of Python's internals that an answer in the user's words does not contain.
+#: Command lines per CLI fuzz in the suite (derandomized: the same ones each run);
+#: CLI_FUZZ_EXAMPLES=2000 for the long run, tests/cli_fuzz_table.py for the table.
+EXAMPLES = int(os.environ.get("CLI_FUZZ_EXAMPLES", "500"))
+
 INTERNALS = ("Traceback", "[Errno", "codec can't", "NoneType", "got None", "<class ",
              "object has no attribute", "unsupported operand", "takes 1 positional",
              "np.float64", "float64", "could not convert")

@@ -12,7 +12,7 @@ import tempfile
 from pathlib import Path
 
 import pytest
-from cli_fuzz import cheap_commands, check_answer, invocations, path_values
+from cli_fuzz import EXAMPLES, cheap_commands, check_answer, invocations, path_values
 from hypothesis import HealthCheck, given, settings
 
 from hil.cli import build_parser, main
@@ -39,7 +39,7 @@ def monkeypatch_module():
         yield mp
 
 
-@settings(max_examples=2000, derandomize=True, deadline=None,
+@settings(max_examples=EXAMPLES, derandomize=True, deadline=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(argv=invocations(build_parser(), PATHS, caps))
 def test_every_hil_command_answers_bad_input_with_one_clear_line(argv: list[str]) -> None:
