@@ -2,8 +2,9 @@
 
 Run from the repository: ``.venv/bin/python docs/design_report.py``. It runs each documented
 ``toggle design`` command as written (in this process, through the command line; the record
-goes to build/design/ and a rerun resumes from it), reads the record back by replaying the
-same seeded search (nothing is computed again: it checks that), and prints the Markdown of
+goes to build/design/ and a rerun resumes from it, with --force over a finished run's
+files), reads the record back by replaying the same seeded search (nothing is computed
+again: it checks that), and prints the Markdown of
 docs/design.md's tables: seed 004's groups against the front, and the SM-55 redesign with
 every objective and constraint against the SM-55, both opened by the same rule. Writes the
 figures to docs/design/ and the chosen SM-55 design to design/examples/sm55_design.toml
@@ -65,10 +66,12 @@ def run_cli(main: Callable[[Sequence[str]], int], prog: str, argv: list[str]) ->
 
 
 def run_documented(name: str, search: dict, out: Path) -> tuple[str, SearchResult]:
-    """Run the documented command, then replay its record (which must compute nothing)."""
+    """Run the documented command, then replay its record (which must compute nothing).
+    Over a finished run it adds --force: the record is kept and resumed, its files replaced
+    (``toggle design`` refuses them otherwise)."""
     from toggle_cli import main
     argv = command(name, search, out)
-    run_cli(main, "toggle", argv)
+    run_cli(main, "toggle", argv + ["--force"] * (out / "pareto.csv").exists())
     targets = load_targets(EXAMPLES / f"{name}.toml")
     result = run_search(targets, out, workers=0, **search)
     if result.evaluated:
@@ -232,7 +235,8 @@ RIG = ["--force-limit", "1e5", "--json", "--quiet", "--force"]
 
 def rig_runs(presets: dict[str, Path], records: Path) -> str:
     """``hil run`` on each preset: the rig's stroke and forces (forward, opening, at the
-    toggle); the change is of the magnitude, so a larger opening pull is a positive change."""
+    toggle; the mean over the cycles); the change is of the magnitude, so a larger opening
+    pull is a positive change."""
     from hil.cli import SUMMARY_ROWS, main
     got, lines = {}, []
     for name, path in presets.items():
@@ -244,7 +248,7 @@ def rig_runs(presets: dict[str, Path], records: Path) -> str:
     out = ["```text", *lines, "```", "", f"| quantity | {a} | {b} | change |",
            "|---|---|---|---|"]
     for key, label, scale, unit in SUMMARY_ROWS:
-        x, y = scale * ra[key], scale * rb[key]
+        x, y = scale * ra[key]["mean"], scale * rb[key]["mean"]
         change = (f"{100 * (abs(y) - abs(x)) / abs(x):+.2f} %" if key != "stroke_error"
                   else f"{y - x:+.4f} {unit}")
         out.append(f"| {label} ({unit}) | {x:.5g} | {y:.5g} | {change} |")
