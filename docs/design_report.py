@@ -2,21 +2,28 @@
 
 Run from the repository: ``.venv/bin/python docs/design_report.py``. It runs each documented
 ``toggle design`` command as written (in this process, through the command line; the record
-goes to build/design/ and a rerun resumes from it), reads the record back by replaying the
-same seeded search (nothing is computed again: it checks that), and prints the Markdown of
+goes to build/design/ and a rerun resumes from it, with --force over a finished run's
+files), reads the record back by replaying the same seeded search (nothing is computed
+again: it checks that), and prints the Markdown of
 docs/design.md's tables: seed 004's groups against the front, and the SM-55 redesign with
 every objective and constraint against the SM-55, both opened by the same rule. Writes the
 figures to docs/design/ and the chosen SM-55 design to design/examples/sm55_design.toml
-(the SM-55 opened by the same rule to build/design/sm55_reference.toml), and runs
-``toggle plan --min-time --cycle`` on both.
+(the SM-55 opened by the same rule to build/design/sm55_reference.toml), runs
+``toggle plan --min-time --cycle`` and ``hil run`` (the simulated rig) on both, and draws the
+design to scale with ``toggle plot linkage``.
 ``tests/test_design_report.py`` runs it on a reduced search.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import json
 import math
 import os
+import shutil
 import sys
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -43,22 +50,28 @@ def command(name: str, search: dict, out: Path) -> list[str]:
             str(search["seed"]), "--out", os.path.relpath(out, ROOT), "--no-figures", "--json"]
 
 
-def run_documented(name: str, search: dict, out: Path) -> tuple[str, SearchResult]:
-    """Run the documented command, then replay its record (which must compute nothing)."""
-    import contextlib
-    import io
-
-    from toggle_cli import main
-    argv = command(name, search, out)
-    here = Path.cwd()
+def run_cli(main: Callable[[Sequence[str]], int], prog: str, argv: list[str]) -> str:
+    """Run a command line in this process from the repository's root; its standard output.
+    A failed run stops the script, naming the command."""
+    text, here = io.StringIO(), Path.cwd()
     os.chdir(ROOT)
     try:
-        with contextlib.redirect_stdout(io.StringIO()):
+        with contextlib.redirect_stdout(text):
             code = main(argv)
     finally:
         os.chdir(here)
     if code != 0:
-        raise SystemExit(f"toggle {' '.join(argv)} exited {code}")
+        raise SystemExit(f"{prog} {' '.join(argv)} exited {code}")
+    return text.getvalue()
+
+
+def run_documented(name: str, search: dict, out: Path) -> tuple[str, SearchResult]:
+    """Run the documented command, then replay its record (which must compute nothing).
+    Over a finished run it adds --force: the record is kept and resumed, its files replaced
+    (``toggle design`` refuses them otherwise)."""
+    from toggle_cli import main
+    argv = command(name, search, out)
+    run_cli(main, "toggle", argv + ["--force"] * (out / "pareto.csv").exists())
     targets = load_targets(EXAMPLES / f"{name}.toml")
     result = run_search(targets, out, workers=0, **search)
     if result.evaluated:
@@ -112,6 +125,10 @@ def _change(row: Row) -> str:
     return f"{100 * row.change:+.2f} %"
 
 
+def _pct(reference: dict[str, float], design: dict[str, float], key: str) -> str:
+    return f"{100 * (design[key] / reference[key] - 1):+.2f} %"
+
+
 def _rows(rows: list[Row], limits: bool) -> list[str]:
     out = []
     for r in rows:
@@ -160,7 +177,16 @@ def sm55(records: Path, search: dict, design_file: Path | None = None,
            "| constraint | better | limit | SM-55 | sm55_design | change | design |",
            "|---|---|---|---|---|---|---|", *_rows(limits, True), "",
            f"wins on {len(wins)}: {', '.join(wins)}; loses on {len(loses)}: "
-           f"{', '.join(loses)}\n", "| variable | SM-55 | sm55_design |", "|---|---|---|"]
+           f"{', '.join(loses)}\n"]
+    if "die_height_thrust" in ref.metrics and "die_height_thrust" in design.metrics:
+        r, d = ref.metrics, design.metrics
+        out.append("die-height range, the worse end: peak thrust "
+                   f"{r['die_height_thrust']:.0f} N (SM-55) against "
+                   f"{d['die_height_thrust']:.0f} N ({_pct(r, d, 'die_height_thrust')}), "
+                   f"clamp-force sensitivity {r['die_height_sensitivity']:.0f} /m against "
+                   f"{d['die_height_sensitivity']:.0f} /m "
+                   f"({_pct(r, d, 'die_height_sensitivity')})\n")
+    out += ["| variable | SM-55 | sm55_design |", "|---|---|---|"]
     out += [f"| {v} | {a:.5g} | {design.variables[v]:.5g} |" for v, a in ref.variables.items()]
     if figures:
         chosen = replace(reference, name="sm55_design", reference=best, dominated_by=None)
@@ -177,24 +203,10 @@ PLAN = ["--min-time", "--force-limit", "1e5", "--cycle", "--hold", "8", "--eject
 def plans(presets: dict[str, Path]) -> str:
     """``toggle plan`` on each preset: the minimum-time stroke's times, peak input force, the
     motor's RMS torque and energy over the stroke and over the molding cycle."""
-    import contextlib
-    import io
-    import json
-
     from toggle_cli import main
-    got = {}
-    for name, path in presets.items():
-        argv = ["plan", "--preset", os.path.relpath(path, ROOT), *PLAN]
-        text = io.StringIO()
-        here = Path.cwd()
-        os.chdir(ROOT)
-        try:
-            with contextlib.redirect_stdout(text):
-                if main(argv) != 0:
-                    raise SystemExit(f"toggle {' '.join(argv)} failed")
-        finally:
-            os.chdir(here)
-        got[name] = json.loads(text.getvalue())
+    got = {name: json.loads(run_cli(main, "toggle", ["plan", "--preset",
+                                                      os.path.relpath(path, ROOT), *PLAN]))
+           for name, path in presets.items()}
     quantities = [("stroke time (s)", lambda r: r["duration"]),
                   ("closing time (s)", lambda r: r["closing_time"]),
                   ("peak input force (N)", lambda r: r["peak_force"]),
@@ -217,6 +229,43 @@ def plans(presets: dict[str, Path]) -> str:
     return "\n".join(out)
 
 
+#: The simulated rig's run on each side (3 forward-backward cycles, deterministic).
+RIG = ["--force-limit", "1e5", "--json", "--quiet", "--force"]
+
+
+def rig_runs(presets: dict[str, Path], records: Path) -> str:
+    """``hil run`` on each preset: the rig's stroke and forces (forward, opening, at the
+    toggle; the mean over the cycles); the change is of the magnitude, so a larger opening
+    pull is a positive change."""
+    from hil.cli import SUMMARY_ROWS, main
+    got, lines = {}, []
+    for name, path in presets.items():
+        argv = ["run", "--preset", os.path.relpath(path, ROOT), *RIG[:-1], "--out",
+                os.path.relpath(records / "hil" / path.stem, ROOT), RIG[-1]]
+        lines.append("$ hil " + " ".join(argv))
+        got[name] = json.loads(run_cli(main, "hil", argv))
+    (a, ra), (b, rb) = got.items()
+    out = ["```text", *lines, "```", "", f"| quantity | {a} | {b} | change |",
+           "|---|---|---|---|"]
+    for key, label, scale, unit in SUMMARY_ROWS:
+        x, y = scale * ra[key]["mean"], scale * rb[key]["mean"]
+        change = (f"{100 * (abs(y) - abs(x)) / abs(x):+.2f} %" if key != "stroke_error"
+                  else f"{y - x:+.4f} {unit}")
+        out.append(f"| {label} ({unit}) | {x:.5g} | {y:.5g} | {change} |")
+    return "\n".join(out)
+
+
+def linkage(preset: Path, records: Path, figure: Path) -> str:
+    """The design to scale: ``toggle plot linkage`` on its preset, the PNG copied to figure."""
+    from toggle_cli import main
+    out = records / "linkage"
+    argv = ["plot", "linkage", "--preset", os.path.relpath(preset, ROOT), "--out",
+            os.path.relpath(out, ROOT), "--force"]
+    run_cli(main, "toggle", argv)
+    shutil.copyfile(out / "linkage.png", figure)
+    return "$ toggle " + " ".join(argv)
+
+
 def shrink(path: Path) -> None:
     """A 64-colour palette PNG: a tenth of the size, for the repository."""
     from PIL import Image
@@ -230,7 +279,12 @@ if __name__ == "__main__":
     print()
     print(sm55(records, SEARCHES["sm55"], EXAMPLES / "sm55_design.toml"))
     print()
-    print(plans({"SM-55": records / "sm55_reference.toml",
-                 "sm55_design": EXAMPLES / "sm55_design.toml"}))
+    both = {"SM-55": records / "sm55_reference.toml",
+            "sm55_design": EXAMPLES / "sm55_design.toml"}
+    print(plans(both))
+    print()
+    print(rig_runs(both, records))
+    print()
+    print(linkage(EXAMPLES / "sm55_design.toml", records, FIGURES / "sm55_design_linkage.png"))
     for png in FIGURES.glob("*.png"):
         shrink(png)

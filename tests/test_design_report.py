@@ -71,3 +71,27 @@ def test_a_comparison_lists_every_objective_and_constraint_losses_included() -> 
     row = next(r for r in objectives if r.key == "installation_length")
     assert row.change == pytest.approx(
         design.metrics["installation_length"] / reference.metrics["installation_length"] - 1)
+
+
+def test_a_failed_command_stops_the_report_naming_it(capsys: pytest.CaptureFixture) -> None:
+    from toggle_cli import main
+    report = _report()
+    with pytest.raises(SystemExit, match=r"^toggle design missing\.toml exited 2$"):
+        report.run_cli(main, "toggle", ["design", "missing.toml"])
+    assert "missing.toml" in capsys.readouterr().err
+
+
+def test_the_rig_table_changes_are_of_the_magnitude(monkeypatch: pytest.MonkeyPatch,
+                                                     tmp_path: Path) -> None:
+    from hil.cli import SUMMARY_ROWS
+    report = _report()
+    runs = iter([{key: {"mean": -100.0 if key == "force_backward_min" else 1.0}
+                  for key, *_ in SUMMARY_ROWS},
+                 {key: {"mean": -110.0 if key == "force_backward_min" else 2.0}
+                  for key, *_ in SUMMARY_ROWS}])
+    monkeypatch.setattr(report, "run_cli", lambda main, prog, argv: json.dumps(next(runs)))
+    table = report.rig_runs({"a": tmp_path / "a.toml", "b": tmp_path / "b.toml"}, tmp_path)
+    rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines()}
+    assert rows["F_B(min) (N)"].endswith("| +10.00 % |")  # a 10 % larger opening pull
+    assert rows["F_F(max) (N)"].endswith("| +100.00 % |")
+    assert rows["stroke error dS (mm)"].endswith("| +1000.0000 mm |")
