@@ -6,6 +6,12 @@ command module defines ``add_parser(subparsers)``; a module may also define
 ``add_plot_parser(plot_subparsers)`` to add a ``toggle plot <kind>`` figure. Values are SI
 inside; the tables convert to mm and degrees.
 
+Every command line builds every command's parser, so the command modules import nothing
+heavy at their top (numpy, SciPy, CasADi, the planner: a third of a second): each command
+loads what it runs when it runs, and arguments whose declarations need such a module are
+added only when the command line names their command
+(:func:`toggle_cli.common.add_arguments_later`).
+
 The command's process gets its SIGINT/SIGTERM handlers on this file's first lines, before
 numpy and the rest load (a Ctrl-C in its first second printed a KeyboardInterrupt
 traceback); :func:`main` then installs handlers that unwind.
@@ -22,7 +28,7 @@ import argparse  # noqa: E402
 import importlib  # noqa: E402
 import signal  # noqa: E402
 import sys  # noqa: E402
-from collections.abc import Sequence  # noqa: E402
+from collections.abc import Collection, Sequence  # noqa: E402
 
 from toggle.args import (  # noqa: E402
     add_completion,
@@ -48,7 +54,12 @@ COMMANDS = ("kinematics", "tolerance", "clamp", "synthesize", "study", "asymmetr
             "tables", "build_fmu", "plan", "design", "plot", "cache")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(words: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The ``toggle`` command line's parser; with ``words`` (the command line's), the
+    arguments kept back (:func:`toggle_cli.common.add_arguments_later`) only of the
+    sub-commands it names, which are all the parser can parse of it."""
+    from toggle_cli.common import add_waiting_arguments
+
     parser = argparse.ArgumentParser(
         prog="toggle", description="Double-toggle mold/die clamp: model, analysis and tools."
     )
@@ -56,10 +67,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"toggle_cli.{name}").add_parser(sub)
+    add_waiting_arguments(parser, words)
     add_completion(sub, "toggle", build_parser)
-    for words in CHECKS_OUTPUTS:
+    for chain in CHECKS_OUTPUTS:
         command = parser
-        for word in words:
+        for word in chain:
             command = _subcommands(command)[word]
         command.set_defaults(checks_outputs=True)
     add_force_options(parser)
@@ -86,9 +98,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv == ["--version"]:  # without loading the commands (numpy, CasADi: seconds)
         print(f"toggle {version()}")
         return 0
-    args = parse_command_line(build_parser(), join_negative_numbers(argv))
-    from toggle.kinematics import AssemblyError  # loaded with the commands by now
-    from toggle.params import ParameterError
+    argv = join_negative_numbers(argv)
+    args = parse_command_line(build_parser(words=argv), argv)
 
     # from here a signal unwinds into the handlers below (while the commands' modules load
     # and the arguments are parsed, toggle/__init__.py's end the process at once)
@@ -114,7 +125,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"toggle {command}: interrupted", file=sys.stderr)
         return 130
-    except (ParameterError, AssemblyError, ValueError) as exc:
+    except ValueError as exc:  # ParameterError, AssemblyError, InputError, OutputError too
         print(f"toggle {command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except (OSError, RuntimeError) as exc:

@@ -7,10 +7,6 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
-from toggle.asymmetry import asymmetry, force_curves, plot_force_curves
-from toggle.kinematics import stroke_limits
 from toggle_cli.common import (
     LINK_ERROR,
     MM,
@@ -26,6 +22,11 @@ from toggle_cli.common import (
 
 def summary(args: argparse.Namespace) -> dict:
     """F_TP and the paper's curve statistics of the extra force (SI)."""
+    import numpy as np
+
+    from toggle.asymmetry import asymmetry, force_curves
+    from toggle.kinematics import stroke_limits
+
     mech = mechanism(args).with_error("upper", "r5", args.delta_r8)
     x_tp = stroke_limits(mech.lower)[1]
     at_tp = asymmetry(x_tp, args.speed, mech.lower, mech.upper)
@@ -79,6 +80,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def plot(args: argparse.Namespace) -> int:
+    from toggle.asymmetry import plot_force_curves
+
     plot_force_curves(mechanism(args), args.out / "asymmetry.png", speed=args.speed)
     return 0
 

@@ -10,13 +10,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fmu_src.build import build_fmu
 from toggle.args import path
 from toggle.files import check_writable, check_writable_dir
 from toggle.params import load_preset
 
 
 def run(args: argparse.Namespace) -> int:
+    from fmu_src.build import build_fmu
+
     if not args.native and (args.fmi_version, args.interface) != (2, "cs"):
         raise ValueError("--fmi-version 3 and --interface me|both need --native (the "
                          "pythonfmu FMU is FMI 2.0 Co-Simulation)")

@@ -13,19 +13,11 @@ import math
 from dataclasses import asdict
 
 from toggle.args import path
-from toggle.calibration import (
-    FITTABLE,
-    MAX_FITTED,
-    PAPER_TABLES,
-    calibrate,
-    compare,
-    load_force_table,
-    table_mechanism,
-)
 from toggle.params import ParameterError, load_preset
 from toggle_cli.common import (
     MM,
     SPEED,
+    add_arguments_later,
     add_json_argument,
     add_preset_argument,
     mechanism,
@@ -40,6 +32,8 @@ FITTED_UNITS = {"free_play": "m", "contact_stiffness": "N/m^1.5", "series_stiffn
 
 
 def run(args: argparse.Namespace) -> int:
+    from toggle.calibration import calibrate, compare, load_force_table, table_mechanism
+
     data = load_force_table(args.table)
     mech = mechanism(args)
     measured = table_mechanism(args.table)
@@ -77,6 +71,14 @@ def run(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate",
                        help="fit the unequal-halves model to measured F_TP (seed 000 Tables 6-8)")
+    add_arguments_later(p, _add_arguments)
+    p.set_defaults(handler=run)
+
+
+def _add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options, whose defaults and choices are :mod:`toggle.calibration`'s."""
+    from toggle.calibration import FITTABLE, MAX_FITTED, PAPER_TABLES
+
     add_preset_argument(p, accepts=("chang2021",),
                         why="the paper's table was measured on the chang2021 rig")
     p.add_argument("--table", type=path, default=PAPER_TABLES,
@@ -88,4 +90,3 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"at most {MAX_FITTED} of: {', '.join(FITTABLE)} (default free_play "
                         "contact_stiffness hersey_transition)")
     add_json_argument(p)
-    p.set_defaults(handler=run)

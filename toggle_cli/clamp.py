@@ -10,12 +10,9 @@ from __future__ import annotations
 
 import argparse
 import math
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from toggle.args import positive
-from toggle.drive import encoder_pulses, motor_torque, torque_history, travel_per_radian
-from toggle.elastics import ClampingResult, analyse_clamping, clamping_curves
 from toggle.params import Mechanism
 from toggle_cli.common import (
     FORCE,
@@ -32,6 +29,9 @@ from toggle_cli.common import (
     table,
 )
 
+if TYPE_CHECKING:
+    from toggle.elastics import ClampingResult
+
 KGF = 9.80665  # N per kgf, for tables and figures only
 PAPER_MUS = (0.0, 0.01, 0.05, 0.10, 0.17)
 
@@ -42,6 +42,8 @@ def _finite_or_none(value: float) -> float | None:
 
 def summary(mech: Mechanism, result: ClampingResult) -> dict:
     """SI summary of one clamping run (the ``--json`` payload)."""
+    from toggle.drive import encoder_pulses, motor_torque
+
     out = {
         "preset": mech.name,
         "mu": result.mu,
@@ -90,6 +92,8 @@ def _print_table(mech: Mechanism, data: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from toggle.elastics import analyse_clamping
+
     mech = mechanism(args)
     result = analyse_clamping(mech, args.mu, tiebar_force=args.clamp_force, x_contact=args.contact)
     data = summary(mech, result)
@@ -122,6 +126,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def plot(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from toggle.drive import torque_history, travel_per_radian
+    from toggle.elastics import analyse_clamping, clamping_curves
     from toggle.plots import plt, save_figure
 
     mech = mechanism(args)

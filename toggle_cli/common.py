@@ -1,18 +1,20 @@
 """Helpers shared by the command modules: preset option, argument types, JSON and tables.
 
 The argument types are :mod:`toggle.args`'s, so ``toggle`` and ``hil`` judge a value alike.
+This module and the command modules' tops import nothing heavy (no numpy, SciPy, CasADi):
+every command's parser is built on every command line, each command loads what it runs.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Iterable, Sequence
+import weakref
+from collections.abc import Callable, Collection, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 from toggle.args import integer, number, path, positive
-from toggle.json_text import json_text
 from toggle.params import HALVES, Mechanism, ParameterError, load_preset
 
 MM = 1e3  # metres to millimetres, for tables only
@@ -29,6 +31,38 @@ SEED = integer(0, 2**32 - 1, "must be a seed between 0 and 2^32 - 1")
 POINTS = integer(2, 100_000, "must be a count of points between 2 and 100000")
 SAMPLES = integer(1, 100_000_000, "must be a number of samples between 1 and 1e8")
 IT_GRADE = integer(1, 18, "must be an ISO 286 IT grade between 1 and 18")
+
+
+#: Parsers whose arguments wait to be added (:func:`add_arguments_later`), with the functions
+#: that add them.
+_WAITING: weakref.WeakKeyDictionary[argparse.ArgumentParser,
+                                    tuple[Callable[[argparse.ArgumentParser], None], ...]] = (
+    weakref.WeakKeyDictionary())
+
+
+def add_arguments_later(parser: argparse.ArgumentParser,
+                        *adds: Callable[[argparse.ArgumentParser], None]) -> None:
+    """``add(parser)`` for each of ``adds`` in turn adds the arguments of a (sub-)command
+    whose declarations need a heavy module (a default or the choices from the planner:
+    CasADi, SciPy): the command line adds them (:func:`add_waiting_arguments`) only where it
+    names that command, so that the other commands start without loading the module. The
+    parser itself (its name and one-line help, which ``toggle --help`` lists) is made at
+    once."""
+    _WAITING[parser] = adds
+
+
+def add_waiting_arguments(parser: argparse.ArgumentParser,
+                          words: Collection[str] | None = None) -> None:
+    """The arguments :func:`add_arguments_later` kept back, of every sub-command of
+    ``parser`` named in ``words`` (argparse picks a sub-command by its exact name: one not
+    named there is not parsed) and of theirs; of all of them when ``words`` is None."""
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for name, sub in action.choices.items():
+                if words is None or name in words:
+                    for add in _WAITING.pop(sub, ()):
+                        add(sub)
+                    add_waiting_arguments(sub, words)
 
 
 def add_preset_argument(parser: argparse.ArgumentParser, default: str = "chang2021",
@@ -85,6 +119,8 @@ def mechanism(args: argparse.Namespace) -> Mechanism:
 
 def print_json(payload: Any) -> None:
     """Strict JSON on stdout: a non-finite number is null (:mod:`toggle.json_text`)."""
+    from toggle.json_text import json_text
+
     print(json_text(payload))
 
 

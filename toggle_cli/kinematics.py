@@ -4,11 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 from toggle.args import integer
 from toggle.files import check_writable, check_writable_dir
-from toggle.kinematics import half_motion, half_pose, mirror_angles, stroke_limits
 from toggle.params import HALVES, Mechanism
 from toggle_cli.common import (
     MM,
@@ -26,6 +23,8 @@ from toggle_cli.common import (
 
 def summary(mech: Mechanism) -> dict:
     """Stroke data of each half; top-level values are the lower half's (SI)."""
+    from toggle.kinematics import half_pose, mirror_angles, stroke_limits
+
     halves = {}
     for h in HALVES:
         dims = mech.half(h)
@@ -56,6 +55,10 @@ def summary(mech: Mechanism) -> dict:
 
 def profile(mech: Mechanism, points: int) -> dict:
     """L, dL/dx and mechanical advantage of both halves over the stroke."""
+    import numpy as np
+
+    from toggle.kinematics import half_motion, stroke_limits
+
     x_open, x_tp = stroke_limits(mech.lower)
     xs = np.linspace(x_open, x_tp, points)
     out = {"x": xs.tolist()}

@@ -13,42 +13,14 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from controllers import cam, cam_formats
-from controllers.background import Background
-from controllers.cycle import MoldingCycle
-from controllers.duty import Duty, check_motor, motor_duty
-from controllers.limits import DriveLimits, drive_limits
-from controllers.planner import (
-    ClampPlanner,
-    best_plan,
-    default_duration,
-    planner_for,
-    trade_off_curve,
-)
-from controllers.plans import (
-    CONTACT_SPEED,
-    INTERVALS,
-    PROTECT_FRACTION,
-    Plan,
-    Protection,
-    plan_config,
-)
-from controllers.profiles import predict, read_profile_csv, write_profile_csv
-from controllers.progress import Progress, describe, reporting
-from controllers.stroke_problem import OBJECTIVES
-from controllers.stroke_reports import baseline_stroke, baselines
 from toggle.args import integer, number, path, positive
-from toggle.drive import motor_torque
-from toggle.elastics import clamp_stroke
 from toggle.files import atomic_path, check_writable
 from toggle.params import DYNAMICS_PARAMETERS, HALVES, PAPER_NAMES, ParameterError
-from toggle.plant import PlantConfig, with_errors
 from toggle_cli.common import (
     FRICTION,
     LINK_ERROR,
     POSITION,
+    add_arguments_later,
     add_json_argument,
     add_out_argument,
     add_preset_argument,
@@ -56,6 +28,17 @@ from toggle_cli.common import (
     print_json,
     table,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from controllers.cycle import MoldingCycle
+    from controllers.duty import Duty
+    from controllers.limits import DriveLimits
+    from controllers.planner import ClampPlanner
+    from controllers.plans import Plan, Protection
+    from controllers.progress import Progress
+    from toggle.plant import PlantConfig
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -97,11 +80,16 @@ def _progress(args: argparse.Namespace, desc: str = "planning", unit: str = "sol
               total: int = 0) -> Progress:
     """The planning's progress on stderr (:mod:`controllers.progress`), none with
     ``--json``."""
+    from controllers.progress import Progress
+
     return Progress(desc, unit, total, enabled=not getattr(args, "json", False))
 
 
 def _plant(args: argparse.Namespace, errors: bool = True) -> tuple[PlantConfig, DriveLimits]:
     """The plant (with the dimensional errors unless ``errors`` is false) and the limits."""
+    from controllers.limits import drive_limits
+    from controllers.plans import plan_config
+
     cfg = plan_config(args.preset, mu=args.mu, x_contact=args.x_contact,
                       clamp_force=args.clamp_force, masses=_masses(args.masses),
                       errors=_errors(args) if errors else None)
@@ -112,6 +100,8 @@ def _plant(args: argparse.Namespace, errors: bool = True) -> tuple[PlantConfig, 
 
 def _protection(args: argparse.Namespace) -> Protection:
     """The mold-protection zone of ``--protect-distance/-speed/-force``."""
+    from controllers.plans import Protection
+
     return Protection(args.protect_distance, args.protect_speed, args.protect_force)
 
 
@@ -119,6 +109,12 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     """The robust planner (``--robust``): the nominal clamp with the erroneous one as a
     variant, each weighed against its own S-curve; and the report of the robust plan, the
     nominal plan and the S-curve on each clamp."""
+    from controllers.background import Background
+    from controllers.planner import best_plan, default_duration, planner_for
+    from controllers.profiles import predict
+    from controllers.stroke_reports import baseline_stroke
+    from toggle.plant import with_errors
+
     if args.min_time or not _errors(args):
         raise ParameterError("--robust plans a fixed duration against dimensional errors: "
                              "give --delta-NAME and no --min-time")
@@ -151,6 +147,10 @@ def _trade_off_curves(args: argparse.Namespace, cfg: PlantConfig, limits: DriveL
                       ) -> dict[str, tuple[ClampPlanner, list[Plan]]]:
     """``--trade-off N``: the fastest stroke under N force limits, with the mold and in a
     dry cycle (the mold at the toggle: no clamp force), each with its planner."""
+    from controllers.background import Background
+    from controllers.planner import planner_for, trade_off_curve
+    from toggle.elastics import clamp_stroke
+
     dry = cfg.with_(x_contact=clamp_stroke(cfg.mechanism)[1] - DRY_CONTACT)
     common = (limits, args.contact_speed, args.intervals, _protection(args), args.trade_off)
     planners = {name: planner_for(plant, *common[:3], protection=common[3])
@@ -199,6 +199,11 @@ def _opening(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
     position under the drive's force limit (and ``--force-limit``), the platen leaving the
     mold at most at ``--contact-speed`` and at most at ``--break-speed`` over the
     protection distance after it; its times, forces and binding limits."""
+    import numpy as np
+
+    from controllers.planner import planner_for
+    from controllers.plans import Protection
+
     opener = planner_for(cfg, limits, args.contact_speed, args.intervals, opening=True,
                          protection=Protection(args.protect_distance, args.break_speed))
     plan = opener.minimum_time(args.force_limit)
@@ -217,6 +222,8 @@ def _export(args: argparse.Namespace, plan: Plan, cfg: PlantConfig, limits: Driv
             settings: dict[str, object]) -> dict[str, object]:
     """``--export cam``: the plan's cam table written to ``--out``, checked as the drive
     interpolates it at ``--drive-cycle`` (:mod:`controllers.cam_formats`)."""
+    from controllers import cam, cam_formats
+
     return cam_formats.export(args.out, plan.profile, cfg, limits, plan.peak_force,
                               args.format, settings, points=args.points, master=args.master,
                               units=args.units, interpolation=args.interpolation,
@@ -225,6 +232,8 @@ def _export(args: argparse.Namespace, plan: Plan, cfg: PlantConfig, limits: Driv
 
 def _drive_cycle(text: str) -> float:
     """argparse type of ``--drive-cycle`` (:func:`controllers.cam.parse_cycle`)."""
+    from controllers import cam
+
     try:
         return cam.parse_cycle(text)
     except ParameterError as exc:
@@ -236,6 +245,10 @@ def _molding_cycle(args: argparse.Namespace, plan: Plan, opening: Plan, limits: 
     """``--cycle``: the whole molding cycle with the ``--hold`` and ``--eject`` dwells, its
     times and the motor's duty over it (refused if the motor is too small for its RMS
     torque); ``--cycle-out`` writes it for ``hil run --profile``."""
+    from controllers.cycle import MoldingCycle
+    from controllers.duty import check_motor
+    from controllers.profiles import write_profile_csv
+
     cycle = MoldingCycle(plan, opening, args.hold, args.eject)
     duty = cycle.duty()
     drive = plan.config.mechanism.drive
@@ -257,6 +270,8 @@ def _planned(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
              ) -> tuple[ClampPlanner, Plan, dict[str, object] | None]:
     """The planner and the plan asked for (robust, minimum time or least peak) and the
     robust report (None unless ``--robust``)."""
+    from controllers.planner import default_duration, planner_for
+
     if args.robust:
         return _robust(args)
     planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
@@ -268,6 +283,15 @@ def _planned(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from controllers import cam
+    from controllers.duty import motor_duty
+    from controllers.profiles import write_profile_csv
+    from controllers.progress import describe, reporting
+    from controllers.stroke_reports import baselines
+    from toggle.drive import motor_torque
+
     if args.out:
         check_writable(args.out, "--out")  # before solving, not after
     if args.trade_off and args.cycle:
@@ -480,6 +504,8 @@ def _print_electrical(electrical: dict | None, thermal: dict | None) -> None:
 
 
 def plot(args: argparse.Namespace) -> int:
+    from controllers.profiles import read_profile_csv
+    from controllers.stroke_reports import baselines
     from toggle.plots import MM, plt, save_figure
 
     samples = read_profile_csv(args.csv)
@@ -508,6 +534,8 @@ def plot(args: argparse.Namespace) -> int:
 def _check_positions(csv: Path, x: np.ndarray, cfg: PlantConfig) -> None:
     """Refuse a profile whose positions leave the preset's stroke by more than a tenth of
     it: a file in mm (a 45 mm stroke read as 45 m), or one planned for another preset."""
+    from toggle.elastics import clamp_stroke
+
     x_open, x_tp = clamp_stroke(cfg.mechanism)
     margin = 0.1 * (x_tp - x_open)
     if x.min() < x_open - margin or x.max() > x_tp + margin:
@@ -561,6 +589,8 @@ def duty_figure(duty: Duty, limits: DriveLimits, rated_torque: float | None,
     (SI; axes labelled with units). The plane is scaled to the cycle: the motor's curve
     and rated torque are drawn where they fall inside it, and the text says how much of
     them the cycle uses. Legends sit below the axes, never over the curves."""
+    import numpy as np
+
     from toggle.plots import plt
 
     fig, (ax_t, ax_c) = plt.subplots(1, 2, figsize=(12, 5.6))
@@ -612,6 +642,8 @@ def duty_figure(duty: Duty, limits: DriveLimits, rated_torque: float | None,
 
 
 def _add_protection_arguments(p: argparse.ArgumentParser) -> None:
+    from controllers.plans import PROTECT_FRACTION
+
     zone = p.add_argument_group("mold protection: the last distance of platen travel before "
                                 "mold contact")
     zone.add_argument("--protect-distance", type=positive("distance in m", 10.0, 1e-6),
@@ -658,6 +690,16 @@ def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plan", help="plan the clamp stroke that minimises the drive force")
+    add_arguments_later(p, _add_plan_arguments)
+    p.set_defaults(handler=run)
+
+
+def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``toggle plan``, whose defaults and choices are the planner's."""
+    from controllers import cam, cam_formats
+    from controllers.plans import CONTACT_SPEED, INTERVALS
+    from controllers.stroke_problem import OBJECTIVES
+
     _add_plant_arguments(p)
     p.add_argument("--duration", type=positive("duration in s", 1e4), default=None,
                    help="stroke duration, s (default: twice the kinematic minimum)")
@@ -736,7 +778,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "at once (the worst of the two, each against its S-curve)")
     p.add_argument("--out", type=path, default=None, help="profile CSV to write (SI units)")
     add_json_argument(p)
-    p.set_defaults(handler=run)
 
 
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
@@ -748,6 +789,15 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=plot)
     p = kinds.add_parser("trade-off", help="stroke time against peak input force, with the "
                          "mold and in a dry cycle")
+    add_arguments_later(p, _add_trade_off_arguments, add_out_argument)
+    declare_outputs(p, "trade_off.png")
+    p.set_defaults(handler=plot_trade_off)
+
+
+def _add_trade_off_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``toggle plot trade-off`` but --out, some defaults the planner's."""
+    from controllers.plans import CONTACT_SPEED, INTERVALS
+
     _add_plant_arguments(p)
     p.add_argument("--points", dest="trade_off", type=integer(2, 100, "must be 2 to 100 points"),
                    default=6, help="force limits per curve (default 6)")
@@ -757,6 +807,3 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
                    default=INTERVALS, help=f"time intervals N (default {INTERVALS})")
     _add_protection_arguments(p)
-    add_out_argument(p)
-    declare_outputs(p, "trade_off.png")
-    p.set_defaults(handler=plot_trade_off)

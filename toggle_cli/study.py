@@ -9,28 +9,18 @@ of one half over a grid. ``toggle plot study`` draws seed 004's Figures 3-6,
 from __future__ import annotations
 
 import argparse
+import functools
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from toggle.args import integer, number
 from toggle.params import DIMENSIONS, HALVES, ParameterError, load_preset
-from toggle.study import (
-    CRITERIA,
-    MIN_ANGLE,
-    GroupResult,
-    SweepResult,
-    angle_grid,
-    preset_halves,
-    rank_groups,
-    study_groups,
-    sweep,
-)
 from toggle_cli.common import (
     MM,
     POINTS,
+    add_arguments_later,
     add_json_argument,
     add_out_argument,
     add_preset_argument,
@@ -39,6 +29,11 @@ from toggle_cli.common import (
     print_json,
     table,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from toggle.study import GroupResult, SweepResult
 
 #: Labels of the criteria in tables and figures (angles in degrees).
 _SHORT = {"stroke_ratio": "Ms", "velocity_ratio": "Mv peak", "force_amplification": "Mp lock",
@@ -49,7 +44,15 @@ _SHORT = {"stroke_ratio": "Ms", "velocity_ratio": "Mv peak", "force_amplificatio
 ANGLE = number(0.0, 180.0, "must be a toggle angle between 0 and 180 deg")
 
 
+def _range_arguments(preset: str) -> Callable[[argparse.ArgumentParser], None]:
+    """Adds the preset and toggle-angle range options (default ``preset``), whose help needs
+    :mod:`toggle.study` (for :func:`toggle_cli.common.add_arguments_later`)."""
+    return functools.partial(_add_range_arguments, preset=preset)
+
+
 def _add_range_arguments(p: argparse.ArgumentParser, preset: str) -> None:
+    from toggle.study import MIN_ANGLE
+
     add_preset_argument(p, default=preset, why="a family (li_micro) compares its groups; "
                         "family/group makes that group the baseline")
     p.add_argument("--half", choices=HALVES, default="lower", help="half to study (default lower)")
@@ -63,6 +66,8 @@ def _add_range_arguments(p: argparse.ArgumentParser, preset: str) -> None:
 
 
 def _alphas(args: argparse.Namespace) -> np.ndarray:
+    from toggle.study import MIN_ANGLE, angle_grid
+
     least = math.degrees(MIN_ANGLE)
     if not least <= args.alpha_lock < args.alpha_max < 180:
         raise ParameterError(f"need {least:.2g} <= --alpha-lock < --alpha-max < 180 deg, got "
@@ -76,12 +81,16 @@ def _shown(key: str, value: float) -> float:
 
 
 def _run_study(args: argparse.Namespace) -> tuple[list[GroupResult], str]:
+    from toggle.study import preset_halves, study_groups
+
     halves, baseline = preset_halves(args.preset, args.half)
     return study_groups(halves, _alphas(args)), baseline
 
 
 def study_payload(args: argparse.Namespace) -> dict[str, Any]:
     """JSON of ``toggle study`` (SI): the groups with their measures, and the ranking."""
+    from toggle.study import rank_groups
+
     results, baseline = _run_study(args)
     groups = []
     for r in results:
@@ -99,6 +108,8 @@ def study_payload(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _print_ranking(data: dict[str, Any], alpha_max: float, alpha_lock: float) -> None:
+    from toggle.study import CRITERIA
+
     rk = data["ranking"]
     rows = []
     for g in data["groups"]:
@@ -149,6 +160,8 @@ _COUNT = integer(2, 200, "must be a count of values from 2 to 200")
 
 def _axis(spec: list[str]) -> tuple[str, np.ndarray]:
     """``[name, start_m, stop_m, count]`` -> (name, values in m)."""
+    import numpy as np
+
     name, start, stop, count = spec
     if name not in DIMENSIONS:
         raise ParameterError(f"--dim: unknown dimension {name!r}; known: {', '.join(DIMENSIONS)}")
@@ -159,6 +172,8 @@ def _axis(spec: list[str]) -> tuple[str, np.ndarray]:
 
 
 def _run_sweep(args: argparse.Namespace) -> SweepResult:
+    from toggle.study import sweep
+
     if len(args.dim) != 2:
         raise ValueError(f"--dim must be given exactly twice, got {len(args.dim)}")
     dims = load_preset(args.preset).half(args.half)
@@ -167,6 +182,8 @@ def _run_sweep(args: argparse.Namespace) -> SweepResult:
 
 def sweep_payload(args: argparse.Namespace, result: SweepResult) -> dict[str, Any]:
     """JSON of ``toggle sweep`` (SI); failed cells are null and listed with the reason."""
+    import numpy as np
+
     return {
         "preset": args.preset, "half": args.half, "alpha": _alphas(args).tolist(),
         "dims": list(result.names), "values": [v.tolist() for v in result.values],
@@ -177,6 +194,8 @@ def sweep_payload(args: argparse.Namespace, result: SweepResult) -> dict[str, An
 
 
 def run_sweep(args: argparse.Namespace) -> int:
+    from toggle.study import CRITERIA
+
     result = _run_sweep(args)
     if args.json:
         print_json(sweep_payload(args, result))
@@ -203,18 +222,17 @@ def _add_dim_argument(p: argparse.ArgumentParser) -> None:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("study", help="seed 004 design study: rank the groups of a preset family")
-    _add_range_arguments(p, "li_micro")
-    add_json_argument(p)
+    add_arguments_later(p, _range_arguments("li_micro"), add_json_argument)
     p.set_defaults(handler=run_study)
     s = sub.add_parser("sweep", help="the study's criteria over a grid of two dimensions")
-    _add_range_arguments(s, "li_micro/1")
-    _add_dim_argument(s)
-    add_json_argument(s)
+    add_arguments_later(s, _range_arguments("li_micro/1"), _add_dim_argument, add_json_argument)
     s.set_defaults(handler=run_sweep)
 
 
 def plot_study(results: list[GroupResult], title: str, path: Path) -> Path:
     """Seed 004's Figures 3-6 for every valid group: Ms, Mv, Mp and psi against alpha."""
+    import numpy as np
+
     from toggle.plots import plt, save_figure
 
     panels = (("stroke_ratio", "stroke ratio Ms (1)", 1.0, False),
@@ -239,6 +257,7 @@ def plot_study(results: list[GroupResult], title: str, path: Path) -> Path:
 def plot_sweep(result: SweepResult, title: str, path: Path) -> Path:
     """Filled contours of the four criteria over the two swept dimensions (mm)."""
     from toggle.plots import plt, save_figure
+    from toggle.study import CRITERIA
 
     (n1, n2), (v1, v2) = result.names, result.values
     fig, axes = plt.subplots(2, 2, figsize=(11, 8))
@@ -271,13 +290,10 @@ def _plot_sweep(args: argparse.Namespace) -> int:
 
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("study", help="Ms, Mv, Mp, psi against toggle angle (seed 004 Figs 3-6)")
-    _add_range_arguments(p, "li_micro")
-    add_out_argument(p)
+    add_arguments_later(p, _range_arguments("li_micro"), add_out_argument)
     declare_outputs(p, "study.png")
     p.set_defaults(handler=_plot_study)
     s = kinds.add_parser("sweep", help="contours of the study's criteria over two dimensions")
-    _add_range_arguments(s, "li_micro/1")
-    _add_dim_argument(s)
-    add_out_argument(s)
+    add_arguments_later(s, _range_arguments("li_micro/1"), _add_dim_argument, add_out_argument)
     declare_outputs(s, "sweep.png")
     s.set_defaults(handler=_plot_sweep)

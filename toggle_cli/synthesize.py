@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import asdict
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from toggle import press, synthesis
 from toggle.files import check_writable, check_writable_dir
 from toggle.params import load_preset
 from toggle_cli.common import (
@@ -26,9 +25,14 @@ from toggle_cli.common import (
     table,
 )
 
+if TYPE_CHECKING:
+    from toggle import synthesis
+
 
 def error_model(preset: str) -> synthesis.ErrorModel:
     """The press error model for a press preset, else the clamp's."""
+    from toggle import press, synthesis
+
     if press.is_press_preset(preset):
         return press.error_model(press.load_press(preset))
     return synthesis.clamp_error_model(load_preset(preset))
@@ -36,6 +40,8 @@ def error_model(preset: str) -> synthesis.ErrorModel:
 
 def _evaluate(model: synthesis.ErrorModel, tol: dict[str, float], samples: int,
               seed: int) -> dict[str, Any]:
+    from toggle import synthesis
+
     return {
         "tolerances": tol,
         "cost": synthesis.cost(model, tol),
@@ -49,6 +55,8 @@ def _evaluate(model: synthesis.ErrorModel, tol: dict[str, float], samples: int,
 
 def report(model: synthesis.ErrorModel, samples: int, seed: int) -> dict[str, Any]:
     """Everything the command prints, SI units."""
+    from toggle import synthesis
+
     rows = synthesis.sensitivity_table(model)
     st = model.settings
     alloc = synthesis.allocate(model, samples=samples)
@@ -118,6 +126,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def plot(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from toggle import synthesis
     from toggle.plots import plt, save_figure
 
     check_writable_dir(args.out, "--out")

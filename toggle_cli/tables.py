@@ -15,33 +15,32 @@ import argparse
 
 from toggle.args import path
 from toggle.files import check_writable, check_writable_dir
-from toggle.rig_calibration import (
-    FORCE_FITTABLE,
-    MAX_FORCE_FITTED,
-    SHIPPED_FIT_SPEEDS,
-    STAT_LABELS,
-    STATISTICS,
-    RigModel,
-    Row,
-    calibrate_rig,
-    compare_tables,
-    load_paper_tables,
-    plot_tables,
-    simulate_tables,
-)
 from toggle_cli.common import (
     MM,
     SPEED,
+    add_arguments_later,
     add_json_argument,
     add_preset_argument,
     mechanism,
     print_json,
 )
 
-LABELS = {**STAT_LABELS, "stroke": "S"}
-
 
 def run(args: argparse.Namespace) -> int:
+    from toggle.rig_calibration import (
+        SHIPPED_FIT_SPEEDS,
+        STAT_LABELS,
+        STATISTICS,
+        RigModel,
+        Row,
+        calibrate_rig,
+        compare_tables,
+        load_paper_tables,
+        plot_tables,
+        simulate_tables,
+    )
+
+    labels = {**STAT_LABELS, "stroke": "S"}
     if args.plot is not None:
         check_writable_dir(args.plot, "--plot")  # before the simulation, not after it
         for stat in STATISTICS:  # plot_tables draws every statistic
@@ -91,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if fit:
         print(f"{nominal.name}: fitted on {', '.join(f'{s * MM:g}' for s in fit.speeds)} mm/s, "
-              f"statistics {', '.join(LABELS[s] for s in fit.statistics)}")
+              f"statistics {', '.join(labels[s] for s in fit.statistics)}")
         for name, value in fit.values.items():
             if name in fit.at_limit:
                 print(f"  {name} = {value:.5g} (SI; at a limit of the model, held there: "
@@ -104,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
           f"{'res/3s':>7} {'rel %':>7}  role       verdict")
     for r in rows:
         scale = MM if r.statistic == "stroke" else 1.0
-        print(f"{LABELS[r.statistic]:>9} {r.speed * MM:7g} {r.error * MM:7.2f} "
+        print(f"{labels[r.statistic]:>9} {r.speed * MM:7g} {r.error * MM:7.2f} "
               f"{r.measured * scale:9.3f} +-{r.three_sigma * scale:7.3f} "
               f"{r.simulated * scale:10.3f} {r.in_sigma:+7.1f} {100 * r.relative:+7.1f}  "
               f"{role(r):10} {'holds' if r.holds() else 'MISSES'}")
@@ -119,6 +118,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _fittable(name: str) -> str:
     """A --fit name (the list, with the as-built errors of each dimension, is in --help)."""
+    from toggle.rig_calibration import FORCE_FITTABLE
+
     if name not in FORCE_FITTABLE:
         raise argparse.ArgumentTypeError(f"{name!r} is not fittable (see toggle tables --help)")
     return name
@@ -127,6 +128,14 @@ def _fittable(name: str) -> str:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tables",
                        help="the simulated rig against seed 000 Tables 3-8 (fit, predict, plot)")
+    add_arguments_later(p, _add_arguments)
+    p.set_defaults(handler=run, checks_outputs=True)
+
+
+def _add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options, whose choices are :mod:`toggle.rig_calibration`'s."""
+    from toggle.rig_calibration import FORCE_FITTABLE, MAX_FORCE_FITTED, STATISTICS
+
     add_preset_argument(p, accepts=("chang2021",),
                         why="the paper's tables were measured on the chang2021 rig")
     p.add_argument("--fit", nargs="+", type=_fittable, metavar="PARAM",
@@ -141,4 +150,3 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", type=path, default=None, metavar="DIR",
                    help="write one PNG per statistic into DIR")
     add_json_argument(p)
-    p.set_defaults(handler=run, checks_outputs=True)

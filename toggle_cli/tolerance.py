@@ -7,7 +7,6 @@ from dataclasses import asdict
 
 from toggle.args import integer
 from toggle.params import DIMENSIONS, HALVES, PAPER_NAMES
-from toggle.tolerance import asymmetry, it_tolerances, monte_carlo
 from toggle_cli.common import (
     IT_GRADE,
     MM,
@@ -24,6 +23,8 @@ from toggle_cli.common import (
 
 
 def run(args: argparse.Namespace) -> int:
+    from toggle.tolerance import asymmetry, it_tolerances, monte_carlo
+
     mech = mechanism(args)
     tol = it_tolerances(mech, args.it)
     rep = asymmetry(mech, tol, args.x)
