@@ -106,9 +106,9 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     import numpy as np
     from matplotlib.figure import Figure
 
+    import fmu_src.build as build  # toggle build-fmu loads it when it runs
     import fmu_src.native_build as native
     import toggle.linkage as linkage
-    import toggle_cli.build_fmu as build_cli
     from hil import cli as hil_cli
     from hil import experiment
     from hil.interrupts import Interrupted
@@ -137,7 +137,7 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     mp.setattr(Figure, "savefig", fake_savefig)
     mp.setattr(Figure, "tight_layout", lambda fig, **_kw: None)
     mp.setattr(linkage, "animate_linkage", fake_animation)
-    mp.setattr(build_cli, "build_fmu", fake_build)
+    mp.setattr(build, "build_fmu", fake_build)
     mp.setattr(native, "build_native_fmu", fake_build)
     mp.setattr(experiment, "planned_trajectory", lambda *a, **k: canned)
     mp.setattr(RigEmulator, "serve", lambda self: None)

@@ -42,9 +42,9 @@ def regular(tmp_path: Path) -> Path:
 
 
 def test_plan_refuses_an_unwritable_out_before_solving(monkeypatch, capsys, regular):
-    import toggle_cli.plan as plan_cli
+    import controllers.planner as planner  # toggle plan loads it when it runs
 
-    monkeypatch.setattr(plan_cli, "planner_for", lambda *a, **k: pytest.fail("solved first"))
+    monkeypatch.setattr(planner, "planner_for", lambda *a, **k: pytest.fail("solved first"))
     code, _, err = answer(toggle, ["plan", "--out", str(regular / "plan.csv")], capsys)
     # a refused output is a usage error (exit 2), told before the work
     assert code == 2 and err.startswith("toggle plan: error: --out") and str(regular) in err

@@ -56,9 +56,10 @@ def test_a_figure_kind_names_its_folder_last_and_json_keeps_stdout(tmp_path: Pat
 
 @pytest.fixture
 def no_planning(monkeypatch):
+    import controllers.planner as planner  # toggle plan loads it when it runs
     import toggle_cli.plan as plan_cli
 
-    monkeypatch.setattr(plan_cli, "planner_for", lambda *a, **k: pytest.fail("solved first"))
+    monkeypatch.setattr(planner, "planner_for", lambda *a, **k: pytest.fail("solved first"))
     monkeypatch.setattr(plan_cli, "_trade_off_curves",
                         lambda *a, **k: pytest.fail("planned first"))
 
@@ -111,10 +112,10 @@ def test_plot_clamp_writes_into_figures_by_default(tmp_path: Path, monkeypatch,
 
 def test_build_fmu_refuses_an_existing_fmu_before_the_build(tmp_path: Path, monkeypatch,
                                                             capsys) -> None:
+    import fmu_src.build as build  # toggle build-fmu loads it when it runs
     import fmu_src.native_build as native
-    import toggle_cli.build_fmu as build_cli
 
-    monkeypatch.setattr(build_cli, "build_fmu", lambda *a, **k: pytest.fail("built first"))
+    monkeypatch.setattr(build, "build_fmu", lambda *a, **k: pytest.fail("built first"))
     monkeypatch.setattr(native, "build_native_fmu", lambda out, *a: out / "ToggleClampNative.fmu")
     (tmp_path / "ToggleClamp.fmu").write_bytes(b"PK mine")
     code, _, err = answer(["build-fmu", "--out", str(tmp_path)], capsys)

@@ -128,9 +128,9 @@ def test_an_output_folder_that_is_a_file_is_refused_before_the_work(
 
 def test_plan_refuses_an_existing_out_before_solving(tmp_path: Path, monkeypatch,
                                                      capsys: pytest.CaptureFixture) -> None:
-    import toggle_cli.plan as plan_cli
+    import controllers.planner as planner  # toggle plan loads it when it runs
 
-    monkeypatch.setattr(plan_cli, "planner_for", lambda *a, **k: pytest.fail("solved first"))
+    monkeypatch.setattr(planner, "planner_for", lambda *a, **k: pytest.fail("solved first"))
     existing = tmp_path / "plan.csv"
     existing.write_text("mine\n")
     assert main(["plan", "--out", str(existing)]) == 2
