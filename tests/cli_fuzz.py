@@ -160,6 +160,19 @@ INTERNALS = ("Traceback", "[Errno", "codec can't", "NoneType", "got None", "<cla
              "np.float64", "float64", "could not convert")
 
 
+def run_command(main: Callable[[Sequence[str]], int], argv: Sequence[str],
+                capsys: pytest.CaptureFixture) -> tuple[int, str, str]:
+    """(exit code, stdout, stderr) of one in-process command (``toggle``'s or ``hil``'s
+    main); never a traceback."""
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    assert "Traceback" not in err
+    return code, out, err
+
+
 def check_answer(main: Callable[[Sequence[str]], int], argv: list[str],
                  outputs: Sequence[Path], watch: Path | None = None,
                  in_words: bool = False) -> tuple[int, str]:

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from cli_fuzz import run_command
 from matplotlib.figure import Figure
 
 from hil.cli import build_parser as hil_parser
@@ -22,12 +23,7 @@ from toggle_cli import main as toggle
 
 def answer(main, argv: list[str], capsys) -> tuple[int, str, str]:
     """(exit code, stdout, the last stderr line) of one in-process command."""
-    try:
-        code = main(argv)
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    assert "Traceback" not in err
+    code, out, err = run_command(main, argv, capsys)
     return code, out, (err.strip().splitlines() or [""])[-1]
 
 

@@ -5,10 +5,12 @@ files names the folder and the files on its last line; figure kinds write into t
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 
 import pytest
+from cli_fuzz import run_command
 
 from toggle.files import atomic_path, results_line, take_written
 from toggle_cli import main
@@ -16,14 +18,7 @@ from toggle_cli import main
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def answer(argv: list[str], capsys: pytest.CaptureFixture) -> tuple[int, str, str]:
-    try:
-        code = main(argv)
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    assert "Traceback" not in err
-    return code, out, err
+answer = functools.partial(run_command, main)  # (argv, capsys) -> (code, stdout, stderr)
 
 
 @pytest.mark.parametrize("files, line", [

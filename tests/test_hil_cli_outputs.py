@@ -5,13 +5,14 @@ invalid input files exit 2 in one line naming the file, a sub-command's own usag
 
 from __future__ import annotations
 
+import functools
 import os
 import stat
 from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_fuzz import INTERNALS
+from cli_fuzz import INTERNALS, run_command
 
 from hil import experiment
 from hil.cli import main
@@ -22,15 +23,7 @@ from hil.rsm import RsmError, fit_rsm
 QUICK = ["run", "--speed", "40e-3", "--cycles", "1", "--quiet"]
 
 
-def answer(argv: list[str], capsys: pytest.CaptureFixture) -> tuple[int, str, str]:
-    """(exit code, stdout, stderr) of one in-process ``hil`` command."""
-    try:
-        code = main(argv)
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    assert "Traceback" not in err
-    return code, out, err
+answer = functools.partial(run_command, main)  # (argv, capsys) -> (code, stdout, stderr)
 
 
 @pytest.fixture
