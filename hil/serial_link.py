@@ -27,7 +27,7 @@ import serial
 
 from hil import protocol as p
 from hil.link_timing import ACK_TIMEOUT_MAX, ACK_TIMEOUT_MIN, WATCHDOG_MAX, AckTimer, LinkTiming
-from hil.realtime import raise_thread_priority, set_realtime
+from hil.realtime import freeze_collections, raise_thread_priority, set_realtime
 
 ESTOP_REPEATS = 3  # an emergency stop is sent this many times back to back
 #: Attempts of the STOP that ends a session before the host escalates to ESTOP (section 6).
@@ -286,6 +286,7 @@ class SerialLink:
         self.heartbeat_period = heartbeat_period
         self.realtime = realtime
         self._restore_priority: Callable[[], None] = lambda: None  # the session thread's nice
+        self._unfreeze: Callable[[], None] = lambda: None  # the heap kept out of collections
         self.clock_slack = clock_slack
         self.clear_faults_on_close = clear_faults_on_close
         self.point_period_us = point_period_us
@@ -343,6 +344,7 @@ class SerialLink:
             self._silence.timeout = WATCHDOG_MAX  # until the link is measured
         if self.realtime:
             self._restore_priority = raise_thread_priority()
+            self._unfreeze = freeze_collections()
         self._reader = threading.Thread(target=self._read_loop, name="rig-reader", daemon=True)
         self._reader.start()
         try:
@@ -539,6 +541,8 @@ class SerialLink:
         self.info = None
         self._restore_priority()
         self._restore_priority = lambda: None
+        self._unfreeze()
+        self._unfreeze = lambda: None
 
     def __enter__(self) -> SerialLink:
         return self

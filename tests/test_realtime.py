@@ -56,3 +56,16 @@ def test_a_thread_already_higher_is_left_as_it_is() -> None:
     if not seen:
         pytest.skip("raising a priority needs root or CAP_SYS_NICE")
     assert seen["after"] == SESSION_NICE - 5
+
+
+def test_a_session_keeps_the_heap_out_of_collections_until_it_ends() -> None:
+    import gc
+
+    from hil.realtime import freeze_collections
+    kept = [[i] for i in range(1000)]  # objects that exist when the session opens
+    unfreeze = freeze_collections()
+    try:
+        assert gc.get_freeze_count() >= len(kept)
+    finally:
+        unfreeze()
+    assert gc.get_freeze_count() == 0

@@ -7,6 +7,7 @@ timing is not the point, the host watchdog is generous so a loaded machine canno
 
 from __future__ import annotations
 
+import gc
 import os
 import threading
 import time
@@ -374,8 +375,9 @@ def test_a_realtime_session_raises_its_thread_until_it_closes(rig: Callable[...,
     before = os.getpriority(os.PRIO_PROCESS, tid)
     _, link = rig(realtime=True)
     during = os.getpriority(os.PRIO_PROCESS, tid)
+    assert gc.get_freeze_count() > 0  # the heap kept out of collections meanwhile
     link.close()
-    assert os.getpriority(os.PRIO_PROCESS, tid) == before
+    assert os.getpriority(os.PRIO_PROCESS, tid) == before and gc.get_freeze_count() == 0
     assert during in (before, min(before, SESSION_NICE))
     if os.geteuid() == 0:
         assert during == min(before, SESSION_NICE)
