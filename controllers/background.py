@@ -1,26 +1,28 @@
 """A planning job in a second process: two independent IPOPT runs at once on two cores.
 
-A trade-off's two curves (with the mold, and the dry cycle) and a robust plan's nominal
-twin are independent solves, each seconds of IPOPT, which holds the GIL; the second runs in
-a child process while the parent computes the first. The child is spawned (a fresh
+A trade-off's two curves (with the mold, and the dry cycle) and a robust plan's nominal twin
+are independent solves, each seconds of IPOPT, which holds the GIL; the second runs in a
+child process while the parent computes the first. The child is spawned (a fresh
 interpreter: forking a process that holds CasADi, IPOPT and a progress bar's thread is not
-safe), loads the compiled problem from the disk cache, and sends back progress ticks and
-its result (or its exception) over a pipe.
+safe), loads the compiled problem from the disk cache, and sends back progress ticks and its
+result (or its exception) over a pipe.
 
-The parent owns the child: leaving the ``with`` block any way (the result, an error,
-Ctrl-C) terminates it, a SIGTERM to the parent is turned into :class:`Terminated` for that
-(instead of ending the parent with the child left running), and the kernel kills the child
-if the parent dies without a word (``PR_SET_PDEATHSIG``, Linux). The child ignores Ctrl-C
-from the terminal from its first instruction: it is spawned with SIGINT blocked (the mask is
-inherited across exec; a Ctrl-C during the child's seconds of imports ended it with a
-traceback, and the parent with exit status 1), then ignores it and unblocks; the parent
-decides, and stops it. With one core for this process, or in a job's process itself
-(:func:`parallel`), the job runs in this process when its result is asked for, as before.
+The parent owns the child: leaving the ``with`` block any way (the result, an error, Ctrl-C)
+terminates it, a SIGTERM to a parent that has no handler for it is turned into
+:class:`Terminated` for that (instead of ending the parent with the child left running; a
+command's own handler, :class:`toggle.interrupts.RaiseOutsideImports`, is kept), and the
+kernel kills the child if the parent dies without a word (``PR_SET_PDEATHSIG``, Linux). The
+child ignores Ctrl-C from the terminal from its first instruction: it is spawned with SIGINT
+blocked (the mask is inherited across exec; a Ctrl-C during the child's seconds of imports
+ended it with a traceback, and the parent with exit status 1), then ignores it and unblocks;
+the parent decides, and stops it. With one core for this process, or in a job's process
+itself (:func:`parallel`), the job runs in this process when its result is asked for, as
+before.
 
-The job's ``progress`` is a :class:`controllers.progress.Relay`: called, it counts one
-step; as a :class:`~controllers.progress.Progress` (``reporting(progress)``) it counts the
-planner's solves. Its counts reach :meth:`Background.ticks` and, where the block runs in
-a ``reporting()`` context, that progress (count and total: a robust plan's bar counts its
+The job's ``progress`` is a :class:`controllers.progress.Relay`: called, it counts one step;
+as a :class:`~controllers.progress.Progress` (``reporting(progress)``) it counts the
+planner's solves. Its counts reach :meth:`Background.ticks` and, where the block runs in a
+``reporting()`` context, that progress (count and total: a robust plan's bar counts its
 nominal twin's solves too), drained whenever that progress counts.
 """
 
@@ -98,7 +100,8 @@ class Background:
             child_end.close()
 
     def __enter__(self) -> Background:
-        if threading.current_thread() is threading.main_thread():
+        if (threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL):
             self._previous_term = signal.signal(signal.SIGTERM, self._terminate)
         return self
 

@@ -54,6 +54,7 @@ from toggle.args import (
 )
 from toggle.elastics import clamp_stroke
 from toggle.files import InputError, OutputError, allow_overwrite, one_line, print_results
+from toggle.interrupts import raised_signal, signal_taken
 from toggle.json_text import json_text
 from toggle.params import DYNAMICS_PARAMETERS, ParameterError, load_preset
 from toggle.rig_calibration import load_paper_tables
@@ -484,14 +485,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:
         return quiet_broken_pipe()
     except (ParameterError, InputError, OutputError, RsmError) as exc:
-        print(f"hil {command}: error: {one_line(exc)}", file=sys.stderr)
-        return 2
+        return _error(command, exc, 2)
     except (TrajectoryError, RecordingError, RunStoppedError, cli_rig.RigCommandError,
             ValueError, OSError) as exc:
-        print(f"hil {command}: error: {one_line(exc)}", file=sys.stderr)
-        return 1
+        return _error(command, exc, 1)
     finally:  # the policy is the command's: a library caller in this process keeps replacing
         allow_overwrite(True)
+
+
+def _error(command: str, exc: Exception, code: int) -> int:
+    """One ``hil COMMAND: error:`` line and ``code``; but the signal instead where one was
+    raised and lost on the way (:func:`toggle.interrupts.raised_signal`)."""
+    stop = raised_signal()
+    if stop is not None:
+        raise stop from None
+    print(f"hil {command}: error: {one_line(exc)}", file=sys.stderr)
+    return code
 
 
 def entry() -> NoReturn:
@@ -500,8 +509,13 @@ def entry() -> NoReturn:
     Everything the command opened is closed by then (the rig's session, the run's files,
     QEMU); what is left is the interpreter's teardown of numpy, scipy, CasADi and fmpy,
     measured at 110-200 ms here, which made a run that gave up on a deaf MCU exit 0.8 s
-    after it (issue 35). An exception that escapes :func:`main` unwinds as usual."""
-    code = main()
+    after it (issue 35). The SystemExit of a signal (:func:`exit_cleanly_on_signals`) is
+    taken here, so it is not delivered again; any other exception unwinds as usual."""
+    try:
+        code = main()
+    except SystemExit as stop:
+        signal_taken()
+        code = stop.code if isinstance(stop.code, int) else int(stop.code is not None)
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(OSError, ValueError):  # a closed or broken pipe
             stream.flush()

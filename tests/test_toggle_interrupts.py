@@ -10,15 +10,17 @@ the Dask cluster: tests/test_design_cluster.py.
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 import pytest
 
-from toggle.interrupts import Terminated, started_as
+from toggle.interrupts import RaiseOutsideImports, Terminated, started_as
 from toggle_cli import signal_cause
 
 pytestmark = pytest.mark.real_time
@@ -103,3 +105,102 @@ def test_only_the_toggle_command_installs_the_start_up_handlers() -> None:
     assert signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None)
     # (SIG_IGN where pytest runs as a shell's background job, which ignores SIGINT)
     assert signal.getsignal(signal.SIGINT) in (signal.default_int_handler, signal.SIG_IGN)
+
+
+#: ``toggle plan`` in a process that sends itself ``SIG`` the first time CasADi's Python
+#: type check ``CHECK`` (called from its C code, which clears what it raises) runs after the
+#: command's handlers are installed: the moment a Ctrl-C was lost 0.8 s into a plan.
+_SIGNAL_IN_A_TYPE_CHECK = """
+import os, signal, sys
+sys.argv = [{toggle!r}, "plan", "--json"]
+import toggle_cli
+from toggle.interrupts import RaiseOutsideImports
+
+def tracer(frame, event, arg):
+    if (frame.f_code.co_name == {check!r} and frame.f_code.co_filename.endswith("casadi.py")
+            and isinstance(signal.getsignal({sig}), RaiseOutsideImports)):
+        sys.settrace(None)
+        sys.stderr.write("sent\\n")
+        os.kill(os.getpid(), {sig})
+
+sys.settrace(tracer)
+sys.exit(toggle_cli.main())
+"""
+
+
+@pytest.mark.parametrize("check", ["size1", "DM_from_csc", "DM_from_array"])
+@pytest.mark.parametrize("signum", SIGNALS, ids=lambda s: signal.Signals(s).name)
+def test_a_signal_whose_exception_casadi_clears_still_ends_toggle_plan(
+        check: str, signum: int) -> None:
+    """CasADi's SWIG type checks clear any exception their Python raised; the handler's
+    KeyboardInterrupt raised there was lost and the plan finished with exit 0 (a CI run),
+    or CasADi went on to "Wrong number or type of arguments" and toggle exited 1 with that
+    error. The handler keeps the signal and raises it again until main() takes it; an
+    error that follows a signal not taken is the signal."""
+    code = _SIGNAL_IN_A_TYPE_CHECK.format(toggle=str(TOGGLE), check=check, sig=int(signum))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    lines = proc.stderr.strip().splitlines()
+    assert lines[0] == "sent", proc.stderr  # the signal met the type check
+    assert proc.returncode == 128 + signum and proc.stdout == "", proc.stderr
+    assert len(lines) == 2 and lines[1].endswith(SAID[signum]), proc.stderr
+
+
+def test_a_raised_signal_is_raised_again_until_taken_but_not_during_its_cleanup() -> None:
+    """The handler's contract on its own: an exception swallowed (``except: pass``, as
+    CasADi's checks do) comes back within a few KEEP intervals; while it unwinds through a
+    ``finally`` it is not raised again; once taken, nothing more is delivered."""
+    handler = RaiseOutsideImports()
+    previous = signal.signal(signal.SIGINT, handler)
+    raised: list[KeyboardInterrupt] = []
+    try:
+        try:
+            for i in range(1000):
+                try:
+                    if i == 0:
+                        os.kill(os.getpid(), signal.SIGINT)
+                    time.sleep(0.001)
+                except KeyboardInterrupt as exc:
+                    raised.append(exc)
+                    if len(raised) == 1:
+                        continue  # swallowed
+                    raise
+            pytest.fail("a swallowed signal was not raised again within 1 s")
+        except KeyboardInterrupt:
+            try:
+                try:
+                    raise
+                finally:
+                    time.sleep(5 * handler.KEEP)  # cleanup: deliveries again, no raise
+            except KeyboardInterrupt:  # main()'s last handler
+                handler.taken()
+        assert len(raised) == 2
+        time.sleep(3 * handler.KEEP)  # a delivery sent before taken() is ignored
+        assert handler.pending is None and handler.raised is None
+    finally:
+        handler.taken()
+        signal.signal(signal.SIGINT, previous)
+
+
+def test_a_signal_held_back_is_not_raised_by_another_thread_inside_the_block() -> None:
+    """signals_held blocks the signal in this thread, but a thread that does not block it
+    (a progress bar's, a timer's) receives a process-directed one, and Python runs the
+    handler in the main thread anyway: a Ctrl-C raised inside Process.start() and the
+    planning child died on "EOFError: Ran out of input" with a traceback. Inside the block
+    nothing is raised; on leaving, the signal is."""
+    from toggle.interrupts import signals_held
+
+    other = threading.Thread(target=time.sleep, args=(1.0,), daemon=True)
+    other.start()
+    inside: list[str] = []
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt), signals_held(signal.SIGINT):
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(50):
+                time.sleep(0.002)  # Python would run a handler here
+            inside.append("not raised")
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert inside == ["not raised"]

@@ -25,7 +25,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from types import FrameType
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -38,35 +38,49 @@ class Terminated(KeyboardInterrupt):
     so that its child process is stopped): unwinds like Ctrl-C; ``toggle`` exits 143."""
 
 
-@contextmanager
-def signals_survive() -> Iterator[None]:
-    """Run a block (a CasADi solve) so that SIGINT or SIGTERM, if a Python handler takes
-    it, reaches that handler after the block even when the block swallowed the exception.
+class _InFront:
+    """A handler put in front of the program's own (``__wrapped__``) for a block: it notes
+    each signal and, if ``passes``, hands it on at once."""
 
-    Only the main thread can set handlers; elsewhere the block runs as it is.
-    """
+    def __init__(self, wrapped: Callable[[int, FrameType | None], object], passes: bool,
+                 received: list[int]) -> None:
+        self.__wrapped__, self.passes, self.received = wrapped, passes, received
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        self.received.append(signum)
+        if self.passes:
+            self.__wrapped__(signum, frame)
+
+
+@contextmanager
+def _in_front(passes: bool, signums: tuple[int, ...] = SIGNALS) -> Iterator[None]:
+    """A block during which :class:`_InFront` notes ``signums`` (those with a Python
+    handler); after it, the first one noted goes to the program's handler again. Only the
+    main thread can set handlers; elsewhere the block runs as it is."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous: dict[int, Callable[[int, FrameType | None], object]] = {}
     received: list[int] = []
-
-    def note(signum: int, frame: FrameType | None) -> None:
-        received.append(signum)
-        previous[signum](signum, frame)  # raises what the program expects, to stop IPOPT
-
-    for sig in SIGNALS:
+    for sig in signums:
         handler = signal.getsignal(sig)
         if callable(handler):  # Python's own for SIGINT, or the program's (hil's guard)
             previous[sig] = handler
-            signal.signal(sig, note)
+            signal.signal(sig, _InFront(handler, passes, received))
     try:
         yield
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    if received:  # the block returned: the exception was swallowed on the way
+    if received:  # held back, or passed on and swallowed by the block
         previous[received[0]](received[0], None)
+
+
+def signals_survive() -> AbstractContextManager[None]:
+    """Run a block (a CasADi solve) so that SIGINT or SIGTERM, if a Python handler takes
+    it, reaches that handler at once (its exception stops IPOPT) and again after the block,
+    where the block swallowed the exception."""
+    return _in_front(passes=True)
 
 
 def in_import(frame: FrameType | None) -> bool:
@@ -79,12 +93,13 @@ def in_import(frame: FrameType | None) -> bool:
     return False
 
 
-def redeliver(signum: int, still_pending: Callable[[], bool]) -> None:
-    """Send ``signum`` to the main thread again after REDELIVER s if ``still_pending()``."""
+def redeliver(signum: int, still_pending: Callable[[], bool],
+              after: float = REDELIVER) -> None:
+    """Send ``signum`` to the main thread again after ``after`` s if ``still_pending()``."""
     def again() -> None:
         if still_pending():
             signal.pthread_kill(threading.main_thread().ident, signum)
-    timer = threading.Timer(REDELIVER, again)
+    timer = threading.Timer(after, again)
     timer.daemon = True
     timer.start()
 
@@ -154,24 +169,98 @@ def signal_exception(signum: int) -> KeyboardInterrupt:
 
 class RaiseOutsideImports:
     """A signal handler: ``exception(signum)`` raised in the main thread where the signal
-    finds it, but never inside an import: there it is delivered again after the import.
+    finds it, never inside an import (there it is delivered again after the import), and
+    kept until the program takes it (:meth:`taken`).
+
+    Kept, because a raised exception can be lost: CasADi's Python type checks (``size1``,
+    ``DM_from_csc``, ``vertcat``), called from its C code while a problem is built, clear
+    any exception their Python raised, so a Ctrl-C 0.8 s into ``toggle plan`` was dropped
+    there and the plan finished with exit 0. Until it is taken the signal is delivered
+    again every KEEP s, and raised again unless its exception is on its way up (being
+    handled by a ``finally`` or an ``__exit__`` on the stack): cleanup is not interrupted.
     ``announce``: the command that says ``interrupted by SIGNAME`` at the first signal."""
+
+    #: Interval at which a raised signal not yet taken is delivered again, s.
+    KEEP = 0.05
 
     def __init__(self, exception: Callable[[int], BaseException] = signal_exception,
                  announce: str | None = None) -> None:
         self.exception, self.announce = exception, announce
-        self.pending: int | None = None
+        self.pending: int | None = None  # to be raised (the first signal, or one lost)
+        self.raised: BaseException | None = None  # raised and not yet taken
+        self.signum = 0  # the signal raised
+        self._late = False  # a delivery again was sent: it may arrive after taken()
 
     def __call__(self, signum: int, frame: FrameType | None) -> None:
+        late, self._late = self._late, False
         if self.pending is None:
-            self.pending = signum
-            if self.announce is not None:
-                say_interrupted(self.announce, signum)
+            if self.raised is None and late:
+                return  # delivered again just as the program took the signal
+            if self.raised is None:
+                self.pending = signum
+                if self.announce is not None:
+                    say_interrupted(self.announce, signum)
+            elif self._on_its_way():
+                redeliver(signum, self._again, self.KEEP)
+                return
+            else:  # swallowed on the way: raised again
+                self.pending = self.signum
         if in_import(frame):
             redeliver(signum, lambda: self.pending is not None)
             return
-        signum, self.pending = self.pending, None
-        raise self.exception(signum)
+        self.signum, self.pending = self.pending, None
+        self.raised = self.exception(self.signum)
+        redeliver(self.signum, self._again, self.KEEP)
+        raise self.raised
+
+    def _again(self) -> bool:
+        """Whether to deliver the raised signal again: not taken yet, and this handler still
+        the signal's (one that replaced it, or the one restored, decides)."""
+        self._late = self.raised is not None and self._in_charge()
+        return self._late
+
+    def _in_charge(self) -> bool:
+        """This handler takes the signal: it is installed, or behind a block's
+        :class:`_InFront`."""
+        handler = signal.getsignal(self.signum)
+        while isinstance(handler, _InFront):
+            handler = handler.__wrapped__
+        return handler is self
+
+    def _on_its_way(self) -> bool:
+        """The raised exception (or one it caused) is being handled on the stack."""
+        seen = sys.exc_info()[1]
+        while seen is not None:
+            if seen is self.raised:
+                return True
+            seen = seen.__cause__ or seen.__context__
+        return False
+
+    def taken(self) -> None:
+        """The program has the signal (its exception reached the command's last handler):
+        no more deliveries."""
+        self.pending = self.raised = None
+
+
+def signal_taken() -> None:
+    """The command's process has acted on the signal that is being raised (its main()
+    caught the exception): the installed :class:`RaiseOutsideImports` stops delivering it."""
+    for sig in SIGNALS:
+        handler = signal.getsignal(sig)
+        if isinstance(handler, RaiseOutsideImports):
+            handler.taken()
+
+
+def raised_signal() -> BaseException | None:
+    """The exception of a signal that the installed :class:`RaiseOutsideImports` raised and
+    the program has not taken: it was swallowed on the way, and what the code that
+    swallowed it did next (CasADi: "Wrong number or type of arguments") is its
+    consequence, not an error of its own."""
+    for sig in SIGNALS:
+        handler = signal.getsignal(sig)
+        if isinstance(handler, RaiseOutsideImports) and handler.raised is not None:
+            return handler.raised
+    return None
 
 
 def unwind_on_signals(handler: RaiseOutsideImports | None = None) -> None:
@@ -191,7 +280,8 @@ def signals_held(*signums: int) -> Iterator[None]:
     """``signums`` held back from this thread, and from the threads and processes started
     meanwhile, which inherit the mask and keep it: a planning process, a Dask cluster's
     event loop and workers then never see the terminal's Ctrl-C (their parent decides, and
-    stops them); one that arrives meanwhile is delivered here on leaving.
+    stops them); one that arrives meanwhile is delivered here on leaving (also one that a
+    thread which does not block it received: Python runs its handler in this thread).
 
     multiprocessing's resource tracker, started with the first child process, unblocks
     SIGINT and SIGTERM whatever the mask was: it is started first.
@@ -199,8 +289,9 @@ def signals_held(*signums: int) -> Iterator[None]:
     from multiprocessing import resource_tracker
 
     resource_tracker.ensure_running()
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, set(signums))
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+    with _in_front(passes=False, signums=signums):  # a thread that does not block it got it
+        previous = signal.pthread_sigmask(signal.SIG_BLOCK, set(signums))
+        try:
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)

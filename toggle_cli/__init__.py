@@ -42,7 +42,12 @@ from toggle.args import (  # noqa: E402
     version,
 )
 from toggle.files import allow_overwrite, one_line, print_results, take_written  # noqa: E402
-from toggle.interrupts import Terminated, unwind_on_signals  # noqa: E402
+from toggle.interrupts import (  # noqa: E402
+    Terminated,
+    raised_signal,
+    signal_taken,
+    unwind_on_signals,
+)
 
 #: Commands (their words) whose modules check their output files with
 #: :func:`toggle.files.check_writable` before the work (``toggle plan``: --out, --cycle-out,
@@ -112,17 +117,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             code = int(args.handler(args) or 0)
             print_results(take_written(), to_stderr=getattr(args, "json", False))
             return code
-        except Exception as exc:  # a signal's exception wrapped by C code: the signal
-            stop = signal_cause(exc)
+        except Exception as exc:  # a signal's exception wrapped or lost by C code: the signal
+            stop = signal_cause(exc) or raised_signal()
             if stop is None:
                 raise
             raise stop from None
     except BrokenPipeError:
         return quiet_broken_pipe()
     except Terminated:  # SIGTERM: a planning process that ran is stopped
+        signal_taken()
         print(f"toggle {command}: terminated", file=sys.stderr)
         return 128 + signal.SIGTERM
     except KeyboardInterrupt:
+        signal_taken()
         print(f"toggle {command}: interrupted", file=sys.stderr)
         return 130
     except ValueError as exc:  # ParameterError, AssemblyError, InputError, OutputError too
