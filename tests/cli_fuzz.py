@@ -150,11 +150,11 @@ def _files(root: Path | None) -> set[Path]:
     return set() if root is None else {p for p in root.rglob("*") if p.is_file()}
 
 
-#: Phrases of Python's internals that an answer in the user's words does not contain.
 #: Command lines per CLI fuzz in the suite (derandomized: the same ones each run);
 #: CLI_FUZZ_EXAMPLES=2000 for the long run, tests/cli_fuzz_table.py for the table.
-EXAMPLES = int(os.environ.get("CLI_FUZZ_EXAMPLES", "500"))
+EXAMPLES = int(os.environ.get("CLI_FUZZ_EXAMPLES", "300"))
 
+#: Phrases of Python's internals that an answer in the user's words does not contain.
 INTERNALS = ("Traceback", "[Errno", "codec can't", "NoneType", "got None", "<class ",
              "object has no attribute", "unsupported operand", "takes 1 positional",
              "np.float64", "float64", "could not convert")
