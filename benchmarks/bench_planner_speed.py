@@ -15,7 +15,7 @@ after each command: the machine is shared, and the wall time follows it. ``--jso
 the same rows (every run's wall and CPU time, the answers, the load) as JSON.
 
     python benchmarks/bench_planner_speed.py --before PATH [--repeat N] [--warm-up SIDE]
-        [--hog] [--json PATH]
+        [--hog] [--only TEXT] [--json PATH]
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from pathlib import Path
 
 AFTER = Path(sys.executable).with_name("toggle")
 ROBUST = ["--robust", "--delta-r8", "0.25e-3", "--delta-r3", "0.2e-3", "--delta-r6", "-0.2e-3"]
-#: name, arguments (``{out}``: a temporary file)
+#: name, arguments (``{out}``: a temporary folder, the results folder ``--out`` names)
 COMMANDS = (
     ("plan (default)", ["plan", "--json"]),
     ("plan --min-time --force-limit 14.91", ["plan", "--min-time", "--force-limit", "14.91",
@@ -61,7 +61,7 @@ def _answer(stdout: str) -> list[float]:
 def run(toggle: Path, argv: list[str]) -> tuple[float, float, int, list[float]]:
     """Wall time, CPU time (s), exit status and answer of one command."""
     with tempfile.TemporaryDirectory() as tmp:
-        args = [a.replace("{out}", str(Path(tmp) / "figure.png")) for a in argv]
+        args = [a.replace("{out}", str(Path(tmp) / "figures")) for a in argv]
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         tic = time.perf_counter()
         done = subprocess.run([str(toggle), *args], capture_output=True, text=True)
@@ -85,6 +85,8 @@ def main() -> int:
                         "first, to fill the cache (default after: this checkout's changed code)")
     parser.add_argument("--hog", action="store_true",
                         help="keep one CPU-bound process running while the commands run")
+    parser.add_argument("--only", default="",
+                        help="only the commands whose name contains this text")
     parser.add_argument("--json", type=Path, default=None,
                         help="also write the rows (every run, the answers, the load) here")
     args = parser.parse_args()
@@ -103,6 +105,8 @@ def _table(args: argparse.Namespace) -> int:
           f"{'cpu ratio':>9}  exit  answer (peak N) before -> after  same  load")
     rows = []
     for name, argv in COMMANDS:
+        if args.only not in name:
+            continue
         results, load = {}, [os.getloadavg()[0]]
         for side, toggle in (("before", args.before), ("after", AFTER)):
             if args.warm_up in (side, "both"):

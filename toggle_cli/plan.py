@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -30,6 +31,8 @@ from toggle_cli.common import (
 )
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     import numpy as np
 
     from controllers.cycle import MoldingCycle
@@ -143,10 +146,13 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     return planner, plan, report
 
 
-def _trade_off_curves(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
+def _trade_off_curves(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits,
+                      meanwhile: Callable[[], object] = lambda: None
                       ) -> dict[str, tuple[ClampPlanner, list[Plan]]]:
     """``--trade-off N``: the fastest stroke under N force limits, with the mold and in a
-    dry cycle (the mold at the toggle: no clamp force), each with its planner."""
+    dry cycle (the mold at the toggle: no clamp force), each with its planner.
+    ``meanwhile``: work for this process while it waits for the dry cycle's (the figure's
+    imports, 0.6 s)."""
     from controllers.background import Background
     from controllers.planner import planner_for, trade_off_curve
     from toggle.elastics import clamp_stroke
@@ -168,6 +174,7 @@ def _trade_off_curves(args: argparse.Namespace, cfg: PlantConfig, limits: DriveL
             seen = dry_curve.ticks()
 
         mold = planners["mold"].trade_off(args.trade_off, tick)
+        meanwhile()
         curves = {"mold": (planners["mold"], mold),
                   "dry_cycle": (planners["dry_cycle"], dry_curve.result())}
         bar.advance(dry_curve.ticks() - seen)
@@ -546,10 +553,11 @@ def _check_positions(csv: Path, x: np.ndarray, cfg: PlantConfig) -> None:
 
 
 def plot_trade_off(args: argparse.Namespace) -> int:
+    cfg, limits = _plant(args)
+    curves = _trade_off_curves(args, cfg, limits,
+                               meanwhile=lambda: importlib.import_module("toggle.plots"))
     from toggle.plots import plt, save_figure
 
-    cfg, limits = _plant(args)
-    curves = _trade_off_curves(args, cfg, limits)
     fig, ax = plt.subplots(figsize=(8, 5))
     for (name, (planner, plans)), marker in zip(curves.items(), "os"):
         label = (f"with the mold (clamp force {planner.clamp_force():.4g} N)" if name == "mold"
