@@ -11,6 +11,7 @@ C firmware in place of :class:`hil.mcu_model.McuModel`.
 from __future__ import annotations
 
 import ctypes
+import fcntl
 import hashlib
 import math
 import os
@@ -27,6 +28,7 @@ from hil.rig_physics import ClampPhysics
 ROOT = Path(__file__).resolve().parent.parent
 FIRMWARE = ROOT / "firmware"
 CORE_DIR, SIM_DIR, HOST_DIR = FIRMWARE / "core", FIRMWARE / "sim", FIRMWARE / "host"
+BOARD_DIR = FIRMWARE / "board"
 BUILD_DIR = ROOT / "build" / "firmware"
 LIBRARY = "librigfw.so"
 #: Flags of the firmware's own C (core, sim, host glue); the FMU's C gets fmu_src.native_build's.
@@ -66,6 +68,19 @@ def core_sources() -> list[Path]:
 def _safe_name(preset: str) -> str:
     """A folder-name form of a preset's name or file."""
     return re.sub(r"[^A-Za-z0-9_.-]", "_", Path(preset).stem if "/" in preset else preset)
+
+
+def make_board(*targets: str) -> subprocess.CompletedProcess[str]:
+    """``make -s -C firmware/board TARGETS``, one make at a time on this checkout: two
+    processes making the same image (two test workers, two ``hil emulate --firmware``)
+    wrote and linked the same object files at once, and one link failed on objects the
+    other had half written (undefined references to tgc_geometry in a clean-clone run).
+    The second waits, then finds the image up to date."""
+    BUILD_DIR.mkdir(parents=True, exist_ok=True)
+    with open(BUILD_DIR / ".make.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return subprocess.run(["make", "-s", "-C", str(BOARD_DIR), *targets],
+                              capture_output=True, text=True)
 
 
 def _run(cmd: list[str], cwd: Path) -> None:

@@ -34,19 +34,20 @@ from types import TracebackType
 from hil import protocol as p
 from hil.backends import RigSetup
 from hil.firmware import (
+    BOARD_DIR,
+    BUILD_DIR,
     CORE_DIR,
     SIM_DIR,
     check_hardware,
     core_sources,
     fmu_start_values,
+    make_board,
 )
 from hil.mcu_model import RigHardware
 from hil.realtime import set_realtime
 from hil.rig_physics import ClampPhysics
 
 ROOT = Path(__file__).resolve().parent.parent
-BOARD_DIR = ROOT / "firmware" / "board"
-BUILD_DIR = ROOT / "build" / "firmware"
 QEMU = "qemu-system-arm"
 MACHINE = "netduinoplus2"
 #: Where the image reads the launcher's random seed word (board_qemu.c, qemu_f405.ld).
@@ -200,8 +201,7 @@ def build_qemu_image(setup: RigSetup, hw: RigHardware, seed: int) -> Path:
         if work is not None:
             shutil.rmtree(work, ignore_errors=True)
     if not elf.is_file():
-        result = subprocess.run(["make", "-s", "-C", str(BOARD_DIR), "qemu", f"GEN={gen}"],
-                                capture_output=True, text=True)
+        result = make_board("qemu", f"GEN={gen}")
         if result.returncode or not elf.is_file():
             raise RuntimeError(f"building the QEMU image failed (make -C {BOARD_DIR} qemu "
                                f"GEN={gen}):\n{result.stdout.strip()}\n"

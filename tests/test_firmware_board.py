@@ -7,8 +7,10 @@ simulated rig: it boots in qemu-system-arm and speaks the protocol over its pty.
 
 from __future__ import annotations
 
+import fcntl
 import re
 import subprocess
+import threading
 import time
 from pathlib import Path
 
@@ -16,6 +18,7 @@ import pytest
 
 from hil import protocol as p
 from hil.backends import RigSetup
+from hil.firmware import BUILD_DIR, make_board
 from hil.firmware_qemu import BOARD_DIR, QemuRig, build_qemu_image, qemu_available
 from hil.mcu_model import RigHardware
 
@@ -53,10 +56,29 @@ def _section_sizes(elf: Path) -> dict[str, int]:
     return sizes
 
 
+def test_a_board_make_waits_for_one_already_running() -> None:
+    """Two makes of one image at once (the QEMU image's module fixture, built before the
+    test takes its turn, and ``hil emulate --firmware`` in a test on the other worker)
+    linked objects the other was writing: "undefined reference to tgc_geometry" in a
+    clean-clone run. make_board holds the build folder's lock: while another holds it, it
+    waits; then it makes, and the image is whole."""
+    _skip_unless(need_qemu=False)
+    BUILD_DIR.mkdir(parents=True, exist_ok=True)
+    done: list[subprocess.CompletedProcess[str]] = []
+    with open(BUILD_DIR / ".make.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # another make running
+        maker = threading.Thread(target=lambda: done.append(make_board("nucleo")))
+        maker.start()
+        maker.join(1.0)
+        assert maker.is_alive() and not done  # waiting, not making beside it
+    maker.join(600)
+    assert done and done[0].returncode == 0, done and done[0].stderr
+    assert _section_sizes(NUCLEO_OUT / "rig.elf")[".text"] > 0
+
+
 def test_nucleo_image_links_and_fits() -> None:
     _skip_unless(need_qemu=False)
-    result = subprocess.run(["make", "-s", "-C", str(BOARD_DIR), "nucleo"],
-                            capture_output=True, text=True)
+    result = make_board("nucleo")
     assert result.returncode == 0, result.stdout + result.stderr
     assert "warning" not in result.stderr.lower(), result.stderr
     elf = NUCLEO_OUT / "rig.elf"

@@ -38,13 +38,14 @@ from pathlib import Path
 from types import TracebackType
 
 from hil.firmware import (
+    BOARD_DIR,
     BUILD_DIR,
-    FIRMWARE,
     SimRigHw,
     SimRigStatus,
     build_host_firmware,
     check_hardware,
     fmu_start_values,
+    make_board,
 )
 from hil.firmware_qemu import await_firmware
 from hil.mcu_model import RigHardware
@@ -77,7 +78,6 @@ from hil.rehost.stm32f446 import (
 )
 from hil.rig_physics import ClampPhysics
 
-BOARD_DIR = FIRMWARE / "board"
 NUCLEO_ELF = BUILD_DIR / "board-nucleo" / "rig.elf"
 PLANT_PERIOD_S = 1e-3
 
@@ -90,8 +90,7 @@ PC_HOME, PC_LIMIT_OPEN, PC_LIMIT_CLOSED, PC_CLKIN, PC_B1 = 0, 2, 3, 9, 13
 def build_nucleo_image() -> Path:
     """``make -C firmware/board nucleo`` (arm-none-eabi-gcc); the ELF it writes.
     RuntimeError with make's output when it fails."""
-    result = subprocess.run(["make", "-s", "-C", str(BOARD_DIR), "nucleo"],
-                            capture_output=True, text=True)
+    result = make_board("nucleo")
     if result.returncode or not NUCLEO_ELF.is_file():
         raise RuntimeError(f"make -C {BOARD_DIR} nucleo failed:\n{result.stdout.strip()}\n"
                            f"{result.stderr.strip()}")
