@@ -29,6 +29,8 @@ sys.path.insert(0, str(ROOT / "firmware" / "board"))
 
 from stack_report import report as stack_report  # noqa: E402
 
+from hil.firmware import section_sizes  # noqa: E402
+
 DOC = ROOT / "docs" / "firmware.md"
 FLASH_SECTIONS = (".isr_vector", ".text", ".rodata", ".ARM.exidx", ".data")
 RAM_SECTIONS = (".data", ".bss", ".noinit")
@@ -39,18 +41,6 @@ BLOCK = re.compile(r"(<!-- figures:(?P<name>[\w-]+) -->\n)(?P<body>.*?)"
 def _grouped(n: int) -> str:
     """12345 -> '12 345' (the document's thousands separator)."""
     return f"{n:,}".replace(",", " ")
-
-
-def sections(elf: Path) -> dict[str, int]:
-    """Section sizes (bytes) of ``elf`` by name (arm-none-eabi-size -A)."""
-    out = subprocess.run(["arm-none-eabi-size", "-A", str(elf)], capture_output=True,
-                         text=True, check=True).stdout
-    sizes = {}
-    for line in out.splitlines():
-        parts = line.split()
-        if len(parts) == 3 and parts[0].startswith(".") and parts[1].isdigit():
-            sizes[parts[0]] = int(parts[1])
-    return sizes
 
 
 def stack(folder: Path) -> tuple[int, str, int]:
@@ -65,7 +55,7 @@ def stack(folder: Path) -> tuple[int, str, int]:
 
 def memory_rows(elf: Path, flash_total: int) -> list[str]:
     """The memory table's rows of an image."""
-    size = sections(elf)
+    size = section_sizes(elf)
     flash = sum(size.get(s, 0) for s in FLASH_SECTIONS)
     ram = sum(size.get(s, 0) for s in RAM_SECTIONS)
     deepest, chain, worst = stack(elf.parent)

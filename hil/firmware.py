@@ -83,6 +83,18 @@ def make_board(*targets: str) -> subprocess.CompletedProcess[str]:
                               capture_output=True, text=True)
 
 
+def section_sizes(elf: Path) -> dict[str, int]:
+    """Section sizes (bytes) of a board image by name (``arm-none-eabi-size -A``)."""
+    out = subprocess.run(["arm-none-eabi-size", "-A", str(elf)], capture_output=True,
+                         text=True, check=True).stdout
+    sizes = {}
+    for line in out.splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[0].startswith(".") and parts[1].isdigit():
+            sizes[parts[0]] = int(parts[1])
+    return sizes
+
+
 def _run(cmd: list[str], cwd: Path) -> None:
     result = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
     if result.returncode:

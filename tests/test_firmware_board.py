@@ -18,7 +18,7 @@ import pytest
 
 from hil import protocol as p
 from hil.backends import RigSetup
-from hil.firmware import BUILD_DIR, make_board
+from hil.firmware import BUILD_DIR, make_board, section_sizes
 from hil.firmware_qemu import BOARD_DIR, QemuRig, build_qemu_image, qemu_available
 from hil.mcu_model import RigHardware
 
@@ -45,17 +45,6 @@ def _skip_unless(need_qemu: bool) -> None:
         pytest.skip(f"needs the Debian packages: {' '.join(missing)}")
 
 
-def _section_sizes(elf: Path) -> dict[str, int]:
-    out = subprocess.run(["arm-none-eabi-size", "-A", str(elf)], capture_output=True,
-                         text=True, check=True).stdout
-    sizes = {}
-    for line in out.splitlines():
-        parts = line.split()
-        if len(parts) == 3 and parts[0].startswith("."):
-            sizes[parts[0]] = int(parts[1])
-    return sizes
-
-
 def test_a_board_make_waits_for_one_already_running() -> None:
     """Two makes of one image at once (the QEMU image's module fixture, built before the
     test takes its turn, and ``hil emulate --firmware`` in a test on the other worker)
@@ -73,7 +62,7 @@ def test_a_board_make_waits_for_one_already_running() -> None:
         assert maker.is_alive() and not done  # waiting, not making beside it
     maker.join(600)
     assert done and done[0].returncode == 0, done and done[0].stderr
-    assert _section_sizes(NUCLEO_OUT / "rig.elf")[".text"] > 0
+    assert section_sizes(NUCLEO_OUT / "rig.elf")[".text"] > 0
 
 
 def test_nucleo_image_links_and_fits() -> None:
@@ -82,7 +71,7 @@ def test_nucleo_image_links_and_fits() -> None:
     assert result.returncode == 0, result.stdout + result.stderr
     assert "warning" not in result.stderr.lower(), result.stderr
     elf = NUCLEO_OUT / "rig.elf"
-    sizes = _section_sizes(elf)
+    sizes = section_sizes(elf)
     flash = sum(sizes.get(s, 0) for s in (".isr_vector", ".text", ".rodata", ".ARM.exidx",
                                           ".data"))
     ram = sum(sizes.get(s, 0) for s in (".data", ".bss", ".noinit"))
@@ -104,7 +93,7 @@ def test_the_probe_image_links(tmp_path: Path) -> None:
     symbols = subprocess.run(["arm-none-eabi-nm", str(elf)], capture_output=True, text=True,
                              check=True).stdout.split()
     assert {"Reset_Handler", "memcpy", "memset"} <= set(symbols)
-    assert _section_sizes(elf)[".text"] > 0
+    assert section_sizes(elf)[".text"] > 0
 
 
 class _Port:
