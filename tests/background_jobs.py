@@ -19,9 +19,11 @@ def refuse(message: str, progress: Callable[[], object]) -> None:
 
 
 def sleep_forever(pid_file: str, progress: Callable[[], object]) -> None:
-    """Write this process's id, then wait to be stopped."""
-    with open(pid_file, "w") as f:
+    """Write this process's id (whole: the file appears with it, so a test that waits for
+    the file never reads it empty), then wait to be stopped."""
+    with open(f"{pid_file}.tmp", "w") as f:
         f.write(str(os.getpid()))
+    os.replace(f"{pid_file}.tmp", pid_file)
     while True:
         time.sleep(0.05)
 

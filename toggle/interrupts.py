@@ -222,10 +222,7 @@ class RaiseOutsideImports:
     def _in_charge(self) -> bool:
         """This handler takes the signal: it is installed, or behind a block's
         :class:`_InFront`."""
-        handler = signal.getsignal(self.signum)
-        while isinstance(handler, _InFront):
-            handler = handler.__wrapped__
-        return handler is self
+        return _handler(self.signum) is self
 
     def _on_its_way(self) -> bool:
         """The raised exception (or one it caused) is being handled on the stack."""
@@ -242,13 +239,25 @@ class RaiseOutsideImports:
         self.pending = self.raised = None
 
 
+def _handler(signum: int) -> object:
+    """The program's handler of ``signum``: the installed one, or the one behind a block's
+    :class:`_InFront`."""
+    handler = signal.getsignal(signum)
+    while isinstance(handler, _InFront):
+        handler = handler.__wrapped__
+    return handler
+
+
+def _keeping() -> list[RaiseOutsideImports]:
+    """The program's :class:`RaiseOutsideImports` handlers (SIGINT's, SIGTERM's)."""
+    return [h for h in map(_handler, SIGNALS) if isinstance(h, RaiseOutsideImports)]
+
+
 def signal_taken() -> None:
     """The command's process has acted on the signal that is being raised (its main()
     caught the exception): the installed :class:`RaiseOutsideImports` stops delivering it."""
-    for sig in SIGNALS:
-        handler = signal.getsignal(sig)
-        if isinstance(handler, RaiseOutsideImports):
-            handler.taken()
+    for handler in _keeping():
+        handler.taken()
 
 
 def raised_signal() -> BaseException | None:
@@ -256,11 +265,7 @@ def raised_signal() -> BaseException | None:
     the program has not taken: it was swallowed on the way, and what the code that
     swallowed it did next (CasADi: "Wrong number or type of arguments") is its
     consequence, not an error of its own."""
-    for sig in SIGNALS:
-        handler = signal.getsignal(sig)
-        if isinstance(handler, RaiseOutsideImports) and handler.raised is not None:
-            return handler.raised
-    return None
+    return next((h.raised for h in _keeping() if h.raised is not None), None)
 
 
 def unwind_on_signals(handler: RaiseOutsideImports | None = None) -> None:
