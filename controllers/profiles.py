@@ -234,7 +234,9 @@ def read_profile_columns(path: str | Path, columns: tuple[str, ...] = CSV_COLUMN
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ProfileError(f"cannot read profile {path}: {exc}") from exc
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    numbered = [(number, ln) for number, ln in enumerate(text.splitlines(), 1)
+                if ln.strip() and not ln.lstrip().startswith("#")]
+    lines = [ln for _, ln in numbered]
     if not lines:
         raise ProfileError(f"profile {path} is empty")
     header = [h.strip() for h in next(csv.reader(lines[:1]))]
@@ -248,7 +250,7 @@ def read_profile_columns(path: str | Path, columns: tuple[str, ...] = CSV_COLUMN
         try:
             data[row] = [float(fields[i]) for i in at]
         except (ValueError, IndexError):
-            raise ProfileError(f"profile {path}, line {_line_of(text, row + 1)}: expected "
+            raise ProfileError(f"profile {path}, line {numbered[row + 1][0]}: expected "
                                f"{len(header)} numbers ({', '.join(header)}), got "
                                f"{','.join(fields)!r}") from None
     if not np.all(np.isfinite(data)):
@@ -257,18 +259,6 @@ def read_profile_columns(path: str | Path, columns: tuple[str, ...] = CSV_COLUMN
     if data.shape[0] < 2 or (time is not None and np.any(np.diff(time) <= 0)):
         raise ProfileError(f"profile {path}: need >= 2 rows with increasing time")
     return data
-
-
-def _line_of(text: str, data_row: int) -> int:
-    """The 1-based line number in ``text`` of its ``data_row``-th non-comment line (0: the
-    header)."""
-    seen = -1
-    for number, line in enumerate(text.splitlines(), 1):
-        if line.strip() and not line.lstrip().startswith("#"):
-            seen += 1
-            if seen == data_row:
-                return number
-    return number
 
 
 #: How far before the time its header states a plan's samples may end, s (two periods of
