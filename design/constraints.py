@@ -23,7 +23,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from toggle.elastics import ClampingResult, analyse_clamping, at_mold_height, clamp_state
-from toggle.kinematics import half_pose
+from toggle.kinematics import clamp_joints, half_pose
 from toggle.params import HalfDims, LinkSection, Mechanism
 from toggle.statics import OPENING
 
@@ -80,6 +80,21 @@ def radial_envelope(paths: Paths) -> float:
     """Radial height the half's pins sweep over the stroke (C at 0 included), m."""
     ys = np.concatenate([paths.E[1], paths.D[1], paths.B[1], paths.A[1], [0.0]])
     return float(ys.max() - ys.min())
+
+
+def link_clearance(lower: HalfDims, upper: HalfDims, x_open: float, x_toggle: float,
+                   points: int = 401) -> float:
+    """Least distance of the two halves' moving joints from the clamp axis over the stroke,
+    m (each half's own side positive; < 0: a joint crosses into the other half's side and
+    meets its mirror image), from :func:`toggle.kinematics.clamp_joints` on ``points``
+    crosshead positions. The joints: D (link 3 on the triangle), B (link 5 on the
+    triangle) and A (link 5 on the platen). The links between joints are straight, so their
+    distance from the axis is least at a joint; the crosshead pin E is left out (it rides
+    the crosshead, one body on the axis for both halves)."""
+    joints = clamp_joints(np.linspace(x_open, x_toggle, points), lower, upper)
+    return min(float(np.min(side * np.asarray(point[1])))
+               for half, side in (("lower", -1.0), ("upper", 1.0))
+               for point in (joints[half].corner, joints[half].elbow, joints[half].platen))
 
 
 def linkage_width(mech: Mechanism) -> float:

@@ -38,6 +38,7 @@ from toggle.study import angle_grid, angle_measures, criteria
 MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_toggle": "m",
             "link_ratio": "1", "transmission_D": "rad", "transmission_A": "rad",
             "platen_side_load": "1", "radial_envelope": "m", "tiebar_clearance": "m",
+            "link_clearance": "m",
             "link_mass": "kg", "lockup_angle": "rad", "breakaway_force": "N",
             "self_locking_travel": "m", "clamp_force_sensitivity": "1/m",
             "link_utilisation": "1", "buckling_utilisation": "1", "pin_pressure": "Pa",
@@ -54,7 +55,8 @@ CONSTRAINTS = ("assembly", "mold_open_stroke", "installation_length", "max_link_
 _DUTY = ("close_rms_torque", "close_energy")
 
 #: The designer's limits read on the geometry alone (the others need the clamping forces).
-_GEOMETRIC = ("transmission_angle", "radial_envelope", "tiebar_clearance", "platen_side_load")
+_GEOMETRIC = ("transmission_angle", "radial_envelope", "tiebar_clearance", "platen_side_load",
+              "link_clearance")
 
 #: Platen travel before mold contact over which the speed ratio "at mold close" is read
 #: (the planner's default mold-protection zone: the last tenth).
@@ -272,6 +274,7 @@ class Evaluator:
         m["transmission_angle"] = min(m["transmission_D"], m["transmission_A"])
         m["platen_side_load"] = checks.platen_side_load(paths)
         m["radial_envelope"] = checks.radial_envelope(paths)
+        m["link_clearance"] = checks.link_clearance(dims, dims, m["x_open"], x_toggle)
         if self._has("sections") and self._has("spacing"):
             m["tiebar_clearance"] = checks.tiebar_clearance(
                 replace(self.base, lower=dims, upper=dims), paths)

@@ -84,6 +84,13 @@ DESIGN_LIMITS: dict[str, Limit] = {lim.key: lim for lim in (
     Limit("tiebar_clearance", "m", False, 0.010,
           "10 mm between the links' side faces and a tie bar (assumption: a running "
           "clearance; no standard names one)", ("sections", "spacing")),
+    Limit("link_clearance", "m", False, 1.0e-3,
+          "1 mm: the two halves' pins (D, B, A) stay on their own sides of the clamp axis "
+          "over the whole stroke, or the mirror halves' joints pass each other and collide "
+          "(assumption: 1 mm for the pins' play and tolerances; the halves' links are taken "
+          "as staggered side by side, as the crosshead links pinned on the axis must be, so "
+          "their sections may overlap radially: a preset whose halves share planes sets "
+          "half its deepest section)", ("sections",)),
     Limit("clamp_force_sensitivity", "1/m", True, 3000.0,
           "at most 30 % clamp force change per 0.1 mm of mold height (a 300 mm steel mold "
           "grows 0.10 mm over 30 K at 11.5e-6/K); the SM-55 has 25.9 %", ("clamp",)),

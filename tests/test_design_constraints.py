@@ -1,7 +1,8 @@
 """A designer's limits (issue 38), each against a hand computation for the SM-55: the joints
 are placed along the model's angles (toggle.kinematics.half_pose) and the forces are the
 model's (toggle.elastics); the transmission angles, envelope, tie-bar clearance, buckling
-loads and pin pressures are computed here from those, not by design.constraints."""
+loads, pin pressures and the halves' clearance at the axis are computed here from those,
+not by design.constraints."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from design import constraints as checks
 from design.objectives import Evaluator
 from design.placement import design_values
 from design.targets import DESIGN_LIMITS, load_targets, targets_from_dict
@@ -33,10 +35,11 @@ def sm55() -> tuple:
     return mech, evaluator, ref
 
 
-def _joints(mech, points: int = 2001) -> dict[str, np.ndarray]:
+def _joints(mech, points: int = 2001, x_open: float | None = None) -> dict[str, np.ndarray]:
     """C, E, D, B, A of the lower half over the stroke (2 x n, m), placed by hand."""
     h = mech.lower
-    xs = np.linspace(mech.clamp.x_open, stroke_limits(h)[1], points)
+    x_open = mech.clamp.x_open if x_open is None else x_open
+    xs = np.linspace(x_open, stroke_limits(h)[1], points)
     pose = half_pose(xs, h)
     arm = pose.theta4 + pose.alpha4
     return {"E": np.stack([xs, np.full_like(xs, h.r1 - h.r2)]),
@@ -80,6 +83,64 @@ def test_radial_envelope_and_tiebar_clearance_of_the_sm55_by_hand(sm55) -> None:
     expect = math.hypot(0.185 - w / 2, 0.185 - reach) - bar
     assert expect == pytest.approx(0.0776, abs=1e-4)
     assert ref.metrics["tiebar_clearance"] == pytest.approx(expect, abs=1e-9)
+
+
+def _axis_gap(mech, x_open: float | None = None) -> dict[str, tuple[float, float]]:
+    """Per joint D, B, A of the lower half: its least distance from the clamp axis (y = r1
+    of the half's frame, the upper half its mirror image) over the stroke on a fine grid,
+    and the joint's own x where it is least, m."""
+    j = _joints(mech, 8001, x_open)
+    assert np.allclose(np.linalg.norm(j["D"] - j["E"], axis=0), mech.lower.r3)  # D closes
+    assert np.allclose(np.linalg.norm(j["A"] - j["B"], axis=0), mech.lower.r5)  # B closes
+    out = {}
+    for name in ("D", "B", "A"):
+        gap = mech.lower.r1 - j[name][1]
+        i = int(np.argmin(gap))
+        out[name] = (float(gap[i]), float(j[name][0][i]))
+    return out
+
+
+def test_link_clearance_of_the_sm55_and_its_redesign_by_hand(sm55) -> None:
+    mech, evaluator, ref = sm55
+    assert evaluator.limits["link_clearance"] == DESIGN_LIMITS["link_clearance"].default
+    sm = _axis_gap(mech)  # the SM-55 opened to its preset's x_open = -70 mm
+    assert ref.metrics["x_open"] == pytest.approx(mech.clamp.x_open, abs=1e-9)
+    least = min(gap for gap, _ in sm.values())
+    assert ref.metrics["link_clearance"] == pytest.approx(least, abs=2e-6)
+    assert least < 0 and ref.constraints["link_clearance"] > 0  # its elbows B cross
+    assert sm["B"][0] == least
+    # the redesign: issue 38's review found at the open position the elbows B 0.9 mm beyond
+    # the axis at x = 37.4 mm and the arms' pins D 2.1 mm at -16.4 mm; over the stroke D
+    # goes further
+    design_mech = load_preset(str(SM55.parent / "sm55_design.toml"))
+    design = evaluator(evaluator.vector(design_values(design_mech)))
+    assert design.metrics["x_open"] == pytest.approx(design_mech.clamp.x_open, abs=1e-9)
+    j = _joints(design_mech, 2)  # the open position first
+    for name, gap, at in (("B", -0.9e-3, 37.4e-3), ("D", -2.1e-3, -16.4e-3)):
+        assert design_mech.lower.r1 - j[name][1][0] == pytest.approx(gap, abs=0.1e-3)
+        assert j[name][0][0] == pytest.approx(at, abs=0.1e-3)
+    hand = _axis_gap(design_mech)
+    assert hand["D"][0] < design_mech.lower.r1 - j["D"][1][0]  # worse inside the stroke
+    assert design.metrics["link_clearance"] == pytest.approx(
+        min(gap for gap, _ in hand.values()), abs=2e-6)
+    assert design.constraints["link_clearance"] > 0
+    assert design.reason.startswith("link_clearance:")
+
+
+def test_the_sm55_meets_link_clearance_opened_less_and_each_half_counts(sm55) -> None:
+    mech = sm55[0]
+    h, x_toggle = mech.lower, stroke_limits(mech.lower)[1]
+    limit = DESIGN_LIMITS["link_clearance"].default
+    x_open = brentq(lambda x: min(g for g, _ in _axis_gap(mech, x).values()) - limit,
+                    mech.clamp.x_open, 0.0, xtol=1e-7)
+    assert checks.link_clearance(h, h, x_open, x_toggle) == pytest.approx(limit, abs=2e-6)
+    assert checks.link_clearance(h, h, x_open + 1e-4, x_toggle) > limit
+    # both halves with their own dimensions: the upper half's longer arm decides
+    upper = replace(h, r4a=h.r4a + 0.004)
+    alone = checks.link_clearance(upper, upper, x_open, x_toggle)
+    assert alone < limit
+    assert checks.link_clearance(h, upper, x_open, x_toggle) == pytest.approx(alone, abs=1e-12)
+    assert checks.link_clearance(upper, h, x_open, x_toggle) == pytest.approx(alone, abs=1e-12)
 
 
 def _johnson_euler(depth: float, thickness: float, length: float, e: float, sy: float
@@ -207,11 +268,13 @@ def test_link_masses_scale_with_length(sm55) -> None:
 def test_the_sm55_meets_every_default_and_the_old_design_does_not(sm55) -> None:
     mech, evaluator, ref = sm55
     assert set(DESIGN_LIMITS) <= set(evaluator.active)
-    assert ref.feasible, ref.reason
+    # all but link_clearance: opened to its preset's assumed x_open its elbows cross the axis
+    assert [k for k, v in ref.constraints.items() if v > 0] == ["link_clearance"], ref.reason
     old = load_preset(str(SM55.parent / "sm55_old_design.toml"))
     design = evaluator(evaluator.vector(design_values(old)))
     assert design.constraints["transmission_angle"] > 0  # 38.4 deg at A (link 1 at 51.6)
     assert design.constraints["radial_envelope"] > 0  # the arm tip 37 mm over its pin line
+    assert design.metrics["link_clearance"] < -0.030  # that arm tip across the axis
 
 
 def test_a_target_overrides_a_default_and_missing_data_turns_a_limit_off(tmp_path: Path
@@ -221,10 +284,13 @@ def test_a_target_overrides_a_default_and_missing_data_turns_a_limit_off(tmp_pat
     table = {"preset": "lin2003_sm55", "objectives": ["thrust_peak", "link_mass"],
              "targets": {"pin_pressure": 80e6}, "bounds": bounds}
     assert Evaluator(targets_from_dict(table)).limits["pin_pressure"] == 80e6
+    table["targets"] = {"link_clearance": 0.042}  # halves in one plane: half a section
+    assert Evaluator(targets_from_dict(table)).limits["link_clearance"] == 0.042
     table.update(preset="chang2021", objectives=["stroke_ratio", "transmission_angle"],
                  targets={})
     limits = Evaluator(targets_from_dict(table)).limits  # no [clamp], no [sections]
     assert "transmission_angle" in limits and "pin_pressure" not in limits
+    assert "link_clearance" not in limits  # no drawn links: the halves may not share planes
     with pytest.raises(ParameterError, match="targets.pin_pressure must be > 0"):
         targets_from_dict(dict(table, targets={"pin_pressure": -1.0}))
 
