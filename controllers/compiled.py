@@ -105,11 +105,15 @@ def _load(library: Path, names: Sequence[str]) -> list[ca.Function] | None:
         return None
 
 
-def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]]
-             ) -> list[ca.Function]:
+def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]],
+             machine_code: bool = True) -> list[ca.Function]:
     """The functions ``names`` as machine code: from the library cached under ``key``, or
     else built by ``build``, compiled, cached and loaded; as built (interpreted) where
-    compiling or loading fails."""
+    compiling or loading fails, or without ``machine_code`` (a problem solved once, for
+    which a compile would cost more than it saves)."""
+    if not machine_code:
+        built = {fn.name(): fn for _, functions in build() for fn in functions}
+        return [built[n] for n in names]
     units: list[Unit] = []
 
     def sources(tmp: Path) -> Sources:

@@ -281,11 +281,12 @@ class StrokeProblem:
 
     def __init__(self, cfg: PlantConfig, intervals: int,
                  variants: tuple[PlantConfig, ...] = (), torque: bool = False,
-                 opening: bool = False, zone: bool = False) -> None:
+                 opening: bool = False, zone: bool = False, machine_code: bool = True
+                 ) -> None:
         if not (isinstance(intervals, int) and intervals >= 4):
             raise ParameterError(f"intervals must be an integer >= 4, got {intervals!r}")
         self.config, self.variants, self.torque = cfg, variants, torque
-        self.opening, self.zone = opening, zone
+        self.opening, self.zone, self.machine_code = opening, zone, machine_code
         self.plants = (cfg, *variants)
         self.x_open, self.x_final = clamp_stroke(cfg.mechanism)
         lo, hi = cfg.input_range
@@ -485,7 +486,8 @@ class StrokeProblem:
         key = problem_key(self.config, N, self.variants, self.opening) + (
             "\ntorque" if self.torque else "") + ("\nzone" if self.zone else "")
         names = _names(len(self.plants))
-        fn = dict(zip(names, compiled("stroke", key, names, self._symbolic)))
+        fn = dict(zip(names, compiled("stroke", key, names, self._symbolic,
+                                      self.machine_code)))
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
         L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.n_constraints)
         z = self._nodes(W, P[_P["t_ref"]])[-1]
@@ -538,7 +540,8 @@ class StrokeProblem:
         if self.torque:
             return self
         return problem_for(self.config, self.n1 + self.n2, self.variants, torque=True,
-                            opening=self.opening, zone=self.zone)
+                            opening=self.opening, zone=self.zone,
+                            machine_code=self.machine_code)
 
     @functools.cached_property
     def with_zone(self) -> StrokeProblem:
@@ -547,7 +550,7 @@ class StrokeProblem:
         if self.zone:
             return self
         return problem_for(self.config, self.n1 + self.n2, self.variants, torque=self.torque,
-                            opening=self.opening, zone=True)
+                            opening=self.opening, zone=True, machine_code=self.machine_code)
 
     def input_force(self, x: Any, v: Any, a: Any, cfg: PlantConfig) -> np.ndarray:
         """The input force (N) at the points (x, v, a) of the plant ``cfg`` (its mold, pin
@@ -574,10 +577,10 @@ class StrokeProblem:
 
 @functools.lru_cache(maxsize=8)
 def problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = (),
-                torque: bool = False, opening: bool = False, zone: bool = False
-                ) -> StrokeProblem:
+                torque: bool = False, opening: bool = False, zone: bool = False,
+                machine_code: bool = True) -> StrokeProblem:
     """A built problem, shared by the planners of every mold height, friction, drive and
     drive limits of one plant (and variants), with or without the torque rows, closing or
-    opening."""
-    return StrokeProblem(cfg, intervals, variants, torque, opening, zone)
+    opening; its functions compiled, or interpreted without ``machine_code``."""
+    return StrokeProblem(cfg, intervals, variants, torque, opening, zone, machine_code)
 

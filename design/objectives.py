@@ -28,6 +28,7 @@ import numpy as np
 
 from design import constraints as checks
 from design.targets import DESIGN_LIMITS, OBJECTIVES, TARGETS, VARIABLES, Targets
+from design.timing import StallError
 from toggle.elastics import ClampingError, analyse_clamping
 from toggle.kinematics import AssemblyError, output_position, sensitivities, stroke_limits
 from toggle.params import HalfDims, Mechanism, ParameterError
@@ -42,7 +43,8 @@ MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_tog
             "link_mass": "kg", "lockup_angle": "rad", "breakaway_force": "N",
             "self_locking_travel": "m", "clamp_force_sensitivity": "1/m",
             "link_utilisation": "1", "buckling_utilisation": "1", "pin_pressure": "Pa",
-            "die_height_range": "1", "die_height_thrust": "N", "die_height_sensitivity": "1/m"}
+            "die_height_range": "1", "die_height_thrust": "N", "die_height_sensitivity": "1/m",
+            "close_rms_torque": "N m", "close_energy": "J", "close_plan_time": "s"}
 
 #: The constraints, in the order of the G matrix; each is active when its target is set
 #: (assembly always; drive_thrust when the preset has a drive and clamp data; the
@@ -51,8 +53,10 @@ MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_tog
 CONSTRAINTS = ("assembly", "mold_open_stroke", "installation_length", "max_link_ratio",
                "clamp_force", "drive_thrust", "tolerances", *DESIGN_LIMITS)
 
-#: Objectives of the motor's duty along the closing-time bound's profile.
+#: Objectives of the motor's duty over the minimum-time plan of the closing stroke.
 _DUTY = ("close_rms_torque", "close_energy")
+#: The measures of that plan (:func:`design.timing.planned_duty`).
+DUTY_MEASURES = (*_DUTY, "close_plan_time")
 
 #: The designer's limits read on the geometry alone (the others need the clamping forces).
 _GEOMETRIC = ("transmission_angle", "radial_envelope", "tiebar_clearance", "platen_side_load",
@@ -335,33 +339,52 @@ class Evaluator:
                               f"motor holds {most:.6g} N")
                 return
         if {"close_time", *_DUTY} & set(self.targets.objectives):
-            self._close_time(mech, result.x_contact, result.x_final, m, g, out,
-                             duty=bool(set(_DUTY) & set(self.targets.objectives)))
+            try:
+                m.update(self._timing(mech, result, set(_DUTY) & set(self.targets.objectives)))
+            except StallError as exc:  # the motor cannot close this clamp
+                g["drive_thrust"] = max(g.get("drive_thrust", 0.0), 1.0)
+                out.reason = f"drive_thrust: {exc}"
+
+    def _timing(self, mech: Mechanism, result: Any, duty: bool) -> dict[str, float]:
+        """The closing-time bound (:func:`design.timing.close_time_bound`, on the mold
+        contact of the clamping measures) and, with ``duty``, the minimum-time plan's duty
+        (:func:`design.timing.planned_duty`) of the plant ``toggle plan`` takes for the
+        design's preset (:func:`controllers.plans.plan_config`: the exact inverse of the
+        plant's force for the contact; analyse_clamping's, the paper's linearised Eq 25,
+        lands 5 um away on the SM-55). StallError where the motor cannot close it."""
+        from controllers.plans import PlanningError, plan_config
+        from design.timing import close_time_bound, planned_duty
+        from toggle.plant import PlantConfig
+        out = {"close_time": close_time_bound(PlantConfig(mech, x_contact=result.x_contact),
+                                              self._limits, mech.clamp.x_open, result.x_final)}
+        if duty:
+            try:
+                out.update(planned_duty(plan_config(mech), self._limits))
+            except PlanningError as exc:
+                raise StallError(f"the planner finds no closing stroke: {exc}") from exc
+        return out
 
     def close_duty(self, values: Mapping[str, float], x_open: float) -> dict[str, float]:
-        """The closing stroke's time bound, RMS torque and energy on the bound's profile
-        (:func:`design.timing.close_duty`) of a feasible candidate opening at ``x_open``."""
-        from design.timing import close_duty
-        from toggle.plant import PlantConfig
+        """The closing stroke's time bound and the minimum-time plan's RMS torque, energy
+        and duration of a feasible candidate opening at ``x_open``."""
         mech = self.mechanism(values, x_open=x_open)
-        result = analyse_clamping(mech)
-        return close_duty(PlantConfig(mech, x_contact=result.x_contact), self._limits,
-                          x_open, result.x_final)
+        return self._timing(mech, analyse_clamping(mech), True)
 
-    def _close_time(self, mech: Mechanism, x_contact: float, x_final: float,
-                    m: dict[str, float], g: dict[str, float], out: Evaluation,
-                    duty: bool = False) -> None:
-        from design.timing import StallError, close_duty, close_time_bound
-        from toggle.plant import PlantConfig
-        cfg = PlantConfig(mech, x_contact=x_contact)
+    @property
+    def plans_duty(self) -> bool:
+        """The preset has what the planner needs (clamp, drive, masses)."""
+        return all(self._has(n) for n in ("clamp", "drive", "dynamics"))
+
+    def with_duty(self, e: Evaluation) -> Evaluation:
+        """A feasible evaluation with its closing stroke's planned duty among its metrics
+        (:data:`DUTY_MEASURES`; NaN where the planner finds no stroke): what the front's
+        designs get when the search did not weigh it."""
         try:
-            if duty:
-                m.update(close_duty(cfg, self._limits, m["x_open"], x_final))
-            else:
-                m["close_time"] = close_time_bound(cfg, self._limits, m["x_open"], x_final)
-        except StallError as exc:
-            g["drive_thrust"] = max(g.get("drive_thrust", 0.0), 1.0)
-            out.reason = f"drive_thrust: {exc}"
+            duty = self.close_duty(e.variables, e.metrics["x_open"])
+            duty.pop("close_time")
+        except StallError:
+            duty = dict.fromkeys(DUTY_MEASURES, math.nan)
+        return replace(e, metrics={**e.metrics, **duty})
 
 
 def objective_matrix(evaluations: Sequence[Evaluation], keys: Sequence[str]) -> np.ndarray:

@@ -27,7 +27,8 @@ def columns(targets: Targets) -> list[tuple[str, str, str]]:
     out = [("key", "key", "key")]
     out += [(f"{v} ({VARIABLES[v][0]})", "variables", v) for v in VARIABLES]
     out += [(OBJECTIVES[k].header, "metrics", k) for k in targets.objectives]
-    out += [(f"{k} ({u})", "metrics", k) for k, u in MEASURES.items()]
+    out += [(f"{k} ({u})", "metrics", k) for k, u in MEASURES.items()
+            if k not in targets.objectives]
     return out
 
 

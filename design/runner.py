@@ -41,6 +41,10 @@ TASKS_PER_WORKER = 4
 MAX_CHUNK = 16
 #: Fewest candidates worth a local cluster: below, its start (3-5 s) is most of the run.
 MIN_CLUSTER_WORK = 200
+#: A worker's rate over this process's own on a core of its own: what the client and the
+#: scheduler take (benchmarks/bench_design.py: two workers 1.66 x the process idle, one
+#: worker 0.88 x beside a CPU hog). And the gain over the process a cluster must promise.
+CLUSTER_EFFICIENCY, CLUSTER_MARGIN = 0.85, 1.05
 
 
 #: The probe of the cores busy now: samples of the runnable tasks, and their spacing (s).
@@ -67,16 +71,22 @@ def busy_cores(loadavg: Path | str = "/proc/loadavg", average: float | None = No
 
 def default_workers(candidates: int, cores: int | None = None,
                     load: float | None = None) -> int:
-    """Local worker processes for the default back-end: one per core this machine has free
-    (its cores less those busy, :func:`busy_cores`), or 0 (in this process) when that is
-    one core's worth or less, or when the search is too small to pay for the cluster. On the
-    loaded two-core machine of docs/design.md the cluster was 2.2 x slower than the process."""
+    """Local worker processes for the default back-end, by the rate each back-end can expect
+    under the kernel's fair share of the cores (each of n runnable processes on c cores gets
+    min(1, c / n) of a core) beside the ``load`` cores other processes keep busy
+    (:func:`busy_cores`): the process evaluates at min(1, c / (load + 1)), w workers at
+    :data:`CLUSTER_EFFICIENCY` w min(1, c / (load + w)). The workers are the free cores, at
+    least two; the cluster where its rate beats the process's by :data:`CLUSTER_MARGIN`,
+    else 0 (in this process), as for a search too small to pay for the cluster's start."""
     if candidates < MIN_CLUSTER_WORK:
         return 0
     cores = cores if cores is not None else os.cpu_count() or 1
-    load = load if load is not None else busy_cores()
-    free = int(cores - load + 0.5)
-    return free if free >= 2 else 0
+    load = max(0.0, load if load is not None else busy_cores())
+    workers = min(cores, max(2, int(cores - load + 0.5)))
+    alone = min(1.0, cores / (load + 1))
+    cluster = CLUSTER_EFFICIENCY * workers * min(1.0, cores / (load + workers))
+    return workers if cluster > CLUSTER_MARGIN * alone else 0
+
 
 _EVALUATORS: dict[tuple[str, tuple[str, ...]], Evaluator] = {}
 
@@ -97,6 +107,12 @@ def evaluate_chunk(targets: Targets, vectors: Sequence[Sequence[float]]) -> list
     """A Dask task: evaluate candidates on this worker (records, plain data for the wire)."""
     evaluator = evaluator_for(targets)
     return [evaluator(v).as_record() for v in vectors]
+
+
+def duty_chunk(targets: Targets, records: Sequence[dict]) -> list[dict]:
+    """A Dask task: the evaluations with their planned duty (:meth:`Evaluator.with_duty`)."""
+    evaluator = evaluator_for(targets)
+    return [evaluator.with_duty(Evaluation.from_record(r)).as_record() for r in records]
 
 
 def check_address(address: str) -> str:
@@ -181,6 +197,28 @@ class Runner:
             self._compute(list(todo.values()))
         return [self.store.get(k) for k in keys]
 
+    def with_duty(self, evaluations: Sequence[Evaluation]) -> list[Evaluation]:
+        """The feasible ``evaluations`` with their closing stroke's planned duty
+        (:meth:`Evaluator.with_duty`, about a second each): those without it planned on this
+        back-end, with a bar of their own, and recorded (:meth:`Store.supersede`)."""
+        todo = [e for e in evaluations if "close_rms_torque" not in
+                (self.store.get(e.key) if e.key in self.store else e).metrics]
+        if todo:
+            bar = Progress("toggle design: planning the front", unit="design",
+                           total=len(todo), enabled=self.progress)
+            try:
+                if self.client is None:
+                    evaluator = evaluator_for(self.targets)
+                    for e in todo:
+                        self.store.supersede([evaluator.with_duty(e)])
+                        bar.advance()
+                else:
+                    self._on_dask(duty_chunk, [e.as_record() for e in todo], 1, bar,
+                                  self.store.supersede)
+            finally:
+                bar.close()
+        return [self.store.get(e.key) if e.key in self.store else e for e in evaluations]
+
     def _compute(self, vectors: list[Sequence[float]]) -> None:
         if self.client is None:
             evaluator = evaluator_for(self.targets)
@@ -188,30 +226,35 @@ class Runner:
                 self.store.append([evaluator(v)])
                 self._bar.advance()
         else:
-            self._on_dask(vectors, self._bar)
+            size = max(1, min(MAX_CHUNK, math.ceil(
+                len(vectors) / (TASKS_PER_WORKER * self.worker_count))))
+            self._on_dask(evaluate_chunk, [list(map(float, v)) for v in vectors], size,
+                          self._bar, self.store.append)
         self.evaluated += len(vectors)
 
-    def _on_dask(self, vectors: list[Sequence[float]], bar: Progress) -> None:
+    def _on_dask(self, task: Any, items: list[Any], size: int, bar: Progress,
+                 record: Any) -> None:
+        """``task(targets, chunk)`` on the cluster for chunks of ``size`` items; each
+        chunk's evaluations handed to ``record`` as it completes."""
         from dask.distributed import as_completed
-        size = max(1, min(MAX_CHUNK, math.ceil(
-            len(vectors) / (TASKS_PER_WORKER * self.worker_count))))
-        chunks = [vectors[i:i + size] for i in range(0, len(vectors), size)]
+        chunks = [items[i:i + size] for i in range(0, len(items), size)]
         targets = self.client.scatter(self.targets, broadcast=True, hash=False)
-        futures = [self.client.submit(evaluate_chunk, targets, [list(map(float, v)) for v in c],
-                                      key=_task_key(self.store.digest, c), retries=2)
+        futures = [self.client.submit(task, targets, c, retries=2,
+                                      key=_task_key(task.__name__, self.store.digest,
+                                                    c))
                    for c in chunks]
         try:
             for future in as_completed(futures):
                 records = future.result()
-                self.store.append(Evaluation.from_record(r) for r in records)
+                record(Evaluation.from_record(r) for r in records)
                 bar.advance(len(records))
         except BaseException:
             self.client.cancel(futures)
             raise
 
 
-def _task_key(digest: str, chunk: Sequence[Sequence[float]]) -> str:
-    h = hashlib.sha256("".join(candidate_key(digest, v) for v in chunk).encode())
+def _task_key(name: str, digest: str, chunk: Sequence[Any]) -> str:
+    h = hashlib.sha256(f"{name}{digest}{chunk!r}".encode())
     return f"design-{h.hexdigest()[:24]}"
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from design.objectives import Evaluation, objective_matrix
-from design.runner import CONNECT_TIMEOUT, Runner
+from design.runner import CONNECT_TIMEOUT, Runner, evaluator_for
 from design.store import Store
 from design.targets import VARIABLES, Targets
 from toggle.params import ParameterError
@@ -179,12 +179,14 @@ def _by_cv_then_random(pop: object, P: np.ndarray, random_state: np.random.Gener
 def run_search(targets: Targets, folder: str | Path, *, generations: int = 20,
                population: int = 40, doe_method: str | None = None, samples: int = 0,
                seed: int = 0, scheduler: str | None = None, workers: int | None = None,
-               progress: bool = False, connect_timeout: float = CONNECT_TIMEOUT
-               ) -> SearchResult:
+               progress: bool = False, connect_timeout: float = CONNECT_TIMEOUT,
+               front_duty: bool = True) -> SearchResult:
     """Search for ``targets``, recording every evaluation in ``folder`` as it arrives.
 
     With ``doe_method`` ("lhs" or "sobol") evaluate ``samples`` candidates of a design of
     experiments; otherwise run the genetic algorithm for ``generations`` of ``population``.
+    Then, with ``front_duty`` and a preset the planner can take, the front's designs get
+    their closing stroke's minimum-time plan (:meth:`Runner.with_duty`), recorded too.
     """
     store = Store(folder, targets.digest())
     total = samples if doe_method is not None else generations * _population(
@@ -196,8 +198,12 @@ def run_search(targets: Targets, folder: str | Path, *, generations: int = 20,
         else:
             evaluations = nsga(targets, runner, generations, population, seed)
         evaluated = runner.evaluated
-    return SearchResult(targets, evaluations, pareto_front(evaluations, targets.objectives),
-                        Path(folder), evaluated)
+        front = pareto_front(evaluations, targets.objectives)
+        if front_duty and evaluator_for(targets).plans_duty:
+            front = runner.with_duty(front)
+            planned = {e.key: e for e in front}
+            evaluations = [planned.get(e.key, e) for e in evaluations]
+    return SearchResult(targets, evaluations, front, Path(folder), evaluated)
 
 
 def binding_constraint(evaluations: Sequence[Evaluation]) -> str:

@@ -59,7 +59,14 @@ class Store:
         return self._known[key]
 
     def append(self, evaluations: Iterable[Evaluation]) -> None:
-        new = [e for e in evaluations if e.key not in self._known]
+        self._write([e for e in evaluations if e.key not in self._known])
+
+    def supersede(self, evaluations: Iterable[Evaluation]) -> None:
+        """Record later evaluations of known candidates (more measures: a front design's
+        planned duty): their lines follow the first and win when the record is read."""
+        self._write(list(evaluations))
+
+    def _write(self, new: list[Evaluation]) -> None:
         if not new:
             return
         if not self.path.exists():  # created with the first result: a refused run leaves none

@@ -84,13 +84,12 @@ DESIGN_LIMITS: dict[str, Limit] = {lim.key: lim for lim in (
     Limit("tiebar_clearance", "m", False, 0.010,
           "10 mm between the links' side faces and a tie bar (assumption: a running "
           "clearance; no standard names one)", ("sections", "spacing")),
-    Limit("link_clearance", "m", False, 1.0e-3,
-          "1 mm: the two halves' pins (D, B, A) stay on their own sides of the clamp axis "
-          "over the whole stroke, or the mirror halves' joints pass each other and collide "
-          "(assumption: 1 mm for the pins' play and tolerances; the halves' links are taken "
-          "as staggered side by side, as the crosshead links pinned on the axis must be, so "
-          "their sections may overlap radially: a preset whose halves share planes sets "
-          "half its deepest section)", ("sections",)),
+    Limit("link_clearance", "m", False, None,
+          "opt-in, no default: for a clamp whose two halves' links share one plane, so that "
+          "their pins (D, B, A) must stay on their own sides of the clamp axis over the "
+          "stroke (1 mm is play and tolerances); where the halves' link pairs interleave "
+          "side by side (as the crosshead links pinned on the axis must), they may cross "
+          "it. Seed 001 does not say which the SM-55's are", ("sections",)),
     Limit("clamp_force_sensitivity", "1/m", True, 3000.0,
           "at most 30 % clamp force change per 0.1 mm of mold height (a 300 mm steel mold "
           "grows 0.10 mm over 30 K at 11.5e-6/K); the SM-55 has 25.9 %", ("clamp",)),
@@ -256,12 +255,11 @@ OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
               "1", -1),
     Objective("close_time", "closing time bound under the motor's limits", "s", -1,
               ("clamp", "drive", "dynamics")),
-    Objective("close_rms_torque", "motor RMS torque over the closing stroke, on the time "
-              "bound's profile (not the minimum-time plan's: it ranks designs unlike the "
-              "planner, docs/design.md)", "N m", -1,
+    Objective("close_rms_torque", "motor RMS torque over the minimum-time plan of the "
+              "closing stroke (the planner, about 1 s a candidate)", "N m", -1,
               ("clamp", "drive", "dynamics")),
-    Objective("close_energy", "motor energy (no regeneration) over the closing stroke, on "
-              "the time bound's profile", "J", -1, ("clamp", "drive", "dynamics")),
+    Objective("close_energy", "motor shaft energy (no regeneration) over the same plan",
+              "J", -1, ("clamp", "drive", "dynamics")),
     Objective("thrust_peak", "peak crosshead thrust clamping to the force", "N", -1,
               ("clamp",)),
     Objective("link_stress", "peak axial link stress, clamped", "Pa", -1, ("clamp",)),

@@ -1,9 +1,12 @@
-"""A cheap lower bound on the closing time under the motor's limits, for the search.
+"""The closing stroke's time and the motor's duty for the search: a cheap lower bound on
+the time to rank by, and the planner's own plan for the duty.
 
 The planner (:mod:`controllers.planner`) finds the true minimum-time stroke, but its
 compiled problem is keyed by the linkage's geometry: every candidate of a search would
 compile anew (about 10 s) before its 10-20 ms warm solve. The search ranks candidates by
-this bound instead and the planner checks the final designs (docs/design.md).
+the bound (:func:`close_time_bound`, 5-10 ms); the motor's RMS torque and energy, which a
+bound's jerk-free profile gets wrong by up to 20 percentage points against the planner,
+come from the planner on a coarser grid, interpreted (:func:`planned_duty`, about 1 s).
 
 The bound is the time-optimal motion of the crosshead along its path in the phase plane
 (position, speed): from rest at the open position to rest at the toggle, the speed at
@@ -28,6 +31,10 @@ from toggle.plant import PlantConfig, plant_outputs
 
 #: Grid of the bound: positions before and after mold contact, speeds.
 APPROACH_POINTS, CLAMP_POINTS, SPEED_POINTS = 160, 40, 24
+#: Intervals of the planned stroke whose duty the search weighs (:func:`planned_duty`):
+#: its RMS torque within 0.5 % and its energy within 0.3 % of the planner's default 200
+#: on the SM-55 and sm55_design (benchmarks/bench_design_duty.py), in 0.9-1.3 s, not 4 s.
+DUTY_INTERVALS = 40
 
 
 class StallError(ValueError):
@@ -86,21 +93,23 @@ def close_time_bound(cfg: PlantConfig, limits: DriveLimits, x_open: float, x_fin
     return float(np.sum(np.diff(xs) / (0.5 * (v[:-1] + v[1:]))))
 
 
-def close_duty(cfg: PlantConfig, limits: DriveLimits, x_open: float, x_final: float
-               ) -> dict[str, float]:
-    """The bound's duration and the motor's RMS torque (N m) and energy without
-    regeneration (J) along its profile: a fast estimate of the minimum-time plan's (the
-    planner adds the jerk limit; docs/design.md compares the two)."""
-    xs, v = _profile(cfg, limits, x_open, x_final)
-    dx = np.diff(xs)
-    dt = dx / (0.5 * (v[:-1] + v[1:]))
-    a = np.diff(v) / dt  # constant on each interval
-    x_mid, v_mid = 0.5 * (xs[:-1] + xs[1:]), 0.5 * (v[:-1] + v[1:])
-    drive = cfg.mechanism.drive
-    torque = np.asarray(motor_torque(plant_outputs(x_mid, v_mid, a, cfg).input_force, drive,
-                                     a), dtype=float)
-    power = np.maximum(torque * np.asarray(motor_speed(v_mid, drive), dtype=float), 0.0)
-    duration = float(np.sum(dt))
-    return {"close_time": duration,
-            "close_rms_torque": float(np.sqrt(np.sum(torque ** 2 * dt) / duration)),
-            "close_energy": float(np.sum(power * dt))}
+def planned_duty(cfg: PlantConfig, limits: DriveLimits) -> dict[str, float]:
+    """The minimum-time plan's motor duty over the closing stroke of ``cfg`` (from rest at
+    its clamp's open position to rest at the toggle, under the drive's limits, jerk
+    included): RMS torque (N m), shaft energy without regeneration (J) and duration (s).
+    The planner at :data:`DUTY_INTERVALS` intervals with its functions interpreted: a
+    candidate is planned once, so a compile (10-30 s) would cost more than the solve; each
+    plan starts cold, so a design's duty does not depend on what the process planned
+    before. PlanningError where the planner finds no stroke."""
+    from controllers.duty import motor_duty
+    from controllers.planner import ClampPlanner
+    from controllers.stroke_problem import neutral, problem_for
+
+    problem = problem_for(neutral(cfg), DUTY_INTERVALS, machine_code=False)
+    problem.last = None  # a cold start whatever this process planned before: records replay
+    plan = ClampPlanner(cfg, limits, intervals=DUTY_INTERVALS, problem=problem).minimum_time()
+    s = plan.samples
+    duty = motor_duty(s.time, s.velocity, s.acceleration, s.input_force, cfg.mechanism.drive)
+    return {"close_rms_torque": duty.rms_torque,
+            "close_energy": duty.shaft_energy_without_regeneration,
+            "close_plan_time": duty.cycle_time}

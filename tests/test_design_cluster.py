@@ -6,6 +6,7 @@ here is gone afterwards, whatever happens."""
 from __future__ import annotations
 
 import csv
+import math
 import os
 import signal
 import socket
@@ -115,8 +116,13 @@ def test_a_search_on_a_real_cluster_survives_a_killed_worker_and_equals_the_loca
         stop(search)
     assert search.returncode == 0, stderr
     lines = record.read_text().splitlines()
-    assert len(lines) - 1 == len(local.evaluations)  # every evaluation once, none lost
+    # every evaluation once, none lost; then one line more for each front design: its
+    # planned duty (the planner on the workers), the same as the process planned
+    assert len(lines) - 1 == len(local.evaluations) + len(local.front)
+    assert sorted(lines) == sorted((tmp_path / "local" / "evaluations.jsonl").read_text()
+                                   .splitlines())
     assert at_kill < len(local.evaluations) / 2  # the kill came early in the run
+    assert all(math.isfinite(e.metrics["close_rms_torque"]) for e in local.front)
     write_csv(tmp_path / "local.csv", local.targets, local.front)
     assert (out / "pareto.csv").read_text() == (tmp_path / "local.csv").read_text()
     assert len(rows(out / "pareto.csv")) == len(local.front) > 0

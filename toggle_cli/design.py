@@ -1,12 +1,15 @@
 """``toggle design``: search the double-toggle family for a targets file (:mod:`design`).
 
-Evaluates by default on a local Dask cluster of one worker per free core, or in this process
-when no more than one core is free or the search is small (design.runner.default_workers);
-on an existing cluster with ``--scheduler tcp://HOST:PORT``; in this process with
-``--workers 0``. One progress bar counts the whole search, with an ETA. Every
-evaluation is appended to OUT/evaluations.jsonl as it arrives: run the same command again
-to resume. Writes OUT/pareto.csv, pareto.parquet, all.csv, presets/*.toml (each takes
-``--preset FILE`` in the other commands) and the figures front.png and parallel.png.
+Evaluates by default on a local Dask cluster (one worker per free core, at least two) where
+the kernel's fair share of the cores gives it more than this process, or in this process on
+one core or for a small search (design.runner.default_workers); on an existing cluster with
+``--scheduler tcp://HOST:PORT``; in this process with ``--workers 0``. One progress bar
+counts the whole search, with an ETA. Then each design on the front gets its closing
+stroke's minimum-time plan (the motor's RMS torque, energy and the plan's duration: about a
+second a design, on the same back-end, a bar of its own; ``--no-front-duty`` skips it).
+Every evaluation is appended to OUT/evaluations.jsonl as it arrives: run the same command
+again to resume. Writes OUT/pareto.csv, pareto.parquet, all.csv, presets/*.toml (each
+takes ``--preset FILE`` in the other commands) and the figures front.png and parallel.png.
 The search packages (dask, pymoo) are imported only when the command runs.
 """
 
@@ -77,6 +80,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"NSGA-II/III population (default {DEFAULT_POPULATION})")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the search (a seed replays)")
     p.add_argument("--no-figures", action="store_true", help="write no figures")
+    p.add_argument("--no-front-duty", action="store_true",
+                   help="do not plan the front's designs' closing strokes (the motor's RMS "
+                        "torque and energy, about 1 s a design)")
     add_json_argument(p)
     # checked before the search (the evaluations.jsonl an interrupted search left is not)
     declare_outputs(p, "pareto.csv", "pareto.parquet", "all.csv", "front.png", "parallel.png")
@@ -101,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
                             population=args.population or DEFAULT_POPULATION,
                             doe_method=method, samples=samples,
                             seed=args.seed, scheduler=args.scheduler, workers=args.workers,
-                            progress=not args.json, connect_timeout=args.connect_timeout)
+                            progress=not args.json, connect_timeout=args.connect_timeout,
+                            front_duty=not args.no_front_duty)
     except KeyboardInterrupt:
         from design.store import FILE
         if (args.out / FILE).exists():  # written with the first evaluation received
