@@ -211,13 +211,13 @@ def plans(presets: dict[str, Path]) -> str:
                   ("closing time (s)", lambda r: r["closing_time"]),
                   ("peak input force (N)", lambda r: r["peak_force"]),
                   ("stroke RMS torque (N m)", lambda r: r["duty"]["rms_torque"]),
-                  ("stroke energy, no regeneration (J)",
+                  ("stroke electrical energy, no regeneration (J)",
                    lambda r: r["duty"]["energy_without_regeneration"]),
                   ("peak motor torque (N m)", lambda r: r["peak_motor_torque"]),
                   ("molding cycle (s)", lambda r: r["molding_cycle"]["cycle_time"]),
                   ("cycle RMS torque (N m)", lambda r: r["molding_cycle"]["rms_torque"]),
                   ("cycle peak torque (N m)", lambda r: r["molding_cycle"]["peak_torque"]),
-                  ("cycle energy, no regeneration (J)",
+                  ("cycle electrical energy, no regeneration (J)",
                    lambda r: r["molding_cycle"]["energy_without_regeneration"])]
     (a, ra), (b, rb) = got.items()
     out = ["```text", *(f"$ toggle plan --preset {os.path.relpath(p, ROOT)} {' '.join(PLAN)}"
