@@ -339,10 +339,26 @@ def test_minimum_time_holds_the_torque_speed_curve_and_a_steeper_one_is_slower(c
     assert np.abs(held.acceleration).max() < lim.acceleration
 
 
-def _no_compile(name, key, names, build):
+def _no_compile(name, key, names, build, machine_code=True):
     """Stands in for :func:`compiled` where the cache must hold the problem: loads only."""
-    loaded = _real_compiled(name, key, names, _fail_build)
-    return loaded
+    assert machine_code
+    return _real_compiled(name, key, names, _fail_build)
+
+
+def test_a_problem_without_machine_code_is_interpreted_and_plans_alike(chang, tmp_path,
+                                                                      monkeypatch):
+    """planner_for(..., machine_code=False), what a design's duty takes: no compile and
+    nothing in the cache (an empty one here), CasADi's own functions, and the plan the
+    compiled problem finds."""
+    cfg, limits, _, _ = chang
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
+    interpreted = planner_for(cfg, limits, intervals=8, machine_code=False)
+    assert interpreted.problem._force.class_name() == "SXFunction"
+    plan = interpreted.solve(DURATION, warm=False)
+    assert list(tmp_path.iterdir()) == []  # nothing compiled, nothing cached
+    machine = ClampPlanner(cfg, limits, intervals=8).solve(DURATION, warm=False)
+    assert machine.peak_force == pytest.approx(plan.peak_force, rel=1e-8)
+    np.testing.assert_allclose(machine.profile.v, plan.profile.v, rtol=1e-6, atol=1e-9)
 
 
 def _fail_build():
