@@ -8,7 +8,8 @@ phase-plane bound the search ranks by. This script runs a reduced SM-55 search
 (``design/examples/sm55.toml``), takes designs spread along its front (by closing-time
 bound) and the SM-55 itself, opens each to the targets' mold stroke (the comparison's rule,
 :func:`design.placement.compare`), and for each prints the search's figures beside
-``toggle plan --min-time --force-limit 1e5`` on the design's preset (200 intervals,
+``toggle plan --min-time --force-limit 1e5 --cycle`` with the targets' hold and ejection
+dwells on the design's preset (200 intervals,
 compiled: one compile per design, minutes on a loaded machine): its RMS torque, shaft
 energy without regeneration (what ``close_energy`` is: the plan's electrical energy adds
 the copper losses) and duration.
@@ -49,26 +50,32 @@ TARGETS = ROOT / "design" / "examples" / "sm55.toml"
 #: Largest difference of the search's and the planner's change against the SM-55,
 #: percentage points, and largest relative difference of the duty's levels.
 TOLERANCE_PP, LEVEL = 2.0, 0.01
-PLAN = ["--min-time", "--force-limit", "1e5", "--json"]
+PLAN = ["--min-time", "--force-limit", "1e5", "--json", "--cycle"]
 
 
-def planned(preset: Path) -> dict:
-    """The minimum-time plan's duty over the stroke (``toggle plan ... --json``)."""
+def planned(preset: Path, hold: float, eject: float) -> dict:
+    """The minimum-time plan's duty over the stroke and the molding cycle with the targets'
+    dwells (``toggle plan ... --json --cycle --hold H --eject E``)."""
     text = io.StringIO()
     with contextlib.redirect_stdout(text):
-        if toggle(["plan", "--preset", str(preset), *PLAN]) != 0:
+        if toggle(["plan", "--preset", str(preset), *PLAN, "--hold", str(hold), "--eject",
+                   str(eject)]) != 0:
             raise SystemExit(f"toggle plan --preset {preset} failed")
-    duty = json.loads(text.getvalue())["duty"]
+    result = json.loads(text.getvalue())
+    duty, cycle = result["duty"], result["molding_cycle"]
     return {"close_rms_torque": duty["rms_torque"],
             "close_energy": duty["shaft_energy_without_regeneration"],
             "close_plan_time": duty["cycle_time"], "close_time": duty["cycle_time"],
+            "cycle_rms_torque": cycle["rms_torque"],
+            "cycle_energy": cycle["shaft_energy_without_regeneration"],
             "torque_squared": duty["torque_squared_integral"]}
 
 
 def estimated(metrics: dict) -> dict:
     """The search's figures, and the integral of the torque squared they give (N^2 m^2 s:
     the stroke's share of a molding cycle's RMS torque, whatever the stroke's duration)."""
-    keys = ("close_rms_torque", "close_energy", "close_plan_time", "close_time")
+    keys = ("close_rms_torque", "close_energy", "close_plan_time", "close_time",
+            "cycle_rms_torque", "cycle_energy")
     return {**{k: metrics[k] for k in keys},
             "torque_squared": metrics["close_rms_torque"] ** 2 * metrics["close_plan_time"]}
 
@@ -103,7 +110,7 @@ def main() -> None:
                                      sm55, stroke)
             name = "SM-55" if design is None else f"design-{des.key[:12]}"
             path = write_preset(Path(tmp) / f"d{i}.toml", targets, des, name=f"d{i}")
-            plan = planned(path)
+            plan = planned(path, targets.settings["hold"], targets.settings["eject"])
             rows.append((name, estimated(des.metrics), plan))
             print(f"  {name}: search {des.metrics['close_rms_torque']:.4g} N m "
                   f"{des.metrics['close_energy']:.4g} J, planner "
@@ -111,7 +118,7 @@ def main() -> None:
                   flush=True)
     base_search, base_plan = rows[0][1], rows[0][2]
     keys = ("close_rms_torque", "close_energy", "torque_squared", "close_plan_time",
-            "close_time")
+            "close_time", "cycle_rms_torque", "cycle_energy")
     print("\n| design | " + " | ".join(f"{k} search | planner | change search | planner"
                                      for k in keys) + f" |\n{'|---' * (1 + 4 * len(keys))}|")
     worst = dict.fromkeys(keys, 0.0)

@@ -539,9 +539,7 @@ class StrokeProblem:
         """The same problem with the torque-speed curve's rows (itself if it has them)."""
         if self.torque:
             return self
-        return problem_for(self.config, self.n1 + self.n2, self.variants, torque=True,
-                            opening=self.opening, zone=self.zone,
-                            machine_code=self.machine_code)
+        return self._sibling(torque=True, zone=self.zone)
 
     @functools.cached_property
     def with_zone(self) -> StrokeProblem:
@@ -549,8 +547,15 @@ class StrokeProblem:
         the plans without caps do without them."""
         if self.zone:
             return self
-        return problem_for(self.config, self.n1 + self.n2, self.variants, torque=self.torque,
-                            opening=self.opening, zone=True, machine_code=self.machine_code)
+        return self._sibling(torque=self.torque, zone=True)
+
+    def _sibling(self, torque: bool, zone: bool) -> StrokeProblem:
+        """This problem with or without the torque's and the zone's rows: the shared one of
+        :func:`problem_for` when compiled, a problem of its own when interpreted (planned
+        once, it would only push the shared ones out of the cache)."""
+        build = problem_for if self.machine_code else StrokeProblem
+        return build(self.config, self.n1 + self.n2, self.variants, torque=torque,
+                     opening=self.opening, zone=zone, machine_code=self.machine_code)
 
     def input_force(self, x: Any, v: Any, a: Any, cfg: PlantConfig) -> np.ndarray:
         """The input force (N) at the points (x, v, a) of the plant ``cfg`` (its mold, pin

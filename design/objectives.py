@@ -44,7 +44,8 @@ MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_tog
             "self_locking_travel": "m", "clamp_force_sensitivity": "1/m",
             "link_utilisation": "1", "buckling_utilisation": "1", "pin_pressure": "Pa",
             "die_height_range": "1", "die_height_thrust": "N", "die_height_sensitivity": "1/m",
-            "close_rms_torque": "N m", "close_energy": "J", "close_plan_time": "s"}
+            "close_rms_torque": "N m", "close_energy": "J", "close_plan_time": "s",
+            "cycle_rms_torque": "N m", "cycle_energy": "J", "cycle_time": "s"}
 
 #: The constraints, in the order of the G matrix; each is active when its target is set
 #: (assembly always; drive_thrust when the preset has a drive and clamp data; the
@@ -53,10 +54,10 @@ MEASURES = {"platen_stroke": "m", "crosshead_stroke": "m", "x_open": "m", "x_tog
 CONSTRAINTS = ("assembly", "mold_open_stroke", "installation_length", "max_link_ratio",
                "clamp_force", "drive_thrust", "tolerances", *DESIGN_LIMITS)
 
-#: Objectives of the motor's duty over the minimum-time plan of the closing stroke.
-_DUTY = ("close_rms_torque", "close_energy")
-#: The measures of that plan (:func:`design.timing.planned_duty`).
-DUTY_MEASURES = (*_DUTY, "close_plan_time")
+#: Objectives of the motor's duty over the minimum-time closing stroke and molding cycle.
+_DUTY = ("close_rms_torque", "close_energy", "cycle_rms_torque", "cycle_energy")
+#: The measures of those plans (:func:`design.timing.planned_duty`).
+DUTY_MEASURES = (*_DUTY, "close_plan_time", "cycle_time")
 
 #: The designer's limits read on the geometry alone (the others need the clamping forces).
 _GEOMETRIC = ("transmission_angle", "radial_envelope", "tiebar_clearance", "platen_side_load",
@@ -359,14 +360,16 @@ class Evaluator:
                                               self._limits, mech.clamp.x_open, result.x_final)}
         if duty:
             try:
-                out.update(planned_duty(plan_config(mech), self._limits))
+                settings = self.targets.settings
+                out.update(planned_duty(plan_config(mech), self._limits, settings["hold"],
+                                        settings["eject"]))
             except PlanningError as exc:
                 raise StallError(f"the planner finds no closing stroke: {exc}") from exc
         return out
 
     def close_duty(self, values: Mapping[str, float], x_open: float) -> dict[str, float]:
-        """The closing stroke's time bound and the minimum-time plan's RMS torque, energy
-        and duration of a feasible candidate opening at ``x_open``."""
+        """The closing stroke's time bound and the planned duty (:data:`DUTY_MEASURES`) of a
+        feasible candidate opening at ``x_open``."""
         mech = self.mechanism(values, x_open=x_open)
         return self._timing(mech, analyse_clamping(mech), True)
 

@@ -129,9 +129,11 @@ TARGETS.update({k: (lim.unit, ("most " if lim.most else "least ") + lim.key.repl
 #: Keys of [settings] with their defaults: the toggle angle where force amplification is
 #: read (seed 004's "near lock-up"), points on the opening; lockup_angle > 0 holds the
 #: angle of links 4b and 5 at lock-up (seed 004's gamma0): e = (r4b + r5) sin(lockup_angle)
-#: follows the links instead of bounds.e.
+#: follows the links instead of bounds.e; the molding cycle's hold (mold locked: injection
+#: and cooling) and ejection dwells, s, of the cycle duty (assumption: 8 s and 1.5 s, a thin-
+#: walled part on a 55 t machine; the seeds give no cycle).
 SETTINGS: dict[str, float] = {"alpha_lock": math.radians(1.0), "points": 60,
-                              "lockup_angle": 0.0}
+                              "lockup_angle": 0.0, "hold": 8.0, "eject": 1.5}
 
 _TOP = {"preset", "objectives", "targets", "bounds", "settings", "description"}
 
@@ -260,6 +262,11 @@ OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
               ("clamp", "drive", "dynamics")),
     Objective("close_energy", "motor shaft energy (no regeneration) over the same plan",
               "J", -1, ("clamp", "drive", "dynamics")),
+    Objective("cycle_rms_torque", "motor RMS torque over the molding cycle: that plan, the "
+              "hold, the minimum-time opening, the ejection (settings.hold, eject; about 2 s "
+              "a candidate)", "N m", -1, ("clamp", "drive", "dynamics")),
+    Objective("cycle_energy", "motor shaft energy (no regeneration) over the same cycle",
+              "J", -1, ("clamp", "drive", "dynamics")),
     Objective("thrust_peak", "peak crosshead thrust clamping to the force", "N", -1,
               ("clamp",)),
     Objective("link_stress", "peak axial link stress, clamped", "Pa", -1, ("clamp",)),
@@ -323,10 +330,11 @@ def targets_from_dict(table: dict[str, Any], origin: str = "<targets>") -> Targe
                                  f"known: {', '.join(SETTINGS)}")
         settings[key] = _number(value, f"{origin}: settings.{key}", "")
     if not (0 < settings["alpha_lock"] < 0.5 and 2 <= settings["points"] <= 1000
-            and 0 <= settings["lockup_angle"] < 0.5):
+            and 0 <= settings["lockup_angle"] < 0.5
+            and 0 <= settings["hold"] <= 3600 and 0 <= settings["eject"] <= 3600):
         raise ParameterError(f"{origin}: settings need 0 < alpha_lock < 0.5 rad, "
-                             f"2 <= points <= 1000 and 0 <= lockup_angle < 0.5 rad, "
-                             f"got {settings}")
+                             f"2 <= points <= 1000, 0 <= lockup_angle < 0.5 rad and "
+                             f"hold and eject of 0 to 3600 s, got {settings}")
     bounds = _bounds(table.get("bounds"), origin)
     if bounds["alpha_open"][0] <= settings["alpha_lock"]:
         raise ParameterError(f"{origin}: bounds.alpha_open must stay above settings.alpha_lock "

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.limits import DriveLimits
-from controllers.plans import CONTACT_SPEED
+from controllers.plans import CONTACT_SPEED, Plan
 from toggle.drive import motor_speed, motor_torque
 from toggle.plant import PlantConfig, plant_outputs
 
@@ -94,23 +94,39 @@ def close_time_bound(cfg: PlantConfig, limits: DriveLimits, x_open: float, x_fin
     return float(np.sum(np.diff(xs) / (0.5 * (v[:-1] + v[1:]))))
 
 
-def planned_duty(cfg: PlantConfig, limits: DriveLimits) -> dict[str, float]:
-    """The minimum-time plan's motor duty over the closing stroke of ``cfg`` (from rest at
-    its clamp's open position to rest at the toggle, under the drive's limits, jerk
-    included): RMS torque (N m), shaft energy without regeneration (J) and duration (s).
-    The planner at :data:`DUTY_INTERVALS` intervals with its functions interpreted: a
-    candidate is planned once, so a compile (10-30 s) would cost more than the solve; each
-    plan starts cold, so a design's duty does not depend on what the process planned
-    before. PlanningError where the planner finds no stroke."""
-    from controllers.duty import motor_duty
+def _fastest(cfg: PlantConfig, limits: DriveLimits, opening: bool) -> Plan:
+    """The minimum-time closing (or opening) stroke on :data:`DUTY_INTERVALS` intervals, on
+    a problem of its own, interpreted: started cold whatever the process planned before (a
+    record replays), and out of :func:`controllers.stroke_problem.problem_for`'s cache of
+    the problems that are planned again."""
     from controllers.planner import ClampPlanner
-    from controllers.stroke_problem import neutral, problem_for
+    from controllers.stroke_problem import StrokeProblem, neutral
 
-    problem = problem_for(neutral(cfg), DUTY_INTERVALS, machine_code=False)
-    problem.last = None  # a cold start whatever this process planned before: records replay
-    plan = ClampPlanner(cfg, limits, intervals=DUTY_INTERVALS, problem=problem).minimum_time()
-    s = plan.samples
-    duty = motor_duty(s.time, s.velocity, s.acceleration, s.input_force, cfg.mechanism.drive)
-    return {"close_rms_torque": duty.rms_torque,
-            "close_energy": duty.shaft_energy_without_regeneration,
-            "close_plan_time": duty.cycle_time}
+    problem = StrokeProblem(neutral(cfg), DUTY_INTERVALS, opening=opening, machine_code=False)
+    return ClampPlanner(cfg, limits, intervals=DUTY_INTERVALS, problem=problem).minimum_time()
+
+
+def planned_duty(cfg: PlantConfig, limits: DriveLimits, hold: float, eject: float
+                 ) -> dict[str, float]:
+    """The motor's duty over the minimum-time closing stroke of ``cfg`` (from rest at its
+    clamp's open position to rest at the toggle, under the drive's limits, jerk included)
+    and over the molding cycle it starts (:class:`controllers.cycle.MoldingCycle`: that
+    stroke, ``hold`` s locked, the minimum-time opening stroke, ``eject`` s open): RMS torque
+    (N m), shaft energy without regeneration (J) and duration (s) of each. The planner at
+    :data:`DUTY_INTERVALS` intervals with its functions interpreted: a candidate is planned
+    once, so a compile (10-30 s) would cost more than the solve; each plan starts cold, so a
+    design's duty does not depend on what the process planned before. PlanningError where
+    the planner finds no stroke."""
+    from controllers.cycle import MoldingCycle
+    from controllers.duty import motor_duty
+
+    closing = _fastest(cfg, limits, opening=False)
+    s = closing.samples
+    close = motor_duty(s.time, s.velocity, s.acceleration, s.input_force, cfg.mechanism.drive)
+    cycle = MoldingCycle(closing, _fastest(cfg, limits, opening=True), hold, eject).duty()
+    return {"close_rms_torque": close.rms_torque,
+            "close_energy": close.shaft_energy_without_regeneration,
+            "close_plan_time": close.cycle_time,
+            "cycle_rms_torque": cycle.rms_torque,
+            "cycle_energy": cycle.shaft_energy_without_regeneration,
+            "cycle_time": cycle.cycle_time}

@@ -313,7 +313,8 @@ def test_the_fronts_designs_get_the_planners_duty_once_and_recorded(sm55, tmp_pa
     for e in planned:
         assert e.variables == store.get(e.key).variables
         cfg = plan_config(str(write_preset(tmp_path / f"{e.key}.toml", targets, e)))
-        duty = planned_duty(cfg, drive_limits(cfg.mechanism))
+        duty = planned_duty(cfg, drive_limits(cfg.mechanism), targets.settings["hold"],
+                            targets.settings["eject"])
         for key in DUTY_MEASURES:
             assert e.metrics[key] == pytest.approx(duty[key], rel=1e-6)
         assert e.metrics["close_plan_time"] > e.metrics["close_time"]  # above the bound

@@ -19,7 +19,9 @@ from pathlib import Path
 import pytest
 
 from design.output import write_csv
+from design.runner import Runner
 from design.search import run_search
+from design.store import Store
 from design.targets import load_targets
 
 # a scheduler and workers computing on both cores, against timeouts: beside a rig test it
@@ -94,12 +96,13 @@ def test_a_search_on_a_real_cluster_survives_a_killed_worker_and_equals_the_loca
         cluster, tmp_path: Path) -> None:
     address, procs = cluster
     targets_file = EXAMPLES / "sm55.toml"
-    local = run_search(load_targets(targets_file), tmp_path / "local", generations=6,
-                       population=24, seed=3, workers=0)
+    targets = load_targets(targets_file)
+    local = run_search(targets, tmp_path / "local", generations=6, population=24, seed=3,
+                       workers=0, front_duty=False)
     out = tmp_path / "cluster"
     search = subprocess.Popen(
         [str(BIN / "toggle"), "design", str(targets_file), "--scheduler", address,
-         "--out", str(out), "--no-figures", *SEARCH],
+         "--out", str(out), "--no-figures", "--no-front-duty", *SEARCH],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         record = out / "evaluations.jsonl"
@@ -116,13 +119,22 @@ def test_a_search_on_a_real_cluster_survives_a_killed_worker_and_equals_the_loca
         stop(search)
     assert search.returncode == 0, stderr
     lines = record.read_text().splitlines()
-    # every evaluation once, none lost; then one line more for each front design: its
-    # planned duty (the planner on the workers), the same as the process planned
-    assert len(lines) - 1 == len(local.evaluations) + len(local.front)
+    assert len(lines) - 1 == len(local.evaluations)  # every evaluation once, none lost
     assert sorted(lines) == sorted((tmp_path / "local" / "evaluations.jsonl").read_text()
                                    .splitlines())
     assert at_kill < len(local.evaluations) / 2  # the kill came early in the run
-    assert all(math.isfinite(e.metrics["close_rms_torque"]) for e in local.front)
+    # the front's planned duty on the cluster's (remaining) worker equals the process's, and
+    # is recorded (two front designs: each plans two strokes, a few seconds)
+    planned = {}
+    for name, where in (("cluster", {"scheduler": address}), ("process", {"workers": 0})):
+        store = Store(tmp_path / f"duty-{name}", targets.digest())
+        store.append(local.front[:2])
+        with Runner(targets, store, **where) as runner:
+            planned[name] = [e.metrics for e in runner.with_duty(local.front[:2])]
+        kept = Store(store.path.parent, targets.digest())  # read back from the file
+        assert [kept.get(e.key).metrics for e in local.front[:2]] == planned[name]
+    assert planned["cluster"] == planned["process"]
+    assert all(math.isfinite(m["cycle_rms_torque"]) for m in planned["process"])
     write_csv(tmp_path / "local.csv", local.targets, local.front)
     assert (out / "pareto.csv").read_text() == (tmp_path / "local.csv").read_text()
     assert len(rows(out / "pareto.csv")) == len(local.front) > 0

@@ -357,3 +357,22 @@ def test_the_duty_is_the_planners_and_does_at_least_the_clamping_work(sm55) -> N
     thrust = np.asarray(clamp_state(xs, result.x_contact, mech).thrust, dtype=float)
     work = float(np.sum(0.5 * (thrust[1:] + thrust[:-1]) * np.diff(xs)))
     assert duty["close_energy"] >= work / mech.drive.efficiency > 0  # the clamp-up's share
+
+
+def test_the_cycle_duty_holds_the_closing_stroke_and_the_dwells(sm55) -> None:
+    """The molding cycle's duty: the closing plan, the targets' hold and ejection dwells and
+    an opening stroke (its duration what is left: the closing one's within 5 %, the same
+    path under the same speed, acceleration and jerk limits, which bind the SM-55 both
+    ways); its torque-squared integral and energy more than the closing stroke's, its RMS
+    torque diluted by the dwells."""
+    _, evaluator, ref = sm55
+    settings = evaluator.targets.settings
+    assert (settings["hold"], settings["eject"]) == (8.0, 1.5)  # the stated defaults
+    duty = evaluator.close_duty(ref.variables, ref.metrics["x_open"])
+    opening = duty["cycle_time"] - duty["close_plan_time"] - settings["hold"] - settings["eject"]
+    assert opening == pytest.approx(duty["close_plan_time"], rel=0.05)
+    close_sq = duty["close_rms_torque"] ** 2 * duty["close_plan_time"]
+    cycle_sq = duty["cycle_rms_torque"] ** 2 * duty["cycle_time"]
+    assert cycle_sq > close_sq
+    assert duty["cycle_rms_torque"] < duty["close_rms_torque"]  # diluted by the dwells
+    assert duty["cycle_energy"] > duty["close_energy"]

@@ -29,7 +29,7 @@ from controllers.profiles import (
     s_curve,
     write_profile_csv,
 )
-from controllers.stroke_problem import problem_key
+from controllers.stroke_problem import StrokeProblem, neutral, problem_key
 from controllers.stroke_reports import baseline_stroke, baselines
 from fmu_src.build import build_fmu
 from toggle.elastics import ClampingError, clamp_stroke
@@ -352,8 +352,12 @@ def test_a_problem_without_machine_code_is_interpreted_and_plans_alike(chang, tm
     compiled problem finds."""
     cfg, limits, _, _ = chang
     monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
-    interpreted = planner_for(cfg, limits, intervals=8, machine_code=False)
-    assert interpreted.problem._force.class_name() == "SXFunction"
+    # its own problem: planner_for's and problem_for's caches keep the other tests' problems
+    problem = StrokeProblem(neutral(cfg), 8, machine_code=False)
+    interpreted = ClampPlanner(cfg, limits, intervals=8, problem=problem)
+    assert problem._force.class_name() == "SXFunction"
+    assert problem.with_torque._force.class_name() == "SXFunction"
+    assert not problem.with_torque.machine_code  # a sibling of its own, interpreted too
     plan = interpreted.solve(DURATION, warm=False)
     assert list(tmp_path.iterdir()) == []  # nothing compiled, nothing cached
     machine = ClampPlanner(cfg, limits, intervals=8).solve(DURATION, warm=False)
