@@ -4,9 +4,10 @@ Evaluates by default on a local Dask cluster (one worker per free core, at least
 the kernel's fair share of the cores gives it more than this process, or in this process on
 one core or for a small search (design.runner.default_workers); on an existing cluster with
 ``--scheduler tcp://HOST:PORT``; in this process with ``--workers 0``. One progress bar
-counts the whole search, with an ETA. Then each design on the front gets its closing
-stroke's minimum-time plan (the motor's RMS torque, energy and the plan's duration: about a
-second a design, on the same back-end, a bar of its own; ``--no-front-duty`` skips it).
+counts the whole search, with an ETA. Then each design on the front gets the motor's duty
+from the planner: the minimum-time closing and opening strokes and the molding cycle with
+the targets' dwells (RMS torque, energy, durations: about 1.4 s a design on an idle core, on
+the same back-end, a bar of its own; ``--no-front-duty`` skips it).
 Every evaluation is appended to OUT/evaluations.jsonl as it arrives: run the same command
 again to resume. Writes OUT/pareto.csv, pareto.parquet, all.csv, presets/*.toml (each
 takes ``--preset FILE`` in the other commands) and the figures front.png and parallel.png.
@@ -81,8 +82,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=SEED, default=0, help="seed of the search (a seed replays)")
     p.add_argument("--no-figures", action="store_true", help="write no figures")
     p.add_argument("--no-front-duty", action="store_true",
-                   help="do not plan the front's designs' closing strokes (the motor's RMS "
-                        "torque and energy, about 1 s a design)")
+                   help="do not plan the front's designs' strokes and molding cycles (the "
+                        "motor's RMS torque and energy, about 1.4 s a design)")
     add_json_argument(p)
     # checked before the search (the evaluations.jsonl an interrupted search left is not)
     declare_outputs(p, "pareto.csv", "pareto.parquet", "all.csv", "front.png", "parallel.png")
