@@ -655,21 +655,18 @@ class ClampPlanner(StrokeReports):
 def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CONTACT_SPEED,
                 intervals: int = INTERVALS, variants: tuple[PlantConfig, ...] = (),
                 scales: tuple[float, ...] | None = None,
-                protection: Protection = NO_PROTECTION, opening: bool = False,
-                machine_code: bool = True) -> ClampPlanner:
+                protection: Protection = NO_PROTECTION, opening: bool = False) -> ClampPlanner:
     """A planner on a kept problem, so that a re-plan for the same plant (and variants),
     for any mold height, friction, drive limits or protection zone, neither rebuilds nor
     starts cold. ``opening``: the opening (break-away) stroke from the toggle back to the
-    open position instead of the closing one (:class:`ClampPlanner`). Without
-    ``machine_code`` the problem's functions are interpreted, not compiled: a plant planned
-    once (a design's candidate, :func:`design.timing.planned_duty`) pays no compile."""
+    open position instead of the closing one (:class:`ClampPlanner`)."""
     problem = problem_for(neutral(cfg), intervals, tuple(neutral(v) for v in variants),
-                          opening=opening, machine_code=machine_code)
+                          opening=opening)
     planner = ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
                            problem=problem, variants=variants, scales=scales,
                            protection=protection)
     planner.recipe = (cfg, limits, contact_speed, intervals, variants, scales, protection,
-                      opening, machine_code)
+                      opening)
     return planner
 
 

@@ -553,9 +553,11 @@ class StrokeProblem:
         """This problem with or without the torque's and the zone's rows: the shared one of
         :func:`problem_for` when compiled, a problem of its own when interpreted (planned
         once, it would only push the shared ones out of the cache)."""
-        build = problem_for if self.machine_code else StrokeProblem
-        return build(self.config, self.n1 + self.n2, self.variants, torque=torque,
-                     opening=self.opening, zone=zone, machine_code=self.machine_code)
+        if self.machine_code:
+            return problem_for(self.config, self.n1 + self.n2, self.variants, torque=torque,
+                               opening=self.opening, zone=zone)
+        return StrokeProblem(self.config, self.n1 + self.n2, self.variants, torque=torque,
+                             opening=self.opening, zone=zone, machine_code=False)
 
     def input_force(self, x: Any, v: Any, a: Any, cfg: PlantConfig) -> np.ndarray:
         """The input force (N) at the points (x, v, a) of the plant ``cfg`` (its mold, pin
@@ -582,10 +584,10 @@ class StrokeProblem:
 
 @functools.lru_cache(maxsize=8)
 def problem_for(cfg: PlantConfig, intervals: int, variants: tuple[PlantConfig, ...] = (),
-                torque: bool = False, opening: bool = False, zone: bool = False,
-                machine_code: bool = True) -> StrokeProblem:
+                torque: bool = False, opening: bool = False, zone: bool = False
+                ) -> StrokeProblem:
     """A built problem, shared by the planners of every mold height, friction, drive and
     drive limits of one plant (and variants), with or without the torque rows, closing or
-    opening; its functions compiled, or interpreted without ``machine_code``."""
-    return StrokeProblem(cfg, intervals, variants, torque, opening, zone, machine_code)
+    opening (compiled: a problem interpreted is planned once and is its own)."""
+    return StrokeProblem(cfg, intervals, variants, torque, opening, zone)
 

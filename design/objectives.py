@@ -353,19 +353,23 @@ class Evaluator:
         design's preset (:func:`controllers.plans.plan_config`: the exact inverse of the
         plant's force for the contact; analyse_clamping's, the paper's linearised Eq 25,
         lands 5 um away on the SM-55). StallError where the motor cannot close it."""
-        from controllers.plans import PlanningError, plan_config
-        from design.timing import close_time_bound, planned_duty
+        from design.timing import close_time_bound
         from toggle.plant import PlantConfig
         out = {"close_time": close_time_bound(PlantConfig(mech, x_contact=result.x_contact),
                                               self._limits, mech.clamp.x_open, result.x_final)}
-        if duty:
-            try:
-                settings = self.targets.settings
-                out.update(planned_duty(plan_config(mech), self._limits, settings["hold"],
-                                        settings["eject"]))
-            except PlanningError as exc:
-                raise StallError(f"the planner finds no closing stroke: {exc}") from exc
-        return out
+        return {**out, **self._duty(mech)} if duty else out
+
+    def _duty(self, mech: Mechanism) -> dict[str, float]:
+        """:func:`design.timing.planned_duty` of ``mech`` with the targets' dwells;
+        StallError where the planner finds no stroke."""
+        from controllers.plans import PlanningError, plan_config
+        from design.timing import planned_duty
+        settings = self.targets.settings
+        try:
+            return planned_duty(plan_config(mech), self._limits, settings["hold"],
+                                settings["eject"])
+        except PlanningError as exc:
+            raise StallError(f"the planner finds no stroke: {exc}") from exc
 
     def close_duty(self, values: Mapping[str, float], x_open: float) -> dict[str, float]:
         """The closing stroke's time bound and the planned duty (:data:`DUTY_MEASURES`) of a
@@ -379,12 +383,11 @@ class Evaluator:
         return all(self._has(n) for n in ("clamp", "drive", "dynamics"))
 
     def with_duty(self, e: Evaluation) -> Evaluation:
-        """A feasible evaluation with its closing stroke's planned duty among its metrics
+        """A feasible evaluation with its planned duty (stroke and molding cycle) among its metrics
         (:data:`DUTY_MEASURES`; NaN where the planner finds no stroke): what the front's
         designs get when the search did not weigh it."""
         try:
-            duty = self.close_duty(e.variables, e.metrics["x_open"])
-            duty.pop("close_time")
+            duty = self._duty(self.mechanism(e.variables, x_open=e.metrics["x_open"]))
         except StallError:
             duty = dict.fromkeys(DUTY_MEASURES, math.nan)
         return replace(e, metrics={**e.metrics, **duty})

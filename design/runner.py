@@ -199,7 +199,7 @@ class Runner:
 
     def with_duty(self, evaluations: Sequence[Evaluation]) -> list[Evaluation]:
         """The feasible ``evaluations`` with their closing stroke's planned duty
-        (:meth:`Evaluator.with_duty`, about a second each): those without it planned on this
+        (:meth:`Evaluator.with_duty`, about 1.4 s each): those without it planned on this
         back-end, with a bar of their own, and recorded (:meth:`Store.supersede`)."""
         todo = [e for e in evaluations if "close_rms_torque" not in
                 (self.store.get(e.key) if e.key in self.store else e).metrics]

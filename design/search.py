@@ -186,7 +186,7 @@ def run_search(targets: Targets, folder: str | Path, *, generations: int = 20,
     With ``doe_method`` ("lhs" or "sobol") evaluate ``samples`` candidates of a design of
     experiments; otherwise run the genetic algorithm for ``generations`` of ``population``.
     Then, with ``front_duty`` and a preset the planner can take, the front's designs get
-    their closing stroke's minimum-time plan (:meth:`Runner.with_duty`), recorded too.
+    their planned duty, stroke and molding cycle (:meth:`Runner.with_duty`), recorded too.
     """
     store = Store(folder, targets.digest())
     total = samples if doe_method is not None else generations * _population(

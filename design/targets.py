@@ -258,13 +258,14 @@ OBJECTIVES: dict[str, Objective] = {o.key: o for o in (
     Objective("close_time", "closing time bound under the motor's limits", "s", -1,
               ("clamp", "drive", "dynamics")),
     Objective("close_rms_torque", "motor RMS torque over the minimum-time plan of the "
-              "closing stroke (the planner, about 1 s a candidate)", "N m", -1,
+              "closing stroke (the planner: any duty objective plans both strokes, about "
+              "1.4 s a candidate)", "N m", -1,
               ("clamp", "drive", "dynamics")),
     Objective("close_energy", "motor shaft energy (no regeneration) over the same plan",
               "J", -1, ("clamp", "drive", "dynamics")),
     Objective("cycle_rms_torque", "motor RMS torque over the molding cycle: that plan, the "
-              "hold, the minimum-time opening, the ejection (settings.hold, eject; about 2 s "
-              "a candidate)", "N m", -1, ("clamp", "drive", "dynamics")),
+              "hold, the minimum-time opening, the ejection (settings.hold, eject)", "N m", -1,
+              ("clamp", "drive", "dynamics")),
     Objective("cycle_energy", "motor shaft energy (no regeneration) over the same cycle",
               "J", -1, ("clamp", "drive", "dynamics")),
     Objective("thrust_peak", "peak crosshead thrust clamping to the force", "N", -1,

@@ -31,10 +31,11 @@ from toggle.plant import PlantConfig, plant_outputs
 
 #: Grid of the bound: positions before and after mold contact, speeds.
 APPROACH_POINTS, CLAMP_POINTS, SPEED_POINTS = 160, 40, 24
-#: Intervals of the planned stroke whose duty the search weighs (:func:`planned_duty`):
-#: on eight SM-55 designs its RMS torque 0.4-1.0 % below the planner's default 200, its
-#: energy within 0.6 %, its duration within 0.4 %, the designs' changes against the SM-55
-#: within 0.6 percentage points (benchmarks/bench_design_duty.py), in 0.9-1.3 s, not 4 s.
+#: Intervals of the planned strokes whose duty the search weighs (:func:`planned_duty`):
+#: on eight SM-55 designs the stroke's RMS torque 0.4-1.0 % below the planner's default
+#: 200, the cycle's 0.3-0.7 %, the designs' changes against the SM-55 within 0.6
+#: percentage points (benchmarks/bench_design_duty.py); both strokes in 1.35-1.45 s on an
+#: idle core, where one stroke at 200 takes 4.2 s.
 DUTY_INTERVALS = 40
 
 
@@ -94,16 +95,17 @@ def close_time_bound(cfg: PlantConfig, limits: DriveLimits, x_open: float, x_fin
     return float(np.sum(np.diff(xs) / (0.5 * (v[:-1] + v[1:]))))
 
 
-def _fastest(cfg: PlantConfig, limits: DriveLimits, opening: bool) -> Plan:
-    """The minimum-time closing (or opening) stroke on :data:`DUTY_INTERVALS` intervals, on
-    a problem of its own, interpreted: started cold whatever the process planned before (a
+def fastest_stroke(cfg: PlantConfig, limits: DriveLimits, opening: bool = False,
+                   intervals: int = DUTY_INTERVALS) -> Plan:
+    """The minimum-time closing (or opening) stroke on ``intervals`` intervals, on a problem
+    of its own, interpreted: started cold whatever the process planned before (a
     record replays), and out of :func:`controllers.stroke_problem.problem_for`'s cache of
     the problems that are planned again."""
     from controllers.planner import ClampPlanner
     from controllers.stroke_problem import StrokeProblem, neutral
 
-    problem = StrokeProblem(neutral(cfg), DUTY_INTERVALS, opening=opening, machine_code=False)
-    return ClampPlanner(cfg, limits, intervals=DUTY_INTERVALS, problem=problem).minimum_time()
+    problem = StrokeProblem(neutral(cfg), intervals, opening=opening, machine_code=False)
+    return ClampPlanner(cfg, limits, intervals=intervals, problem=problem).minimum_time()
 
 
 def planned_duty(cfg: PlantConfig, limits: DriveLimits, hold: float, eject: float
@@ -120,10 +122,10 @@ def planned_duty(cfg: PlantConfig, limits: DriveLimits, hold: float, eject: floa
     from controllers.cycle import MoldingCycle
     from controllers.duty import motor_duty
 
-    closing = _fastest(cfg, limits, opening=False)
+    closing = fastest_stroke(cfg, limits)
     s = closing.samples
     close = motor_duty(s.time, s.velocity, s.acceleration, s.input_force, cfg.mechanism.drive)
-    cycle = MoldingCycle(closing, _fastest(cfg, limits, opening=True), hold, eject).duty()
+    cycle = MoldingCycle(closing, fastest_stroke(cfg, limits, opening=True), hold, eject).duty()
     return {"close_rms_torque": close.rms_torque,
             "close_energy": close.shaft_energy_without_regeneration,
             "close_plan_time": close.cycle_time,

@@ -335,8 +335,8 @@ def test_the_duty_is_the_planners_and_does_at_least_the_clamping_work(sm55) -> N
     least the clamp-up's work through the screw."""
     from controllers.duty import motor_duty
     from controllers.limits import drive_limits
-    from controllers.planner import planner_for
     from controllers.plans import INTERVALS
+    from design.timing import fastest_stroke
     from toggle.plant import PlantConfig
 
     mech, evaluator, ref = sm55
@@ -345,8 +345,7 @@ def test_the_duty_is_the_planners_and_does_at_least_the_clamping_work(sm55) -> N
     assert duty["close_plan_time"] > duty["close_time"]  # the bound is a bound
     result = analyse_clamping(mech)
     cfg = PlantConfig(mech, x_contact=result.x_contact)
-    plan = planner_for(cfg, drive_limits(mech), intervals=INTERVALS, machine_code=False
-                       ).minimum_time()
+    plan = fastest_stroke(cfg, drive_limits(mech), intervals=INTERVALS)
     s = plan.samples
     fine = motor_duty(s.time, s.velocity, s.acceleration, s.input_force, mech.drive)
     assert duty["close_rms_torque"] == pytest.approx(fine.rms_torque, rel=0.01)

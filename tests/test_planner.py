@@ -347,7 +347,7 @@ def _no_compile(name, key, names, build, machine_code=True):
 
 def test_a_problem_without_machine_code_is_interpreted_and_plans_alike(chang, tmp_path,
                                                                       monkeypatch):
-    """planner_for(..., machine_code=False), what a design's duty takes: no compile and
+    """A problem without machine code, what a design's duty takes: no compile and
     nothing in the cache (an empty one here), CasADi's own functions, and the plan the
     compiled problem finds."""
     cfg, limits, _, _ = chang
