@@ -14,9 +14,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from hil.backends import FmuPlant, RigSetup, ensure_fmu
-from hil.experiment import reciprocating_trajectory
-from hil.recording import RunMeta, RunRecorder
+from hil.host.backends import FmuPlant, RigSetup, ensure_fmu
+from hil.host.experiment import reciprocating_trajectory
+from hil.host.recording import RunMeta, RunRecorder
 from toggle.params import load_preset
 
 

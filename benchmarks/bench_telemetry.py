@@ -16,9 +16,9 @@ import time
 
 import numpy as np
 
-from hil import protocol as p
-from hil.rig_emulator import spawn_emulator
-from hil.serial_link import SerialLink
+from hil.emulators.rig_emulator import spawn_emulator
+from hil.link import protocol as p
+from hil.link.serial_link import SerialLink
 
 
 class LinearPlant:

@@ -10,7 +10,8 @@ model for the F405, about a minute) as they are. ``tests/test_firmware_figures.p
 
 Blocks: ``nucleo-memory`` (``make -C firmware/board nucleo``: arm-none-eabi-size -A of the
 ELF, firmware/board/stack_report.py's chains), ``nucleo-pulses``
-(:func:`hil.rehost.pulses.full_rate_reversal` against :data:`hil.rehost.pulses.TMC5160`),
+(:func:`hil.emulators.rehost.pulses.full_rate_reversal` against
+:data:`hil.emulators.rehost.pulses.TMC5160`),
 ``qemu-memory`` (the QEMU image of the default rig, the same two tools).
 """
 
@@ -29,7 +30,7 @@ sys.path.insert(0, str(ROOT / "firmware" / "board"))
 
 from stack_report import report as stack_report  # noqa: E402
 
-from hil.firmware import section_sizes  # noqa: E402
+from hil.emulators.firmware import section_sizes  # noqa: E402
 
 DOC = ROOT / "docs" / "firmware.md"
 FLASH_SECTIONS = (".isr_vector", ".text", ".rodata", ".ARM.exidx", ".data")
@@ -71,7 +72,7 @@ def memory_rows(elf: Path, flash_total: int) -> list[str]:
 
 
 def nucleo_memory() -> str:
-    from hil.rehost.nucleo import build_nucleo_image
+    from hil.emulators.rehost.nucleo import build_nucleo_image
 
     elf = build_nucleo_image()
     rows = memory_rows(elf, 512 * 1024)
@@ -80,9 +81,9 @@ def nucleo_memory() -> str:
 
 
 def qemu_memory() -> str:
-    from hil.backends import RigSetup
-    from hil.firmware_qemu import build_qemu_image
-    from hil.mcu_model import RigHardware
+    from hil.emulators.firmware_qemu import build_qemu_image
+    from hil.emulators.mcu_model import RigHardware
+    from hil.host.backends import RigSetup
 
     setup = RigSetup()
     elf = build_qemu_image(setup, RigHardware(x_origin=setup.stroke[0]), seed=0)
@@ -92,8 +93,8 @@ def qemu_memory() -> str:
 
 
 def nucleo_pulses() -> str:
-    from hil.rehost.nucleo import build_nucleo_image
-    from hil.rehost.pulses import TMC5160, full_rate_reversal
+    from hil.emulators.rehost.nucleo import build_nucleo_image
+    from hil.emulators.rehost.pulses import TMC5160, full_rate_reversal
 
     _, t, _ = full_rate_reversal(build_nucleo_image(), periods=12, steps=256)
     d = TMC5160

@@ -4,9 +4,9 @@ None of the project's protocol, host or emulator code was read or imported to wr
 this: COBS, CRC-16/CCITT-FALSE, the message layouts, the state machine, the safety
 checks, the trajectory buffer, duplicate/STALE handling, the heartbeat watchdog,
 telemetry at 1 kHz and the home switch are all implemented here from the document.
-The only project code used is the mechanics (`hil.rig_physics.ClampPhysics`), the
-open position of the stroke (`hil.backends.RigSetup().stroke[0]`) and SCHED_FIFO
-scheduling for the serving process (`hil.realtime.set_realtime`).
+The only project code used is the mechanics (`hil.emulators.rig_physics.ClampPhysics`), the
+open position of the stroke (`hil.host.backends.RigSetup().stroke[0]`) and SCHED_FIFO
+scheduling for the serving process (`hil.link.realtime.set_realtime`).
 
 Readings taken where the document leaves a choice (see the clean-room report):
 
@@ -670,8 +670,8 @@ def _i32(v: float) -> int:
 
 def serve(conn: Connection, x_open: float, noise_n: float = 0.2, future: bool = False) -> None:
     """Child-process main: run an Mcu on a pty with a 1 ms tick loop until told to quit."""
-    from hil.realtime import set_realtime
-    from hil.rig_physics import ClampPhysics
+    from hil.emulators.rig_physics import ClampPhysics
+    from hil.link.realtime import set_realtime
 
     # an MCU is real time: SCHED_FIFO where allowed (a nice level alone left it starved
     # past the host's HELLO retries on a loaded machine), else a higher priority
@@ -766,7 +766,7 @@ class CleanroomRig:
     """Handle to a clean-room MCU served on a pty in a spawned process."""
 
     def __init__(self, noise_n: float = 0.2, future: bool = False) -> None:
-        from hil.backends import RigSetup
+        from hil.host.backends import RigSetup
 
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()

@@ -109,11 +109,11 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     import fmu_src.build as build  # toggle build-fmu loads it when it runs
     import fmu_src.native_build as native
     import toggle.linkage as linkage
-    from hil import cli as hil_cli
-    from hil import experiment
-    from hil.interrupts import Interrupted
-    from hil.rig_emulator import RigEmulator
-    from hil.samples import Trajectory
+    from hil.cli import main as hil_cli
+    from hil.cli.interrupts import Interrupted
+    from hil.emulators.rig_emulator import RigEmulator
+    from hil.host import experiment
+    from hil.host.samples import Trajectory
     from toggle.files import atomic_path
 
     def fake_build(out: Path, *_args: object, **_kwargs: object) -> Path:

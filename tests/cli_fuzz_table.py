@@ -289,8 +289,8 @@ def fuzz(n: int = 749, seed: int = 40, root: Path | None = None,
          ) -> tuple[dict[str, Row], list[str]]:
     """Run ``n`` generated lines; the rows by kind of mistake and the lines off the
     convention (each with its answer)."""
-    from hil.cli import build_parser as hil_parser
-    from hil.cli import main as hil_main
+    from hil.cli.main import build_parser as hil_parser
+    from hil.cli.main import main as hil_main
     from toggle_cli import build_parser as toggle_parser
     from toggle_cli import main as toggle_main
 

@@ -17,11 +17,11 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from hil import protocol as p
-from hil.backends import RigSetup
-from hil.mcu_model import RigHardware
-from hil.rig_emulator import EmulatorLog, EmulatorProcess, FaultPlan, spawn_emulator
-from hil.rig_physics import ClampPhysics
+from hil.emulators.mcu_model import RigHardware
+from hil.emulators.rig_emulator import EmulatorLog, EmulatorProcess, FaultPlan, spawn_emulator
+from hil.emulators.rig_physics import ClampPhysics
+from hil.host.backends import RigSetup
+from hil.link import protocol as p
 
 X_OPEN = RigSetup().stroke[0]
 #: A short experiment: one cycle at 40 mm/s (about 2.5 s of motion).

@@ -18,6 +18,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 FLOORS = {"toggle": 0, "controllers": 1, "fmu_src": 1, "design": 2, "hil": 2, "toggle_cli": 3}
+#: The rooms of a package, on floors of their own: hil's wire (link) under the host side of a
+#: run (host), under the rigs without hardware (emulators), under the front panel (panel),
+#: under the command line (cli). A module of a room imports its own room or rooms below; a
+#: package's own modules (its __init__) import none of its rooms.
+ROOMS = {"hil": {"link": 0, "host": 1, "emulators": 2, "panel": 3, "cli": 4}}
 
 
 def packages(root: Path = ROOT) -> list[str]:
@@ -120,7 +125,41 @@ def findings(root: Path = ROOT) -> list[str]:
                                 f"(floor {FLOORS[there]}): up")
             elif FLOORS[there] == FLOORS[here]:
                 problems.append(f"{module} imports {target}: across floor {FLOORS[here]}")
+    problems += room_findings(graph)
     problems += [f"circle: {' <-> '.join(c)}" for c in cycles(graph)]
+    return problems
+
+
+def room_of(module: str) -> tuple[str, str | None]:
+    """The package and the room of a module (None: the package's own module, or no rooms)."""
+    package, _, rest = module.partition(".")
+    room = rest.split(".")[0] if rest else None
+    return package, room if room in ROOMS.get(package, {}) else None
+
+
+def room_findings(graph: dict[str, set[str]]) -> list[str]:
+    """Every import inside a package with rooms that runs up a room, or into a room from the
+    package's own modules (which every room's import loads first)."""
+    problems = []
+    for module, targets in sorted(graph.items()):
+        package, room = room_of(module)
+        if package not in ROOMS:
+            continue
+        floors = ROOMS[package]
+        for target in sorted(targets):
+            there_package, there = room_of(target)
+            if there_package != package or there is None or there == room:
+                continue
+            if room is None:
+                problems.append(f"{module} (the package's own) imports {target} (room {there})")
+            elif room not in floors:
+                problems.append(f"{module}: {room!r} is not a room of {package} in ROOMS")
+            elif floors[there] > floors[room]:
+                problems.append(f"{module} (room {room}) imports {target} (room {there}): up")
+    unplaced = sorted({room_of(m)[0] + "." + m.split(".")[1] for m in graph
+                       if m.split(".")[0] in ROOMS and len(m.split(".")) > 1
+                       and room_of(m)[1] is None})
+    problems += [f"{m}: not in a room of ROOMS" for m in unplaced]
     return problems
 
 

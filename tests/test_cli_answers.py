@@ -13,8 +13,8 @@ import pytest
 from cli_fuzz import run_command
 from matplotlib.figure import Figure
 
-from hil.cli import build_parser as hil_parser
-from hil.cli import main as hil
+from hil.cli.main import build_parser as hil_parser
+from hil.cli.main import main as hil
 from toggle.params import load_preset
 from toggle.rig_tables import CHANG2021_READING
 from toggle_cli import build_parser as toggle_parser

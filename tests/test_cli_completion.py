@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.cli import main as hil_main
+from hil.cli.main import main as hil_main
 from toggle_cli import main as toggle_main
 
 CLIS: dict[str, Callable[[list[str]], int]] = {"toggle": toggle_main, "hil": hil_main}

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from cli_fuzz_table import KINDS, fuzz, generate, make_fixture
 
-from hil.cli import build_parser as hil_parser
+from hil.cli.main import build_parser as hil_parser
 from toggle_cli import build_parser as toggle_parser
 
 

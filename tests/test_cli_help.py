@@ -10,7 +10,7 @@ from collections.abc import Iterator
 
 import pytest
 
-import hil.cli
+import hil.cli.main
 import toggle_cli
 from toggle.params import load_preset
 
@@ -27,7 +27,7 @@ def _helps(parser: argparse.ArgumentParser, name: str) -> Iterator[tuple[str, st
 
 
 HELPS = dict([*_helps(toggle_cli.build_parser(), "toggle"),
-              *_helps(hil.cli.build_parser(), "hil")])
+              *_helps(hil.cli.main.build_parser(), "hil")])
 
 
 def test_every_command_has_help() -> None:

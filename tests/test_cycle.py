@@ -15,13 +15,13 @@ from controllers.limits import drive_limits
 from controllers.planner import default_duration, planner_for
 from controllers.plans import plan_config
 from controllers.profiles import read_profile_csv, read_profile_settings
-from hil.backends import RigSetup
-from hil.cli import main as hil_main
-from hil.experiment import profile_cycles, segment_cycles
-from hil.mcu_model import RigHardware
-from hil.rig_emulator import spawn_emulator
-from hil.rig_physics import ClampPhysics
-from hil.samples import Trajectory
+from hil.cli.main import main as hil_main
+from hil.emulators.mcu_model import RigHardware
+from hil.emulators.rig_emulator import spawn_emulator
+from hil.emulators.rig_physics import ClampPhysics
+from hil.host.backends import RigSetup
+from hil.host.experiment import profile_cycles, segment_cycles
+from hil.host.samples import Trajectory
 from toggle.elastics import clamp_stroke
 from toggle.params import load_preset
 from toggle_cli import main

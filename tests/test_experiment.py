@@ -11,14 +11,14 @@ from hypothesis import strategies as st
 
 from controllers.limits import DriveLimits, drive_limits
 from controllers.profiles import s_curve, stroke_at_speed
-from hil.experiment import (
+from hil.host.experiment import (
     CycleCounter,
     profile_cycles,
     reciprocating_trajectory,
     segment_cycles,
     stroke_positions,
 )
-from hil.samples import Trajectory, TrajectoryError
+from hil.host.samples import Trajectory, TrajectoryError
 from toggle.kinematics import stroke_limits
 
 PERIOD = 1e-3

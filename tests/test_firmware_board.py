@@ -16,11 +16,11 @@ from pathlib import Path
 
 import pytest
 
-from hil import protocol as p
-from hil.backends import RigSetup
-from hil.firmware import BUILD_DIR, make_board, section_sizes
-from hil.firmware_qemu import BOARD_DIR, QemuRig, build_qemu_image, qemu_available
-from hil.mcu_model import RigHardware
+from hil.emulators.firmware import BUILD_DIR, make_board, section_sizes
+from hil.emulators.firmware_qemu import BOARD_DIR, QemuRig, build_qemu_image, qemu_available
+from hil.emulators.mcu_model import RigHardware
+from hil.host.backends import RigSetup
+from hil.link import protocol as p
 
 pytestmark = pytest.mark.alone
 

@@ -14,7 +14,7 @@ from types import ModuleType
 
 import pytest
 
-from hil.firmware_qemu import qemu_available
+from hil.emulators.firmware_qemu import qemu_available
 
 ROOT = Path(__file__).resolve().parents[1]
 pytest.importorskip("unicorn", reason="needs the unicorn package (pip install unicorn)")

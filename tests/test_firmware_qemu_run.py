@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from hil_host import SHORT_RUN, hil
 
-from hil.firmware_qemu import qemu_available
+from hil.emulators.firmware_qemu import qemu_available
 
 pytestmark = pytest.mark.alone
 

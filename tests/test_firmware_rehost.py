@@ -1,4 +1,4 @@
-"""The NUCLEO-F446RE image rehosted (hil/rehost/, docs/firmware.md "The rehosted image").
+"""The NUCLEO-F446RE image rehosted (hil/emulators/rehost/, docs/firmware.md "The rehosted image").
 
 The ELF `make -C firmware/board nucleo` writes, bytes unchanged, runs on the unicorn CPU
 emulator with models of the STM32F446 peripherals and the ADS131M02, joined to the
@@ -16,16 +16,16 @@ from pathlib import Path
 
 import pytest
 
-from hil import protocol as p
-from hil.backends import RigSetup
-from hil.firmware_qemu import qemu_available
-from hil.mcu_model import RigHardware
+from hil.emulators.firmware_qemu import qemu_available
+from hil.emulators.mcu_model import RigHardware
+from hil.host.backends import RigSetup
+from hil.link import protocol as p
 
 unicorn = pytest.importorskip("unicorn", reason="needs the unicorn package (pip install unicorn)")
 
-from hil.rehost.machine import UNITS_PER_S, UnsupportedAccessError  # noqa: E402
-from hil.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image  # noqa: E402
-from hil.rehost.pulses import TMC5160, full_rate_reversal  # noqa: E402
+from hil.emulators.rehost.machine import UNITS_PER_S, UnsupportedAccessError  # noqa: E402
+from hil.emulators.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image  # noqa: E402
+from hil.emulators.rehost.pulses import TMC5160, full_rate_reversal  # noqa: E402
 
 NO_CHECK = -(2**31)
 
@@ -159,7 +159,7 @@ def test_the_plain_host_runs_a_trajectory_on_the_paced_pty(elf: Path) -> None:
     the image's clock never faster than the wall clock. (The default job takes minutes on
     the rehost: docs/firmware.md "The rehosted image".)"""
     pytest.importorskip("serial")
-    from hil.serial_link import SerialLink
+    from hil.link.serial_link import SerialLink
 
     board = NucleoBoard(elf, seed=5, rng_seed=7)
     with NucleoRig(board) as rig:
@@ -197,7 +197,7 @@ def test_the_plain_host_runs_a_trajectory_on_the_paced_pty(elf: Path) -> None:
 def test_step_pulses_equal_the_commanded_steps_and_meet_the_drivers_timing(elf: Path) -> None:
     """256 steps per period (TIM1's longest burst) out, back at once: every commanded step
     is a rising edge on PA8, and STEP high and low, DIR setup and hold meet the TMC5160's
-    minimums (hil.rehost.pulses.TMC5160, from its datasheet)."""
+    minimums (hil.emulators.rehost.pulses.TMC5160, from its datasheet)."""
     board, timing, telemetry = full_rate_reversal(elf, periods=12, steps=256)
     last = telemetry[-1]
     assert not [m for m in telemetry if m.faults] and last.state == p.State.IDLE
@@ -509,8 +509,8 @@ def _host_build_run(hw: RigHardware, config: p.Config, points: list[tuple[int, i
                     seconds_: float) -> list[p.Telemetry]:
     """The host build with the NUCLEO's step timing, the same session as the board's (HELLO,
     CONFIG, the trajectory streamed, START, heartbeats), one tick per millisecond."""
-    from hil.firmware import FirmwareMcu
-    from hil.rig_physics import ClampPhysics
+    from hil.emulators.firmware import FirmwareMcu
+    from hil.emulators.rig_physics import ClampPhysics
 
     fw = FirmwareMcu(ClampPhysics(), hw, seed=3, step_timing="nucleo")
     now, seq = 0.0, 0
@@ -561,7 +561,7 @@ def test_the_host_build_with_the_boards_step_timing_agrees_sample_by_sample(elf:
     instants: a stroke to the toggle and back at 40 mm/s (200 steps per period, the whole
     force range) gives the same encoder count in every sample and load-cell codes within
     1 LSB (the load cell's noise off: each draws it from its own sequence)."""
-    from hil.experiment import stroke_positions
+    from hil.host.experiment import stroke_positions
 
     setup = RigSetup()
     hw = RigHardware(x_origin=setup.stroke[0], load_noise_n=0.0)

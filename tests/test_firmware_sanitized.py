@@ -35,7 +35,8 @@ def test_the_host_build_is_clean_under_asan_and_ubsan() -> None:
     # built here, without the runtimes: CasADi's code generation dlopens its plugins with
     # RTLD_DEEPBIND, which the sanitizer runtime refuses
     built = subprocess.run(
-        [sys.executable, "-c", "from hil.firmware import build_host_firmware as b; print(b())"],
+        [sys.executable, "-c",
+         "from hil.emulators.firmware import build_host_firmware as b; print(b())"],
         cwd=ROOT, env={**os.environ, "RIGFW_SANITIZE": "1"}, capture_output=True, text=True,
         check=True).stdout.strip()
     env = {**os.environ, "RIGFW_LIBRARY": built, "LD_PRELOAD": ":".join(runtimes),

@@ -1,7 +1,7 @@
-"""The rig firmware's host build (hil/firmware.py): the C core on the simulated rig.
+"""The rig firmware's host build (hil/emulators/firmware.py): the C core on the simulated rig.
 
 The simulated rig (firmware/sim/) is an FMI 2.0 master of the native FMU's C code with the
-sensor model of hil.mcu_model.Sensors. Its physics is checked against the Python model:
+sensor model of hil.emulators.mcu_model.Sensors. Its physics is checked against the Python model:
 the same protocol session (HELLO, CONFIG, streamed chunks, START, heartbeats) drives
 FirmwareMcu and McuModel over a stroke of the default RigSetup and back, and every
 telemetry sample's steps, enc and load_raw are compared (the protocol fields are
@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil import protocol as p
-from hil.backends import RigSetup
-from hil.experiment import stroke_positions
-from hil.firmware import FirmwareMcu, build_host_firmware, split_frames
-from hil.mcu_model import McuModel, RigHardware
-from hil.rig_physics import ClampPhysics
+from hil.emulators.firmware import FirmwareMcu, build_host_firmware, split_frames
+from hil.emulators.mcu_model import McuModel, RigHardware
+from hil.emulators.rig_physics import ClampPhysics
+from hil.host.backends import RigSetup
+from hil.host.experiment import stroke_positions
+from hil.link import protocol as p
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None,
                                 reason="gcc is missing: the rig firmware's host build needs it")
@@ -241,7 +241,7 @@ def test_sensor_faults_and_seeded_noise(library: Path) -> None:
 
 
 def test_a_failed_build_names_gcc_and_its_complaint(monkeypatch: pytest.MonkeyPatch) -> None:
-    import hil.firmware as firmware
+    import hil.emulators.firmware as firmware
 
     before = set(firmware.BUILD_DIR.iterdir())
     bad = (*firmware.FIRMWARE_CFLAGS, "-fno-such-option")

@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from hil_host import recorded_samples, sent_samples
 
-from hil.backends import FmuPlant, RigPlant, RigSetup, RunStoppedError
-from hil.cli import build_parser, main
-from hil.experiment import reciprocating_trajectory
-from hil.mcu_model import RigHardware
-from hil.recording import read_samples
-from hil.rig_emulator import FaultPlan, spawn_emulator
-from hil.rig_physics import ClampPhysics
-from hil.run_settings import resolve_settings
-from hil.samples import TrajectoryError
+from hil.cli.main import build_parser, main
+from hil.emulators.mcu_model import RigHardware
+from hil.emulators.rig_emulator import FaultPlan, spawn_emulator
+from hil.emulators.rig_physics import ClampPhysics
+from hil.host.backends import FmuPlant, RigPlant, RigSetup, RunStoppedError
+from hil.host.experiment import reciprocating_trajectory
+from hil.host.recording import read_samples
+from hil.host.run_settings import resolve_settings
+from hil.host.samples import TrajectoryError
 from toggle.params import load_preset
 
 DELTA_R8 = 0.5e-3

@@ -15,7 +15,7 @@ import pytest
 from cli_fuzz import EXAMPLES, cheap_commands, check_answer, invocations, path_values
 from hypothesis import HealthCheck, given, settings
 
-from hil.cli import build_parser, main
+from hil.cli.main import build_parser, main
 
 ROOT = Path(tempfile.mkdtemp(prefix="hil_fuzz_"))
 PATHS = path_values(ROOT)

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from cli_fuzz import INTERNALS, run_command
 
-from hil import experiment
-from hil.cli import main
-from hil.recording import RUN_FILES
-from hil.rsm import RsmError, fit_rsm
+from hil.cli.main import main
+from hil.host import experiment
+from hil.host.recording import RUN_FILES
+from hil.host.rsm import RsmError, fit_rsm
 
 #: A quick run of the simulated rig (one cycle at 40 mm/s: about 3 s).
 QUICK = ["run", "--speed", "40e-3", "--cycles", "1", "--quiet"]
@@ -213,7 +213,7 @@ def test_an_unknown_option_shows_the_sub_commands_usage(argv, usage, capsys) -> 
 
 def test_hil_run_says_when_it_builds_the_fmu(tmp_path: Path, monkeypatch) -> None:
     import fmu_src.build as build
-    from hil.backends import ensure_fmu
+    from hil.host.backends import ensure_fmu
 
     def fake_build(folder: Path, preset: str = "chang2021") -> Path:
         (folder / "ToggleClamp.fmu").write_bytes(b"PK")

@@ -33,8 +33,8 @@ from hil_host import (
 )
 
 from controllers.profiles import ProfileSamples, s_curve, write_profile_csv
-from hil import protocol as p
-from hil.rig_emulator import FaultPlan
+from hil.emulators.rig_emulator import FaultPlan
+from hil.link import protocol as p
 
 pytestmark = pytest.mark.real_time
 
@@ -173,9 +173,9 @@ def test_a_swallowed_ctrl_c_during_planning_is_still_acted_on(monkeypatch, tmp_p
     when the failed solve failed the plan (which was reported as 'duration 3.1 s is too
     short', exit 1)."""
     from controllers.plans import PlanningError
-    from hil import experiment
-    from hil.cli import main
-    from hil.interrupts import Interrupted
+    from hil.cli.interrupts import Interrupted
+    from hil.cli.main import main
+    from hil.host import experiment
 
     real = experiment.planned_trajectory
 

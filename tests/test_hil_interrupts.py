@@ -1,9 +1,9 @@
 """Ctrl-C and SIGTERM at any moment of ``hil``'s start-up: exit 130/143 and one line.
 
-The console script imports hil.cli, and with it numpy, scipy and the rest, before main()
+The console script imports hil.cli.main, and with it numpy, scipy and the rest, before main()
 runs; a Ctrl-C in that first second printed a KeyboardInterrupt traceback, and a SIGTERM
-killed the process without its exit code. hil/__init__.py now installs the handlers
-first (hil.interrupts.install_exit_handlers); ``hil run`` then replaces them with its
+killed the process without its exit code. hil/cli/__init__.py now installs the handlers
+first (hil.cli.interrupts.install_exit_handlers); ``hil run`` then replaces them with its
 SignalGuard (tests/test_hil_faults.py covers Ctrl-C while planning and in motion). No
 handler raises inside an import: numpy's C code turned that exception into an ImportError
 traceback, and some imports swallowed it (the run went on, exit 0).
@@ -21,8 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from hil import interrupts
-from hil.interrupts import Interrupted, SignalGuard, in_import, started_as_hil
+from hil.cli import interrupts
+from hil.cli.interrupts import Interrupted, SignalGuard, in_import, started_as_hil
 
 pytestmark = pytest.mark.real_time
 
@@ -102,7 +102,7 @@ def test_only_the_hil_command_installs_the_exit_handlers() -> None:
 
 SWALLOWING_MODULE = """
     import os, signal, time
-    from hil.interrupts import in_import
+    from hil.cli.interrupts import in_import
     INSIDE = in_import(__import__("sys")._getframe())
     try:  # what numpy's C import of datetime does to an exception raised in it
         os.kill(os.getpid(), signal.SIGINT)

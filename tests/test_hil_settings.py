@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.cli import main
-from hil.recording import read_samples
+from hil.cli.main import main
+from hil.host.recording import read_samples
 
 
 def test_config_force_limit_is_honoured(tmp_path, capsys) -> None:

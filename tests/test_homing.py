@@ -1,4 +1,4 @@
-"""Homing's constant-speed points, made as they are streamed (hil.homing.ConstantSpeed)."""
+"""Homing's constant-speed points, made as they are streamed (hil.host.homing.ConstantSpeed)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hil import protocol as p
-from hil.homing import ConstantSpeed
+from hil.host.homing import ConstantSpeed
+from hil.link import protocol as p
 
 
 @given(start=st.integers(-10**6, 10**6), per_period=st.floats(-20, 20),

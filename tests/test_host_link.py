@@ -24,10 +24,10 @@ import numpy as np
 import pytest
 from hil_host import SHORT_RUN, Host, wait_for
 
-from hil import protocol as p
-from hil.backends import RigPlant, RigSetup, RunStoppedError
-from hil.samples import Trajectory
-from hil.serial_link import (
+from hil.host.backends import RigPlant, RigSetup, RunStoppedError
+from hil.host.samples import Trajectory
+from hil.link import protocol as p
+from hil.link.serial_link import (
     ESTOP_REPEATS,
     STOP_ATTEMPTS,
     CommandError,
@@ -328,7 +328,7 @@ def test_a_deaf_rig_ends_hil_run_with_one_stop_sequence_and_a_quick_exit(
     watchdog tripped, it sent the STOPs of the stop sequence, one ACK timeout apart, and no
     answer came), files written and run summarised. It took 0.8-0.98 s (issue 35): the
     interpreter's teardown of numpy, scipy, CasADi and fmpy after main() returned was
-    110-200 ms of it (hil.cli.entry now ends the process at once)."""
+    110-200 ms of it (hil.cli.main.entry now ends the process at once)."""
     exits = []
     for run in range(DEAF_RUNS):
         mcu = fake(deaf_at_start=1, deaf_after=300)

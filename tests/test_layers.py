@@ -42,3 +42,21 @@ def test_the_checks_find_an_import_up_a_circle_and_an_unplaced_package(tmp_path:
     assert "package extra/ has no floor in tests/import_graph.py FLOORS" in found
     assert any("toggle (floor 0) imports controllers.plan (floor 1): up" in f for f in found)
     assert cycles(module_graph(tmp_path)) == [["controllers.other", "controllers.plan"]]
+
+
+def test_the_room_check_finds_an_import_up_a_room(tmp_path: Path) -> None:
+    """hil's rooms (import_graph.ROOMS): the host side importing the command line is reported,
+    as is the package's own module importing a room and a module outside every room."""
+    for room in ("", "link", "host", "cli"):
+        (tmp_path / "hil" / room).mkdir(parents=True, exist_ok=True)
+        (tmp_path / "hil" / room / "__init__.py").write_text("")
+    (tmp_path / "hil" / "__init__.py").write_text("from hil.host import run\n")
+    (tmp_path / "hil" / "host" / "run.py").write_text("from hil.cli import main\n")
+    (tmp_path / "hil" / "cli" / "main.py").write_text("from hil.link import wire\n")
+    (tmp_path / "hil" / "link" / "wire.py").write_text("")
+    (tmp_path / "hil" / "loose.py").write_text("")
+    found = findings(tmp_path)
+    assert "hil.host.run (room host) imports hil.cli.main (room cli): up" in found
+    assert "hil (the package's own) imports hil.host.run (room host)" in found
+    assert "hil.loose: not in a room of ROOMS" in found
+    assert not any("hil.cli.main" in f and "link" in f for f in found)

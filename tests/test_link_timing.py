@@ -1,10 +1,10 @@
-"""The host's timeouts from the measured link (hil/link_timing.py, docs/rig-protocol.md §7)."""
+"""The host's timeouts from the measured link (hil/link/timing.py, docs/rig-protocol.md §7)."""
 
 from __future__ import annotations
 
 import pytest
 
-from hil.link_timing import (
+from hil.link.timing import (
     ACK_TIMEOUT_MAX,
     ACK_TIMEOUT_MIN,
     HEARTBEAT_MAX_MS,

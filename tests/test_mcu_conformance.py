@@ -1,7 +1,7 @@
 """The conformance checklist of docs/rig-protocol.md §13, over the bytes, against both MCUs.
 
-Every test runs twice: against the Python MCU model (hil.mcu_model.ModelMcu) and against
-the C firmware's host build on the simulated rig (hil.firmware.FirmwareMcu), through the
+Every test runs twice: against the Python MCU model (hil.emulators.mcu_model.ModelMcu) and against
+the C firmware's host build on the simulated rig (hil.emulators.firmware.FirmwareMcu), through the
 byte-level interface the rig emulator uses: host frames in, wire frames out, one tick per
 period. The two must give the same answers; ``test_a_whole_session_is_the_same_on_both``
 compares every frame of a scripted session field by field. The defects of issue 27 that
@@ -16,10 +16,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from hil import protocol as p
-from hil.backends import RigSetup
-from hil.mcu_model import ModelMcu, RigHardware
-from hil.rig_physics import ClampPhysics
+from hil.emulators.mcu_model import ModelMcu, RigHardware
+from hil.emulators.rig_physics import ClampPhysics
+from hil.host.backends import RigSetup
+from hil.link import protocol as p
 
 X_OPEN = RigSetup().stroke[0]
 QUIET = RigHardware(x_origin=X_OPEN, load_noise_n=0.0)  # noise off: both read alike
@@ -31,7 +31,7 @@ def make_mcu(kind: str, hw: RigHardware = QUIET) -> ModelMcu:
     physics = ClampPhysics("chang2021")
     if kind == "model":
         return ModelMcu(physics, hw, 3)
-    from hil.firmware import FirmwareMcu
+    from hil.emulators.firmware import FirmwareMcu
 
     return FirmwareMcu(physics, hw, 3)  # type: ignore[return-value]
 

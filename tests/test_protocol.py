@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil import protocol as p
+from hil.link import protocol as p
 
 # one message of every type, with non-default field values that survive f32 rounding
 SAMPLES: list[p.Message] = [

@@ -14,10 +14,10 @@ import time
 
 import pytest
 
-from hil import protocol as p
-from hil.mcu_model import McuModel, RigHardware
-from hil.rig_emulator import FaultPlan, RigEmulator
-from hil.serial_link import SerialLink
+from hil.emulators.mcu_model import McuModel, RigHardware
+from hil.emulators.rig_emulator import FaultPlan, RigEmulator
+from hil.link import protocol as p
+from hil.link.serial_link import SerialLink
 
 pytestmark = pytest.mark.real_time
 

@@ -1,4 +1,5 @@
-"""hil.realtime: the session thread's priority is raised while a session runs, then put back."""
+"""hil.link.realtime: the session thread's priority is raised while a session runs, then put
+back."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import threading
 
 import pytest
 
-from hil.realtime import SESSION_NICE, raise_thread_priority
+from hil.link.realtime import SESSION_NICE, raise_thread_priority
 
 
 def _nice() -> int:
@@ -61,7 +62,7 @@ def test_a_thread_already_higher_is_left_as_it_is() -> None:
 def test_a_session_keeps_the_heap_out_of_collections_until_it_ends() -> None:
     import gc
 
-    from hil.realtime import freeze_collections
+    from hil.link.realtime import freeze_collections
     kept = [[i] for i in range(1000)]  # objects that exist when the session opens
     unfreeze = freeze_collections()
     try:

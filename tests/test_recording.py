@@ -12,7 +12,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from hil.recording import (
+from hil.host.recording import (
     CSV_COLUMNS,
     FORCE_PNG,
     NOT_CLOSED,
@@ -25,7 +25,7 @@ from hil.recording import (
     summarize,
     summarize_run,
 )
-from hil.samples import Sample, Status
+from hil.host.samples import Sample, Status
 from toggle.rig_tables import F_TP_LATENCY
 
 X_OPEN, X_TP = -0.0034, 0.0516
@@ -127,8 +127,8 @@ def test_platen_zero_defaults_to_first_sample_and_can_be_given(tmp_path):
 
 KILLED_RUN = textwrap.dedent("""
     import os, signal, sys
-    from hil.recording import RunMeta, RunRecorder
-    from hil.samples import Sample
+    from hil.host.recording import RunMeta, RunRecorder
+    from hil.host.samples import Sample
     meta = RunMeta(backend="synthetic", preset="test", cycles=1, delta_r8=0.0, period=1e-3,
                    x_open=-0.0034, x_toggle=0.0516, stroke_theory=0.045, speed=0.025)
     rec = RunRecorder(meta, sys.argv[1], flush_every=100, flush_interval=1e9)

@@ -30,7 +30,7 @@ from cleanroom_rig import (
     frame,
 )
 
-from hil.cli import main
+from hil.cli.main import main
 
 pytestmark = [pytest.mark.real_time,
               pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty")]

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.backends import RigSetup
+from hil.host.backends import RigSetup
 from toggle.asymmetry import (
     AsymmetryParams,
     advance_slip_state,
@@ -224,8 +224,8 @@ def test_a_run_is_compared_with_the_paper_only_where_it_repeats_a_condition():
     anything else (the default planned job, another error, another preset) none."""
     from dataclasses import replace as replace_settings
 
-    from hil.cli import build_parser, paper_statistics
-    from hil.run_settings import resolve_settings
+    from hil.cli.main import build_parser, paper_statistics
+    from hil.host.run_settings import resolve_settings
 
     def settings(*argv: str):
         return resolve_settings(build_parser().parse_args(["run", *argv]))
@@ -345,7 +345,7 @@ def test_hil_run_at_0_75_mm_stays_under_the_force_limit_and_matches_table8(tmp_p
     """``hil run --delta-r8 0.75e-3 --speed 25e-3 --cycles 2`` with the default 400 N limit
     completes with the rig's as-built error recorded; its F_TP (read as the rig read it) and
     F_F(max) are within 25 % of Table 8, and its summary prints them beside Table 8's."""
-    from hil.cli import main as hil_main
+    from hil.cli.main import main as hil_main
 
     out = tmp_path / "run"
     assert hil_main(["run", "--delta-r8", "0.75e-3", "--speed", "25e-3", "--cycles", "2",

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from hil import cli_rsm
-from hil.rsm import (
+from hil.cli import rsm as cli_rsm
+from hil.host.rsm import (
     POWERS,
     RsmError,
     design_matrix,

@@ -16,11 +16,11 @@ from collections.abc import Callable, Iterator
 import pytest
 from hil_host import wait_for
 
-from hil import protocol as p
-from hil.mcu_model import RigHardware
-from hil.realtime import SESSION_NICE
-from hil.rig_emulator import FaultPlan, RigEmulator
-from hil.serial_link import (
+from hil.emulators.mcu_model import RigHardware
+from hil.emulators.rig_emulator import FaultPlan, RigEmulator
+from hil.link import protocol as p
+from hil.link.realtime import SESSION_NICE
+from hil.link.serial_link import (
     CommandError,
     HandshakeError,
     LinkLostError,
@@ -334,8 +334,8 @@ def test_homing_runs_under_the_sessions_heartbeat_timeout(given: int | None,
     """Issue 35: homing sent its CONFIG with the default 250 ms and the run's came after it,
     so `hil run --heartbeat-ms 1000` did not cover homing. Every CONFIG of the session, the
     first (homing's) included, carries the session's timeout: as given, else as measured."""
-    from hil.backends import RigPlant, RigSetup
-    from hil.rig_physics import ClampPhysics
+    from hil.emulators.rig_physics import ClampPhysics
+    from hil.host.backends import RigPlant, RigSetup
 
     sent: list[p.Config] = []
     configure = SerialLink.configure

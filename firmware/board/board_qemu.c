@@ -1,7 +1,7 @@
 /* The rig firmware on QEMU's netduinoplus2 (STM32F405): the portable core (firmware/core/)
  * on the simulated rig (firmware/sim/: rig_hal.h on the clamp's native FMU), with the
  * simulation's parameters baked in at build time (rig_setup.h, written by
- * hil/firmware_qemu.py). What QEMU 7.2 emulates of the F405 decides the peripherals:
+ * hil/emulators/firmware_qemu.py). What QEMU 7.2 emulates of the F405 decides the peripherals:
  *
  *   - USART1 is QEMU's serial0 (-serial pty): RX by the RXNE interrupt into a ring, TX by
  *     polling TXE from the main loop (QEMU's USART transmits a written byte at once);

@@ -18,10 +18,10 @@ from pathlib import Path
 
 import serial
 
-from hil import protocol as p
-from hil.backends import RigSetup
-from hil.firmware_qemu import QemuRig, build_qemu_image, symbol_address
-from hil.mcu_model import RigHardware
+from hil.emulators.firmware_qemu import QemuRig, build_qemu_image, symbol_address
+from hil.emulators.mcu_model import RigHardware
+from hil.host.backends import RigSetup
+from hil.link import protocol as p
 
 FIELDS = ("magic", "counts_per_ms", "ticks", "late_ticks", "tick_max", "sim_max", "core_max",
           "step_at_max", "rx_max", "rx_bytes", "tx_bytes", "tick_max_state")

@@ -1,5 +1,5 @@
 /* The rig MCU's portable core (rig_core.h): docs/rig-protocol.md v1.1 with the decisions of
- * docs/rig-protocol.md, behaving on the wire as hil/mcu_model.py (corrected) does.
+ * docs/rig-protocol.md, behaving on the wire as hil/emulators/mcu_model.py (corrected) does.
  *
  * Structure: rig_rx() -> framing (rig_frame.c) -> handle_frame(): type and length checks,
  * the seq rules of section 6, then one command; its reply is queued first and the FAULT and

@@ -108,7 +108,7 @@ enum {
 #define RIG_EVENT_MAX 15u    /* largest event payload (FAULT) */
 
 /* A FAULT or STATE frame held back until the reply of the command that caused it is sent
- * (the reply comes first, as in hil/mcu_model.py). */
+ * (the reply comes first, as in hil/emulators/mcu_model.py). */
 typedef struct {
     uint8_t type, len;
     uint8_t payload[RIG_EVENT_MAX];

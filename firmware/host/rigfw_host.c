@@ -1,6 +1,6 @@
 /* The host build of the rig firmware: the portable core (firmware/core/) on the simulated
  * rig (firmware/sim/), one MCU per process, exported as a plain C API for Python's ctypes
- * (hil/firmware.py). The caller is the board's main loop: it feeds received bytes
+ * (hil/emulators/firmware.py). The caller is the board's main loop: it feeds received bytes
  * (rigfw_rx), calls rigfw_tick once per period with its clock, and sends what
  * rigfw_tx_take hands it. Only the rigfw_* functions are exported from librigfw.so.
  */

@@ -152,7 +152,7 @@ static int variable(const char *name) {
     return -1;
 }
 
-/* Input position of a step count: as hil.mcu_model.Sensors.x (steps * step_nm / 1e9). */
+/* Input position of a step count: as hil.emulators.mcu_model.Sensors.x (steps * step_nm / 1e9). */
 static double table_x(int32_t steps) {
     return sim.hw.x_origin + (double)((int64_t)steps * 200) / 1e9;
 }
@@ -382,7 +382,7 @@ void hal_read(rig_inputs *in) {
         sim.platen_zero = sim.platen;
         sim.have_zero = true;
     }
-    /* the sensors: hil.mcu_model.Sensors.read */
+    /* the sensors: hil.emulators.mcu_model.Sensors.read */
     double force = sim.force;
     if (sim.spike_samples > 0) {
         force += sim.spike_n;

@@ -3,9 +3,9 @@
  * fmi2_clamp.c and the generated clamp_model.c, compiled in): the sim is an FMI 2.0 master
  * of that FMU, one fmi2DoStep per sensor reading, so the rig's mechanics are the FMU's
  * equations and nothing else. On top of the plant it adds the sensors exactly as
- * hil/mcu_model.py's Sensors.read does: encoder quantisation, load-cell noise (own seeded
+ * hil/emulators/mcu_model.py's Sensors.read does: encoder quantisation, load-cell noise (own seeded
  * PRNG), amplifier offset and gain, the 24-bit ADC rails, and the injected sensor faults of
- * hil/rig_emulator.py's FaultPlan (force spike, stuck load cell, stuck encoder, the
+ * hil/emulators/rig_emulator.py's FaultPlan (force spike, stuck load cell, stuck encoder, the
  * operator's stop button).
  *
  * One rig per program, static state, no heap in this file (the FMU itself allocates its
@@ -21,7 +21,7 @@
 
 #include "rig_hal.h"
 
-/* The rig's constants (hil.mcu_model.RigHardware). */
+/* The rig's constants (hil.emulators.mcu_model.RigHardware). */
 typedef struct {
     double x_origin;     /* input (table) position at hardware step 0, power-on, m */
     double home_x;       /* reference switch active while x <= home_x + 1e-12 m */
@@ -34,7 +34,7 @@ typedef struct {
 } sim_rig_hw;
 
 /* When the table takes a period's steps (sim_rig_hw.step_timing):
- * AT_ONCE  all of them before the period's reading (hil.mcu_model's idealised board: the
+ * AT_ONCE  all of them before the period's reading (hil.emulators.mcu_model's idealised board: the
  *          reading of a tick shows that tick's steps; hal_step_halt() has nothing left);
  * NUCLEO   as the NUCLEO-F446RE's TIM1 emits them (step_burst.h): a tick's steps leave in
  *          a burst that starts STEP_PHASE_US after it and lasts the period, and the reading
@@ -58,7 +58,7 @@ int sim_rig_init(const sim_rig_hw *hw, const char *const *names, const double *v
 /* The board's tick instant (SIM_RIG_STEPS_NUCLEO): the bursts in flight age by a period. */
 void sim_rig_tick(void);
 
-/* Sensor faults (hil.rig_emulator.FaultPlan). */
+/* Sensor faults (hil.emulators.rig_emulator.FaultPlan). */
 void sim_rig_force_spike(double newtons, uint32_t samples); /* add to the next readings */
 void sim_rig_stick_load(bool on);    /* the load-cell reading freezes (true) / recovers */
 void sim_rig_stick_encoder(bool on); /* the encoder reading freezes (true) / recovers */

@@ -1,7 +1,7 @@
 /* Unit tests of the firmware core (firmware/core/) on the fake HAL: the worked examples of
  * docs/rig-protocol.md section 12 byte for byte, the framing rules of section 2, the seq
  * rules of section 6, and the behaviours of sections 5, 8 and 9 with docs/rig-protocol.md that
- * the conformance suite compares with hil/mcu_model.py. Ends with the line
+ * the conformance suite compares with hil/emulators/mcu_model.py. Ends with the line
  * "core tests: N passed, 0 failed" (exit status 1 if any failed).
  */
 #include <stdio.h>

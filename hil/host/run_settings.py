@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from controllers.profiles import ProfileError, read_profile_settings, truncation
-from hil.backends import MAX_SPEED, RigSetup, simulated_speed_limit
-from hil.recording import RUN_FILES
-from hil.samples import Trajectory, TrajectoryError
+from hil.host.backends import MAX_SPEED, RigSetup, simulated_speed_limit
+from hil.host.recording import RUN_FILES
+from hil.host.samples import Trajectory, TrajectoryError
 from toggle.elastics import clamp_stroke
 from toggle.files import InputError, check_writable, check_writable_dir, read_text, read_toml
 from toggle.params import ParameterError, load_preset

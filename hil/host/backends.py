@@ -2,7 +2,7 @@
 
 Lifecycle: ``configure`` (what to run) -> ``activate`` (build/instantiate the
 FMU, or open the port, handshake and reference the rig) -> ``run`` a
-:class:`~hil.samples.Trajectory` and stream :class:`~hil.samples.Sample` s ->
+:class:`~hil.host.samples.Trajectory` and stream :class:`~hil.host.samples.Sample` s ->
 ``stop`` (after a run that ended early: bring the plant to a standstill and return
 the samples taken on the way) -> ``deactivate`` (free the FMU, or end the session
 and close the port). Use a back-end as a context manager: every exit path, Ctrl-C
@@ -31,17 +31,17 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Discard
 
 from controllers.limits import DriveLimits, drive_limits
-from hil.experiment import stroke_positions
-from hil.homing import APPROACH_SPEED, START_TOLERANCE
-from hil.samples import Sample, Status, Trajectory, TrajectoryError
+from hil.host.experiment import stroke_positions
+from hil.host.homing import APPROACH_SPEED, START_TOLERANCE
+from hil.host.samples import Sample, Status, Trajectory, TrajectoryError
 from toggle.elastics import clamp_stroke
 from toggle.kinematics import output_position
 from toggle.params import dynamics_parameters, load_preset, preset_file
 from toggle.rig_tables import rig_dynamics, rig_errors
 
 if TYPE_CHECKING:
-    from hil import protocol as p
-    from hil.serial_link import SerialLink
+    from hil.link import protocol as p
+    from hil.link.serial_link import SerialLink
 
 #: Margin of the soft travel limits beyond the stroke, m.
 TRAVEL_MARGIN = 1e-3
@@ -392,7 +392,7 @@ class RigPlant(Plant):
                  notify: Callable[[str], None] | None = None) -> None:
         super().__init__()
         self.port = port
-        # None: measured from the link when the session opens (hil.link_timing), within
+        # None: measured from the link when the session opens (hil.link.timing), within
         # bounds; the protocol's 20 ms, 100 ms and 250 ms on a rig's idle link
         self.ack_timeout = ack_timeout
         self.heartbeat_ms = heartbeat_ms
@@ -408,9 +408,9 @@ class RigPlant(Plant):
         return self._link
 
     def _activate(self) -> None:
-        from hil import protocol as p
-        from hil.homing import home
-        from hil.serial_link import RigError, SerialLink
+        from hil.host.homing import home
+        from hil.link import protocol as p
+        from hil.link.serial_link import RigError, SerialLink
 
         s = self.setup
         self._x0, _ = s.stroke
@@ -454,8 +454,8 @@ class RigPlant(Plant):
             raise
 
     def _move_to(self, x: float, check: Callable[[], None]) -> float:
-        from hil.homing import move_to
-        from hil.serial_link import RigError
+        from hil.host.homing import move_to
+        from hil.link.serial_link import RigError
 
         try:
             distance = move_to(self._link, x, self._x0, self.setup.limits, check=check)
@@ -468,8 +468,8 @@ class RigPlant(Plant):
         return distance
 
     def _sample(self, tel: p.Telemetry, total: int) -> Sample:
-        from hil import protocol as p
-        from hil.serial_link import sample_distance
+        from hil.link import protocol as p
+        from hil.link.serial_link import sample_distance
 
         sc, x0 = self._link.scaling, self._x0
         if tel.faults:
@@ -483,7 +483,7 @@ class RigPlant(Plant):
                       sc.platen(tel.enc), sc.force(tel.load_raw), status, tel.sample)
 
     def _run(self, trajectory: Trajectory) -> Iterator[Sample]:
-        from hil.serial_link import RigError, RigFaultError
+        from hil.link.serial_link import RigError, RigFaultError
 
         link, sc, x0 = self._link, self._link.scaling, self._x0
         x = trajectory.x_cmd
@@ -502,7 +502,7 @@ class RigPlant(Plant):
     def stop(self) -> list[Sample]:
         if self._link is None:
             return []
-        from hil import protocol as p
+        from hil.link import protocol as p
 
         self._link.stop_quietly()
         rest = self._link.finish_run()
@@ -552,6 +552,6 @@ class RigPlant(Plant):
 
 def fault_names(faults: int) -> str:
     """'FORCE_LIMIT | ESTOP' for a fault bit set."""
-    from hil import protocol as p
+    from hil.link import protocol as p
 
     return " | ".join(f.name for f in p.Fault if f and f & faults) or "none"

@@ -21,18 +21,20 @@ from dataclasses import replace
 from typing import Any, NoReturn
 
 from controllers.progress import Progress
-from hil import cli_rig, cli_rsm, experiment
-from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
-from hil.experiment import (
+from hil.cli import rig as cli_rig
+from hil.cli import rsm as cli_rsm
+from hil.cli.interrupts import Interrupted, SignalGuard, exit_cleanly_on_signals
+from hil.host import experiment
+from hil.host.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
+from hil.host.experiment import (
     DEFAULT_END_TOL,
     CycleCounter,
     profile_cycles,
     reciprocating_trajectory,
 )
-from hil.interrupts import Interrupted, SignalGuard, exit_cleanly_on_signals
-from hil.recording import RUN_FILES, RecordingError, RunMeta, RunRecorder
-from hil.rsm import RsmError
-from hil.run_settings import (
+from hil.host.recording import RUN_FILES, RecordingError, RunMeta, RunRecorder
+from hil.host.rsm import RsmError
+from hil.host.run_settings import (
     BYTES_PER_SAMPLE,
     RUN_DEFAULTS,
     RunSettings,
@@ -40,7 +42,7 @@ from hil.run_settings import (
     check_mold,
     resolve_settings,
 )
-from hil.samples import Trajectory, TrajectoryError
+from hil.host.samples import Trajectory, TrajectoryError
 from toggle.args import (
     add_completion,
     add_force_options,
@@ -302,9 +304,9 @@ def _run(s: RunSettings, guard: SignalGuard) -> int:
 
 
 def emulate(args: argparse.Namespace) -> int:
-    from hil.mcu_model import RigHardware
-    from hil.rig_emulator import FaultPlan, RigEmulator
-    from hil.rig_physics import ClampPhysics
+    from hil.emulators.mcu_model import RigHardware
+    from hil.emulators.rig_emulator import FaultPlan, RigEmulator
+    from hil.emulators.rig_physics import ClampPhysics
 
     setup = RigSetup(preset=args.preset, delta_r8=args.delta_r8, mu=args.mu)
     if args.x_contact == "planned":
@@ -339,7 +341,7 @@ def emulate(args: argparse.Namespace) -> int:
 
 def serve_until(stopped: Callable[[], bool]) -> None:
     """Serve an emulated rig (its own threads do the work) until ``stopped()``; a signal
-    meanwhile raises :class:`~hil.interrupts.Interrupted` out of it."""
+    meanwhile raises :class:`~hil.cli.interrupts.Interrupted` out of it."""
     while not stopped():
         time.sleep(0.2)
 
@@ -354,21 +356,21 @@ def _no_injection(args: argparse.Namespace, option: str) -> None:
 
 
 def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
-    """The NUCLEO-F446RE image rehosted (hil/rehost/): print its pty, serve until a signal;
-    on stderr the image's SHA-256 and, at the end, the emulated/wall time ratio."""
+    """The NUCLEO-F446RE image rehosted (hil/emulators/rehost/): print its pty, serve until a
+    signal; on stderr the image's SHA-256 and, at the end, the emulated/wall time ratio."""
     if args.qemu:
         raise ParameterError("--board nucleo and --qemu are two ways to run the firmware: "
                          "give one")
     _no_injection(args, "--board nucleo")
-    from hil.firmware_qemu import qemu_available
-    from hil.rig_physics import ClampPhysics
+    from hil.emulators.firmware_qemu import qemu_available
+    from hil.emulators.rig_physics import ClampPhysics
 
     missing = qemu_available(need_qemu=False)
     if missing:
         raise OSError(f"--board nucleo needs the Debian packages {' '.join(missing)} "
                       f"(apt-get install {' '.join(missing)})")
     try:
-        from hil.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image
+        from hil.emulators.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image
     except ImportError as exc:
         raise OSError(f"--board nucleo needs the unicorn package: {exc}") from None
     elf = build_nucleo_image()
@@ -397,7 +399,7 @@ def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) ->
 def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
     """The firmware's Cortex-M build in QEMU: print its pty, serve until a signal."""
     _no_injection(args, "--qemu")
-    from hil.firmware_qemu import QemuRig, build_qemu_image, qemu_available
+    from hil.emulators.firmware_qemu import QemuRig, build_qemu_image, qemu_available
 
     missing = qemu_available()
     if missing:

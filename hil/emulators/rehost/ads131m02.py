@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from hil.rehost.machine import UNITS_PER_S, UnsupportedAccessError
+from hil.emulators.rehost.machine import UNITS_PER_S, UnsupportedAccessError
 
 WORD = 3
 FRAME_WORDS = 4

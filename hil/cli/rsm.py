@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from hil.rsm import (
+from hil.host.rsm import (
     RESPONSES,
     RSM_FIGURE,
     TERMS,

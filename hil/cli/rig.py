@@ -10,11 +10,11 @@ import argparse
 import sys
 from typing import Any
 
-from hil import protocol as p
-from hil.backends import fault_names
-from hil.homing import home
-from hil.run_settings import check_port
-from hil.serial_link import CommandError, RigError, SerialLink
+from hil.host.backends import fault_names
+from hil.host.homing import home
+from hil.host.run_settings import check_port
+from hil.link import protocol as p
+from hil.link.serial_link import CommandError, RigError, SerialLink
 from toggle.args import PROBABILITY, TIME, number
 
 
@@ -54,7 +54,7 @@ def add_emulator_options(e: argparse.ArgumentParser) -> None:
     e.add_argument("--firmware", action="store_true",
                    help="the MCU is the C firmware (firmware/), built for this machine, on "
                         "the simulated rig whose physics is the native FMU (default: the "
-                        "Python MCU model, hil/mcu_model.py)")
+                        "Python MCU model, hil/emulators/mcu_model.py)")
     e.add_argument("--qemu", action="store_true",
                    help="with --firmware: the Cortex-M build of the firmware in "
                         "qemu-system-arm (netduinoplus2), its UART on a pty; no fault "

@@ -1,10 +1,12 @@
 """The NUCLEO-F446RE image rehosted: the ELF `make -C firmware/board nucleo` writes, run
-unchanged on :mod:`hil.rehost.machine` with the peripheral models of
-:mod:`hil.rehost.stm32f446` and :mod:`hil.rehost.ads131m02`, wired as the board is
+unchanged on :mod:`hil.emulators.rehost.machine` with the peripheral models of
+:mod:`hil.emulators.rehost.stm32f446` and :mod:`hil.emulators.rehost.ads131m02`, wired as the
+board is
 (docs/firmware.md) to the simulated rig.
 
 The rig is the host build's plant (firmware/sim/sim_rig.c on the native FMU, built by
-:func:`hil.firmware.build_host_firmware` with ``plant_only``), stepped once per millisecond
+:func:`hil.emulators.firmware.build_host_firmware` with ``plant_only``), stepped once per
+millisecond
 of emulated time, at the firmware's tick instants (TIM5's update events) while the tick
 runs, so the image reads the plant as it stands at its tick (a free 1 ms grid would put a
 boot-dependent phase of up to a period between the two): its input is the table position
@@ -37,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 
-from hil.firmware import (
+from hil.emulators.firmware import (
     BOARD_DIR,
     BUILD_DIR,
     SimRigHw,
@@ -47,11 +49,11 @@ from hil.firmware import (
     fmu_start_values,
     make_board,
 )
-from hil.firmware_qemu import await_firmware
-from hil.mcu_model import RigHardware
-from hil.rehost.ads131m02 import Ads131m02
-from hil.rehost.cortex import DbgMcu, Dwt, SystemControl
-from hil.rehost.machine import (
+from hil.emulators.firmware_qemu import await_firmware
+from hil.emulators.mcu_model import RigHardware
+from hil.emulators.rehost.ads131m02 import Ads131m02
+from hil.emulators.rehost.cortex import DbgMcu, Dwt, SystemControl
+from hil.emulators.rehost.machine import (
     UNITS_PER_S,
     Machine,
     UnsupportedAccessError,
@@ -59,7 +61,7 @@ from hil.rehost.machine import (
     load_elf,
     seconds,
 )
-from hil.rehost.stm32f446 import (
+from hil.emulators.rehost.stm32f446 import (
     HSE_HZ,
     Dma1,
     EncoderTimer,
@@ -76,7 +78,7 @@ from hil.rehost.stm32f446 import (
     TickTimer,
     Usart,
 )
-from hil.rig_physics import ClampPhysics
+from hil.emulators.rig_physics import ClampPhysics
 
 NUCLEO_ELF = BUILD_DIR / "board-nucleo" / "rig.elf"
 PLANT_PERIOD_S = 1e-3
@@ -176,7 +178,7 @@ class PlantClock:
 
 @dataclass
 class BoardLog:
-    """What the board did, in time units (:data:`hil.rehost.machine.UNITS_PER_S`)."""
+    """What the board did, in time units (:data:`hil.emulators.rehost.machine.UNITS_PER_S`)."""
 
     enable: list[tuple[int, bool]] = field(default_factory=list)  # PA10 changes
     pulses: int = 0  # signed step pulses the driver took (enabled)
@@ -200,7 +202,7 @@ class NucleoBoard:
                  rng_seed: int | None = None) -> None:
         self.elf = Path(elf)
         self.elf_sha256 = sha256(self.elf)
-        from hil.backends import RigSetup
+        from hil.host.backends import RigSetup
 
         physics = physics or ClampPhysics("chang2021")
         self.hw = hw or RigHardware(x_origin=RigSetup(preset=physics.preset).stroke[0])
@@ -384,10 +386,10 @@ class NucleoRig:
     emulated time never runs faster than the wall clock (a slice that took longer than its
     emulated millisecond is not made up later: that time is lost, and the image's own
     clock, its ``t_us``, shows it), and :attr:`port` is published only once the image
-    answered a HELLO and then a BYE on it (:func:`hil.firmware_qemu.await_firmware`).
+    answered a HELLO and then a BYE on it (:func:`hil.emulators.firmware_qemu.await_firmware`).
     ``answer_timeout`` bounds that wait (s). :attr:`time_ratio`: emulated per wall time.
     ``with NucleoRig(...) as rig``; :meth:`close` stops it. :attr:`error`: what stopped
-    the board (an :class:`~hil.rehost.machine.UnsupportedAccessError` access), re-raised
+    the board (an :class:`~hil.emulators.rehost.machine.UnsupportedAccessError` access), re-raised
     by :meth:`check`."""
 
     SLICE_S = 1e-3

@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Protocol
 
-from hil import protocol as p
+from hil.link import protocol as p
 
 # faults that halt stepping at once; the others (underrun, heartbeat) decelerate first
 HALTING_FAULTS = (
@@ -567,7 +567,7 @@ class McuModel:
 class ModelMcu:
     """:class:`McuModel` behind the byte-level MCU interface of the rig emulator.
 
-    The interface :class:`hil.firmware.FirmwareMcu` (the C firmware) also has:
+    The interface :class:`hil.emulators.firmware.FirmwareMcu` (the C firmware) also has:
     :meth:`receive` host bytes and :meth:`tick` once per period return the wire frames the
     MCU sent (each ending in ``b"\\x00"``, its header seq counting every frame), plus the
     rig's fault inputs. Attributes not defined here are the model's (``mcu.steps``).

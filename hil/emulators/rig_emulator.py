@@ -3,11 +3,11 @@
 :class:`RigEmulator` opens a pty (``os.openpty``), runs an MCU at the telemetry rate and
 speaks the protocol of docs/rig-protocol.md to whoever opens the pty's device path
 (``SerialLink(emulator.port)``). The MCU is the Python model
-(:class:`~hil.mcu_model.ModelMcu`, the default) or the C firmware's host build
-(:class:`~hil.firmware.FirmwareMcu`, ``firmware=True``): both take bytes and return wire
+(:class:`~hil.emulators.mcu_model.ModelMcu`, the default) or the C firmware's host build
+(:class:`~hil.emulators.firmware.FirmwareMcu`, ``firmware=True``): both take bytes and return wire
 frames, so the emulator's link faults and its log are the same for both. The mechanics
-are a pluggable :class:`~hil.mcu_model.RigPhysics` (the firmware's is the native FMU of a
-:class:`~hil.rig_physics.ClampPhysics`); :class:`FaultPlan` injects link and rig faults.
+are a pluggable :class:`~hil.emulators.mcu_model.RigPhysics` (the firmware's is the native FMU of a
+:class:`~hil.emulators.rig_physics.ClampPhysics`); :class:`FaultPlan` injects link and rig faults.
 Run it in a thread (:meth:`RigEmulator.start`) or in a process of its own
 (:func:`spawn_emulator`).
 """
@@ -26,9 +26,9 @@ import tty
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from hil import protocol as p
-from hil.mcu_model import ModelMcu, RigHardware, RigPhysics
-from hil.realtime import set_realtime
+from hil.emulators.mcu_model import ModelMcu, RigHardware, RigPhysics
+from hil.link import protocol as p
+from hil.link.realtime import set_realtime
 
 #: s behind schedule up to which missed ticks are caught up (a late wake-up of this
 #: process). A longer lag (a loaded or paused machine that descheduled the emulator) is
@@ -111,14 +111,14 @@ class RigEmulator:
         """``realtime`` asks for SCHED_FIFO scheduling of the serving thread, as a
         firmware's timer interrupt would have (best effort: ignored without the
         permission). ``firmware``: the MCU is the C firmware's host build on the
-        simulated rig (``physics`` a :class:`~hil.rig_physics.ClampPhysics`), not the
+        simulated rig (``physics`` a :class:`~hil.emulators.rig_physics.ClampPhysics`), not the
         Python model.
         """
         self.hw = hardware or RigHardware()
         self.faults = faults or FaultPlan()
         self._rng = random.Random(self.faults.seed)
         if firmware:
-            from hil.firmware import FirmwareMcu
+            from hil.emulators.firmware import FirmwareMcu
 
             self.mcu: ModelMcu | FirmwareMcu = FirmwareMcu(physics, self.hw,
                                                            self.faults.seed + 1)

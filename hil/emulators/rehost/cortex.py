@@ -1,11 +1,11 @@
 """The Cortex-M4's own memory-mapped parts (ARMv7-M architecture reference manual, Cortex-M4
 generic user guide) and the STM32F446's DBGMCU (RM0390 section 33.16): the NVIC, the SCB,
 SysTick, the DWT cycle counter, the debug freeze bits. Registers the firmware does not
-touch are not modelled (:class:`hil.rehost.machine.UnsupportedAccessError`)."""
+touch are not modelled (:class:`hil.emulators.rehost.machine.UnsupportedAccessError`)."""
 
 from __future__ import annotations
 
-from hil.rehost.machine import Machine, Peripheral
+from hil.emulators.rehost.machine import Machine, Peripheral
 
 CPUID_M4_R0P1 = 0x410FC241
 AIRCR_VECTKEY = 0x05FA
@@ -132,7 +132,7 @@ class Dwt(Peripheral):
 
 class DbgMcu(Peripheral):
     """0xE0042000: the debug freeze bits (RM0390 33.16.4, 33.16.5). A debugger halt
-    (:meth:`hil.rehost.nucleo.NucleoBoard.debug_halt`) freezes the peripherals whose
+    (:meth:`hil.emulators.rehost.nucleo.NucleoBoard.debug_halt`) freezes the peripherals whose
     bit is set."""
 
     NAME = "DBGMCU"

@@ -1,9 +1,9 @@
 """Models of the STM32F446 peripherals the NUCLEO-F446RE firmware touches (RM0390 rev 6).
 
 Each model implements the registers and the fields board_nucleo.c uses and raises
-:class:`hil.rehost.machine.UnsupportedAccessError` for anything else (another register, a mode it
-does not model, an access with the peripheral's clock off). What each one does not model
-is listed in docs/firmware.md ("The rehosted image").
+:class:`hil.emulators.rehost.machine.UnsupportedAccessError` for anything else (another
+register, a mode it does not model, an access with the peripheral's clock off). What each one
+does not model is listed in docs/firmware.md ("The rehosted image").
 """
 
 from __future__ import annotations
@@ -12,8 +12,14 @@ import random
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from hil.rehost.cortex import DbgMcu
-from hil.rehost.machine import UNITS_PER_S, Machine, Peripheral, UnsupportedAccessError, seconds
+from hil.emulators.rehost.cortex import DbgMcu
+from hil.emulators.rehost.machine import (
+    UNITS_PER_S,
+    Machine,
+    Peripheral,
+    UnsupportedAccessError,
+    seconds,
+)
 
 HSI_HZ = 16_000_000
 HSE_HZ = 8_000_000  # the ST-LINK's MCO into OSC_IN (HSE bypass)

@@ -5,7 +5,7 @@ simulated rig (firmware/sim/: the board whose hardware is the clamp plant, an FM
 of the native FMU's C code) and the host glue (firmware/host/rigfw_host.c) into
 ``librigfw.so``. :class:`FirmwareMcu` loads it: the byte-level MCU interface (frames in,
 frames out, one tick per period) the rig emulator serves on its pseudo-terminal, with the
-C firmware in place of :class:`hil.mcu_model.McuModel`.
+C firmware in place of :class:`hil.emulators.mcu_model.McuModel`.
 """
 
 from __future__ import annotations
@@ -22,10 +22,10 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
-from hil.mcu_model import RigHardware
-from hil.rig_physics import ClampPhysics
+from hil.emulators.mcu_model import RigHardware
+from hil.emulators.rig_physics import ClampPhysics
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 FIRMWARE = ROOT / "firmware"
 CORE_DIR, SIM_DIR, HOST_DIR = FIRMWARE / "core", FIRMWARE / "sim", FIRMWARE / "host"
 BOARD_DIR = FIRMWARE / "board"
@@ -41,7 +41,7 @@ SANITIZE_FLAGS = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all",
                   "-fno-omit-frame-pointer", "-g")
 #: The library exports the rigfw_* API only (not the core's, the HAL's or the FMU's names).
 VERSION_SCRIPT = "{ global: rigfw_*; local: *; };\n"
-#: The plant alone (hil/rehost/): the sim's API and its rig_hal.h functions.
+#: The plant alone (hil/emulators/rehost/): the sim's API and its rig_hal.h functions.
 PLANT_LIBRARY = "librigsim.so"
 PLANT_VERSION_SCRIPT = "{ global: sim_rig_*; hal_*; local: *; };\n"
 #: The firmware's compile-time constants (rig_core.h) that a RigHardware must match.
@@ -107,7 +107,7 @@ def build_host_firmware(preset: str = "chang2021", plant_only: bool = False) -> 
 
     ``plant_only``: the simulated rig alone, without the core and the host glue,
     exporting sim_rig_* and the hal_* functions (plant-<preset>-<hash>/librigsim.so: the
-    plant of the rehosted board image, hil/rehost/). The hash covers the firmware's C
+    plant of the rehosted board image, hil/emulators/rehost/). The hash covers the firmware's C
     sources, the generated FMU code and the flags, so an
     edit rebuilds and an unchanged tree reuses the library. RuntimeError with gcc's stderr
     when a compilation fails.
@@ -206,10 +206,10 @@ class SimRigStatus(ctypes.Structure):
 
 
 def fmu_start_values(physics: ClampPhysics, x_cmd: float) -> dict[str, float]:
-    """The native FMU's start values for ``physics``: those of :class:`hil.backends.FmuPlant`
+    """The native FMU's start values for ``physics``: those of :class:`hil.host.backends.FmuPlant`
     for a RigSetup with the same preset, delta_r8, mu and x_contact (without "preset"),
     with the input at ``x_cmd`` (the table's power-on position)."""
-    from hil.backends import RigSetup
+    from hil.host.backends import RigSetup
     from toggle.params import dynamics_parameters
 
     setup = RigSetup(preset=physics.preset, delta_r8=physics.delta_r8, mu=physics.mu,
@@ -248,8 +248,8 @@ class FirmwareMcu:
     The byte-level MCU interface: :meth:`receive` host bytes, :meth:`tick` once per period;
     both return the wire frames the MCU sent (each ending in ``b"\\x00"``). The rig's
     mechanics are the native FMU of ``physics``' preset with the parameters
-    :class:`hil.backends.FmuPlant` gives it; ``hw`` its sensors (as
-    :class:`hil.mcu_model.Sensors`); ``seed`` the load-cell noise's.
+    :class:`hil.host.backends.FmuPlant` gives it; ``hw`` its sensors (as
+    :class:`hil.emulators.mcu_model.Sensors`); ``seed`` the load-cell noise's.
     """
 
     def __init__(self, physics: ClampPhysics, hw: RigHardware, seed: int,
@@ -259,7 +259,7 @@ class FirmwareMcu:
         """``library``: a built librigfw.so (default: :func:`build_host_firmware` of the
         physics' preset); ``parameters``: FMU start values beyond or replacing those of
         ``physics``; ``step_timing``: when the table takes a period's steps (one of
-        :data:`STEP_TIMINGS`, firmware/sim/sim_rig.h: "at-once" as hil.mcu_model, "nucleo"
+        :data:`STEP_TIMINGS`, firmware/sim/sim_rig.h: "at-once" as hil.emulators.mcu_model, "nucleo"
         as the NUCLEO board's TIM1 emits them). ValueError naming a parameter the FMU
         refuses or an unknown step timing."""
         check_hardware(hw, physics.period)
@@ -388,7 +388,7 @@ class FirmwareMcu:
 
     @property
     def state(self) -> int:
-        """The MCU's state (hil.protocol.State's values)."""
+        """The MCU's state (hil.link.protocol.State's values)."""
         return int(self._lib.rigfw_state())
 
     # --- diagnostics ------------------------------------------------------------------

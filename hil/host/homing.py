@@ -13,9 +13,9 @@ from collections.abc import Callable, Sequence
 from typing import overload
 
 from controllers.limits import DriveLimits
-from hil import protocol as p
-from hil.experiment import stroke_positions
-from hil.serial_link import RigError, SerialLink
+from hil.host.experiment import stroke_positions
+from hil.link import protocol as p
+from hil.link.serial_link import RigError, SerialLink
 
 #: Speed of the search for the home switch, m/s.
 SEARCH_SPEED = 5e-3

@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import serial
 
-from hil import protocol as p
-from hil.link_timing import ACK_TIMEOUT_MAX, ACK_TIMEOUT_MIN, WATCHDOG_MAX, AckTimer, LinkTiming
-from hil.realtime import freeze_collections, raise_thread_priority, set_realtime
+from hil.link import protocol as p
+from hil.link.realtime import freeze_collections, raise_thread_priority, set_realtime
+from hil.link.timing import ACK_TIMEOUT_MAX, ACK_TIMEOUT_MIN, WATCHDOG_MAX, AckTimer, LinkTiming
 
 ESTOP_REPEATS = 3  # an emergency stop is sent this many times back to back
 #: Attempts of the STOP that ends a session before the host escalates to ESTOP (section 6).
@@ -268,7 +268,7 @@ class SerialLink:
         """``ack_timeout`` (s), ``telemetry_timeout`` (s, the silence of the telemetry at the
         host) and ``heartbeat_timeout_ms`` (the MCU's watchdog, in the CONFIGs of
         :meth:`config_for`) are measured from the link when the session opens
-        (:class:`hil.link_timing.LinkTiming`) unless given; ``clock_slack`` bounds the
+        (:class:`hil.link.timing.LinkTiming`) unless given; ``clock_slack`` bounds the
         MCU-clock jump between received samples beyond their sample distance;
         ``heartbeat_period`` None sends no
         heartbeats (only to test the MCU's watchdog); ``realtime`` asks for SCHED_FIFO
@@ -558,7 +558,7 @@ class SerialLink:
 
         Each attempt waits ``ack_timeout`` (or the next of ``waits``, whose length then
         gives the attempts). An acknowledged command's round trip, from its first attempt,
-        adjusts a measured ACK timeout (:class:`hil.link_timing.AckTimer`)."""
+        adjusts a measured ACK timeout (:class:`hil.link.timing.AckTimer`)."""
         retries = (self.retries if waits is None else len(waits) - 1) if retries is None \
             else retries
         with self._cmd_lock:

@@ -2,7 +2,7 @@
 driver's STEP/DIR minimums (docs/firmware.md "Stepper driver").
 
 :data:`TMC5160` holds the driver's minimums with their source; :func:`burst_timing`
-measures a run's bursts (:class:`hil.rehost.stm32f446.Burst`); :func:`full_rate_reversal`
+measures a run's bursts (:class:`hil.emulators.rehost.stm32f446.Burst`); :func:`full_rate_reversal`
 runs the image through the hardest case, 256 steps per period out and back with an instant
 reversal, and returns what it measured (tests/test_firmware_rehost.py and
 docs/firmware_figures.py use it).
@@ -13,11 +13,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from hil import protocol as p
-from hil.mcu_model import RigHardware
-from hil.rehost.machine import UNITS_PER_S
-from hil.rehost.nucleo import NucleoBoard
-from hil.rehost.stm32f446 import Burst
+from hil.emulators.mcu_model import RigHardware
+from hil.emulators.rehost.machine import UNITS_PER_S
+from hil.emulators.rehost.nucleo import NucleoBoard
+from hil.emulators.rehost.stm32f446 import Burst
+from hil.link import protocol as p
 
 
 @dataclass(frozen=True)
@@ -102,7 +102,7 @@ def full_rate_reversal(elf: Path, periods: int = 12,
     same back at once, a 5-period hold; the board, what TIM1's model emitted and the
     telemetry. An instant reversal at 51 mm/s takes more than the load cell's 838 N: the
     board has a load cell 100 times coarser and the CONFIG a force limit to match."""
-    from hil.backends import RigSetup
+    from hil.host.backends import RigSetup
 
     board = NucleoBoard(elf, hw=RigHardware(x_origin=RigSetup().stroke[0], load_gain_n=1e-2),
                         seed=3, rng_seed=11)

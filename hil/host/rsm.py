@@ -134,7 +134,7 @@ class PaperTables:
     equations_platen_error: dict[str, tuple[str, ...]]
 
     def summaries(self) -> list[dict[str, Any]]:
-        """One run summary per table cell, SI, shaped like ``hil.recording.summarize``'s."""
+        """One run summary per table cell, SI, shaped like ``hil.host.recording.summarize``'s."""
         out = []
         for i, v in enumerate(self.speed_mm_s):
             for j, d in enumerate(self.delta_r8_mm):

@@ -43,8 +43,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from hil.experiment import DEFAULT_END_TOL, Cycle, segment_cycles
-from hil.samples import Sample
+from hil.host.experiment import DEFAULT_END_TOL, Cycle, segment_cycles
+from hil.host.samples import Sample
 from toggle.elastics import clamp_stroke
 from toggle.json_text import json_text
 from toggle.kinematics import output_position
@@ -252,7 +252,7 @@ class RunRecorder:
                 reason = "interrupted by the user"
             elif isinstance(exc, Exception):
                 reason = f"{type(exc).__name__}: {exc}"
-            else:  # hil.interrupts.Interrupted: 'interrupted by SIGTERM'
+            else:  # hil.cli.interrupts.Interrupted: 'interrupted by SIGTERM'
                 reason = str(exc) or type(exc).__name__
             self.abort(reason)
         self.close()

@@ -20,7 +20,7 @@ import numpy as np
 
 from controllers.limits import DriveLimits, drive_limits
 from controllers.profiles import ProfileError, stroke_at_speed
-from hil.samples import Trajectory, TrajectoryError
+from hil.host.samples import Trajectory, TrajectoryError
 from toggle.elastics import clamp_stroke
 from toggle.params import Mechanism
 
