@@ -237,7 +237,8 @@ def rig_runs(presets: dict[str, Path], records: Path) -> str:
     """``hil run`` on each preset: the rig's stroke and forces (forward, opening, at the
     toggle; the mean over the cycles); the change is of the magnitude, so a larger opening
     pull is a positive change."""
-    from hil.cli.main import SUMMARY_ROWS, main
+    from hil.cli.main import main
+    from hil.cli.run import SUMMARY_ROWS
     got, lines = {}, []
     for name, path in presets.items():
         argv = ["run", "--preset", os.path.relpath(path, ROOT), *RIG[:-1], "--out",

@@ -109,7 +109,7 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     import fmu_src.build as build  # toggle build-fmu loads it when it runs
     import fmu_src.native_build as native
     import toggle.linkage as linkage
-    from hil.cli import main as hil_cli
+    from hil.cli import emulate as hil_emulate
     from hil.cli.interrupts import Interrupted
     from hil.emulators.rig_emulator import RigEmulator
     from hil.host import experiment
@@ -141,7 +141,7 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     mp.setattr(native, "build_native_fmu", fake_build)
     mp.setattr(experiment, "planned_trajectory", lambda *a, **k: canned)
     mp.setattr(RigEmulator, "serve", lambda self: None)
-    mp.setattr(hil_cli, "serve_until", stop_at_once)  # QEMU, the rehosted board
+    mp.setattr(hil_emulate, "serve_until", stop_at_once)  # QEMU, the rehosted board
     workdir.mkdir(parents=True, exist_ok=True)
     mp.chdir(workdir)
 

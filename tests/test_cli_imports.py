@@ -66,3 +66,29 @@ def test_a_command_lines_parser_helps_as_the_whole_parser_does() -> None:
     assert len(whole) > 20
     for words, text in whole.items():
         assert _helps(build_parser(words=list(words)))[words] == text, words
+
+
+#: Parses a ``hil`` command line as the ``hil`` script does (its --help and --version exit),
+#: then prints the heavy modules loaded by then.
+HIL_PROBE = ("import json, sys\n"
+             "from toggle.args import join_negative_numbers, parse_command_line\n"
+             "import hil.cli.main as cli\n"
+             "argv = join_negative_numbers(sys.argv[1:])\n"
+             "try:\n"
+             "    parse_command_line(cli.build_parser(), argv)\n"
+             "except SystemExit:\n"
+             "    pass\n"
+             f"print(json.dumps([m for m in {HEAVY + ('fmpy', 'hil.host.backends')!r} "
+             "if m in sys.modules]))\n")
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["--help"], ["run", "--help"],
+                                  ["emulate", "--help"], ["rig", "status", "--help"],
+                                  ["rsm", "--help"], ["run", "--cycles", "2"]])
+def test_hil_parses_its_command_lines_without_the_heavy_modules(argv: list[str]) -> None:
+    """``hil --version`` and every ``hil COMMAND --help`` as fast as ``toggle``'s: the
+    parser and its defaults come without numpy, SciPy, CasADi, fmpy or the back-ends (1.2-1.3 s
+    of imports before); each command loads them when it runs."""
+    out = subprocess.run([sys.executable, "-c", HIL_PROBE, *argv], capture_output=True,
+                         text=True, check=True).stdout
+    assert json.loads(out.strip().splitlines()[-1]) == []

@@ -83,7 +83,7 @@ def test_a_failed_command_stops_the_report_naming_it(capsys: pytest.CaptureFixtu
 
 def test_the_rig_table_changes_are_of_the_magnitude(monkeypatch: pytest.MonkeyPatch,
                                                      tmp_path: Path) -> None:
-    from hil.cli.main import SUMMARY_ROWS
+    from hil.cli.run import SUMMARY_ROWS
     report = _report()
     runs = iter([{key: {"mean": -100.0 if key == "force_backward_min" else 1.0}
                   for key, *_ in SUMMARY_ROWS},

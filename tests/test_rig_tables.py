@@ -224,7 +224,8 @@ def test_a_run_is_compared_with_the_paper_only_where_it_repeats_a_condition():
     anything else (the default planned job, another error, another preset) none."""
     from dataclasses import replace as replace_settings
 
-    from hil.cli.main import build_parser, paper_statistics
+    from hil.cli.main import build_parser
+    from hil.cli.run import paper_statistics
     from hil.host.run_settings import resolve_settings
 
     def settings(*argv: str):

@@ -10,8 +10,6 @@ import argparse
 import sys
 from typing import Any
 
-from hil.host.backends import fault_names
-from hil.host.homing import home
 from hil.host.run_settings import check_port
 from hil.link import protocol as p
 from hil.link.serial_link import CommandError, RigError, SerialLink
@@ -99,6 +97,8 @@ class RigCommandError(RuntimeError):
 
 
 def _describe(link: SerialLink) -> str:
+    from hil.host.backends import fault_names
+
     info, st, sc = link.info, link.status, link.scaling
     flags = p.TelemetryFlag(st.flags)
     return "\n".join((
@@ -120,6 +120,8 @@ def status(args: argparse.Namespace) -> int:
 
 
 def clear(args: argparse.Namespace) -> int:
+    from hil.host.backends import fault_names
+
     with _session(args.port) as link:
         faults = fault_names(link.faults_at_open)
         if not link.faults_at_open:
@@ -136,6 +138,9 @@ def clear(args: argparse.Namespace) -> int:
 
 
 def home_rig(args: argparse.Namespace) -> int:
+    from hil.host.backends import fault_names
+    from hil.host.homing import home
+
     with _session(args.port) as link:
         if link.faults_at_open:
             print(f"hil rig home: the rig has latched faults ({fault_names(link.faults_at_open)})"

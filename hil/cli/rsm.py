@@ -6,20 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from hil.host.rsm import (
-    RESPONSES,
-    RSM_FIGURE,
-    TERMS,
-    RsmError,
-    fit_rsm,
-    load_paper_tables,
-    load_summaries,
-    plot_rsm,
-    toggle_cos_theta8,
-)
 from toggle.args import path
 from toggle.files import atomic_path, check_writable, check_writable_dir, print_results
-from toggle.json_text import json_text
 from toggle.params import load_preset
 
 #: The fit's coefficients (SI and the paper's units) in ``--out``.
@@ -52,6 +40,8 @@ def add_parser(subparsers: Any) -> None:
 def _printed_comparison(fit_paper: dict[str, tuple[float, ...]]) -> dict[str, Any]:
     """Each printed coefficient of Eqs 44-47 next to the fitted one and whether they agree
     to the printed digits (half a unit in the last printed place)."""
+    from hil.host.rsm import load_paper_tables
+
     printed = load_paper_tables().equations
     out = {}
     for name, coefs in fit_paper.items():
@@ -66,10 +56,26 @@ def _printed_comparison(fit_paper: dict[str, tuple[float, ...]]) -> dict[str, An
 
 def _outputs(out: Path) -> list[Path]:
     """The files ``--out`` may get: rsm.json and a contour map per response."""
+    from hil.host.rsm import RESPONSES, RSM_FIGURE
+
     return [out / RSM_JSON, *(out / RSM_FIGURE.format(name) for name in RESPONSES)]
 
 
 def run(args: argparse.Namespace) -> int:
+    """Fit, print and write the response surfaces (numpy and the fit load here, not with the
+    parser)."""
+    from hil.host.rsm import (
+        RESPONSES,
+        TERMS,
+        RsmError,
+        fit_rsm,
+        load_paper_tables,
+        load_summaries,
+        plot_rsm,
+        toggle_cos_theta8,
+    )
+    from toggle.json_text import json_text
+
     if args.paper_tables == bool(args.runs):
         raise RsmError("give run directories or --paper-tables (one of the two)")
     if args.out is not None:  # before the work: an earlier fit's files only with --force

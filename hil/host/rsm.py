@@ -56,7 +56,7 @@ _INPUT_FACTOR = 1e3
 RSM_FIGURE = "rsm_{}.png"
 
 
-class RsmError(ValueError):
+class RsmError(InputError):
     """Data that cannot give a response surface."""
 
 

@@ -4,7 +4,9 @@ Precedence: the command line, then the --config file, then the settings a planne
 profile carries, then the defaults. Every --config key is applied or refused by name
 (unknown keys and wrong types are errors); a profile's settings that disagree with an
 explicit option are refused rather than silently replaced. Every check lives here, so
-a value is judged the same whether it was typed or read from a file.
+a value is judged the same whether it was typed or read from a file. The back-ends, the
+profile reader and the model load in the functions that need them: the `hil` parser takes
+its defaults and options from here without numpy, SciPy or CasADi.
 """
 
 from __future__ import annotations
@@ -18,11 +20,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from controllers.profiles import ProfileError, read_profile_settings, truncation
-from hil.host.backends import MAX_SPEED, RigSetup, simulated_speed_limit
-from hil.host.recording import RUN_FILES
-from hil.host.samples import Trajectory, TrajectoryError
-from toggle.elastics import clamp_stroke
 from toggle.files import InputError, check_writable, check_writable_dir, read_text, read_toml
 from toggle.params import ParameterError, load_preset
 
@@ -146,6 +143,8 @@ def _option(key: str) -> str:
 
 def check(v: dict[str, Any]) -> None:
     """Refuse a value that cannot run, naming its option."""
+    from hil.host.backends import MAX_SPEED, simulated_speed_limit
+
     def bad(key: str, why: str) -> ParameterError:
         return ParameterError(f"{_option(key)} ({key}) {why}, got {v[key]!r}")
 
@@ -195,6 +194,8 @@ def check_port(port: str) -> None:
 def check_mold(preset: str, x_contact: float) -> None:
     """Refuse a mold position (m) outside the preset's stroke, where no mold is clamped
     (``hil run`` and ``hil emulate``)."""
+    from toggle.elastics import clamp_stroke
+
     x_open, x_tp = clamp_stroke(load_preset(preset))
     if not (math.isfinite(x_contact) and x_open < x_contact < x_tp):
         raise ParameterError(f"--x-contact (x_contact) must lie inside the stroke "
@@ -204,6 +205,10 @@ def check_mold(preset: str, x_contact: float) -> None:
 def _apply_profile(values: dict[str, Any], explicit: set[str]) -> str:
     """Adopt the settings the profile was planned with; refuse a clash, a file that is not a
     profile and a truncated one (before any work). Returns the file's SHA-256."""
+    from controllers.profiles import ProfileError, read_profile_settings
+    from hil.host.backends import RigSetup
+    from hil.host.samples import Trajectory, TrajectoryError
+
     path = Path(values["profile"])
     digest = hashlib.sha256(read_text(path, "--profile").encode("utf-8")).hexdigest()
     try:
@@ -228,6 +233,9 @@ def _check_whole(path: Path, planned: dict[str, Any], duration: float) -> None:
     """Refuse a profile that ends before the time its header says the plan lasts
     (``duration`` of a stroke, ``cycle_time`` of a molding cycle): a file cut short would
     run part of a stroke and complete no cycle."""
+    from controllers.profiles import truncation
+    from hil.host.backends import RigSetup
+
     cut = truncation(planned, duration, 2 * RigSetup.period)
     if cut is not None:
         raise ParameterError(f"--profile {path}: {cut}; write it again (toggle plan --out)")
@@ -253,6 +261,9 @@ def _check_fmu(path: Path) -> None:
 
 def resolve_settings(args: argparse.Namespace) -> RunSettings:
     """Merge the command line, the --config file, a profile's settings and the defaults."""
+    from hil.host.backends import RigSetup
+    from hil.host.recording import RUN_FILES
+
     config = read_config(args.config) if args.config is not None else {}
     cli = {k: getattr(args, k) for k in RUN_DEFAULTS if getattr(args, k, None) is not None}
     values = {**RUN_DEFAULTS, **config, **cli}
