@@ -28,7 +28,15 @@ from toggle.drive import (
 from toggle.elastics import ClampingError, analyse_clamping
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_mechanism, load_preset
-from toggle.plant import DriveState, PlantError, configure, follow, lag_transition, plant_outputs
+from toggle.plant import (
+    DriveState,
+    PlantError,
+    configure,
+    drive_step,
+    follow,
+    lag_transition,
+    plant_outputs,
+)
 from toggle_cli import main
 
 SM55 = load_preset("lin2003_sm55")
@@ -295,7 +303,9 @@ def test_a_refused_jump_names_drive_bandwidth(bandwidth, hint):
 def test_the_default_drive_follows_any_staircase_at_any_fixed_step(h, levels, hold):
     """The FMU's default drive_bandwidth (the preset's drive, docs/fmu.md) follows setpoints
     that jump anywhere within the x_cmd range, each held ``hold`` steps of ``h``: never
-    refused, and far within the input link's bounds (at most ~40 m/s^2 observed)."""
+    refused, and far within the input link's bounds (at most ~40 m/s^2 observed), both as the
+    FMU steps (x_cmd at the step's start, extrapolated from the last commands within its
+    range) and with the command taken at the step's end (:func:`toggle.plant.follow`)."""
     from fmu_support import load_module
 
     from fmu_src.build import DEFAULT_SLAVE
@@ -303,11 +313,15 @@ def test_the_default_drive_follows_any_staircase_at_any_fixed_step(h, levels, ho
     table = {v.name: v for v in load_module(DEFAULT_SLAVE, "clamp_fmu_drive").ToggleClamp.VARIABLES}
     bandwidth, damping, x_cmd = (table[n] for n in ("drive_bandwidth", "drive_damping", "x_cmd"))
     middle, half = (x_cmd.max + x_cmd.min) / 2, (x_cmd.max - x_cmd.min) / 2
-    state = DriveState.at_rest(x_cmd.min)
+    states = [DriveState.at_rest(x_cmd.min)] * 2
     for level in levels:
         for _ in range(hold):
-            state = follow(state, middle + half * level, h, bandwidth.start, damping.start)
-            assert abs(state.a) <= 100.0 and abs(state.v) <= 2.0
+            u = middle + half * level
+            states = [drive_step(states[0], u, h, bandwidth.start, damping.start,
+                                 bounds=(x_cmd.min, x_cmd.max)),
+                      follow(states[1], u, h, bandwidth.start, damping.start)]
+            for state in states:
+                assert abs(state.a) <= 100.0 and abs(state.v) <= 2.0
 
 
 def test_the_back_driving_efficiency_is_the_catalogue_relation_unless_given():
