@@ -16,13 +16,18 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from fmpy import extract, read_model_description, simulate_fmu
-from fmpy.fmi2 import FMU2Model
-from fmpy.sundials import CVodeSolver
+from fmpy import extract
 
-from fmu_src.accuracy import OUTPUTS, START, STOP, errors, reference, simulate, stroke
+from fmu_src.accuracy import (
+    OUTPUTS,
+    errors,
+    model_exchange_every_evaluation,
+    reference,
+    simulate,
+    stock,
+    with_derivatives,
+)
 from fmu_src.build import build_fmu
-from fmu_src.host import start_slave
 from fmu_src.native_build import build_native_fmu
 
 STEPS = (2e-3, 1e-3, 5e-4)  # s
@@ -30,71 +35,6 @@ BEGIN = "<!-- generated: python docs/fmu_accuracy.py --docs docs/fmu.md -->"
 END = "<!-- end of generated accuracy table -->"
 HEAD = ("| build, master | h | clamp force | tie-bar force | input force | motor torque | "
         "acceleration |")
-
-
-def _signal(h: float) -> np.ndarray:
-    t = np.arange(0.0, STOP + h / 2, h)
-    return np.array(list(zip(t, stroke(t)[0])), dtype=[("time", float), ("x_cmd", float)])
-
-
-def stock(fmu: Path, h: float) -> dict[str, np.ndarray]:
-    """``fmpy.simulate_fmu`` as it comes: Co-Simulation at h (no input derivatives), or Model
-    Exchange under CVode at its defaults with the input sampled every h."""
-    result = simulate_fmu(str(fmu), stop_time=STOP, step_size=h, output_interval=h,
-                          input=_signal(h), start_values=START, output=list(OUTPUTS))
-    return {name: result[name][1:] for name in OUTPUTS}
-
-
-def with_derivatives(unzipped: Path, h: float, order: int) -> dict[str, np.ndarray]:
-    """A master loop: x_cmd(t) and its derivatives up to ``order`` set before doStep(t, h)."""
-    slave, refs = start_slave(unzipped, "accuracy", START)
-    rows = []
-    for k in range(round(STOP / h)):
-        values = [float(v) for v in stroke(np.array(k * h))]
-        slave.setReal([refs["x_cmd"]], [values[0]])
-        for n in range(1, order + 1):
-            slave.setRealInputDerivatives([refs["x_cmd"]], [n], [values[n]])
-        slave.doStep(k * h, h)
-        rows.append(slave.getReal([refs[name] for name in OUTPUTS]))
-    slave.terminate()
-    slave.freeInstance()
-    return dict(zip(OUTPUTS, np.array(rows).T, strict=True))
-
-
-def model_exchange_every_evaluation(unzipped: Path, h: float) -> dict[str, np.ndarray]:
-    """fmpy's CVode at its defaults (relative tolerance 1e-4, max step STOP / 50), x_cmd(t)
-    set at every right-hand-side evaluation; outputs every h."""
-    md = read_model_description(str(unzipped))
-    refs = {v.name: v.valueReference for v in md.modelVariables}
-    model = FMU2Model(guid=md.guid, unzipDirectory=str(unzipped),
-                      modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
-    model.instantiate()
-    model.setupExperiment(startTime=0.0)
-    model.enterInitializationMode()
-    for name, value in START.items():
-        model.setReal([refs[name]], [value])
-    model.exitInitializationMode()
-    model.newDiscreteStates()
-    model.enterContinuousTimeMode()
-
-    def set_time(t: float) -> None:
-        model.setTime(t)
-        model.setReal([refs["x_cmd"]], [float(stroke(np.array(t))[0])])
-
-    solver = CVodeSolver(nx=3, nz=0, get_x=model.getContinuousStates,
-                         set_x=model.setContinuousStates, get_dx=model.getDerivatives,
-                         get_z=model.getEventIndicators,
-                         get_nominals=model.getNominalsOfContinuousStates, set_time=set_time,
-                         input=None, startTime=0.0, maxStep=STOP / 50, relativeTolerance=1e-4)
-    rows, t = [], 0.0
-    for k in range(1, round(STOP / h) + 1):
-        _, _, t = solver.step(t, k * h)
-        set_time(t)
-        model.completedIntegratorStep()
-        rows.append(model.getReal([refs[name] for name in OUTPUTS]))
-    model.terminate()
-    model.freeInstance()
-    return dict(zip(OUTPUTS, np.array(rows).T, strict=True))
 
 
 def _row(label: str, h: float, got: dict[str, np.ndarray], ref: dict[str, np.ndarray]) -> str:
