@@ -480,8 +480,10 @@ def extrapolation(state: DriveState, x_cmd: float, h: float,
     command is extrapolated to third order in h instead of held (first order).
 
     A stop is not read as a reversal, nor a jump as a ramp that goes on: the extrapolated
-    move over the step lies between 0 and twice the last step's mean slope times h, and
-    within ``bounds`` (m, the input's range), the derivatives scaled down together if not.
+    move over the step lies between 0 and twice the last mean slope times h, at most twice
+    the last change of the command (a step longer than the last one extrapolates no
+    further), and within ``bounds`` (m, the input's range), the derivatives scaled down
+    together if not.
     """
     if state.h <= 0:
         return 0.0, 0.0
@@ -489,7 +491,8 @@ def extrapolation(state: DriveState, x_cmd: float, h: float,
     d2 = 2 * (rate - state.slope) / (state.h + state.span) if state.span > 0 else 0.0
     d1 = rate + d2 * state.h / 2
     move = d1 * h + d2 * h * h / 2
-    lo, hi = min(0.0, 2 * rate * h), max(0.0, 2 * rate * h)
+    reach = 2 * rate * min(h, state.h)  # twice the last slope, nor over a longer step
+    lo, hi = min(0.0, reach), max(0.0, reach)
     if bounds is not None:  # 0 stays within [lo, hi]: x_cmd itself may lie outside bounds
         lo, hi = min(0.0, max(lo, bounds[0] - x_cmd)), max(0.0, min(hi, bounds[1] - x_cmd))
     limited = min(max(move, lo), hi)

@@ -337,7 +337,8 @@ static void respond(Core *c, double u0, double du0, double ddu, double h, double
 /* x_cmd's first and second derivatives at the step's start read off the last commands
  * (toggle.plant.extrapolation): the parabola through the last three (the line through
  * two, held before), its move over the step between 0 and twice the last mean slope times
- * h and within the assemblable range, the derivatives scaled down together if not. */
+ * h, at most twice the last change of the command and within the assemblable range, the
+ * derivatives scaled down together if not. */
 static void extrapolate(const CoreState *s, double u, double h, double d[2]) {
     const double *dr = s->drive;
     d[0] = d[1] = 0.0;
@@ -346,8 +347,9 @@ static void extrapolate(const CoreState *s, double u, double h, double d[2]) {
     d[1] = dr[6] > 0 ? 2 * (rate - dr[4]) / (dr[5] + dr[6]) : 0.0;
     d[0] = rate + d[1] * dr[5] / 2;
     double move = d[0] * h + d[1] * h * h / 2;
-    double lo = fmin(0.0, fmax(fmin(0.0, 2 * rate * h), s->x_lo - u));
-    double hi = fmax(0.0, fmin(fmax(0.0, 2 * rate * h), s->x_hi - u));
+    double reach = 2 * rate * fmin(h, dr[5]);  /* twice the last slope, nor over a longer step */
+    double lo = fmin(0.0, fmax(fmin(0.0, reach), s->x_lo - u));
+    double hi = fmax(0.0, fmin(fmax(0.0, reach), s->x_hi - u));
     double limited = fmin(fmax(move, lo), hi);
     if (limited != move) {  /* move != 0: 0 lies within [lo, hi] */
         d[0] *= limited / move;
