@@ -33,6 +33,7 @@ from toggle.plant import (
     PlantError,
     configure,
     drive_step,
+    extrapolation,
     follow,
     lag_transition,
     plant_outputs,
@@ -381,3 +382,40 @@ def test_bad_motor_data_is_refused_naming_the_key(tmp_path, line, named):
     with pytest.raises(ParameterError, match=named) as info:
         load_mechanism(path)
     assert str(path) in str(info.value) and "[drive]" in str(info.value)
+
+
+def _after(commands: list[tuple[float, float]]) -> DriveState:
+    """The drive state after stepping (x_cmd, h) pairs with a 20 Hz lag, no derivatives."""
+    state = DriveState.at_rest(commands[0][0])
+    for u, h in commands:
+        state = drive_step(state, u, h, 20.0, 1.0)
+    return state
+
+
+def test_extrapolation_is_the_parabola_through_the_last_three_commands():
+    """A command of constant acceleration, given at unequal steps, is extrapolated exactly
+    (its velocity and acceleration at the step's start), whatever the step that follows."""
+    times = [0.0, 1e-3, 2.5e-3, 3.3e-3]
+    command = [1e-3 + 0.05 * t + 0.5 * 3.0 * t * t for t in times]
+    steps = [b - a for a, b in zip(times, times[1:])] + [0.7e-3]
+    state = _after(list(zip(command[:-1], steps[:-1])))
+    d1, d2 = extrapolation(state, command[-1], steps[-1])
+    assert d1 == pytest.approx(0.05 + 3.0 * times[-1], rel=1e-9)
+    assert d2 == pytest.approx(3.0, rel=1e-7)
+
+
+def test_extrapolation_reads_no_reversal_nor_jump_beyond_twice_itself():
+    """A stop is held; a jump from rest is continued by at most twice itself (and never
+    beyond a longer step); a slope's sign is kept; the bounds (x_cmd's range) hold."""
+    rest = _after([(0.0, 1e-3)] * 3)
+    assert extrapolation(_after([(0.0, 1e-3), (0.01, 1e-3), (0.01, 1e-3)]), 0.01, 1e-3) == \
+        (0.0, 0.0)
+    for h in (1e-3, 0.5):
+        d1, d2 = extrapolation(rest, 0.01, h)
+        move = d1 * h + d2 * h * h / 2
+        assert 0.0 < move <= 2 * 0.01 * min(h, 1e-3) / 1e-3 + 1e-15
+    d1, d2 = extrapolation(rest, 0.01, 1e-3, bounds=(-0.1, 0.012))
+    assert d1 * 1e-3 + d2 * 1e-6 / 2 == pytest.approx(0.002)
+    slowing = _after([(0.0, 1e-3), (0.01, 1e-3), (0.011, 1e-3)])
+    d1, d2 = extrapolation(slowing, 0.0111, 1e-3)  # the parabola turns back: held at 0
+    assert d1 * 1e-3 + d2 * 1e-6 / 2 >= 0.0
