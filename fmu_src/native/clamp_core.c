@@ -319,42 +319,13 @@ static const double *lag_matrix(Core *c, double bw, double zeta, double h) {
     return c->lag;
 }
 
-/* The drive's motion after a step h from the instance's drive state, the command over the
- * step being the parabola u0 + du0 s + ddu s^2 / 2 (toggle.plant drive_step/follow). */
+/* The drive's motion after a step h, the command over the step being the parabola
+ * u0 + du0 s + ddu s^2 / 2 (toggle.plant drive_step/follow). */
 static void respond(Core *c, double u0, double du0, double ddu, double h, double out[3]) {
     const CoreState *s = &c->s;
-    double bw = s->r[VR_BANDWIDTH], zeta = s->r[VR_DAMPING], w = 2.0 * PI * bw;
-    const double *p = lag_matrix(c, bw, zeta, h), *d = s->drive;
-    /* exact for the parabola: the deviation from x_p = u - k1 u' + k2 u'' decays as exp(A h) */
-    double k1 = 2 * zeta / w, k2 = (4 * zeta * zeta - 1) / (w * w);
-    double u1 = u0 + du0 * h + ddu * h * h / 2, du1 = du0 + ddu * h;
-    double e0 = d[0] - (u0 - k1 * du0 + k2 * ddu), e1 = d[1] - (du0 - k1 * ddu);
-    out[0] = u1 - k1 * du1 + k2 * ddu + p[0] * e0 + p[1] * e1;
-    out[1] = du1 - k1 * ddu + p[2] * e0 + p[3] * e1;
-    out[2] = w * w * (u1 - out[0]) - 2.0 * zeta * w * out[1];
-}
-
-/* x_cmd's first and second derivatives at the step's start read off the last commands
- * (toggle.plant.extrapolation): the parabola through the last three (the line through
- * two, held before), its move over the step between 0 and twice the last mean slope times
- * h, at most twice the last change of the command and within the assemblable range, the
- * derivatives scaled down together if not. */
-static void extrapolate(const CoreState *s, double u, double h, double d[2]) {
-    const double *dr = s->drive;
-    d[0] = d[1] = 0.0;
-    if (!(dr[5] > 0)) return;
-    double rate = (u - dr[3]) / dr[5];
-    d[1] = dr[6] > 0 ? 2 * (rate - dr[4]) / (dr[5] + dr[6]) : 0.0;
-    d[0] = rate + d[1] * dr[5] / 2;
-    double move = d[0] * h + d[1] * h * h / 2;
-    double reach = 2 * rate * fmin(h, dr[5]);  /* twice the last slope, nor over a longer step */
-    double lo = fmin(0.0, fmax(fmin(0.0, reach), s->x_lo - u));
-    double hi = fmax(0.0, fmin(fmax(0.0, reach), s->x_hi - u));
-    double limited = fmin(fmax(move, lo), hi);
-    if (limited != move) {  /* move != 0: 0 lies within [lo, hi] */
-        d[0] *= limited / move;
-        d[1] *= limited / move;
-    }
+    double bw = s->r[VR_BANDWIDTH], zeta = s->r[VR_DAMPING];
+    drive_lag_response(lag_matrix(c, bw, zeta, h), 2.0 * PI * bw, zeta, s->drive, u0, du0, ddu,
+                       h, out);
 }
 
 /* The drive's motion after the step [t, t + h] (toggle.plant.drive_step): u is x_cmd at
@@ -370,7 +341,7 @@ static int follow(Core *c, double u, double h, double out[7]) {
     int given = s->der_given[0] || s->der_given[1];
     double dd[2] = {s->der_given[0] ? s->der[0] : 0.0, s->der_given[1] ? s->der[1] : 0.0};
     if (bw > 0) {
-        if (!given) extrapolate(s, u, h, dd);
+        if (!given) drive_extrapolate(d, u, h, s->x_lo, s->x_hi, dd);
         respond(c, u, dd[0], dd[1], h, out);
     } else if (given) {
         out[0] = u + dd[0] * h + dd[1] * h * h / 2; out[1] = dd[0] + dd[1] * h; out[2] = dd[1];
