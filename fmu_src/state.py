@@ -26,7 +26,7 @@ import zlib
 from typing import Any
 
 MAGIC = b"TOGGLEST"
-VERSION = 3  # 3: the pending input derivatives (issue 39)
+VERSION = 4  # 3: the pending input derivatives (issue 39); 4: the drive's slope span (issue 46)
 #: The phases of an instance, in the order of their codes in the header.
 PHASES = ("instantiated", "initialising", "stepping", "terminated")
 MAX_PAYLOAD = 1 << 16  # bytes; a clamp's state is about 2 kB

@@ -169,10 +169,12 @@ class ToggleClamp(DeclaredSlave):
 
     def step(self, current_time: float, step_size: float) -> None:
         self._plant.plant.check_input(self.x_cmd)  # a position error first, not a speed
-        # x_cmd and its derivatives are the master's at the step's start (FMI 2.0 4.2.2)
+        # x_cmd and its derivatives are the master's at the step's start (FMI 2.0 4.2.2);
+        # without derivatives x_cmd is extrapolated from the last ones, within its range
+        plant = self._plant.plant
         drive = drive_step(self._drive, self.x_cmd, step_size, self.drive_bandwidth,
                            self.drive_damping, self.input_derivative("x_cmd", 1),
-                           self.input_derivative("x_cmd", 2))
+                           self.input_derivative("x_cmd", 2), (plant.x_min, plant.x_max))
         self._publish(drive)
 
     def initial_dependencies(self) -> dict[str, tuple[str, ...]]:
@@ -198,7 +200,8 @@ class ToggleClamp(DeclaredSlave):
         state = fmu_state.keys(state, frozenset({"drive", "slip"}), "the model state")
         drive, slip = state["drive"], state["slip"]
         if not (isinstance(drive, list) and len(drive) == len(DriveState._fields)):
-            raise StateError("the model state's drive must be a list of 6 numbers "
+            raise StateError(f"the model state's drive must be a list of "
+                             f"{len(DriveState._fields)} numbers "
                              f"({', '.join(DriveState._fields)})")
         drive = DriveState(*(fmu_state.finite(v, f"drive {n}")
                              for n, v in zip(DriveState._fields, drive)))
@@ -217,6 +220,8 @@ class ToggleClamp(DeclaredSlave):
         if not drive.h >= 0 or drive.h == 0 and drive != DriveState.at_rest(drive.u):
             raise StateError(f"drive h = {drive.h!r} s: the last step must be > 0 s, or 0 "
                              "with the drive at rest at its command")
+        if not drive.span >= 0:
+            raise StateError(f"drive span = {drive.span!r} s: the slope's span must be >= 0 s")
         if x_last != drive.x or not abs(z) <= 1:
             raise StateError(f"slip state [{x_last!r}, {z!r}]: it must be at the drive's "
                              f"x = {drive.x!r} m with z in [-1, 1]")

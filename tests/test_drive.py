@@ -28,7 +28,16 @@ from toggle.drive import (
 from toggle.elastics import ClampingError, analyse_clamping
 from toggle.kinematics import stroke_limits
 from toggle.params import ParameterError, load_mechanism, load_preset
-from toggle.plant import DriveState, PlantError, configure, follow, lag_transition, plant_outputs
+from toggle.plant import (
+    DriveState,
+    PlantError,
+    configure,
+    drive_step,
+    extrapolation,
+    follow,
+    lag_transition,
+    plant_outputs,
+)
 from toggle_cli import main
 
 SM55 = load_preset("lin2003_sm55")
@@ -295,7 +304,9 @@ def test_a_refused_jump_names_drive_bandwidth(bandwidth, hint):
 def test_the_default_drive_follows_any_staircase_at_any_fixed_step(h, levels, hold):
     """The FMU's default drive_bandwidth (the preset's drive, docs/fmu.md) follows setpoints
     that jump anywhere within the x_cmd range, each held ``hold`` steps of ``h``: never
-    refused, and far within the input link's bounds (at most ~40 m/s^2 observed)."""
+    refused, and far within the input link's bounds (at most ~40 m/s^2 observed), both as the
+    FMU steps (x_cmd at the step's start, extrapolated from the last commands within its
+    range) and with the command taken at the step's end (:func:`toggle.plant.follow`)."""
     from fmu_support import load_module
 
     from fmu_src.build import DEFAULT_SLAVE
@@ -303,11 +314,15 @@ def test_the_default_drive_follows_any_staircase_at_any_fixed_step(h, levels, ho
     table = {v.name: v for v in load_module(DEFAULT_SLAVE, "clamp_fmu_drive").ToggleClamp.VARIABLES}
     bandwidth, damping, x_cmd = (table[n] for n in ("drive_bandwidth", "drive_damping", "x_cmd"))
     middle, half = (x_cmd.max + x_cmd.min) / 2, (x_cmd.max - x_cmd.min) / 2
-    state = DriveState.at_rest(x_cmd.min)
+    states = [DriveState.at_rest(x_cmd.min)] * 2
     for level in levels:
         for _ in range(hold):
-            state = follow(state, middle + half * level, h, bandwidth.start, damping.start)
-            assert abs(state.a) <= 100.0 and abs(state.v) <= 2.0
+            u = middle + half * level
+            states = [drive_step(states[0], u, h, bandwidth.start, damping.start,
+                                 bounds=(x_cmd.min, x_cmd.max)),
+                      follow(states[1], u, h, bandwidth.start, damping.start)]
+            for state in states:
+                assert abs(state.a) <= 100.0 and abs(state.v) <= 2.0
 
 
 def test_the_back_driving_efficiency_is_the_catalogue_relation_unless_given():
@@ -367,3 +382,40 @@ def test_bad_motor_data_is_refused_naming_the_key(tmp_path, line, named):
     with pytest.raises(ParameterError, match=named) as info:
         load_mechanism(path)
     assert str(path) in str(info.value) and "[drive]" in str(info.value)
+
+
+def _after(commands: list[tuple[float, float]]) -> DriveState:
+    """The drive state after stepping (x_cmd, h) pairs with a 20 Hz lag, no derivatives."""
+    state = DriveState.at_rest(commands[0][0])
+    for u, h in commands:
+        state = drive_step(state, u, h, 20.0, 1.0)
+    return state
+
+
+def test_extrapolation_is_the_parabola_through_the_last_three_commands():
+    """A command of constant acceleration, given at unequal steps, is extrapolated exactly
+    (its velocity and acceleration at the step's start), whatever the step that follows."""
+    times = [0.0, 1e-3, 2.5e-3, 3.3e-3]
+    command = [1e-3 + 0.05 * t + 0.5 * 3.0 * t * t for t in times]
+    steps = [b - a for a, b in zip(times, times[1:])] + [0.7e-3]
+    state = _after(list(zip(command[:-1], steps[:-1])))
+    d1, d2 = extrapolation(state, command[-1], steps[-1])
+    assert d1 == pytest.approx(0.05 + 3.0 * times[-1], rel=1e-9)
+    assert d2 == pytest.approx(3.0, rel=1e-7)
+
+
+def test_extrapolation_reads_no_reversal_nor_jump_beyond_twice_itself():
+    """A stop is held; a jump from rest is continued by at most twice itself (and never
+    beyond a longer step); a slope's sign is kept; the bounds (x_cmd's range) hold."""
+    rest = _after([(0.0, 1e-3)] * 3)
+    assert extrapolation(_after([(0.0, 1e-3), (0.01, 1e-3), (0.01, 1e-3)]), 0.01, 1e-3) == \
+        (0.0, 0.0)
+    for h in (1e-3, 0.5):
+        d1, d2 = extrapolation(rest, 0.01, h)
+        move = d1 * h + d2 * h * h / 2
+        assert 0.0 < move <= 2 * 0.01 * min(h, 1e-3) / 1e-3 + 1e-15
+    d1, d2 = extrapolation(rest, 0.01, 1e-3, bounds=(-0.1, 0.012))
+    assert d1 * 1e-3 + d2 * 1e-6 / 2 == pytest.approx(0.002)
+    slowing = _after([(0.0, 1e-3), (0.01, 1e-3), (0.011, 1e-3)])
+    d1, d2 = extrapolation(slowing, 0.0111, 1e-3)  # the parabola turns back: held at 0
+    assert d1 * 1e-3 + d2 * 1e-6 / 2 >= 0.0

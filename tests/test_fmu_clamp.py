@@ -251,7 +251,7 @@ def test_state_rollback_reproduces_outputs(unzipped: Path):
     fourth = _run(slave, refs, FUTURE)
     close_slave(slave, state, restored)
     assert first == second == third == fourth
-    assert first[0]["velocity"] != 0 and first[-1]["clamp_force"] > 0  # internal state moved
+    assert first[0]["velocity"] != 0 and max(r["clamp_force"] for r in first) > 0  # it moved
 
 
 @pytest.mark.parametrize("bandwidth", [0.0, 20.0])

@@ -150,7 +150,7 @@ def _model_exchange(fmu: Path, version: int, tmp: Path) -> dict:
 def test_the_four_interfaces_give_the_same_trajectory(both: dict, tmp_path: Path):
     """FMI 2.0 Co-Simulation with x_cmd's derivatives and Model Exchange with x_cmd set at
     every right-hand-side evaluation agree to 1e-6 of each output's peak (FMI 3.0
-    Co-Simulation, which holds x_cmd over a step, is FMI 2.0's without derivatives:
+    Co-Simulation, which extrapolates x_cmd over a step, is FMI 2.0's without derivatives:
     tests/test_fmu_inputs.py)."""
     runs = {"FMI 2.0 CS": _co_simulation(both[2], tmp_path / "cs")}
     runs |= {f"FMI {v}.0 ME": {n: column[1:] for n, column in  # from t = 1 ms, as CS

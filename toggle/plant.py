@@ -347,8 +347,9 @@ def configure(
 
 class DriveState(NamedTuple):
     """Input-link motion: position (m), velocity (m/s), acceleration (m/s^2); and the
-    last command (m), its mean slope over the last step (m/s) and that step (s), from
-    which the next step interpolates the command."""
+    last command (m), its mean slope (m/s) over the ``span`` (s) before it, and the last
+    step (s), from which the next step interpolates (:func:`follow`) or extrapolates
+    (:func:`drive_step`) the command."""
 
     x: float
     v: float
@@ -356,6 +357,7 @@ class DriveState(NamedTuple):
     u: float
     slope: float = 0.0
     h: float = 0.0  # 0: no step yet
+    span: float = 0.0  # 0: no slope yet
 
     @classmethod
     def at_rest(cls, x: float) -> DriveState:
@@ -441,7 +443,7 @@ def follow(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
         x, v, a = _lag_response(state, state.u, rate - curvature * h / 2, curvature, h,
                                 bandwidth, damping)
     _check_motion(x_cmd, h, v, a, bandwidth)
-    return DriveState(x, v, a, x_cmd, rate, h)
+    return DriveState(x, v, a, x_cmd, rate, h, h)
 
 
 def _lag_response(state: DriveState, u0: float, du0: float, ddu: float, h: float,
@@ -470,35 +472,72 @@ def _check_motion(x_cmd: float, h: float, v: float, a: float, bandwidth: float) 
             f"{MAX_INPUT_ACCELERATION:g} m/s^2" + _bandwidth_hint(bandwidth))
 
 
+def extrapolation(state: DriveState, x_cmd: float, h: float,
+                  bounds: tuple[float, float] | None = None) -> tuple[float, float]:
+    """x_cmd's first and second derivatives at the step's start, read off the inputs of the
+    last steps (a master that sends none): the parabola through the last three commands
+    (the line through two after the first step, held before), so that over the step the
+    command is extrapolated to third order in h instead of held (first order).
+
+    A stop is not read as a reversal, nor a jump as a ramp that goes on: the extrapolated
+    move over the step lies between 0 and twice the last mean slope times h, at most twice
+    the last change of the command (a step longer than the last one extrapolates no
+    further), and within ``bounds`` (m, the input's range), the derivatives scaled down
+    together if not.
+    """
+    if state.h <= 0:
+        return 0.0, 0.0
+    rate = (x_cmd - state.u) / state.h
+    d2 = 2 * (rate - state.slope) / (state.h + state.span) if state.span > 0 else 0.0
+    d1 = rate + d2 * state.h / 2
+    move = d1 * h + d2 * h * h / 2
+    reach = 2 * rate * min(h, state.h)  # twice the last slope, nor over a longer step
+    lo, hi = min(0.0, reach), max(0.0, reach)
+    if bounds is not None:  # 0 stays within [lo, hi]: x_cmd itself may lie outside bounds
+        lo, hi = min(0.0, max(lo, bounds[0] - x_cmd)), max(0.0, min(hi, bounds[1] - x_cmd))
+    limited = min(max(move, lo), hi)
+    if limited == move:
+        return d1, d2
+    scale = limited / move  # move != 0 here: 0 lies within [lo, hi]
+    return d1 * scale, d2 * scale
+
+
 def drive_step(state: DriveState, x_cmd: float, h: float, bandwidth: float = 0.0,
                damping: float = 0.7, du: float | None = None,
-               ddu: float | None = None) -> DriveState:
+               ddu: float | None = None,
+               bounds: tuple[float, float] | None = None) -> DriveState:
     """Advance the drive over [t, t + h] as an FMI master means it (FMI 2.0 section 4.2.2).
 
     ``x_cmd`` is the command at the step's start t, ``du`` and ``ddu`` its first and second
-    derivatives there (None: not given, taken as 0); over the step the command is the
-    polynomial x_cmd + du s + ddu s^2 / 2 (without derivatives x_cmd held), and the lag
-    (``bandwidth`` > 0 Hz) is solved exactly for it. The ideal drive (``bandwidth`` 0) is
-    at the polynomial's end; without derivatives at the held x_cmd, its velocity and
-    acceleration then the command's as :func:`follow` reads them off the last three
-    commands (a position source's forces need them; a held input has none). The
-    command's bookkeeping (last command, slope, step) is :func:`follow`'s.
+    derivatives there (None: not given, taken as 0 if the other is given); over the step the
+    command is the polynomial x_cmd + du s + ddu s^2 / 2, and the lag (``bandwidth`` > 0 Hz)
+    is solved exactly for it. Without derivatives the lag's command is extrapolated from
+    the last commands (:func:`extrapolation`, within ``bounds``, the input's range): a
+    held command would bias the lag's acceleration by w^2 u' h. The ideal drive
+    (``bandwidth`` 0) is at the polynomial's end; without derivatives at x_cmd, its
+    velocity and acceleration the command's as :func:`follow` reads them off the last
+    three commands (a position source at its setpoint).
     """
     if du is None and ddu is None and bandwidth <= 0:
         return follow(state, x_cmd, h)
     if not (h > 0 and math.isfinite(h)):
         raise PlantError(f"step size must be > 0, got {h!r} s")
-    d1, d2 = du or 0.0, ddu or 0.0
+    if du is None and ddu is None:
+        d1, d2 = extrapolation(state, x_cmd, h, bounds)
+    else:
+        d1, d2 = du or 0.0, ddu or 0.0
     if bandwidth <= 0:
         x, v, a = x_cmd + d1 * h + d2 * h * h / 2, d1 + d2 * h, d2
     else:
         x, v, a = _lag_response(state, x_cmd, d1, d2, h, bandwidth, damping)
     _check_motion(x_cmd, h, v, a, bandwidth)
-    return DriveState(x, v, a, x_cmd, (x_cmd - state.u) / h, h)
+    rate = (x_cmd - state.u) / state.h if state.h > 0 else 0.0
+    return DriveState(x, v, a, x_cmd, rate, h, state.h)
 
 
 __all__ = [
     "AssemblyError", "CompiledPlant", "DriveState", "HystereticPlant", "PlantConfig",
-    "PlantError", "PlantOutputs", "configure", "drive_step", "follow", "plant_outputs",
+    "PlantError", "PlantOutputs", "configure", "drive_step", "extrapolation", "follow",
+    "plant_outputs",
     "with_errors",
 ]

@@ -229,7 +229,7 @@ static int initial_state(Core *c, CoreState *n) {
         snprintf(c->failure, sizeof c->failure, "no finite plant solution at x = %.6g m", x0);
         return 0;
     }
-    double drive[6] = {x0, 0.0, 0.0, x0, 0.0, 0.0};
+    double drive[7] = {x0, 0.0, 0.0, x0, 0.0, 0.0, 0.0};
     memcpy(n->drive, drive, sizeof drive);
     n->slip[0] = x0; n->slip[1] = 0.0;  /* the slip state starts relaxed */
     memcpy(&n->r[VR_OUT0], y, sizeof y);
@@ -319,49 +319,47 @@ static const double *lag_matrix(Core *c, double bw, double zeta, double h) {
     return c->lag;
 }
 
-/* The drive's motion after a step h from the instance's drive state, the command over the
- * step being the parabola u0 + du0 s + ddu s^2 / 2 (toggle.plant drive_step/follow). */
+/* The drive's motion after a step h, the command over the step being the parabola
+ * u0 + du0 s + ddu s^2 / 2 (toggle.plant drive_step/follow). */
 static void respond(Core *c, double u0, double du0, double ddu, double h, double out[3]) {
     const CoreState *s = &c->s;
-    double bw = s->r[VR_BANDWIDTH], zeta = s->r[VR_DAMPING], w = 2.0 * PI * bw;
-    const double *p = lag_matrix(c, bw, zeta, h), *d = s->drive;
-    /* exact for the parabola: the deviation from x_p = u - k1 u' + k2 u'' decays as exp(A h) */
-    double k1 = 2 * zeta / w, k2 = (4 * zeta * zeta - 1) / (w * w);
-    double u1 = u0 + du0 * h + ddu * h * h / 2, du1 = du0 + ddu * h;
-    double e0 = d[0] - (u0 - k1 * du0 + k2 * ddu), e1 = d[1] - (du0 - k1 * ddu);
-    out[0] = u1 - k1 * du1 + k2 * ddu + p[0] * e0 + p[1] * e1;
-    out[1] = du1 - k1 * ddu + p[2] * e0 + p[3] * e1;
-    out[2] = w * w * (u1 - out[0]) - 2.0 * zeta * w * out[1];
+    double bw = s->r[VR_BANDWIDTH], zeta = s->r[VR_DAMPING];
+    drive_lag_response(lag_matrix(c, bw, zeta, h), 2.0 * PI * bw, zeta, s->drive, u0, du0, ddu,
+                       h, out);
 }
 
 /* The drive's motion after the step [t, t + h] (toggle.plant.drive_step): u is x_cmd at
  * t, the master's derivatives (if given) are its derivatives at t, and over the step the
- * command is that polynomial (u held without derivatives). The ideal drive without
- * derivatives is at u, with the velocity and acceleration of the parabola through the last
- * three commands (toggle.plant.follow). 0 if the motion exceeds MAX_SPEED or
- * MAX_ACCELERATION. */
-static int follow(Core *c, double u, double h, double out[6]) {
+ * command is that polynomial (without derivatives the lag's command is extrapolated from
+ * the last commands). The ideal drive without derivatives is at u, with the velocity and
+ * acceleration of the parabola through the last three commands (toggle.plant.follow). 0 if
+ * the motion exceeds MAX_SPEED or MAX_ACCELERATION. */
+static int follow(Core *c, double u, double h, double out[7]) {
     const CoreState *s = &c->s;
     const double *d = s->drive;
-    double bw = s->r[VR_BANDWIDTH], rate = (u - d[3]) / h;
+    double bw = s->r[VR_BANDWIDTH];
     int given = s->der_given[0] || s->der_given[1];
-    double d1 = s->der_given[0] ? s->der[0] : 0.0, d2 = s->der_given[1] ? s->der[1] : 0.0;
+    double dd[2] = {s->der_given[0] ? s->der[0] : 0.0, s->der_given[1] ? s->der[1] : 0.0};
     if (bw > 0) {
-        respond(c, u, d1, d2, h, out);
+        if (!given) drive_extrapolate(d, u, h, s->x_lo, s->x_hi, dd);
+        respond(c, u, dd[0], dd[1], h, out);
     } else if (given) {
-        out[0] = u + d1 * h + d2 * h * h / 2; out[1] = d1 + d2 * h; out[2] = d2;
+        out[0] = u + dd[0] * h + dd[1] * h * h / 2; out[1] = dd[0] + dd[1] * h; out[2] = dd[1];
     } else {  /* a stop is not read as a reversal (nor doubles back) */
+        double rate = (u - d[3]) / h;
         double curvature = 2 * (rate - d[4]) / (d[5] + h), du1 = rate + curvature * h / 2;
         double lo = fmin(0.0, 2 * rate), hi = fmax(0.0, 2 * rate);
         out[0] = u; out[1] = fmin(fmax(du1, lo), hi); out[2] = curvature;
+        out[3] = u; out[4] = rate; out[5] = h; out[6] = h;
+        return fabs(out[1]) <= MAX_SPEED && fabs(out[2]) <= MAX_ACCELERATION;
     }
-    out[3] = u; out[4] = rate; out[5] = h;
+    out[3] = u; out[4] = d[5] > 0 ? (u - d[3]) / d[5] : 0.0; out[5] = h; out[6] = d[5];
     return fabs(out[1]) <= MAX_SPEED && fabs(out[2]) <= MAX_ACCELERATION;
 }
 
 int core_step(Core *c, double t, double h) {
     CoreState *s = &c->s;
-    double drive[6], y[CLAMP_N_OUT];
+    double drive[7], y[CLAMP_N_OUT];
     if (s->phase != PHASE_STEPPING || s->me) {
         if (s->phase == PHASE_FAILED)
             core_say(c, 1, "doStep refused, initialisation failed: %s", c->failure);
@@ -659,10 +657,10 @@ static const char *state_problem(Core *c, const CoreState *s) {
         return "derived data (dimensions, masses, friction, range, mold) not those of its "
                "parameters";
     const double *dr = s->drive;
-    if (!all_finite(dr, 6) || !all_finite(s->slip, 2)) return "a non-finite drive or slip state";
+    if (!all_finite(dr, 7) || !all_finite(s->slip, 2)) return "a non-finite drive or slip state";
     if (!(s->x_lo <= dr[0] && dr[0] <= s->x_hi) || !(s->x_lo <= dr[3] && dr[3] <= s->x_hi))
         return "a drive position outside the assemblable range";
-    if (!(dr[5] >= 0) || s->slip[0] != dr[0] || !(fabs(s->slip[1]) <= 1))
+    if (!(dr[5] >= 0) || !(dr[6] >= 0) || s->slip[0] != dr[0] || !(fabs(s->slip[1]) <= 1))
         return "an invalid step, slip position or slip state (|z| <= 1)";
     if (!(fabs(dr[1]) <= MAX_SPEED)) return "a drive velocity beyond 10 m/s";
     if (s->me) return NULL;  /* outputs follow the states and x_cmd; recomputed when read */

@@ -1,4 +1,6 @@
-/* exp(A h) of the drive lag A = [0 1; -w^2 -2 zeta w] without overflow anywhere in
+/* The drive lag's step (toggle.plant: lag_transition, _lag_response, extrapolation).
+ *
+ * exp(A h) of the drive lag A = [0 1; -w^2 -2 zeta w] without overflow anywhere in
  * w h >= 0, zeta >= 0 (toggle.plant.lag_transition is the same algorithm).
  *
  * Overdamped (zeta > 1): the eigenvalues l1 = -w h / (zeta + r), l2 = -w h (zeta + r),
@@ -42,4 +44,37 @@ void drive_lag_transition(double w, double zeta, double h, double p[4]) {
     p[1] = e * s * h;
     p[2] = -e * s * w * wh;
     p[3] = e * (c - s * zeta * wh);
+}
+
+void drive_lag_response(const double p[4], double w, double zeta, const double drive[7],
+                        double u0, double du0, double ddu, double h, double out[3]) {
+    /* exact for the parabola: the deviation from x_p = u - k1 u' + k2 u'' decays as exp(A h) */
+    double k1 = 2 * zeta / w, k2 = (4 * zeta * zeta - 1) / (w * w);
+    double u1 = u0 + du0 * h + ddu * h * h / 2, du1 = du0 + ddu * h;
+    double e0 = drive[0] - (u0 - k1 * du0 + k2 * ddu), e1 = drive[1] - (du0 - k1 * ddu);
+    out[0] = u1 - k1 * du1 + k2 * ddu + p[0] * e0 + p[1] * e1;
+    out[1] = du1 - k1 * ddu + p[2] * e0 + p[3] * e1;
+    out[2] = w * w * (u1 - out[0]) - 2.0 * zeta * w * out[1];
+}
+
+/* The parabola through the last three commands (the line through two, held before); its
+ * move over the step between 0 and twice the last mean slope times h, at most twice the
+ * last change of the command (a longer step extrapolates no further) and within [lo, hi],
+ * the derivatives scaled down together if not. */
+void drive_extrapolate(const double drive[7], double u, double h, double lo, double hi,
+                       double d[2]) {
+    d[0] = d[1] = 0.0;
+    if (!(drive[5] > 0)) return;
+    double rate = (u - drive[3]) / drive[5];
+    d[1] = drive[6] > 0 ? 2 * (rate - drive[4]) / (drive[5] + drive[6]) : 0.0;
+    d[0] = rate + d[1] * drive[5] / 2;
+    double move = d[0] * h + d[1] * h * h / 2;
+    double reach = 2 * rate * fmin(h, drive[5]);
+    double low = fmin(0.0, fmax(fmin(0.0, reach), lo - u));
+    double high = fmax(0.0, fmin(fmax(0.0, reach), hi - u));
+    double limited = fmin(fmax(move, low), high);
+    if (limited != move) {  /* move != 0: 0 lies within [low, high] */
+        d[0] *= limited / move;
+        d[1] *= limited / move;
+    }
 }

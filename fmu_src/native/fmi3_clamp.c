@@ -1,9 +1,10 @@
 /* FMI 3.0 Co-Simulation and Model Exchange API of the toggle clamp: a thin layer over
  * clamp_core.c, the core under the FMI 2.0 API too. Co-Simulation steps exactly as FMI 2.0
  * Co-Simulation does without input derivatives (FMI 3.0 has no fmi2SetRealInputDerivatives):
- * x_cmd set before fmi3DoStep(t, h) is the command at t, held over the step. Value
- * references: the Float64 variables from 0 as in FMI 2.0, preset CLAMP_VR_PRESET, time
- * TIME_VR. One allocation per instance and per saved state, none per step. */
+ * x_cmd set before fmi3DoStep(t, h) is the command at t, extrapolated over the step from the
+ * last commands (clamp_core.c). Value references: the Float64 variables from 0 as in FMI
+ * 2.0, preset CLAMP_VR_PRESET, time TIME_VR. One allocation per instance and per saved
+ * state, none per step. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
