@@ -17,9 +17,20 @@ from typing import Any
 #: The package's version (pyproject.toml reads it from here).
 __version__ = "0.1.0"
 
-_EXPORTS = {"AssemblyError": "toggle.kinematics", "HalfDims": "toggle.params",
-            "Mechanism": "toggle.params", "load_mechanism": "toggle.params",
-            "load_preset": "toggle.params"}
+#: The public API (everything else in the package is private by convention): its names and
+#: the modules they load from.
+_EXPORTS = {
+    # load or define a mechanism
+    "Mechanism": "toggle.params", "HalfDims": "toggle.params", "load_preset": "toggle.params",
+    "load_mechanism": "toggle.params", "preset_names": "toggle.params",
+    # kinematics and mechanical errors; statics and clamping force
+    "kinematics": "toggle.api", "Kinematics": "toggle.api",
+    "mechanical_errors": "toggle.api", "MechanicalErrors": "toggle.api",
+    "clamping_force": "toggle.api", "ClampingResult": "toggle.elastics",
+    # the errors a caller may catch
+    "ParameterError": "toggle.params", "AssemblyError": "toggle.kinematics",
+    "ClampingError": "toggle.elastics",
+}
 __all__ = list(_EXPORTS)
 
 
