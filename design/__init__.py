@@ -12,7 +12,7 @@ import importlib
 from typing import Any
 
 _EXPORTS = {"search_designs": "design.api", "DesignSearch": "design.api",
-            "load_targets": "design.targets", "Targets": "design.targets"}
+            "Targets": "design.targets"}
 __all__ = list(_EXPORTS)
 
 

@@ -24,7 +24,7 @@ _EXPORTS = {
     "Mechanism": "toggle.params", "HalfDims": "toggle.params", "load_preset": "toggle.params",
     "load_mechanism": "toggle.params", "preset_names": "toggle.params",
     # kinematics and mechanical errors; statics and clamping force
-    "kinematics": "toggle.api", "Kinematics": "toggle.api",
+    "clamp_kinematics": "toggle.api", "Kinematics": "toggle.api",
     "mechanical_errors": "toggle.api", "MechanicalErrors": "toggle.api",
     "clamping_force": "toggle.api", "ClampingResult": "toggle.elastics",
     # the errors a caller may catch

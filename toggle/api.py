@@ -3,7 +3,7 @@
 Thin wrappers over :mod:`toggle.kinematics`, :mod:`toggle.tolerance` and
 :mod:`toggle.elastics` (the one source of the equations): they take a whole
 :class:`~toggle.params.Mechanism` (or a preset's name) and return small named results.
-Import them from :mod:`toggle` (``from toggle import kinematics``); the modules behind
+Import them from :mod:`toggle` (``from toggle import clamp_kinematics``); the modules behind
 them are private by convention and may change.
 """
 
@@ -70,7 +70,7 @@ def _mechanism(mechanism: str | Mechanism) -> Mechanism:
     raise ParameterError(f"mechanism must be a Mechanism or a preset name, got {mechanism!r}")
 
 
-def kinematics(mechanism: str | Mechanism, points: int = 101, *,
+def clamp_kinematics(mechanism: str | Mechanism, points: int = 101, *,
                half: str = "lower") -> Kinematics:
     """Positions, velocity ratio and mechanical advantage of one half over its stroke.
 
