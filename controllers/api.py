@@ -16,11 +16,12 @@ from controllers import plans as _plans
 from controllers.cycle import MoldingCycle
 from controllers.limits import DriveLimits, drive_limits
 from controllers.planner import ClampPlanner, default_duration, planner_for
+from controllers.plans import NO_PROTECTION, Protection
 from controllers.profiles import ProfileSamples, predict, write_profile_csv
 from controllers.stroke_reports import baseline_stroke
 from toggle.files import atomic_path, check_writable
 from toggle.params import Mechanism, ParameterError
-from toggle.plant import with_errors
+from toggle.plant import PlantConfig, with_errors
 
 #: The objectives :func:`plan_stroke` takes.
 OBJECTIVES = ("peak", "min_time", "energy")
@@ -195,7 +196,8 @@ def plan_stroke(mechanism: str | Mechanism = "chang2021", objective: str = "peak
     else:
         duration = duration or default_duration(planner)
         if robust:
-            planner = _robust_planner(planner, errors or {}, duration, intervals)
+            planner = robust_planner(cfg, limits, errors or {}, duration, contact_speed,
+                                     intervals)[0]
         stroke = planner.best(duration, objective)
     opening = None
     if cycle:
@@ -205,16 +207,22 @@ def plan_stroke(mechanism: str | Mechanism = "chang2021", objective: str = "peak
     return Plan(stroke, limits, planner.lower_bound(), opening, name)
 
 
-def _robust_planner(nominal: ClampPlanner, errors: dict[str, float], duration: float,
-                    intervals: int) -> ClampPlanner:
-    """The planner of the nominal clamp with the erroneous one as a variant, each weighed
-    against its own S-curve of ``duration`` (as ``toggle plan --robust``)."""
-    cfg, limits = nominal.config, nominal.limits
-    nominal.check_duration(duration)
+def robust_planner(cfg: PlantConfig, limits: DriveLimits, errors: dict[str, float],
+                   duration: float, contact_speed: float, intervals: int,
+                   protection: Protection = NO_PROTECTION
+                   ) -> tuple[ClampPlanner, PlantConfig, dict[str, ProfileSamples]]:
+    """The robust planner (``toggle plan --robust``, ``plan_stroke(robust=True)``): the
+    nominal clamp with the erroneous one as a variant, each weighed against its own S-curve
+    of ``duration``; with the erroneous plant and the S-curve on both (``"nominal"``,
+    ``"erroneous"``)."""
+    nominal = planner_for(cfg, limits, contact_speed, intervals, protection=protection)
+    nominal.check_duration(duration)  # before predicting a baseline of that length
     erroneous = cfg.with_(mechanism=with_errors(cfg.mechanism, errors)[0])
     stroke = baseline_stroke(cfg, limits, duration)
-    scale = predict(stroke, erroneous).peak_force / predict(stroke, cfg).peak_force
+    curve = {"nominal": predict(stroke, cfg), "erroneous": predict(stroke, erroneous)}
+    scale = curve["erroneous"].peak_force / curve["nominal"].peak_force
     if not math.isfinite(scale):
         raise ParameterError("the erroneous clamp's S-curve has no finite peak force")
-    return planner_for(cfg, limits, nominal.contact_speed, intervals, (erroneous,),
-                       (scale,))
+    planner = planner_for(cfg, limits, contact_speed, intervals, (erroneous,), (scale,),
+                          protection)
+    return planner, erroneous, curve
