@@ -1,9 +1,9 @@
 """The public API of the planner: plan a clamp stroke (or the molding cycle) and export it.
 
-:func:`plan_stroke` wraps :func:`controllers.planner.planner_for` and
-:class:`controllers.planner.ClampPlanner` (the CasADi optimal-control problem), and
-:class:`Plan` writes what ``toggle plan --out`` and ``toggle plan --export cam`` write.
-Import both from :mod:`controllers`; the modules behind them are private by convention.
+`plan_stroke` wraps `controllers.planner.planner_for` and
+`controllers.planner.ClampPlanner` (the CasADi optimal-control problem), and
+`Plan` writes what ``toggle plan --out`` and ``toggle plan --export cam`` write.
+Import both from `controllers`; the modules behind them are private by convention.
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ from toggle.files import atomic_path, check_writable
 from toggle.params import Mechanism, ParameterError
 from toggle.plant import PlantConfig, with_errors
 
-#: The objectives :func:`plan_stroke` takes.
+#: The objectives `plan_stroke` takes.
 OBJECTIVES = ("peak", "min_time", "energy")
-#: The formats :meth:`Plan.export` writes: the profile CSV ``hil run --profile`` replays,
+#: The formats `Plan.export` writes: the profile CSV ``hil run --profile`` replays,
 #: and the cam tables of ``toggle plan --export cam``.
 EXPORT_FORMATS = ("profile", "csv", "plcopen", "twincat", "pvt")
 
@@ -148,7 +148,7 @@ def plan_stroke(mechanism: str | Mechanism = "chang2021", objective: str = "peak
     """Plan the crosshead's closing stroke through the plant model (CasADi + IPOPT).
 
     Args:
-        mechanism: A preset's name or TOML path, or a :class:`~toggle.params.Mechanism`
+        mechanism: A preset's name or TOML path, or a `toggle.params.Mechanism`
             with ``[clamp]``, ``[drive]`` and ``[dynamics]`` data.
         objective: ``"peak"``: least peak input force in ``duration``; ``"min_time"``:
             the fastest stroke whose force stays within ``force_limit``; ``"energy"``:

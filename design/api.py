@@ -1,8 +1,8 @@
-"""The public API of clamp design: :func:`search_designs` (``toggle design``).
+"""The public API of clamp design: `search_designs` (``toggle design``).
 
-Wraps :func:`design.search.run_search` (NSGA-II/III or a design of experiments over Dask,
-resumable), :func:`design.output.write_results`, :func:`design.placement.place` and the
-figures; import it from :mod:`design`. The modules behind it are private by convention.
+Wraps `design.search.run_search` (NSGA-II/III or a design of experiments over Dask,
+resumable), `design.output.write_results`, `design.placement.place` and the
+figures; import it from `design`. The modules behind it are private by convention.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def search_designs(targets: str | Path | dict[str, Any] | Targets,
 
     Args:
         targets: A targets TOML file (see ``design/examples/``), its table as a dict, or
-            loaded :class:`~design.targets.Targets`.
+            loaded `design.targets.Targets`.
         out: The results folder; an interrupted search of the same targets there resumes.
         doe: ``"lhs"`` or ``"sobol"``: a design of experiments of ``samples`` candidates
             instead of the genetic algorithm.

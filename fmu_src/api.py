@@ -1,8 +1,8 @@
-"""The public API of the FMUs: :func:`build_fmu` (``toggle build-fmu``).
+"""The public API of the FMUs: `build_fmu` (``toggle build-fmu``).
 
-Wraps :func:`fmu_src.build.build_fmu` (the pythonfmu FMU) and
-:func:`fmu_src.native_build.build_native_fmu` (the native C FMU); import it from
-:mod:`fmu_src`. The modules behind it are private by convention.
+Wraps `fmu_src.build.build_fmu` (the pythonfmu FMU) and
+`fmu_src.native_build.build_native_fmu` (the native C FMU); import it from
+`fmu_src`. The modules behind it are private by convention.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ def fmu_file_name(native: bool = False, fmi_version: int = 2, interface: str = "
         interface: ``"cs"``, ``"me"`` or ``"both"`` (native only).
 
     Returns:
-        The file name :func:`build_fmu` writes into its folder.
+        The file name `build_fmu` writes into its folder.
     """
     if not native:
         return "ToggleClamp.fmu"

@@ -1,8 +1,8 @@
 """The public API of the rig: run an experiment on the simulated or real rig, read a run.
 
-:func:`run_on_rig` is ``hil run`` called from Python (the same settings, checks, safety
+`run_on_rig` is ``hil run`` called from Python (the same settings, checks, safety
 and run directory: it goes through the command's own code, its report on stdout taken
-as JSON); :func:`read_run` reads a run directory back. Import both from :mod:`hil`; the
+as JSON); `read_run` reads a run directory back. Import both from `hil`; the
 modules behind them are private by convention.
 """
 
@@ -55,7 +55,7 @@ class Run:
 
 
 def read_run(run_dir: str | Path) -> Run:
-    """Read a run directory that ``hil run`` (or :func:`run_on_rig`) wrote.
+    """Read a run directory that ``hil run`` (or `run_on_rig`) wrote.
 
     Args:
         run_dir: The run directory.
@@ -106,7 +106,7 @@ def run_on_rig(profile: str | Path | None = None, *, real: bool = False,
         fmu: A built FMU to use instead of building or reusing ``build/``'s.
 
     Returns:
-        The recorded run (:func:`read_run` of its directory) with its exit code.
+        The recorded run (`read_run` of its directory) with its exit code.
 
     Raises:
         ParameterError: Bad settings (the message names them as ``hil run`` options).

@@ -1,9 +1,9 @@
 """The public API of the model: kinematics, mechanical errors, statics and clamping force.
 
-Thin wrappers over :mod:`toggle.kinematics`, :mod:`toggle.tolerance` and
-:mod:`toggle.elastics` (the one source of the equations): they take a whole
-:class:`~toggle.params.Mechanism` (or a preset's name) and return small named results.
-Import them from :mod:`toggle` (``from toggle import clamp_kinematics``); the modules behind
+Thin wrappers over `toggle.kinematics`, `toggle.tolerance` and
+`toggle.elastics` (the one source of the equations): they take a whole
+`toggle.params.Mechanism` (or a preset's name) and return small named results.
+Import them from `toggle` (``from toggle import clamp_kinematics``); the modules behind
 them are private by convention and may change.
 """
 
@@ -75,7 +75,7 @@ def clamp_kinematics(mechanism: str | Mechanism, points: int = 101, *,
     """Positions, velocity ratio and mechanical advantage of one half over its stroke.
 
     Args:
-        mechanism: A :class:`~toggle.params.Mechanism` or a preset's name or TOML path.
+        mechanism: A `toggle.params.Mechanism` or a preset's name or TOML path.
         points: Number of crosshead positions from open to the toggle (at least 2).
         half: ``"lower"`` or ``"upper"``.
 
@@ -101,7 +101,7 @@ def mechanical_errors(mechanism: str | Mechanism, grade: int = 10, *, x: float |
     """Mechanical errors of the clamp with every dimension at ISO 286 grade ``grade``.
 
     Args:
-        mechanism: A :class:`~toggle.params.Mechanism` or a preset's name or TOML path.
+        mechanism: A `toggle.params.Mechanism` or a preset's name or TOML path.
         grade: IT grade, 1 to 18 (seed 000 uses 10).
         x: Crosshead position, m; default the lower half's toggle position.
         samples: Monte Carlo samples (normal, sigma = tolerance/3); 0 for none.

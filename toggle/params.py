@@ -681,7 +681,7 @@ def preset_names() -> list[str]:
     """Names of the presets shipped with the package.
 
     Returns:
-        The names :func:`load_preset` takes, sorted.
+        The names `load_preset` takes, sorted.
     """
     folder = resources.files(__package__) / "presets"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
@@ -728,7 +728,7 @@ def load_preset(name: str, group: str | int | None = None) -> Mechanism:
     without either it gives the family's default group.
 
     Args:
-        name: A shipped preset's name (:func:`preset_names`) or a TOML file's path.
+        name: A shipped preset's name (`preset_names`) or a TOML file's path.
         group: One group of a preset family.
 
     Returns:
