@@ -4,14 +4,28 @@ The public API is :func:`run_on_rig`, :func:`read_run` and the :class:`Run` they
 (:mod:`hil.api`, loaded on first use); every other module here is private by convention.
 """
 
-from __future__ import annotations
-
-import importlib
-import os
-import sys
-from typing import Any
-
 from hil.interrupts import install_exit_handlers, started_as_hil
+
+# the `hil` command (its console script or `python -m hil.cli`) gets its SIGINT/SIGTERM
+# handlers here, before hil.cli's heavy imports: a Ctrl-C in the first second of `hil run`
+# printed a KeyboardInterrupt traceback, and a SIGTERM killed it without its exit code 143
+if started_as_hil():
+    install_exit_handlers()
+
+import importlib  # noqa: E402
+import os  # noqa: E402
+import sys  # noqa: E402
+from typing import Any  # noqa: E402
+
+if started_as_hil() and sys.argv[1:] == ["--version"] and os.path.basename(
+        sys.argv[0]) == "hil":
+    # answered before hil.cli's imports (numpy, the back-ends: seconds on a loaded machine),
+    # as fast as `toggle --version`; the same text as argparse's version action
+    from toggle import __version__
+
+    sys.stdout.write(f"hil {__version__}\n")
+    sys.stdout.flush()
+    os._exit(0)
 
 _EXPORTS = {"run_on_rig": "hil.api", "read_run": "hil.api", "Run": "hil.api",
             "RecordingError": "hil.recording", "RunStoppedError": "hil.backends"}
@@ -23,18 +37,3 @@ def __getattr__(name: str) -> Any:
     if name in _EXPORTS:
         return getattr(importlib.import_module(_EXPORTS[name]), name)
     raise AttributeError(f"module 'hil' has no attribute {name!r}")
-
-
-# the `hil` command (its console script or `python -m hil.cli`) gets its SIGINT/SIGTERM
-# handlers here, before hil.cli's heavy imports: a Ctrl-C in the first second of `hil run`
-# printed a KeyboardInterrupt traceback, and a SIGTERM killed it without its exit code 143
-if started_as_hil():
-    install_exit_handlers()
-    if sys.argv[1:] == ["--version"] and os.path.basename(sys.argv[0]) == "hil":
-        # answered before hil.cli's imports (numpy, the back-ends: ~0.5 s), as fast as
-        # `toggle --version`; the same text as argparse's version action
-        from toggle import __version__
-
-        sys.stdout.write(f"hil {__version__}\n")
-        sys.stdout.flush()
-        os._exit(0)
