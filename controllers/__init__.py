@@ -6,16 +6,10 @@ use: this file imports nothing heavy); every other module here is private by con
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from toggle import lazy_exports
 
-_EXPORTS = {"plan_stroke": "controllers.api", "Plan": "controllers.api",
-            "PlanningError": "controllers.plans", "DriveLimits": "controllers.limits"}
+_EXPORTS = {"plan_stroke": ".api", "Plan": ".api",
+            "PlanningError": ".plans", "DriveLimits": ".limits"}
 __all__ = list(_EXPORTS)
 
-
-def __getattr__(name: str) -> Any:
-    """The exported names, from their modules on first use (PEP 562)."""
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'controllers' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

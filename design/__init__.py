@@ -8,16 +8,10 @@ every other module here is private by convention.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from toggle import lazy_exports
 
-_EXPORTS = {"search_designs": "design.api", "DesignSearch": "design.api",
-            "Targets": "design.targets"}
+_EXPORTS = {"search_designs": ".api", "DesignSearch": ".api",
+            "Targets": ".targets"}
 __all__ = list(_EXPORTS)
 
-
-def __getattr__(name: str) -> Any:
-    """The exported names, from their modules on first use (PEP 562)."""
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'design' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

@@ -7,21 +7,15 @@ pythonfmu's binary (:mod:`fmu_src.guard_build`); ``native/`` is the hand-written
 the native FMUs around CasADi's generated model (:mod:`fmu_src.native_build`);
 :mod:`fmu_src.host` loads a built FMU in this process. The public API is
 :func:`build_fmu` (:mod:`fmu_src.api`); the rest is private by convention. This file imports
-nothing on import (the name loads on first use): the pythonfmu FMU bundles the modules its
-slave uses.
+only :mod:`toggle`'s light ``__init__`` (the names load on first use): the pythonfmu FMU
+bundles the modules its slave uses.
 """
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from toggle import lazy_exports
 
-_EXPORTS = {"build_fmu": "fmu_src.api", "fmu_file_name": "fmu_src.api"}
+_EXPORTS = {"build_fmu": ".api", "fmu_file_name": ".api"}
 __all__ = list(_EXPORTS)
 
-
-def __getattr__(name: str) -> Any:
-    """The exported names, from their modules on first use (PEP 562)."""
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'fmu_src' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

@@ -12,10 +12,10 @@ from hil.interrupts import install_exit_handlers, started_as_hil
 if started_as_hil():
     install_exit_handlers()
 
-import importlib  # noqa: E402
 import os  # noqa: E402
 import sys  # noqa: E402
-from typing import Any  # noqa: E402
+
+from toggle import lazy_exports  # noqa: E402
 
 if started_as_hil() and sys.argv[1:] == ["--version"] and os.path.basename(
         sys.argv[0]) == "hil":
@@ -27,13 +27,8 @@ if started_as_hil() and sys.argv[1:] == ["--version"] and os.path.basename(
     sys.stdout.flush()
     os._exit(0)
 
-_EXPORTS = {"run_on_rig": "hil.api", "read_run": "hil.api", "Run": "hil.api",
-            "RecordingError": "hil.recording", "RunStoppedError": "hil.backends"}
+_EXPORTS = {"run_on_rig": ".api", "read_run": ".api", "Run": ".api",
+            "RecordingError": ".recording", "RunStoppedError": ".backends"}
 __all__ = list(_EXPORTS)
 
-
-def __getattr__(name: str) -> Any:
-    """The exported names, from their modules on first use (PEP 562)."""
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'hil' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

@@ -12,6 +12,7 @@ names below load their modules on first use.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from typing import Any
 
 #: The package's version (pyproject.toml reads it from here).
@@ -21,21 +22,29 @@ __version__ = "0.1.0"
 #: the modules they load from.
 _EXPORTS = {
     # load or define a mechanism
-    "Mechanism": "toggle.params", "HalfDims": "toggle.params", "load_preset": "toggle.params",
-    "load_mechanism": "toggle.params", "preset_names": "toggle.params",
+    "Mechanism": ".params", "HalfDims": ".params", "load_preset": ".params",
+    "load_mechanism": ".params", "preset_names": ".params",
     # kinematics and mechanical errors; statics and clamping force
-    "clamp_kinematics": "toggle.api", "Kinematics": "toggle.api",
-    "mechanical_errors": "toggle.api", "MechanicalErrors": "toggle.api",
-    "clamping_force": "toggle.api", "ClampingResult": "toggle.elastics",
+    "clamp_kinematics": ".api", "Kinematics": ".api",
+    "mechanical_errors": ".api", "MechanicalErrors": ".api",
+    "clamping_force": ".api", "ClampingResult": ".elastics",
     # the errors a caller may catch
-    "ParameterError": "toggle.params", "AssemblyError": "toggle.kinematics",
-    "ClampingError": "toggle.elastics",
+    "ParameterError": ".params", "AssemblyError": ".kinematics", "ClampingError": ".elastics",
 }
 __all__ = list(_EXPORTS)
 
 
-def __getattr__(name: str) -> Any:
-    """The exported names, from their modules on first use (PEP 562)."""
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'toggle' has no attribute {name!r}")
+def lazy_exports(package: str, exports: dict[str, str]) -> Callable[[str], Any]:
+    """A package's module ``__getattr__`` (PEP 562) that loads each exported name from its
+    module (relative to the package, so that a bundled copy loads its own) on first use:
+    every package's ``__init__`` exports its public API this way and stays cheap to import.
+    """
+    def exported(name: str) -> Any:
+        if name in exports:
+            return getattr(importlib.import_module(exports[name], package), name)
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+
+    return exported
+
+
+__getattr__ = lazy_exports(__name__, _EXPORTS)
