@@ -1,7 +1,7 @@
 """The examples (examples/, issue 48): each runs end to end in its own process and writes
 its figure; the site shows the committed copies (docs/examples/, ``python
 examples/make_figures.py``). Marked ``examples``: ``-m "not examples"`` leaves them out
-(about a minute on two cores, most of it the two planning examples)."""
+(about two minutes in one process on a loaded two-core machine, most of it planning)."""
 
 from __future__ import annotations
 

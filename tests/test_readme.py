@@ -1,7 +1,7 @@
 """The README (issue 48): under 150 lines, and every command in it run by the suite. Each
 part of each command in its ``bash`` blocks (and each ``examples/`` script it names) must
 match a rule below that points at what runs it, which this test checks; its Python blocks
-run here; its links to docs/ resolve."""
+run here (mark ``examples``); its links to docs/ resolve."""
 
 from __future__ import annotations
 
@@ -9,6 +9,8 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -54,6 +56,7 @@ def test_every_command_in_the_readme_is_run_by_the_suite() -> None:
     assert named and set(named) <= set(EXAMPLES)
 
 
+@pytest.mark.examples  # it plans and runs a stroke, as the examples do (half a minute)
 def test_the_readmes_python_runs(tmp_path: Path) -> None:
     code = "\n".join(_blocks("python"))
     done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
