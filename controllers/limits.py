@@ -40,9 +40,16 @@ STEPPER_TORQUE = 0.3  # N m, assumption: usable torque of a stepper preset witho
 
 @dataclass(frozen=True)
 class DriveLimits:
-    """Limits on the crosshead motion: m/s, m/s^2, m/s^3 and motor torque, N m: ``torque``
-    at standstill, falling with motor speed as the curve ``torque_speed`` ((rad/s, N m)
-    points, scaled to ``torque`` at speed 0; empty: flat)."""
+    """Limits on the crosshead motion and the motor's torque.
+
+    Attributes:
+        velocity: Crosshead speed limit, m/s.
+        acceleration: Crosshead acceleration limit, m/s^2.
+        jerk: Crosshead jerk limit, m/s^3.
+        torque: Motor torque at standstill, N m.
+        torque_speed: The torque-speed curve, (rad/s, N m) points scaled to ``torque`` at
+            speed 0; empty: flat.
+    """
 
     velocity: float
     acceleration: float

@@ -140,8 +140,17 @@ _TOP = {"preset", "objectives", "targets", "bounds", "settings", "description"}
 
 @dataclass(frozen=True)
 class Targets:
-    """A parsed targets file (SI). ``bounds`` maps every variable of :data:`VARIABLES`
-    to (low, high); low == high holds it fixed."""
+    """A parsed targets file (SI): what a design search looks for.
+
+    Attributes:
+        preset: The base preset whose clamp data, motor, drive and masses are kept.
+        objectives: The objectives to trade (names of ``OBJECTIVES``).
+        targets: What every design must meet (``clamp_force``, ``mold_open_stroke``, ...).
+        bounds: Every variable of ``VARIABLES`` to (low, high); low == high holds it fixed.
+        settings: The designer's limits and evaluation settings.
+        origin: Where the targets came from (the file), for messages.
+        description: The file's description.
+    """
 
     preset: str
     objectives: tuple[str, ...]

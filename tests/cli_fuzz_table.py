@@ -8,7 +8,7 @@ empty, truncated or in mm, an output that is a fifo, a device node, an existing 
 a folder that holds the results already), or with no mistake against a rig that does
 not answer (a run that fails: exit 1). Each runs in this process with the expensive
 parts faked (:func:`cli_fuzz.cheap_commands`: no figure rendered, no FMU built, no rig
-served) and is judged by the convention (README, "Outputs and errors"): no traceback, no
+served) and is judged by the convention (docs/cli.md, "Outputs and errors"): no traceback, no
 message naming a Python type or errno, exit 2 for every one of these mistakes (usage or
 input, told before the work; 1 for the run that fails), one ``error:`` line, nothing in
 the fixture replaced.

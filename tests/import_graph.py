@@ -20,9 +20,10 @@ ROOT = Path(__file__).resolve().parent.parent
 FLOORS = {"toggle": 0, "controllers": 1, "fmu_src": 1, "design": 2, "hil": 2, "toggle_cli": 3}
 #: The rooms of a package, on floors of their own: hil's wire (link) under the host side of a
 #: run (host), under the rigs without hardware (emulators), under the front panel (panel),
-#: under the command line (cli). A module of a room imports its own room or rooms below; a
-#: package's own modules (its __init__) import none of its rooms.
-ROOMS = {"hil": {"link": 0, "host": 1, "emulators": 2, "panel": 3, "cli": 4}}
+#: under the command line (cli), under the public API over the command's run (api). A module
+#: of a room imports its own room or rooms below; a package's own modules (its __init__)
+#: import none of its rooms.
+ROOMS = {"hil": {"link": 0, "host": 1, "emulators": 2, "panel": 3, "cli": 4, "api": 5}}
 
 
 def packages(root: Path = ROOT) -> list[str]:

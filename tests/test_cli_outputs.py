@@ -1,4 +1,4 @@
-"""``toggle``'s one results folder (README, "Outputs and errors"): every command that writes
+"""``toggle``'s one results folder (docs/cli.md, "Outputs and errors"): every command that writes
 files names the folder and the files on its last line; figure kinds write into the
 ``--out`` folder (default figures) and refuse existing outputs before the work, as do
 ``build-fmu`` and ``design``."""

@@ -69,7 +69,7 @@ def test_hil_replays_the_cycle_as_it_is_on_both_back_ends(cycle, tmp_path):
     runs the same cycle in real time: every sample the emulator sent is recorded once, in
     order, and the two back-ends give the same stroke to the encoder's resolution and the
     same RMS forces to 0.5 % (measured: 0.17 N forward, 0.09 N backward of 39 N; the
-    step generator's velocity ripple, README "Hardware in the loop", which also puts
+    step generator's velocity ripple, docs/rig.md, "Bring-up and runs", which also puts
     F_F(max) 3.4 N further out)."""
     cycle = cycle[0]
     one = Trajectory.from_csv(cycle, period=1e-3)

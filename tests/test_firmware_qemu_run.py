@@ -1,6 +1,6 @@
 """``hil run --real`` against the firmware's Cortex-M build in QEMU and its host build.
 
-The README's recipe with ``hil emulate --firmware --qemu`` and with ``hil emulate
+The recipe of docs/rig.md with ``hil emulate --firmware --qemu`` and with ``hil emulate
 --firmware``, each in its own process as a user starts them, and the same run on both: one
 cycle at 40 mm/s. The two builds run the same core on the same plant (the native FMU's
 C, compiled for the Cortex-M4 and for this machine), so the platen reads the same

@@ -1,4 +1,4 @@
-"""``hil`` under ``toggle``'s output and error convention (README, "Outputs and errors"):
+"""``hil`` under ``toggle``'s output and error convention (docs/cli.md, "Outputs and errors"):
 existing results only with --force (refused before the work), never over a non-regular
 file, files 0644 under the umask, one results folder named on the last line, unreadable or
 invalid input files exit 2 in one line naming the file, a sub-command's own usage."""

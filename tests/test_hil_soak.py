@@ -1,4 +1,4 @@
-"""The README's HIL recipe, literally, on a loaded machine: ``hil emulate --x-contact planned``
+"""The HIL recipe (docs/rig.md) literally, on a loaded machine: ``hil emulate --x-contact planned``
 + ``hil run --real``.
 
 Default options only (the planned default job, 3 cycles), with a CPU-hog process beside

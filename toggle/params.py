@@ -662,12 +662,27 @@ def _read_toml(path: Path) -> dict[str, Any]:
 
 
 def load_mechanism(path: str | Path, group: str | int | None = None) -> Mechanism:
-    """Load a mechanism (or one ``group`` of a family) from a TOML file (preset format, SI)."""
+    """Load a mechanism (or one ``group`` of a family) from a TOML file (preset format, SI).
+
+    Args:
+        path: The TOML file (see ``toggle/presets/chang2021.toml`` for the format).
+        group: One group of a preset family; default the family's default group.
+
+    Returns:
+        The mechanism, checked (a dimension beyond 10 m is refused as written in mm).
+
+    Raises:
+        ParameterError: A missing, unreadable or invalid file, naming the key.
+    """
     return mechanism_from_dict(_read_toml(Path(path)), str(path), group)
 
 
 def preset_names() -> list[str]:
-    """Names of the presets shipped with the package."""
+    """Names of the presets shipped with the package.
+
+    Returns:
+        The names `load_preset` takes, sorted.
+    """
     folder = resources.files(__package__) / "presets"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
@@ -711,6 +726,17 @@ def load_preset(name: str, group: str | int | None = None) -> Mechanism:
     A preset family takes ``group`` or the name ``family/group``
     (``load_preset("li_micro", group=6)`` is ``load_preset("li_micro/6")``);
     without either it gives the family's default group.
+
+    Args:
+        name: A shipped preset's name (`preset_names`) or a TOML file's path.
+        group: One group of a preset family.
+
+    Returns:
+        The mechanism.
+
+    Raises:
+        ParameterError: An unknown preset or an invalid file (``UnknownPresetError`` for
+            an unknown name).
     """
     name, group = _split_group(name, group)
     table, origin = preset_table(name)

@@ -16,30 +16,20 @@ from toggle.params import load_preset
 
 
 def run(args: argparse.Namespace) -> int:
-    from fmu_src.build import build_fmu
+    """Build the FMU asked for through the public API (:func:`fmu_src.build_fmu`), after
+    the checks that name the command's options."""
+    from fmu_src import build_fmu, fmu_file_name
 
     if not args.native and (args.fmi_version, args.interface) != (2, "cs"):
         raise ValueError("--fmi-version 3 and --interface me|both need --native (the "
                          "pythonfmu FMU is FMI 2.0 Co-Simulation)")
     load_preset(args.preset)  # an unreadable or invalid preset: told before the build
     check_writable_dir(args.out, "--out")  # before the build, not after it
-    check_writable(args.out / _file_name(args), "--out")  # an existing FMU: only with --force
-    if args.native:
-        from fmu_src.native_build import build_native_fmu
-
-        print(build_native_fmu(args.out, args.preset, args.fmi_version, args.interface))
-    else:
-        print(build_fmu(args.out, preset=args.preset))
+    name = fmu_file_name(args.native, args.fmi_version, args.interface)
+    check_writable(args.out / name, "--out")  # an existing FMU: only with --force
+    print(build_fmu(args.out, args.preset, native=args.native, fmi_version=args.fmi_version,
+                    interface=args.interface, overwrite=True))
     return 0
-
-
-def _file_name(args: argparse.Namespace) -> str:
-    """The FMU's file name in ``--out``: ToggleClamp.fmu, ToggleClampNative[3][ME|CSME].fmu."""
-    if not args.native:
-        return "ToggleClamp.fmu"
-    from fmu_src.native_build import model_name
-
-    return f"{model_name(args.fmi_version, args.interface)}.fmu"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

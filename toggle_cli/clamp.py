@@ -92,10 +92,10 @@ def _print_table(mech: Mechanism, data: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from toggle.elastics import analyse_clamping
+    from toggle import clamping_force
 
     mech = mechanism(args)
-    result = analyse_clamping(mech, args.mu, tiebar_force=args.clamp_force, x_contact=args.contact)
+    result = clamping_force(mech, args.mu, clamp_force=args.clamp_force, x_contact=args.contact)
     data = summary(mech, result)
     if args.json:
         print_json(data)

@@ -91,9 +91,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from design.output import write_results
-    from design.placement import place
-    from design.search import binding_constraint, run_search
+    """The search through the public API (:func:`design.search_designs`), reported."""
+    from design import search_designs
     from design.targets import OBJECTIVES, load_targets
     from toggle.params import ParameterError
 
@@ -103,13 +102,14 @@ def run(args: argparse.Namespace) -> int:
     targets = load_targets(args.targets)
     method, samples = args.doe or (None, 0)
     try:
-        result = run_search(targets, args.out,
-                            generations=args.generations or DEFAULT_GENERATIONS,
-                            population=args.population or DEFAULT_POPULATION,
-                            doe_method=method, samples=samples,
-                            seed=args.seed, scheduler=args.scheduler, workers=args.workers,
-                            progress=not args.json, connect_timeout=args.connect_timeout,
-                            front_duty=not args.no_front_duty)
+        result = search_designs(targets, args.out,
+                                generations=args.generations or DEFAULT_GENERATIONS,
+                                population=args.population or DEFAULT_POPULATION,
+                                doe=method, samples=samples, seed=args.seed,
+                                scheduler=args.scheduler, workers=args.workers,
+                                progress=not args.json, front_duty=not args.no_front_duty,
+                                figures=not args.no_figures,
+                                connect_timeout=args.connect_timeout)
     except KeyboardInterrupt:
         from design.store import FILE
         if (args.out / FILE).exists():  # written with the first evaluation received
@@ -119,18 +119,8 @@ def run(args: argparse.Namespace) -> int:
             print("toggle design: stopped before any evaluation finished; nothing was kept",
                   file=sys.stderr)
         raise
-    if not result.front:
-        raise ParameterError(f"no design meets the targets of {targets.origin}: "
-                             f"{binding_constraint(result.evaluations)}")
-    files = write_results(args.out, targets, result.front, result.evaluations)
-    placements = place(targets, result.front)
-    if not args.no_figures:
-        from design.figures import front_figure, parallel_figure
-        files["front_png"] = front_figure(args.out / "front.png", targets.objectives,
-                                          result.feasible, result.front, placements)
-        files["parallel_png"] = parallel_figure(args.out / "parallel.png", targets.objectives,
-                                                result.front, placements)
-    summary = {"evaluations": len(result.evaluations), "computed": result.evaluated,
+    files, placements = result.files, result.placements
+    summary = {"evaluations": len(result.evaluations), "computed": result.computed,
                "feasible": len(result.feasible), "pareto": len(result.front),
                "files": {k: str(v) for k, v in files.items()},
                "references": [{"name": p.name, "status": p.status,
@@ -141,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         print_json(summary)
         return 0
     keys = targets.objectives
-    print(f"{targets.origin}: {summary['evaluations']} designs ({result.evaluated} computed, "
+    print(f"{targets.origin}: {summary['evaluations']} designs ({result.computed} computed, "
           f"the rest from {args.out}), {summary['feasible']} feasible, "
           f"{summary['pareto']} in the Pareto set")
     sense = OBJECTIVES[keys[0]].sense

@@ -112,26 +112,21 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     """The robust planner (``--robust``): the nominal clamp with the erroneous one as a
     variant, each weighed against its own S-curve; and the report of the robust plan, the
     nominal plan and the S-curve on each clamp."""
+    from controllers.api import robust_planner
     from controllers.background import Background
     from controllers.planner import best_plan, default_duration, planner_for
     from controllers.profiles import predict
-    from controllers.stroke_reports import baseline_stroke
-    from toggle.plant import with_errors
 
     if args.min_time or not _errors(args):
         raise ParameterError("--robust plans a fixed duration against dimensional errors: "
                              "give --delta-NAME and no --min-time")
     cfg, limits = _plant(args, errors=False)
-    erroneous = cfg.with_(mechanism=with_errors(cfg.mechanism, _errors(args))[0])
     nominal = planner_for(cfg, limits, args.contact_speed, args.intervals,
                           protection=_protection(args))
     duration = args.duration or default_duration(nominal)
-    nominal.check_duration(duration)  # before predicting a baseline of that length
-    stroke = baseline_stroke(cfg, limits, duration)
-    curve = {"nominal": predict(stroke, cfg), "erroneous": predict(stroke, erroneous)}
-    scale = curve["erroneous"].peak_force / curve["nominal"].peak_force
-    planner = planner_for(cfg, limits, args.contact_speed, args.intervals, (erroneous,), (scale,),
-                          _protection(args))
+    planner, erroneous, curve = robust_planner(cfg, limits, _errors(args), duration,
+                                               args.contact_speed, args.intervals,
+                                               _protection(args))
     # the nominal plan, to compare, in a second process while this one plans the robust one;
     # the bound is the nominal plant's for both (computed here once, not in each process)
     bound = planner.lower_bound()

@@ -23,11 +23,12 @@ from toggle_cli.common import (
 
 
 def run(args: argparse.Namespace) -> int:
-    from toggle.tolerance import asymmetry, it_tolerances, monte_carlo
+    from toggle import mechanical_errors
+    from toggle.tolerance import monte_carlo
 
     mech = mechanism(args)
-    tol = it_tolerances(mech, args.it)
-    rep = asymmetry(mech, tol, args.x)
+    errors = mechanical_errors(mech, args.it, x=args.x)  # the Monte Carlo below: its bar
+    tol, rep = errors.tolerances, errors.report
     budgets = {"lower": rep.lower, "upper": rep.upper}
     names = PAPER_NAMES
     data = {

@@ -4,7 +4,7 @@
 a ``--config`` TOML file) selects the rig on ``--port``; nothing else changes.
 Options are SI (m, m/s, N); the run directory gets samples.csv (units in the
 header), meta.json, summary.json and the force plot, named on the last line. Outputs,
-errors and exit codes follow ``toggle``'s convention (README, "Outputs and errors"): 0
+errors and exit codes follow ``toggle``'s convention (docs/cli.md, "Outputs and errors"): 0
 done, 1 the run stopped early or could not start, 2 a usage error or unusable input,
 130/143 SIGINT/SIGTERM.
 
@@ -117,7 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``hil`` script; returns the exit status.
 
-    The convention is ``toggle``'s (README, "Outputs and errors"): 2 a usage error or
+    The convention is ``toggle``'s (docs/cli.md, "Outputs and errors"): 2 a usage error or
     unreadable or invalid input (an option, a --config, --profile or run file; an output
     refused before the work), 1 a run that failed or stopped early, 130/143 SIGINT/SIGTERM;
     every error one ``hil COMMAND: error:`` line in words.

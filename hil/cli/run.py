@@ -207,13 +207,15 @@ def run(args: argparse.Namespace) -> int:
     guard = SignalGuard()
     with guard:
         try:
-            return _run(s, guard)
+            return execute(s, guard)
         except Interrupted as exc:  # before the recording started: nothing moved or recorded
             print(f"hil run: {exc}; nothing was recorded", file=sys.stderr)
             return exc.exit_code
 
 
-def _run(s: RunSettings, guard: SignalGuard) -> int:
+def execute(s: RunSettings, guard: SignalGuard) -> int:
+    """Run the experiment ``s`` describes under ``guard``: record it, print its summary (or
+    its JSON with ``s.json``) and name its files; the exit code (hil.api.run_on_rig too)."""
     setup = RigSetup(preset=s.preset, delta_r8=s.delta_r8, mu=s.mu, x_contact=s.x_contact,
                      force_limit=s.force_limit, as_built=s.as_built)
     trajectory, source = _trajectory(s, guard, setup)
