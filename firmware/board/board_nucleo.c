@@ -630,7 +630,7 @@ static uint32_t cal_check(const cal_record *r) {
 }
 
 static rig_calibration load_calibration(const cal_record *r) {
-    rig_calibration cal = {CAL_DEFAULT_OFFSET, CAL_DEFAULT_GAIN};
+    rig_calibration cal = {CAL_DEFAULT_OFFSET, CAL_DEFAULT_GAIN, 0u};
     if (r->magic == CAL_MAGIC && r->check == cal_check(r)) {
         float gain;
         memcpy(&gain, &r->gain_bits, sizeof gain);
