@@ -222,7 +222,7 @@ class Rcc(Peripheral):
         self.m.cpu_hz = hclk
 
 
-class PowerCut(RuntimeError):
+class PowerCutError(RuntimeError):
     """The test hook of :class:`Flash`: the power failed before a flash write took effect."""
 
 
@@ -235,7 +235,7 @@ class Flash(Peripheral):
     firmware's wait loop runs.
 
     Test hook: with :attr:`cut_after` = N, the (N+1)-th write (a word programmed or a
-    sector erased) raises :class:`PowerCut` before it takes effect, which stops the
+    sector erased) raises :class:`PowerCutError` before it takes effect, which stops the
     machine as a power cut would; :attr:`writes` counts the writes done."""
 
     NAME = "FLASH"
@@ -266,7 +266,7 @@ class Flash(Peripheral):
     def _write_done(self) -> None:
         """Count one write, or cut the power before it (the test hook)."""
         if self.cut_after is not None and self.writes >= self.cut_after:
-            raise PowerCut(f"power cut before flash write {self.writes + 1}")
+            raise PowerCutError(f"power cut before flash write {self.writes + 1}")
         self.writes += 1
         self.busy = True
 
@@ -1165,5 +1165,5 @@ class Rng(Peripheral):
         self.regs[0] = value
 
 
-__all__ = ["Dma1", "EncoderTimer", "Flash", "FlashMemory", "Gpio", "Iwdg", "PowerCut", "PulseCounter",
-           "Pwr", "Rcc", "Rng", "Spi", "StepTimer", "TickTimer", "Usart", "seconds"]
+__all__ = ["Dma1", "EncoderTimer", "Flash", "FlashMemory", "Gpio", "Iwdg", "PowerCutError",
+           "PulseCounter", "Pwr", "Rcc", "Rng", "Spi", "StepTimer", "TickTimer", "Usart", "seconds"]
