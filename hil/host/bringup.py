@@ -104,7 +104,7 @@ class CheckItem(_Result):
 
     name: str
     passed: bool
-    figure: float
+    figure: float | None  # None: not measurable (the text says why)
     unit: str
     text: str
 
@@ -351,7 +351,7 @@ def _lost_steps(d_enc: int, d_steps: int, start: int, platen: Any, enc_m: float,
     """The steps the table did not take: the commanded move minus the move the encoder
     saw, inverted through the nominal linkage (bisection on the monotonic L(x))."""
     if d_enc * d_steps <= 0:
-        return CheckItem("lost steps", False, math.nan, "steps",
+        return CheckItem("lost steps", False, None, "steps",
                          "not measurable while the encoder counts backwards or not at all")
     target = platen(start) + d_enc * enc_m
     lo, hi = start, start + 2 * d_steps
@@ -361,7 +361,7 @@ def _lost_steps(d_enc: int, d_steps: int, start: int, platen: Any, enc_m: float,
     taken = (lo + hi) / 2 - start
     lost = d_steps - taken
     ok = abs(lost) <= LOST_TOLERANCE * d_steps
-    return CheckItem("lost steps", ok, round(lost), "steps",
+    return CheckItem("lost steps", ok, float(round(lost)), "steps",
                      f"of {d_steps} commanded ({lost / d_steps:.1%}; accepted within "
                      f"{LOST_TOLERANCE:.0%}, the model's error)")
 
