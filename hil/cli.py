@@ -317,13 +317,14 @@ def emulate(args: argparse.Namespace) -> int:
                        disconnect_at=args.disconnect_at, seed=args.seed,
                        reconnect_after=None if args.disconnect_at is None else 0.5)
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
-    hardware = RigHardware(x_origin=setup.stroke[0])
+    hardware = RigHardware(x_origin=setup.stroke[0], **cli_rig.bringup_hardware(args))
     if args.board == "nucleo":
         return _emulate_nucleo(args, setup, hardware)
     if args.qemu:
         return _emulate_qemu(args, setup, hardware)
     # an MCU's timer interrupt is hard real time: SCHED_FIFO when the OS permits it
-    emulator = RigEmulator(physics, hardware, faults, realtime=True, firmware=args.firmware)
+    emulator = RigEmulator(physics, hardware, faults, realtime=True, firmware=args.firmware,
+                           nvm=args.nvm)
     print(emulator.open(), flush=True)
     emulator.on_port = lambda port: print(port, flush=True)  # after a re-plugged disconnect
     guard = SignalGuard()

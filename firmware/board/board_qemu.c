@@ -202,8 +202,7 @@ int main(void) {
         uart_puts("\r\n");
         for (;;) wait_for_interrupt();
     }
-    rig_calibration stored = {rig_setup_hw.load_offset, (float)rig_setup_hw.load_gain_n, 0u};
-    rig_boot(&mcu, boot_id(), stored);
+    rig_boot(&mcu, boot_id(), rig_setup_default);
     board_tick_stats.magic = 0x71C5A75u;
 
     SCB_SHPR3 = (SCB_SHPR3 & 0x00FFFFFFu) | (2u << 28); /* SysTick below the UART */
