@@ -97,6 +97,7 @@ class Sensors:
         self.spike_n = 0.0
         self.spike_samples = 0
         self._last: tuple[int, int] | None = None
+        self.force = 0.0
         self.lost = 0  # step pulses the drive lost since the last rezero (signed)
         self._commanded = 0  # the step count of the last reading
         self._drop_acc = 0
@@ -123,6 +124,7 @@ class Sensors:
         """Encoder counts and load-cell raw counts at ``steps`` and time ``t``."""
         self._lose_steps(steps)
         platen, force = self.physics(self.x(steps), t)
+        self.force = force  # the true force of the last reading (sim_rig_status.input_force)
         if self.spike_samples > 0:
             force += self.spike_n
             self.spike_samples -= 1

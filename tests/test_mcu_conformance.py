@@ -15,8 +15,8 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-
 from calibration_script import EXPECTED, calibration_script
+
 from hil import protocol as p
 from hil.backends import RigSetup
 from hil.mcu_model import ModelMcu, RigHardware

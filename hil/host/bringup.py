@@ -135,9 +135,19 @@ def span_from_mass(mass_kg: float) -> float:
 # --- helpers ------------------------------------------------------------------------------
 
 
+def _fresh(link: SerialLink, what: str) -> p.Telemetry:
+    """A sample taken after every command sent so far was executed (the MCU answers a
+    command before its next period)."""
+    link.drain()
+    try:
+        return link.next_sample()
+    except RigError as exc:
+        raise BringupError(f"{what}: {exc}") from exc
+
+
 def _idle(link: SerialLink, what: str) -> p.Telemetry:
-    """The latest sample, refusing unless the rig is IDLE without a latched fault."""
-    st = link.status
+    """A fresh sample, refusing unless the rig is IDLE without a latched fault."""
+    st = _fresh(link, what)
     if st.faults:
         raise BringupError(f"{what}: the rig has latched faults ({p.Fault(st.faults)!r}); "
                            f"check the rig and clear them (hil rig clear)")
@@ -146,8 +156,8 @@ def _idle(link: SerialLink, what: str) -> p.Telemetry:
     return st
 
 
-def _referenced(link: SerialLink, what: str) -> None:
-    if not link.status.flags & p.TelemetryFlag.REFERENCED:
+def _referenced(st: p.Telemetry, what: str) -> None:
+    if not st.flags & p.TelemetryFlag.REFERENCED:
         raise BringupError(f"{what}: the rig is not homed (counts unreferenced since its "
                            f"boot); run hil rig home first")
 
@@ -158,7 +168,6 @@ def _at_rest(link: SerialLink, samples: int, what: str) -> list[int]:
         raise BringupError(f"{what}: samples must be a whole number in 10..60000, not "
                            f"{samples!r}")
     _idle(link, what)
-    link.drain()
     readings: list[int] = []
     while len(readings) < samples:
         tel = link.next_sample()
@@ -188,8 +197,7 @@ def jog(link: SerialLink, *, to: float | None = None, by: float | None = None,
     if not 0 < speed <= JOG_MAX_SPEED:
         raise BringupError(f"jog: speed {speed * 1e3:g} mm/s is outside (0, "
                            f"{JOG_MAX_SPEED * 1e3:g}] mm/s")
-    _idle(link, "jog")
-    _referenced(link, "jog")
+    _referenced(_idle(link, "jog"), "jog")
     setup = setup or RigSetup()
     sc = link.scaling
     start = sc.x(link.status.steps)
@@ -291,8 +299,7 @@ def sensor_check(link: SerialLink, *, setup: RigSetup | None = None,
     nominal linkage (toggle/kinematics.py): the encoder's direction and counts per step,
     lost steps, the cell's noise at rest, the home switch, the overtravel switches and the
     stop chain. Refused unless homed and IDLE without faults."""
-    _idle(link, "sensor check")
-    _referenced(link, "sensor check")
+    _referenced(_idle(link, "sensor check"), "sensor check")
     setup = setup or RigSetup()
     sc = link.scaling
     rest = _at_rest(link, 200, "sensor check")
