@@ -119,6 +119,9 @@ class SensorReport(_Result):
     def passed(self) -> bool:
         return all(item.passed for item in self.items)
 
+    def to_dict(self) -> dict[str, Any]:
+        return {**super().to_dict(), "passed": self.passed}
+
     def item(self, name: str) -> CheckItem:
         """The item called ``name``."""
         return next(i for i in self.items if i.name == name)
