@@ -53,7 +53,14 @@ from toggle.args import (
     use_help_formatter,
 )
 from toggle.elastics import clamp_stroke
-from toggle.files import InputError, OutputError, allow_overwrite, one_line, print_results
+from toggle.files import (
+    InputError,
+    OutputError,
+    allow_overwrite,
+    atomic_path,
+    one_line,
+    print_results,
+)
 from toggle.interrupts import raised_signal, signal_taken
 from toggle.json_text import json_text
 from toggle.params import DYNAMICS_PARAMETERS, ParameterError, load_preset
@@ -318,6 +325,10 @@ def emulate(args: argparse.Namespace) -> int:
                        reconnect_after=None if args.disconnect_at is None else 0.5)
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
     hardware = RigHardware(x_origin=setup.stroke[0], **cli_rig.bringup_hardware(args))
+    if args.nvm is not None and (not args.firmware or args.qemu):
+        raise ParameterError("--nvm is the memory of the host build (--firmware) or of the "
+                             "rehosted board (--firmware --board nucleo); the Python model "
+                             "keeps its calibration in memory, QEMU's board in RAM")
     if args.board == "nucleo":
         return _emulate_nucleo(args, setup, hardware)
     if args.qemu:
@@ -375,6 +386,9 @@ def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) ->
     elf = build_nucleo_image()
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
     board = NucleoBoard(elf, physics, hardware, seed=args.seed)
+    if args.nvm is not None and args.nvm.exists():  # the board's flash sectors 5-7
+        board.flash.memory[:] = args.nvm.read_bytes()[:len(board.flash.memory)]
+        board.machine.reset("power-on")
     guard = SignalGuard()
     rig = NucleoRig(board)
     try:
@@ -387,6 +401,9 @@ def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) ->
         stopped = None
     finally:
         rig.close()
+        if args.nvm is not None:
+            with atomic_path(args.nvm) as tmp:
+                tmp.write_bytes(bytes(board.flash.memory))
         print(f"hil emulate: emulated/wall time {rig.time_ratio:.3f}; {rig.summary()}",
               file=sys.stderr)
     if stopped is not None:

@@ -98,7 +98,9 @@ def add_bringup_emulator_options(e: argparse.ArgumentParser) -> None:
                       help="the drive loses every N-th step pulse")
     e.add_argument("--nvm", type=Path, default=None,
                    help="with --firmware: the file that is the MCU's non-volatile memory "
-                        "(the stored calibration survives the emulator; default: memory)")
+                        "(the stored calibration survives the emulator; default: memory); "
+                        "with --board nucleo, the image of flash sectors 5-7, read at the "
+                        "start and written at the end")
 
 
 def bringup_hardware(args: argparse.Namespace) -> dict[str, Any]:

@@ -25,7 +25,12 @@ from hil.rig_emulator import RigEmulator
 from hil.rig_physics import ClampPhysics
 from hil.serial_link import SerialLink
 
+pytestmark = pytest.mark.real_time  # emulators on ptys, against the wall clock
+
 X_OPEN = RigSetup().stroke[0]
+#: The host's telemetry watchdog in these tests, s: a soft bound (the MCU's are the hard
+#: ones) widened so that a loaded test machine's scheduling is not taken for a rig stall.
+WATCHDOG = 0.5
 CELL_OFFSET, CELL_GAIN = -23_456, 1.2e-4
 HAVE_GCC = shutil.which("gcc") is not None
 KINDS = ["model", pytest.param("firmware", marks=pytest.mark.skipif(
@@ -41,7 +46,7 @@ def rig(kind: str, nvm: Path | None = None, **hw: object) -> Iterator[tuple[RigE
     with RigEmulator(ClampPhysics("chang2021"), hardware, firmware=kind == "firmware",
                      nvm=nvm) as emu:
         port = emu.start()
-        with SerialLink(port) as link:
+        with SerialLink(port, telemetry_timeout=WATCHDOG) as link:
             link.open()
             home(link)
             yield emu, link
@@ -105,7 +110,7 @@ def test_the_stored_calibration_survives_a_reboot(kind: str, tmp_path: Path) -> 
         bringup.store_calibration(link, -23_000, 1.19e-4)
         link.close()
         emu.mcu.reset()
-        with SerialLink(emu.port) as again:
+        with SerialLink(emu.port, telemetry_timeout=WATCHDOG) as again:
             again.open()
             assert bringup.read_calibration(again) == stored
             assert again.info.load_offset == -23_000
