@@ -6,6 +6,9 @@ returns a frozen result with ``to_dict()`` for JSON; every refusal raises
 :class:`BringupError` with one sentence an operator can act on. Nothing here bypasses the
 MCU's limits: moves are ordinary trajectories inside the CONFIG in force, and the board
 refuses STORE_CALIBRATION unless it is IDLE (docs/bring-up.md, docs/rig-protocol.md 1.3).
+The functions consume the link's telemetry queue while they run (``drain``,
+``next_sample``, ``run_trajectory``), as a run does: one caller at a time per link, and a
+live display meanwhile reads ``link.status`` or its own tap, not that queue.
 """
 
 from __future__ import annotations
