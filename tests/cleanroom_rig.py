@@ -24,7 +24,9 @@ Readings taken where the document leaves a choice (see the clean-room report):
   reading; CLEAR_FAULT clears every bit, and is BAD_STATE in RUNNING and STOPPING;
 * HEARTBEAT_LOST keeps the session open (until BYE; a new HELLO takes it over); a pty has no
   USB detach, so LINK_LOST is never sent;
-* stored calibration: load_offset 1500 counts, load_gain_n 1e-4 N/count (section 12).
+* stored calibration: load_offset 1500 counts, load_gain_n 1e-4 N/count (section 12) until
+  a STORE_CALIBRATION (1.3, section 5 "The stored calibration"), whose records live in a
+  dict standing for the non-volatile memory (it survives the Mcu's reset()).
 
 `Mcu` is the firmware logic without I/O (bytes in, frames out, one `tick` per period).
 `serve` runs it on a pseudo-terminal with a 1 ms tick loop, and `CleanroomRig` starts
@@ -50,8 +52,8 @@ from typing import Any
 
 # --- constants from the document ----------------------------------------------------
 
-PROTO_MAJOR, PROTO_MINOR = 1, 1
-FW_VERSION = 0x0101
+PROTO_MAJOR, PROTO_MINOR = 1, 3  # 1.3: the stored calibration (written from the 1.3 text)
+FW_VERSION = 0x0103
 TELEMETRY_HZ = 1000
 PERIOD_US = 1000
 PERIOD_S = PERIOD_US * 1e-6
@@ -71,11 +73,14 @@ ACK_REQ, RETRY = 0x01, 0x02
 # message types
 HELLO, HEARTBEAT, CONFIG, TRAJ_CHUNK, START, STOP = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
 ESTOP_CMD, CLEAR_FAULT, SET_POSITION, BYE = 0x07, 0x08, 0x09, 0x0A
+STORE_CAL, READ_CAL = 0x0B, 0x0C  # 1.3
 ACK, HELLO_REPLY, TELEMETRY, FAULT_MSG, STATE_MSG = 0x80, 0x81, 0x82, 0x83, 0x84
+CALIBRATION = 0x85  # 1.3
 
 # result codes
 OK, BAD_STATE, BAD_LENGTH, BAD_VALUE, NO_SPACE, SEQUENCE_GAP, OUT_OF_LIMITS = range(7)
 NO_SESSION, UNKNOWN_TYPE, VERSION_MISMATCH, FAULT_ACTIVE, EMPTY, STALE = range(7, 13)
+NVM_ERROR = 13  # 1.3
 
 # states
 BOOT, IDLE, RUNNING, STOPPING, FAULT, ESTOP = range(6)
@@ -104,11 +109,14 @@ HELLO_TAIL = struct.Struct("<BBHIIHHBHIIifii")
 TELEMETRY_FMT = struct.Struct("<IIIiiiIHHBB")
 FAULT_FMT = struct.Struct("<HIBii")
 STATE_FMT = struct.Struct("<BBBII")
+STORE_CAL_FMT = struct.Struct("<if")  # 1.3
+CAL_TAIL = struct.Struct("<Iif")  # 1.3: after the ACK fields
 
 #: minimum payload length of each host command (section 4)
 LAYOUT_LEN = {HELLO: 6, HEARTBEAT: 4, CONFIG: 42, TRAJ_CHUNK: 6, START: 0, STOP: 0,
-              ESTOP_CMD: 0, CLEAR_FAULT: 0, SET_POSITION: 8, BYE: 0}
-SESSION_ONLY = {CONFIG, TRAJ_CHUNK, START, CLEAR_FAULT, SET_POSITION, BYE}
+              ESTOP_CMD: 0, CLEAR_FAULT: 0, SET_POSITION: 8, BYE: 0, STORE_CAL: 8, READ_CAL: 0}
+SESSION_ONLY = {CONFIG, TRAJ_CHUNK, START, CLEAR_FAULT, SET_POSITION, BYE, STORE_CAL,
+                READ_CAL}
 
 
 # --- codec ----------------------------------------------------------------------------
@@ -220,7 +228,7 @@ class Mcu:
     physics: Callable[[float, float], tuple[float, float]]
     x_open: float
     noise_n: float = 0.2
-    future: bool = False  # act as a minor version 1.2 would (section 10, item 2)
+    future: bool = False  # act as the next minor version would (section 10, item 2)
     seed: int | None = None
     out: list[bytes] = field(default_factory=list)
     runs: list[Run] = field(default_factory=list)
@@ -235,7 +243,9 @@ class Mcu:
         self.session = False
         self.faults = 0
         self.cfg = Config()
-        self.load_offset, self.load_gain = STORED_LOAD_OFFSET, STORED_LOAD_GAIN
+        self.nvm: dict[str, Any] = {"seq": 0, "offset": STORED_LOAD_OFFSET,
+                                    "gain": STORED_LOAD_GAIN}  # non-volatile: 1.3
+        self.load_offset, self.load_gain = self.nvm["offset"], self.nvm["gain"]
         self.pos = 0.0  # table position in steps since power-on (float for the stop ramp)
         self.rate = 0.0  # steps per period of the present period
         self.steps_off = 0  # reported steps = round(pos) + steps_off
@@ -370,7 +380,8 @@ class Mcu:
                          self.steps, self.enc))
         if msg_type == HEARTBEAT:
             return
-        reply_type = HELLO_REPLY if msg_type == HELLO else ACK
+        reply_type = {HELLO: HELLO_REPLY, STORE_CAL: CALIBRATION,
+                      READ_CAL: CALIBRATION}.get(msg_type, ACK)
         if msg_type not in LAYOUT_LEN:
             self._reply(flags, ACK, self._ack(seq, UNKNOWN_TYPE), seq)
             return
@@ -401,10 +412,12 @@ class Mcu:
                 self._reply(flags, ACK, self._ack(seq, STALE), seq)
                 return
         if msg_type in SESSION_ONLY and not self.session:
-            result = NO_SESSION
+            result, reply_type = NO_SESSION, ACK
         else:
             result = getattr(self, f"_cmd_{msg_type:#04x}")(payload)
         reply = self._ack(seq, result)
+        if reply_type == CALIBRATION:
+            reply += CAL_TAIL.pack(self.nvm["seq"], self.nvm["offset"], self.nvm["gain"])
         self.last_seq, self.last_reply = seq, (reply_type, reply)
         self._reply(flags, reply_type, reply, seq)
 
@@ -427,6 +440,7 @@ class Mcu:
         else:
             result = OK
             self.session = True
+            self.load_offset, self.load_gain = self.nvm["offset"], self.nvm["gain"]
             if self.state == BOOT:
                 self._set_state(IDLE, R_COMMAND)
         minor = PROTO_MINOR + 1 if self.future else PROTO_MINOR
@@ -529,6 +543,19 @@ class Mcu:
         self.next_index = self.exec_index = 0
         self.final = self.discarded = False
         self.last_point = None
+        return OK
+
+    def _cmd_0x0b(self, payload: bytes) -> int:  # STORE_CALIBRATION (1.3)
+        offset, gain = STORE_CAL_FMT.unpack_from(payload)
+        if self.state != IDLE:
+            return BAD_STATE
+        if not (math.isfinite(gain) and gain > 0 and ADC_MIN < offset < ADC_MAX):
+            return BAD_VALUE
+        self.nvm = {"seq": self.nvm["seq"] + 1, "offset": offset, "gain": gain}
+        self.load_offset, self.load_gain = offset, gain  # in use at once
+        return OK
+
+    def _cmd_0x0c(self, payload: bytes) -> int:  # READ_CALIBRATION (1.3)
         return OK
 
     def _cmd_0x0a(self, payload: bytes) -> int:  # BYE

@@ -52,6 +52,11 @@ BASE: dict[tuple[str, ...], list[str]] = {
     ("rig", "status"): ["--port", "/nonexistent/tty"],
     ("rig", "clear"): ["--port", "/nonexistent/tty"],
     ("rig", "home"): ["--port", "/nonexistent/tty"],
+    ("rig", "jog"): ["--port", "/nonexistent/tty", "--to", "0.001"],
+    ("rig", "tare"): ["--port", "/nonexistent/tty"],
+    ("rig", "span"): ["--port", "/nonexistent/tty", "--force", "50"],
+    ("rig", "store"): ["--port", "/nonexistent/tty"],
+    ("rig", "check"): ["--port", "/nonexistent/tty"],
     ("rsm",): ["--paper-tables"],
 }
 #: No mistake in the line: a rig that does not answer (nothing listens on port 9), a run

@@ -54,7 +54,8 @@ def test_the_bash_script_completes_nested_kinds_options_and_paths(capsys,
     assert complete(path, "toggle", "plan", "--cycle") == ["--cycle", "--cycle-out"]
     assert "--force" in complete(path, "toggle", "plot", "kinematics", "--f")
     hil = script("hil", "bash", capsys, tmp_path)
-    assert complete(hil, "hil", "rig", "") == ["status", "clear", "home"]
+    assert complete(hil, "hil", "rig", "") == ["status", "clear", "home", "jog", "tare", "span",
+                                              "store", "check"]
     (tmp_path / "plan-a.csv").write_text("")  # a path option completes file names
     subprocess.run(["bash", "-c", f'cd "{tmp_path}"; source "$0"; COMP_WORDS=(hil run '
                     f'--profile plan-); COMP_CWORD=3; _shtab_hil; '

@@ -26,6 +26,7 @@ unicorn = pytest.importorskip("unicorn", reason="needs the unicorn package (pip 
 from hil.emulators.rehost.machine import UNITS_PER_S, UnsupportedAccessError  # noqa: E402
 from hil.emulators.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image  # noqa: E402
 from hil.emulators.rehost.pulses import TMC5160, full_rate_reversal  # noqa: E402
+from hil.emulators.rehost.stm32f446 import PowerCutError  # noqa: E402
 
 NO_CHECK = -(2**31)
 
@@ -594,3 +595,87 @@ def test_the_host_build_with_the_boards_step_timing_agrees_sample_by_sample(elf:
     loads = [t.load_raw for t in host]
     print(f"{len(host)} samples: enc equal in all, load_raw differs by at most {max(raw)} "
           f"LSB over {min(loads)}..{max(loads)}; table (TIM1 pulses) {board.plant.steps}")
+
+
+# --- 1.3: the calibration in flash (firmware/board/cal_flash.c) ---------------------------
+
+
+def _rebooted(board: NucleoBoard) -> Session:
+    """Power the board off and on (flash and the plant kept): a fresh session on it."""
+    board.flash.cut_after = None
+    board.machine.reset("power-on")
+    board.run(0.02)
+    session = Session(board)
+    session.hello()
+    return session
+
+
+def test_the_rehosted_image_answers_the_calibration_script_as_the_model(elf: Path) -> None:
+    """tests/calibration_script.py: the same answers as the model and the host build
+    (tests/test_mcu_conformance.py), its reboot a power cycle of the board."""
+    from calibration_script import EXPECTED, calibration_script
+
+    board, s = _board(elf)
+    s.hello()
+    sessions = [s]
+
+    def reboot() -> p.HelloReply:
+        board.flash.cut_after = None
+        board.machine.reset("power-on")
+        board.run(0.02)
+        sessions.append(Session(board))
+        return sessions[-1].hello()
+
+    answers = calibration_script(lambda msg: sessions[-1].command(msg), reboot)
+    assert answers == EXPECTED
+
+
+def _record(seq: int, offset: int, gain: float) -> bytes:
+    """A calibration record of cal_flash.c, as its 32-byte slot."""
+    import struct
+    import zlib
+
+    words = struct.pack("<Iif", seq, offset, gain)
+    return words + struct.pack("<II", zlib.crc32(words), 0x3250414C) + b"\xff" * 12
+
+
+def test_a_power_cut_at_any_flash_write_keeps_a_valid_calibration(elf: Path) -> None:
+    """The power fails before each of a record's five words in turn: after the reboot the
+    previous record is in force, and a new store works (it skips the torn slot)."""
+    board, s = _board(elf)
+    s.hello()
+    assert s.command(p.StoreCalibration(-20_000, 1.25e-4)).cal_seq == 1
+    for k in range(5):
+        board.flash.cut_after = board.flash.writes + k
+        with pytest.raises(PowerCutError):
+            s.command(p.StoreCalibration(1000 + k, 2e-4))
+        s = _rebooted(board)
+        back = s.command(p.ReadCalibration())
+        assert (back.cal_seq, back.load_offset) == (1, -20_000), (k, back)
+    stored = s.command(p.StoreCalibration(4242, 2e-4))
+    assert (stored.result, stored.cal_seq) == (p.Result.OK, 2)
+    assert _rebooted(board).hello().load_offset == 4242
+
+
+def test_a_full_sector_goes_on_in_the_other_and_a_cut_there_keeps_the_last(elf: Path) -> None:
+    """Sector 5 full of records (4096): the next store goes to sector 6, which the boot
+    erased; a power cut in that write keeps sector 5's newest, and the boot after erases the
+    torn sector 6 again; once sector 6 holds the newest, the next boot erases sector 5."""
+    from hil.emulators.rehost.stm32f446 import Flash
+
+    board, _ = _board(elf)
+    sector = Flash.SECTOR_SIZE
+    board.flash.memory[:sector] = b"".join(_record(i + 1, -i, 1e-4) for i in range(4096))
+    board.flash.memory[sector:sector + 32] = b"\x00" * 32  # junk in sector 6
+    s = _rebooted(board)
+    assert s.command(p.ReadCalibration()).cal_seq == 4096
+    assert board.flash.memory[sector:2 * sector] == b"\xff" * sector  # erased at boot
+    board.flash.cut_after = board.flash.writes + 3
+    with pytest.raises(PowerCutError):
+        s.command(p.StoreCalibration(9, 2e-4))
+    s = _rebooted(board)
+    assert (s.command(p.ReadCalibration()).cal_seq, s.hello().load_offset) == (4096, -4095)
+    assert s.command(p.StoreCalibration(9, 2e-4)).cal_seq == 4097
+    s = _rebooted(board)
+    assert s.hello().load_offset == 9
+    assert board.flash.memory[:sector] == b"\xff" * sector  # the older sector, erased

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from calibration_script import EXPECTED, calibration_script
 
 from hil.emulators.mcu_model import ModelMcu, RigHardware
 from hil.emulators.rig_physics import ClampPhysics
@@ -66,7 +67,7 @@ class Bench:
         """Feed bytes; the replies (ACK, HELLO_REPLY) and events they caused."""
         msgs = self._decode(self.mcu.receive(data, self.now))
         self.events += [m for m in msgs if isinstance(m, (p.FaultReport, p.StateChange))]
-        return [m for m in msgs if isinstance(m, (p.Ack, p.HelloReply))]
+        return [m for m in msgs if isinstance(m, (p.Ack, p.HelloReply, p.CalibrationReply))]
 
     def send(self, msg: p.Message, seq: int | None = None, flags: int = p.FLAG_ACK_REQ,
              extra: bytes = b"") -> list[p.Message]:
@@ -171,7 +172,7 @@ def test_payload_lengths_and_unknown_types(bench: Bench) -> None:
     assert bench.ack(p.SetPosition(0, 0), extra=b"\x01\x02").result == p.Result.OK
     short = p.Frame(p.MsgType.SET_POSITION, p.FLAG_ACK_REQ, 0x0400, b"\x00" * 7)
     assert bench.raw(p.encode_frame(short))[0].result == p.Result.BAD_LENGTH
-    for code in (0x0B, 0x7F, 0x80, 0x82, 0xFF):
+    for code in (0x0D, 0x7F, 0x80, 0x82, 0x85, 0xFF):
         frame = p.Frame(code, p.FLAG_ACK_REQ, 0x0500 + code, b"")
         (ack,) = bench.raw(p.encode_frame(frame))
         assert (ack.result, ack.acked_seq) == (p.Result.UNKNOWN_TYPE, 0x0500 + code)
@@ -502,3 +503,29 @@ def test_a_config_re_checks_the_buffered_points(kind: str) -> None:
 @pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")
 def test_the_config_re_check_is_the_same_on_both() -> None:
     assert config_after_upload("model") == config_after_upload("firmware")
+
+
+# --- 1.3: the stored calibration --------------------------------------------------------
+
+
+def stored_calibration_answers(kind: str) -> list[tuple[object, ...]]:
+    """tests/calibration_script.py on one MCU; its reboot is an MCU reset (the non-volatile
+    memory survives it: the model's, the host build's memory or file)."""
+    b = Bench(kind).session()
+
+    def reboot() -> p.HelloReply:
+        b.mcu.reset()
+        return b.send(p.Hello(1, 3, 44))[0]  # type: ignore[return-value]
+
+    return calibration_script(b.ack, reboot)
+
+
+def test_the_stored_calibration_commands(kind: str) -> None:
+    """STORE_CALIBRATION and READ_CALIBRATION (1.3): refusals, record numbers, the stored
+    calibration in use after a reset, refused without a session."""
+    assert stored_calibration_answers(kind) == EXPECTED
+
+
+@pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")
+def test_the_stored_calibration_is_the_same_on_both() -> None:
+    assert stored_calibration_answers("model") == stored_calibration_answers("firmware")

@@ -138,7 +138,7 @@ def test_host_works_with_a_later_minor_version(tmp_path: Path) -> None:
         assert _run(rig, tmp_path / "run") == 0
         _check_complete_run(rig, tmp_path / "run", n)
         meta = json.loads((tmp_path / "run" / "meta.json").read_text())
-        assert meta["plant"]["protocol"] == "1.2"
+        assert meta["plant"]["protocol"] == "1.4"
 
 
 def test_fault_left_by_a_dead_host_needs_rig_clear(rig: CleanroomRig, tmp_path: Path,
@@ -161,3 +161,23 @@ def test_fault_left_by_a_dead_host_needs_rig_clear(rig: CleanroomRig, tmp_path: 
     assert main(["rig", "clear", "--port", rig.port]) == 0
     stats = rig.stats()
     assert stats["faults"] == 0 and stats["state"] == "BOOT", stats
+
+
+def test_bringup_store_and_tare_against_the_cleanroom_rig(
+        rig: CleanroomRig, capsys: pytest.CaptureFixture[str]) -> None:
+    """Protocol 1.3 from the document alone: the host reads the stored calibration (none:
+    the default), tares, stores a calibration and reads it back in a new session."""
+    def run(*args: str) -> dict[str, object]:
+        capsys.readouterr()
+        assert main(["rig", *args, "--port", rig.port, "--json"]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    assert run("store") == {"cal_seq": 0, "offset": 1500, "gain": pytest.approx(1e-4)}
+    tare = run("tare", "--samples", "200")
+    # the rig's cell reads 1500 at zero force, 0.2 N (2000 counts) of noise, one sigma
+    assert abs(tare["offset"] - 1500) < 2000 and 0.1 < tare["noise"] < 0.3, tare
+    stored = run("store", "--offset", str(tare["offset"]), "--gain", "1.1e-4")
+    assert stored == {"cal_seq": 1, "offset": tare["offset"], "gain": pytest.approx(1.1e-4)}
+    assert run("store") == stored  # a new session reads the same record
+    stats = rig.stats()
+    assert stats["state"] == "BOOT" and not stats["faults"], stats

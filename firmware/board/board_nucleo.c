@@ -27,7 +27,8 @@
  *           presence, DRDY, CRC and STATUS checked (LOAD_ADC); overtravel (OVERTRAVEL) and
  *           the stop chain (STOP_CHAIN) read every tick; a late tick or a burst over 256
  *           steps is INTERNAL
- *   flash   sector 7 (0x08060000): the load-cell calibration record and a boot counter
+ *   flash   sectors 5 and 6: the load-cell calibration log, sector 7 the boot counter
+ *           (cal_flash.c)
  *   boot id the RNG mixed with the boot counter, never 0 nor the previous boot's
  */
 #include <stdbool.h>
@@ -35,6 +36,7 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "cal_flash.h"
 #include "rig_core.h"
 #include "rx_ring.h"
 #include "step_burst.h"
@@ -88,21 +90,10 @@ _Static_assert(STEP_TICKS_PER_PERIOD == STEP_BURST_PERIOD_TICKS &&
 #define PIN_CLKIN 9u   /* PC9  MCO2 AF0: 8 MHz to the ADC's CLKIN */
 #define PIN_B1 13u     /* PC13 the Nucleo's user button B1 (low when pressed) */
 
-/* flash sector 7 (0x08060000, 128 KiB): calibration record, then the boot counter log */
-#define CAL_SECTOR 7u
-#define CAL_MAGIC 0x314C4143u /* "CAL1" */
+/* the firmware's calibration while none is stored (cal_flash.c) */
 #define CAL_DEFAULT_OFFSET 1500
 #define CAL_DEFAULT_GAIN 1e-4f
 #define NOINIT_MAGIC 0xB007B007u
-
-extern uint32_t __calib_start[], __calib_size[];
-
-typedef struct {
-    uint32_t magic;
-    int32_t load_offset;
-    uint32_t gain_bits; /* f32 N per count */
-    uint32_t check;     /* cal_check() of the three words */
-} cal_record;
 
 /* FAULT values of the board's faults (docs/rig-protocol.md section 8) */
 #define INTERNAL_STEP_BURST 1 /* a burst over 256 steps or armed too late: not emitted */
@@ -614,7 +605,7 @@ static void watchdog_init(void) {
     IWDG->KR = IWDG_KEY_RELOAD;
 }
 
-/* ---- flash: calibration and boot counter ----------------------------------------------- */
+/* ---- boot id --------------------------------------------------------------------------- */
 
 static uint32_t mix32(uint32_t h) { /* a 32-bit avalanche (xor-shift-multiply) */
     h ^= h >> 16;
@@ -623,70 +614,6 @@ static uint32_t mix32(uint32_t h) { /* a 32-bit avalanche (xor-shift-multiply) *
     h *= 0x846CA68Bu;
     h ^= h >> 16;
     return h;
-}
-
-static uint32_t cal_check(const cal_record *r) {
-    return mix32(r->magic ^ mix32((uint32_t)r->load_offset ^ mix32(r->gain_bits)));
-}
-
-static rig_calibration load_calibration(const cal_record *r) {
-    rig_calibration cal = {CAL_DEFAULT_OFFSET, CAL_DEFAULT_GAIN};
-    if (r->magic == CAL_MAGIC && r->check == cal_check(r)) {
-        float gain;
-        memcpy(&gain, &r->gain_bits, sizeof gain);
-        if (gain > 0.0f && gain < 1.0f) {
-            cal.load_offset = r->load_offset;
-            cal.load_gain_n = gain;
-        }
-    }
-    return cal;
-}
-
-static bool flash_wait(void) {
-    /* a word programs in 16 us, the sector erases in up to 4 s (168 MHz: ~10^9 loops) */
-    for (uint32_t tries = 0; tries < 0x40000000u && (FLASH->SR & FLASH_SR_BSY); tries++) {
-    }
-    bool ok = (FLASH->SR & FLASH_SR_ERRORS) == 0u;
-    FLASH->SR = FLASH_SR_ERRORS;
-    return ok;
-}
-
-static bool flash_program(volatile uint32_t *addr, uint32_t value) {
-    FLASH->CR = FLASH_CR_PSIZE_X32 | FLASH_CR_PG;
-    *addr = value;
-    bool ok = flash_wait();
-    FLASH->CR = 0;
-    return ok && *addr == value;
-}
-
-/* The boot counter: after the 16-byte calibration record, one word per boot holding the
- * count; the sector is erased (and the record written back) when the log is full, about
- * every 32 000 boots. Runs before the watchdog starts (an erase stalls the CPU ~1 s). */
-static uint32_t count_boot(void) {
-    volatile uint32_t *sector = (volatile uint32_t *)(uintptr_t)__calib_start;
-    uint32_t words = (uint32_t)(uintptr_t)__calib_size / 4u;
-    uint32_t first = sizeof(cal_record) / 4u, slot = first, count = 0;
-    while (slot < words && sector[slot] != 0xFFFFFFFFu) count = sector[slot++];
-    count++;
-    FLASH->KEYR = FLASH_KEY1;
-    FLASH->KEYR = FLASH_KEY2;
-    FLASH->SR = FLASH_SR_ERRORS;
-    if (slot == words) {
-        cal_record keep;
-        memcpy(&keep, (const void *)(uintptr_t)__calib_start, sizeof keep);
-        FLASH->CR = FLASH_CR_PSIZE_X32 | FLASH_CR_SER | FLASH_CR_SNB(CAL_SECTOR);
-        FLASH->CR |= FLASH_CR_STRT;
-        (void)flash_wait();
-        FLASH->CR = 0;
-        if (keep.magic == CAL_MAGIC) {
-            const uint32_t *w = (const uint32_t *)&keep;
-            for (uint32_t i = 0; i < first; i++) (void)flash_program(&sector[i], w[i]);
-        }
-        slot = first;
-    }
-    (void)flash_program(&sector[slot], count);
-    FLASH->CR = FLASH_CR_LOCK;
-    return count;
 }
 
 /* 32 bits from the RNG (PLLQ's 45 MHz), 0 if it reports a seed or clock error. */
@@ -717,10 +644,10 @@ static uint32_t new_boot_id(uint32_t boots) {
 int main(void) {
     clock_init();
     pins_init();
-    uint32_t boots = count_boot();
+    uint32_t boots = cal_flash_count_boot();
     board_tick_stats.boots = boots;
-    rig_calibration stored =
-        load_calibration((const cal_record *)(uintptr_t)__calib_start);
+    rig_calibration defaults = {CAL_DEFAULT_OFFSET, CAL_DEFAULT_GAIN, 0u};
+    rig_calibration stored = cal_flash_boot(defaults);
     rig_boot(&mcu, new_boot_id(boots), stored);
     encoder_init();
     adc_init();

@@ -409,6 +409,27 @@ static void cmd_hello(rig_mcu *m, const rig_msg_hello *h, uint16_t seq, reply_bu
     r->len = (uint8_t)rig_wire_put_hello_reply(r->payload, &hr);
 }
 
+/* 1.3: STORE_CALIBRATION (IDLE; a finite gain > 0, an offset strictly inside the ADC's
+ * rails) writes record seq + 1 and puts it in use; NVM_ERROR keeps the previous one. */
+static uint8_t cmd_store_calibration(rig_mcu *m, const rig_msg_store_calibration *c) {
+    if (m->state != RIG_STATE_IDLE) return RIG_BAD_STATE;
+    if (!finite_f(c->load_gain_n) || !(c->load_gain_n > 0.0f) ||
+        c->load_offset <= (int32_t)RIG_ADC_MIN || c->load_offset >= (int32_t)RIG_ADC_MAX)
+        return RIG_BAD_VALUE;
+    rig_calibration cal = {c->load_offset, c->load_gain_n, m->stored.seq + 1u};
+    if (!hal_nvm_store(&cal)) return RIG_NVM_ERROR;
+    m->stored = cal;
+    restore_calibration(m);
+    return RIG_OK;
+}
+
+static void reply_calibration(const rig_mcu *m, reply_buf *r, uint16_t seq, uint8_t result) {
+    rig_msg_calibration c = {make_ack(m, seq, result), m->stored.seq, m->stored.load_offset,
+                             m->stored.load_gain_n};
+    r->type = RIG_MSG_CALIBRATION;
+    r->len = (uint8_t)rig_wire_put_calibration(r->payload, &c);
+}
+
 /* Rule 7 of TRAJ_CHUNK for one point under the limits c, after the point (or position)
  * *prev: OUT_OF_LIMITS outside [steps_min, steps_max], BAD_VALUE for a jump above
  * max_step_delta, else RIG_OK and *prev becomes the point. */
@@ -605,6 +626,15 @@ static void execute(rig_mcu *m, const rig_frame *f, reply_buf *r) {
     case RIG_MSG_BYE:
         result = cmd_bye(m);
         break;
+    case RIG_MSG_STORE_CALIBRATION: {
+        rig_msg_store_calibration c;
+        (void)rig_wire_get_store_calibration(p, len, &c);
+        reply_calibration(m, r, f->seq, cmd_store_calibration(m, &c));
+        return;
+    }
+    case RIG_MSG_READ_CALIBRATION:
+        reply_calibration(m, r, f->seq, RIG_OK);
+        return;
     default:
         result = RIG_UNKNOWN_TYPE; /* not reached: the caller checked the type */
         break;
@@ -626,6 +656,8 @@ static int min_payload(uint8_t type) {
     case RIG_MSG_CLEAR_FAULT:
     case RIG_MSG_BYE: return 0;
     case RIG_MSG_SET_POSITION: return (int)RIG_LEN_SET_POSITION;
+    case RIG_MSG_STORE_CALIBRATION: return (int)RIG_LEN_STORE_CALIBRATION;
+    case RIG_MSG_READ_CALIBRATION: return 0;
     default: return -1;
     }
 }

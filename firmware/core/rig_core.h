@@ -1,4 +1,4 @@
-/* The rig firmware's portable core: docs/rig-protocol.md (version 1.2) in C11, with no
+/* The rig firmware's portable core: docs/rig-protocol.md (version 1.3) in C11, with no
  * hardware access (that is rig_hal.h) and no heap: the whole MCU is one rig_mcu that the
  * board allocates statically.
  *
@@ -20,8 +20,8 @@
 #include "rig_hal.h"
 
 #define RIG_PROTO_MAJOR 1u
-#define RIG_PROTO_MINOR 2u
-#define RIG_FW_VERSION 0x0102u
+#define RIG_PROTO_MINOR 3u
+#define RIG_FW_VERSION 0x0103u
 #define RIG_TELEMETRY_HZ 1000u
 #define RIG_POINT_PERIOD_US 1000u
 #define RIG_MAX_CHUNK_POINTS 30u
@@ -35,12 +35,6 @@
 #define RIG_TX_FIFO_BYTES 4096u   /* power of two */
 #define RIG_NO_CHECK INT32_MIN    /* enc_expected: do not check the following error */
 #define RIG_MAX_REPLY 55u         /* HELLO_REPLY, the longest reply */
-
-/* The load-cell calibration stored in non-volatile memory (protocol section 3). */
-typedef struct {
-    int32_t load_offset; /* ADC counts at zero force */
-    float load_gain_n;   /* N per ADC count */
-} rig_calibration;
 
 /* The session's limits (CONFIG, protocol section 5). */
 typedef struct {
@@ -74,7 +68,8 @@ enum {
 enum {
     RIG_OK = 0, RIG_BAD_STATE = 1, RIG_BAD_LENGTH = 2, RIG_BAD_VALUE = 3, RIG_NO_SPACE = 4,
     RIG_SEQUENCE_GAP = 5, RIG_OUT_OF_LIMITS = 6, RIG_NO_SESSION = 7, RIG_UNKNOWN_TYPE = 8,
-    RIG_VERSION_MISMATCH = 9, RIG_FAULT_ACTIVE = 10, RIG_EMPTY = 11, RIG_STALE = 12
+    RIG_VERSION_MISMATCH = 9, RIG_FAULT_ACTIVE = 10, RIG_EMPTY = 11, RIG_STALE = 12,
+    RIG_NVM_ERROR = 13 /* 1.3: the calibration did not verify in non-volatile memory */
 };
 enum {
     RIG_F_FORCE_LIMIT = 0x0001, RIG_F_TRAVEL_LIMIT = 0x0002, RIG_F_FOLLOWING_ERROR = 0x0004,
@@ -99,8 +94,9 @@ enum {
     RIG_MSG_HELLO = 0x01, RIG_MSG_HEARTBEAT = 0x02, RIG_MSG_CONFIG = 0x03,
     RIG_MSG_TRAJ_CHUNK = 0x04, RIG_MSG_START = 0x05, RIG_MSG_STOP = 0x06,
     RIG_MSG_ESTOP = 0x07, RIG_MSG_CLEAR_FAULT = 0x08, RIG_MSG_SET_POSITION = 0x09,
-    RIG_MSG_BYE = 0x0A, RIG_MSG_ACK = 0x80, RIG_MSG_HELLO_REPLY = 0x81,
-    RIG_MSG_TELEMETRY = 0x82, RIG_MSG_FAULT = 0x83, RIG_MSG_STATE = 0x84
+    RIG_MSG_BYE = 0x0A, RIG_MSG_STORE_CALIBRATION = 0x0B, RIG_MSG_READ_CALIBRATION = 0x0C,
+    RIG_MSG_ACK = 0x80, RIG_MSG_HELLO_REPLY = 0x81, RIG_MSG_TELEMETRY = 0x82,
+    RIG_MSG_FAULT = 0x83, RIG_MSG_STATE = 0x84, RIG_MSG_CALIBRATION = 0x85
 };
 #define RIG_CHUNK_FINAL 0x01u
 

@@ -1,7 +1,8 @@
 /* The hardware interface of the rig firmware: what the portable core (rig_core.c) needs
  * from a board, and nothing more. Each board (firmware/board/, the STM32F4 Nucleo) and the
  * simulated rig (firmware/sim/, the clamp plant) implements these functions; the core
- * calls them only from rig_boot() and rig_tick(), never from rig_rx().
+ * calls them only from rig_boot() and rig_tick(), never from rig_rx(), but for
+ * hal_nvm_store().
  *
  * Units are the protocol's (docs/rig-protocol.md section 3): steps (0.2 um of table
  * travel), encoder counts (1 um of platen travel), raw load-cell ADC counts. Counts here
@@ -28,6 +29,13 @@ typedef struct {
     int32_t board_detail;
 } rig_inputs;
 
+/* The load-cell calibration stored in non-volatile memory (protocol section 3). */
+typedef struct {
+    int32_t load_offset; /* ADC counts at zero force */
+    float load_gain_n;   /* N per ADC count */
+    uint32_t seq;        /* 1.3: record number, +1 per STORE_CALIBRATION; 0 = defaults */
+} rig_calibration;
+
 /* Emit |delta| step pulses (direction by sign) spread evenly over the coming period;
  * 0 holds the position. Called once per tick while the table moves. */
 void hal_step(int32_t delta);
@@ -42,6 +50,13 @@ void hal_driver_enable(bool on);
 
 /* Latch every input of the period. */
 void hal_read(rig_inputs *in);
+
+/* 1.3: write the calibration (its seq already the new record's) to non-volatile memory and
+ * read it back; true when it verified. The previous record must stay readable until the
+ * new one verifies (a power cut mid-write keeps it). The one HAL call from rig_rx(): for
+ * STORE_CALIBRATION in IDLE, while the table holds still; it must take well under a
+ * period (program a few words; erase only at boot). */
+bool hal_nvm_store(const rig_calibration *cal);
 
 /* Kick the independent hardware watchdog (once per tick, from the main loop's tick). */
 void hal_watchdog_kick(void);

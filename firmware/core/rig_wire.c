@@ -254,3 +254,36 @@ bool rig_wire_get_state(const uint8_t *p, size_t len, rig_msg_state *out) {
     out->sample = rig_get_u32(p + 7);
     return true;
 }
+
+/* ---- 1.3: the stored calibration ---- */
+
+bool rig_wire_get_store_calibration(const uint8_t *p, size_t len,
+                                    rig_msg_store_calibration *out) {
+    if (len < RIG_LEN_STORE_CALIBRATION) return false;
+    out->load_offset = rig_get_i32(p);
+    out->load_gain_n = rig_get_f32(p + 4);
+    return true;
+}
+
+size_t rig_wire_put_store_calibration(uint8_t *p, const rig_msg_store_calibration *m) {
+    rig_put_i32(p, m->load_offset);
+    rig_put_f32(p + 4, m->load_gain_n);
+    return RIG_LEN_STORE_CALIBRATION;
+}
+
+size_t rig_wire_put_calibration(uint8_t *p, const rig_msg_calibration *m) {
+    rig_wire_put_ack(p, &m->ack);
+    rig_put_u32(p + 12, m->cal_seq);
+    rig_put_i32(p + 16, m->load_offset);
+    rig_put_f32(p + 20, m->load_gain_n);
+    return RIG_LEN_CALIBRATION;
+}
+
+bool rig_wire_get_calibration(const uint8_t *p, size_t len, rig_msg_calibration *out) {
+    if (len < RIG_LEN_CALIBRATION) return false;
+    rig_wire_get_ack(p, len, &out->ack);
+    out->cal_seq = rig_get_u32(p + 12);
+    out->load_offset = rig_get_i32(p + 16);
+    out->load_gain_n = rig_get_f32(p + 20);
+    return true;
+}

@@ -20,6 +20,8 @@
 #define RIG_LEN_CHUNK_HEAD 6u
 #define RIG_LEN_POINT 8u
 #define RIG_LEN_SET_POSITION 8u
+#define RIG_LEN_STORE_CALIBRATION 8u /* 1.3 */
+#define RIG_LEN_CALIBRATION 24u      /* 1.3: the reply */
 #define RIG_LEN_ACK 12u
 #define RIG_LEN_HELLO_REPLY 55u
 #define RIG_LEN_TELEMETRY 34u
@@ -66,6 +68,16 @@ bool rig_wire_get_chunk_head(const uint8_t *p, size_t len, rig_msg_chunk_head *o
 void rig_wire_get_point(const uint8_t *payload, unsigned k, int32_t *steps, int32_t *enc);
 bool rig_wire_get_set_position(const uint8_t *p, size_t len, rig_msg_set_position *out);
 
+/* 1.3: STORE_CALIBRATION's payload (load_offset i32, load_gain_n f32) */
+typedef struct {
+    int32_t load_offset;
+    float load_gain_n;
+} rig_msg_store_calibration;
+
+bool rig_wire_get_store_calibration(const uint8_t *p, size_t len,
+                                    rig_msg_store_calibration *out);
+size_t rig_wire_put_store_calibration(uint8_t *p, const rig_msg_store_calibration *m);
+
 /* writers used by tests and the fuzzer to build host frames */
 size_t rig_wire_put_hello(uint8_t *p, const rig_msg_hello *m);
 size_t rig_wire_put_config(uint8_t *p, const rig_msg_config *m);
@@ -111,6 +123,17 @@ typedef struct {
     uint8_t old_state, new_state, reason;
     uint32_t exec_index, sample;
 } rig_msg_state;
+
+/* 1.3: CALIBRATION, the answer to STORE_CALIBRATION and READ_CALIBRATION */
+typedef struct {
+    rig_msg_ack ack;
+    uint32_t cal_seq;
+    int32_t load_offset;
+    float load_gain_n;
+} rig_msg_calibration;
+
+size_t rig_wire_put_calibration(uint8_t *p, const rig_msg_calibration *m);
+bool rig_wire_get_calibration(const uint8_t *p, size_t len, rig_msg_calibration *out);
 
 size_t rig_wire_put_ack(uint8_t *p, const rig_msg_ack *m);
 size_t rig_wire_put_hello_reply(uint8_t *p, const rig_msg_hello_reply *m);

@@ -12,6 +12,8 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
+#include <string.h>
 #include <sys/random.h>
 #include <unistd.h>
 
@@ -23,6 +25,11 @@
 static rig_mcu mcu;
 static rig_calibration stored;
 static bool opened, have_boot_time;
+/* the MCU's non-volatile memory: a file (survives the process), or this memory only when
+ * no path was given (survives rigfw_reset, an MCU reset) */
+static char nvm_path[512];
+static bool nvm_defaults_set;
+static rig_calibration nvm_defaults;
 static double boot_s;
 
 /* 32 bits from the OS's entropy: getrandom(), else /dev/urandom, else a mix of what is
@@ -54,7 +61,70 @@ static uint32_t new_boot_id(uint32_t previous) {
     return id;
 }
 
+/* ---- non-volatile memory: one 20-byte record, replaced atomically (write, fsync, rename) */
+
+#define NVM_MAGIC 0x314C4143u /* "CAL1" */
+
+static uint32_t nvm_check(const uint32_t w[4]) { /* FNV-1a over the record's 16 bytes */
+    uint32_t h = 2166136261u;
+    for (int i = 0; i < 4; i++)
+        for (int b = 0; b < 4; b++) h = (h ^ ((w[i] >> (8 * b)) & 0xFFu)) * 16777619u;
+    return h;
+}
+
+static void nvm_words(const rig_calibration *cal, uint32_t w[5]) {
+    w[0] = NVM_MAGIC;
+    w[1] = cal->seq;
+    w[2] = (uint32_t)cal->load_offset;
+    memcpy(&w[3], &cal->load_gain_n, sizeof w[3]);
+    w[4] = nvm_check(w);
+}
+
+/* The record in the file, or false when there is none or it does not verify. */
+static bool nvm_load(rig_calibration *cal) {
+    uint32_t w[5];
+    FILE *f = fopen(nvm_path, "rb");
+    if (!f) return false;
+    size_t got = fread(w, sizeof w[0], 5, f);
+    fclose(f);
+    if (got != 5 || w[0] != NVM_MAGIC || w[4] != nvm_check(w)) return false;
+    cal->seq = w[1];
+    cal->load_offset = (int32_t)w[2];
+    memcpy(&cal->load_gain_n, &w[3], sizeof cal->load_gain_n);
+    return true;
+}
+
+bool hal_nvm_store(const rig_calibration *cal) {
+    if (nvm_path[0] == '\0') return true; /* memory only: rig_mcu keeps it, boot() reuses it */
+    char tmp[sizeof nvm_path + 8];
+    snprintf(tmp, sizeof tmp, "%s.new", nvm_path);
+    uint32_t w[5];
+    nvm_words(cal, w);
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) return false;
+    bool ok = write(fd, w, sizeof w) == (ssize_t)sizeof w && fsync(fd) == 0;
+    ok = close(fd) == 0 && ok;
+    ok = ok && rename(tmp, nvm_path) == 0;
+    rig_calibration back;
+    return ok && nvm_load(&back) && back.seq == cal->seq;
+}
+
+/* Where the MCU's non-volatile memory lives ("" or NULL: memory only) and the firmware's
+ * default calibration (used while nothing is stored); call before rigfw_open. */
+EXPORT void rigfw_set_nvm(const char *path, int32_t default_offset, double default_gain) {
+    nvm_path[0] = '\0';
+    if (path) snprintf(nvm_path, sizeof nvm_path, "%s", path);
+    nvm_defaults.load_offset = default_offset;
+    nvm_defaults.load_gain_n = (float)default_gain;
+    nvm_defaults.seq = 0;
+    nvm_defaults_set = true;
+}
+
+/* The stored calibration cal_seq (0: the defaults), for tests. */
+EXPORT uint32_t rigfw_stored_seq(void) { return mcu.stored.seq; }
+
 static void boot(void) {
+    if (mcu.stored.seq != 0) stored = mcu.stored; /* a store of this power-on survives */
     rig_boot(&mcu, new_boot_id(mcu.boot_id), stored);
     have_boot_time = false; /* the next tick is the boot's time, t_us = 0 */
 }
@@ -65,9 +135,16 @@ EXPORT int rigfw_open(const sim_rig_hw *hw, const char *const *names, const doub
                       int n, char *err, size_t err_len) {
     opened = false;
     if (sim_rig_init(hw, names, values, n, err, err_len) != 0) return -1;
-    stored.load_offset = hw->load_offset;
-    stored.load_gain_n = (float)hw->load_gain_n;
+    if (nvm_defaults_set) {
+        stored = nvm_defaults;
+    } else {
+        stored.load_offset = hw->load_offset;
+        stored.load_gain_n = (float)hw->load_gain_n;
+        stored.seq = 0;
+    }
+    if (nvm_path[0] != '\0') (void)nvm_load(&stored);
     mcu.boot_id = 0;
+    mcu.stored.seq = 0;
     boot();
     opened = true;
     return 0;

@@ -53,6 +53,7 @@ static struct {
     double platen_zero, spike_n;
     uint32_t spike_samples;
     int32_t last_enc, last_raw;
+    uint64_t drop_acc; /* lost pulses: hil.emulators.mcu_model.Sensors._lose_steps */
     /* noise: xoshiro256** and Box-Muller with the second deviate kept */
     uint64_t rng[4];
     bool have_spare;
@@ -335,8 +336,19 @@ void sim_rig_tick(void) {
     sim.burst_armed = 0;
 }
 
+/* The pulses of a step command the table takes: drop_n of every drop_d are lost. */
+static int32_t taken(int32_t delta) {
+    if (sim.hw.drop_d == 0u || sim.hw.drop_n == 0u) return delta;
+    uint32_t size = delta < 0 ? (uint32_t)0 - (uint32_t)delta : (uint32_t)delta;
+    sim.drop_acc += (uint64_t)size * sim.hw.drop_n;
+    int32_t lost = (int32_t)(sim.drop_acc / sim.hw.drop_d);
+    sim.drop_acc %= sim.hw.drop_d;
+    return delta < 0 ? delta + lost : delta - lost;
+}
+
 void hal_step(int32_t delta) {
     sim.hw_steps += delta;
+    delta = taken(delta);
     if (sim.hw.step_timing == SIM_RIG_STEPS_NUCLEO) {
         sim.burst_armed += delta; /* one hal_step per tick: the burst of this period */
     } else {
@@ -388,7 +400,8 @@ void hal_read(rig_inputs *in) {
         force += sim.spike_n;
         sim.spike_samples--;
     }
-    int32_t enc = round_clamped((sim.platen - sim.platen_zero) / SIM_RIG_ENC_M,
+    double sign = sim.hw.enc_sign < 0 ? -1.0 : 1.0;
+    int32_t enc = round_clamped(sign * nearbyint((sim.platen - sim.platen_zero) / SIM_RIG_ENC_M),
                                 (double)INT32_MIN, (double)INT32_MAX);
     double noisy = force + gauss() * sim.hw.load_noise_n;
     int32_t raw = round_clamped((double)sim.hw.load_offset + noisy / sim.hw.load_gain_n,

@@ -31,6 +31,10 @@ typedef struct {
     uint64_t noise_seed; /* seed of the noise generator: the same seed, the same noise */
     int32_t load_offset; /* ADC counts at zero force */
     int32_t step_timing; /* SIM_RIG_STEPS_AT_ONCE or SIM_RIG_STEPS_NUCLEO (below) */
+    /* bring-up faults (hil.emulators.mcu_model.RigHardware): -1 the encoder counts against the steps
+     * (0 or 1: with them); the drive loses drop_n of every drop_d step pulses (0: none) */
+    int32_t enc_sign;
+    uint32_t drop_n, drop_d;
 } sim_rig_hw;
 
 /* When the table takes a period's steps (sim_rig_hw.step_timing):

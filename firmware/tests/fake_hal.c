@@ -50,3 +50,10 @@ void hal_read(rig_inputs *in) {
 }
 
 void hal_watchdog_kick(void) { fake.kicks++; }
+
+bool hal_nvm_store(const rig_calibration *cal) {
+    fake.nvm_writes++;
+    if (fake.nvm_fail) return false;
+    fake.nvm = *cal;
+    return true;
+}

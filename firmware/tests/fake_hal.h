@@ -9,6 +9,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "rig_core.h"
 #include "rig_hal.h"
 
 typedef struct {
@@ -22,6 +23,10 @@ typedef struct {
     uint32_t order_errors; /* hal_read without a hal_step since the last read, or two steps */
     int32_t last_delta;
     bool stepped;
+    /* non-volatile memory (1.3): the last record written; nvm_fail makes writes fail */
+    bool nvm_fail;
+    uint32_t nvm_writes;
+    rig_calibration nvm;
 } fake_hal_state;
 
 extern fake_hal_state fake;

@@ -71,6 +71,7 @@ static size_t layout_len(uint8_t type) {
     case RIG_MSG_TELEMETRY: return RIG_LEN_TELEMETRY;
     case RIG_MSG_FAULT: return RIG_LEN_FAULT;
     case RIG_MSG_STATE: return RIG_LEN_STATE;
+    case RIG_MSG_CALIBRATION: return RIG_LEN_CALIBRATION;
     default: return 0;
     }
 }
@@ -86,13 +87,23 @@ static void check_mcu_frame(const rig_frame *f) {
     const uint8_t *p = rig_frame_payload(f);
     switch (f->type) {
     case RIG_MSG_ACK:
-    case RIG_MSG_HELLO_REPLY: {
+    case RIG_MSG_HELLO_REPLY:
+    case RIG_MSG_CALIBRATION: {
         rig_msg_ack a;
         rig_wire_get_ack(p, f->payload_len, &a);
-        if (a.result > RIG_STALE) FAIL("ACK result %u", a.result);
+        if (a.result > RIG_NVM_ERROR) FAIL("ACK result %u", a.result);
+        if (f->type == RIG_MSG_CALIBRATION) {
+            rig_msg_calibration c;
+            rig_wire_get_calibration(p, f->payload_len, &c);
+            if (c.cal_seq != M.stored.seq || c.load_offset != M.stored.load_offset)
+                FAIL("CALIBRATION seq %u offset %d, stored %u %d", c.cal_seq, c.load_offset,
+                     M.stored.seq, M.stored.load_offset);
+            if (c.cal_seq != 0 && (c.cal_seq != fake.nvm.seq || !(c.load_gain_n > 0.0f)))
+                FAIL("CALIBRATION seq %u not the NVM's %u", c.cal_seq, fake.nvm.seq);
+        }
         if (a.state > RIG_STATE_ESTOP) FAIL("ACK state %u", a.state);
         if (a.buf_level + a.buf_free != RIG_BUFFER_CAPACITY) FAIL("ACK buffer sum");
-        if (a.result <= RIG_STALE) results_seen |= 1u << a.result;
+        if (a.result <= RIG_NVM_ERROR) results_seen |= 1u << a.result;
         replies_seen++;
         break;
     }
@@ -213,7 +224,7 @@ static void do_boot(void) {
     fake_hal_reset();
     fake.enc_div = 5; /* 1 um of platen per 5 steps of table, roughly the linkage */
     boot_id = rnd() | 1u;
-    rig_calibration cal = {(int32_t)(below(4000)), 1e-4f};
+    rig_calibration cal = {(int32_t)(below(4000)), 1e-4f, 0u};
     rig_boot(&M, boot_id, cal);
     frames_seen = 0;
     have_sample = 0;
@@ -314,6 +325,14 @@ static size_t make_payload(uint8_t type, uint8_t *p) {
         rig_put_i32(p, rand_i32_near(0, chance(90) ? 1000 : 0x7FFFFFFF));
         rig_put_i32(p + 4, rand_i32_near(0, 1000));
         return 8;
+    case RIG_MSG_STORE_CALIBRATION: { /* 1.3: plausible, at the ADC's rails, or any bits */
+        static const int32_t edges[] = {-8388608, -8388607, 8388606, 8388607, INT32_MIN};
+        rig_msg_store_calibration c = {
+            chance(80) ? rand_i32_near(1500, 100000) : edges[below(5)],
+            chance(70) ? 1e-4f * (float)(below(200) + 1) / 100.0f : f32_of(rand_f32_bits())};
+        fake.nvm_fail = chance(10); /* a write that does not verify */
+        return rig_wire_put_store_calibration(p, &c);
+    }
     default:
         return 0; /* START, STOP, ESTOP, CLEAR_FAULT, BYE, unknown types */
     }
@@ -342,7 +361,8 @@ static uint8_t pick_type(void) {
         RIG_MSG_HELLO, RIG_MSG_HELLO, RIG_MSG_HEARTBEAT, RIG_MSG_HEARTBEAT, RIG_MSG_CONFIG,
         RIG_MSG_CONFIG, RIG_MSG_TRAJ_CHUNK, RIG_MSG_TRAJ_CHUNK, RIG_MSG_TRAJ_CHUNK,
         RIG_MSG_TRAJ_CHUNK, RIG_MSG_TRAJ_CHUNK, RIG_MSG_START, RIG_MSG_START, RIG_MSG_STOP,
-        RIG_MSG_CLEAR_FAULT, RIG_MSG_CLEAR_FAULT, RIG_MSG_SET_POSITION, RIG_MSG_BYE};
+        RIG_MSG_CLEAR_FAULT, RIG_MSG_CLEAR_FAULT, RIG_MSG_SET_POSITION, RIG_MSG_BYE,
+        RIG_MSG_STORE_CALIBRATION, RIG_MSG_READ_CALIBRATION};
     if (chance(1)) return RIG_MSG_ESTOP;
     if (chance(2)) return (uint8_t)rnd(); /* anything, MCU types and unknown ones included */
     return weighted[below(sizeof weighted)];

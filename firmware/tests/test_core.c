@@ -49,7 +49,7 @@ static msg out[1024];
 static size_t nout;
 static uint32_t t_now;
 static uint16_t host_seq;
-static const rig_calibration CAL = {1500, 1e-4f};
+static const rig_calibration CAL = {1500, 1e-4f, 0u};
 
 static void boot(void) {
     fake_hal_reset();
@@ -117,7 +117,8 @@ static int cmd(uint8_t type, const uint8_t *p, size_t n) {
     send_raw(type, RIG_FLAG_ACK_REQ, ++host_seq, p, n);
     drain();
     for (size_t i = 0; i < nout; i++) {
-        if (out[i].type == RIG_MSG_ACK || out[i].type == RIG_MSG_HELLO_REPLY) {
+        if (out[i].type == RIG_MSG_ACK || out[i].type == RIG_MSG_HELLO_REPLY ||
+            out[i].type == RIG_MSG_CALIBRATION) {
             return out[i].payload[2];
         }
     }
@@ -421,7 +422,8 @@ static void test_unknown_and_short(void) {
     uint8_t p[8] = {0};
     CHECK_EQ(cmd(0x80, NULL, 0), RIG_UNKNOWN_TYPE); /* an MCU type from the host */
     CHECK_EQ(cmd(0x84, p, 8), RIG_UNKNOWN_TYPE);
-    CHECK_EQ(cmd(0x0B, NULL, 0), RIG_UNKNOWN_TYPE);
+    CHECK_EQ(cmd(0x0D, NULL, 0), RIG_UNKNOWN_TYPE);
+    CHECK_EQ(cmd(RIG_MSG_STORE_CALIBRATION, p, 7), RIG_BAD_LENGTH);
     CHECK_EQ(cmd(0x00, NULL, 0), RIG_UNKNOWN_TYPE);
     CHECK_EQ(cmd(RIG_MSG_SET_POSITION, p, 7), RIG_BAD_LENGTH);
     CHECK_EQ(cmd(RIG_MSG_CONFIG, p, 8), RIG_BAD_LENGTH);
@@ -1125,6 +1127,82 @@ static void test_set_position_and_bye(void) {
     CHECK_EQ(M.state, RIG_STATE_IDLE);
 }
 
+/* The CALIBRATION reply among the drained frames. */
+static rig_msg_calibration calibration_reply(void) {
+    rig_msg_calibration c;
+    memset(&c, 0, sizeof c);
+    size_t found = 0;
+    for (size_t i = 0; i < nout; i++) {
+        if (out[i].type == RIG_MSG_CALIBRATION) {
+            CHECK(rig_wire_get_calibration(out[i].payload, out[i].len, &c));
+            found++;
+        }
+    }
+    CHECK_EQ(found, 1);
+    return c;
+}
+
+static float f32_inf(void) {
+    uint32_t bits = 0x7F800000u;
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
+static int store_cal(int32_t offset, float gain) {
+    uint8_t p[RIG_LEN_STORE_CALIBRATION];
+    rig_msg_store_calibration s = {offset, gain};
+    rig_wire_put_store_calibration(p, &s);
+    return cmd(RIG_MSG_STORE_CALIBRATION, p, sizeof p);
+}
+
+/* 1.3: STORE_CALIBRATION writes record seq + 1 through hal_nvm_store and puts it in use;
+ * refusals (state, values, a write that does not verify) keep the previous record. */
+static void test_store_and_read_calibration(void) {
+    CHECK_EQ(store_cal(100, 1e-4f), RIG_NO_SESSION); /* BOOT: no session */
+    session();
+    CHECK_EQ(simple(RIG_MSG_READ_CALIBRATION), RIG_OK);
+    rig_msg_calibration c = calibration_reply();
+    CHECK_EQ(c.cal_seq, 0);
+    CHECK_EQ(c.load_offset, 1500);
+    CHECK_EQ(store_cal(-20000, 1.25e-4f), RIG_OK);
+    c = calibration_reply();
+    CHECK_EQ(c.cal_seq, 1);
+    CHECK_EQ(c.load_offset, -20000);
+    CHECK(c.load_gain_n == 1.25e-4f);
+    CHECK_EQ(fake.nvm_writes, 1);
+    CHECK_EQ(fake.nvm.seq, 1);
+    CHECK_EQ(M.cfg.load_offset, -20000); /* in use at once */
+    CHECK_EQ(store_cal(0, 0.0f), RIG_BAD_VALUE);
+    CHECK_EQ(store_cal(0, -1e-4f), RIG_BAD_VALUE);
+    CHECK_EQ(store_cal((int32_t)RIG_ADC_MAX, 1e-4f), RIG_BAD_VALUE);
+    CHECK_EQ(store_cal(0, f32_inf()), RIG_BAD_VALUE);
+    fake.nvm_fail = true;
+    CHECK_EQ(store_cal(7, 1e-4f), RIG_NVM_ERROR);
+    c = calibration_reply();
+    CHECK_EQ(c.cal_seq, 1); /* the previous record stays */
+    CHECK_EQ(M.cfg.load_offset, -20000);
+    fake.nvm_fail = false;
+    CHECK_EQ(fake.nvm_writes, 2); /* the refused values never reached the NVM */
+    /* a retransmission is answered again, not written again */
+    uint8_t p[RIG_LEN_STORE_CALIBRATION];
+    rig_msg_store_calibration s = {42, 2e-4f};
+    rig_wire_put_store_calibration(p, &s);
+    send_raw(RIG_MSG_STORE_CALIBRATION, RIG_FLAG_ACK_REQ, ++host_seq, p, sizeof p);
+    drain();
+    send_raw(RIG_MSG_STORE_CALIBRATION, RIG_FLAG_ACK_REQ | RIG_FLAG_RETRY, host_seq, p,
+             sizeof p);
+    drain();
+    CHECK_EQ(calibration_reply().cal_seq, 2);
+    CHECK_EQ(fake.nvm_writes, 3);
+    /* not while running */
+    int32_t steps[2] = {10, 20};
+    CHECK_EQ(chunk(0, RIG_CHUNK_FINAL, steps, 2), RIG_OK);
+    CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+    CHECK_EQ(store_cal(5, 1e-4f), RIG_BAD_STATE);
+    CHECK_EQ(simple(RIG_MSG_READ_CALIBRATION), RIG_OK); /* reading is allowed */
+}
+
 /* ---- main ---------------------------------------------------------------------------------- */
 
 typedef struct {
@@ -1160,6 +1238,7 @@ static const test_case tests[] = {
     T(test_config_rechecks_buffered_points),
     T(test_telemetry_only_in_a_session_and_tx_fifo),
     T(test_set_position_and_bye),
+    T(test_store_and_read_calibration),
 };
 
 int main(void) {

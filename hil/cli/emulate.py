@@ -10,9 +10,11 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
+from hil.cli import rig as cli_rig
 from hil.cli.interrupts import Interrupted, SignalGuard
 from hil.host.backends import RigSetup
 from hil.host.run_settings import check_mold
+from toggle.files import atomic_path
 from toggle.params import ParameterError
 
 
@@ -32,13 +34,18 @@ def emulate(args: argparse.Namespace) -> int:
                        disconnect_at=args.disconnect_at, seed=args.seed,
                        reconnect_after=None if args.disconnect_at is None else 0.5)
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
-    hardware = RigHardware(x_origin=setup.stroke[0])
+    hardware = RigHardware(x_origin=setup.stroke[0], **cli_rig.bringup_hardware(args))
+    if args.nvm is not None and (not args.firmware or args.qemu):
+        raise ParameterError("--nvm is the memory of the host build (--firmware) or of the "
+                             "rehosted board (--firmware --board nucleo); the Python model "
+                             "keeps its calibration in memory, QEMU's board in RAM")
     if args.board == "nucleo":
         return _emulate_nucleo(args, setup, hardware)
     if args.qemu:
         return _emulate_qemu(args, setup, hardware)
     # an MCU's timer interrupt is hard real time: SCHED_FIFO when the OS permits it
-    emulator = RigEmulator(physics, hardware, faults, realtime=True, firmware=args.firmware)
+    emulator = RigEmulator(physics, hardware, faults, realtime=True, firmware=args.firmware,
+                           nvm=args.nvm)
     print(emulator.open(), flush=True)
     emulator.on_port = lambda port: print(port, flush=True)  # after a re-plugged disconnect
     guard = SignalGuard()
@@ -89,6 +96,9 @@ def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) ->
     elf = build_nucleo_image()
     physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
     board = NucleoBoard(elf, physics, hardware, seed=args.seed)
+    if args.nvm is not None and args.nvm.exists():  # the board's flash sectors 5-7
+        board.flash.memory[:] = args.nvm.read_bytes()[:len(board.flash.memory)]
+        board.machine.reset("power-on")
     guard = SignalGuard()
     rig = NucleoRig(board)
     try:
@@ -101,6 +111,9 @@ def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) ->
         stopped = None
     finally:
         rig.close()
+        if args.nvm is not None:
+            with atomic_path(args.nvm) as tmp:
+                tmp.write_bytes(bytes(board.flash.memory))
         print(f"hil emulate: emulated/wall time {rig.time_ratio:.3f}; {rig.summary()}",
               file=sys.stderr)
     if stopped is not None:

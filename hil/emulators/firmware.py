@@ -47,7 +47,7 @@ PLANT_VERSION_SCRIPT = "{ global: sim_rig_*; hal_*; local: *; };\n"
 #: The firmware's compile-time constants (rig_core.h) that a RigHardware must match.
 CORE_CONSTANTS = {"telemetry_hz": 1000, "buffer_capacity": 2048, "step_nm": 200,
                   "enc_nm": 1000, "adc_min": -8_388_608, "adc_max": 8_388_607,
-                  "fw_version": 0x0102}
+                  "fw_version": 0x0103}
 TX_CHUNK = 4096  # RIG_TX_FIFO_BYTES: one call empties the FIFO
 
 
@@ -191,7 +191,9 @@ class SimRigHw(ctypes.Structure):
     _fields_ = [("x_origin", ctypes.c_double), ("home_x", ctypes.c_double),
                 ("load_gain_n", ctypes.c_double), ("load_noise_n", ctypes.c_double),
                 ("period_s", ctypes.c_double), ("noise_seed", ctypes.c_uint64),
-                ("load_offset", ctypes.c_int32), ("step_timing", ctypes.c_int32)]
+                ("load_offset", ctypes.c_int32), ("step_timing", ctypes.c_int32),
+                ("enc_sign", ctypes.c_int32), ("drop_n", ctypes.c_uint32),
+                ("drop_d", ctypes.c_uint32)]
 
 
 class SimRigStatus(ctypes.Structure):
@@ -255,13 +257,15 @@ class FirmwareMcu:
     def __init__(self, physics: ClampPhysics, hw: RigHardware, seed: int,
                  library: Path | None = None,
                  parameters: Mapping[str, float] | None = None,
-                 step_timing: str = "at-once") -> None:
+                 step_timing: str = "at-once", nvm_path: Path | None = None) -> None:
         """``library``: a built librigfw.so (default: :func:`build_host_firmware` of the
         physics' preset); ``parameters``: FMU start values beyond or replacing those of
         ``physics``; ``step_timing``: when the table takes a period's steps (one of
         :data:`STEP_TIMINGS`, firmware/sim/sim_rig.h: "at-once" as hil.emulators.mcu_model, "nucleo"
-        as the NUCLEO board's TIM1 emits them). ValueError naming a parameter the FMU
-        refuses or an unknown step timing."""
+        as the NUCLEO board's TIM1 emits them); ``nvm_path``: the file that is the MCU's
+        non-volatile memory (its stored calibration survives this object; default: memory
+        only, which survives :meth:`reset`). ValueError naming a parameter the FMU refuses
+        or an unknown step timing."""
         check_hardware(hw, physics.period)
         if step_timing not in STEP_TIMINGS:
             raise ValueError(f"step_timing {step_timing!r}: expected one of "
@@ -272,11 +276,15 @@ class FirmwareMcu:
         self._lib = self._load_private(built)
         self._declare()
         self.parameters = {**fmu_start_values(physics, hw.x_origin), **(parameters or {})}
+        cell_offset, cell_gain = hw.cell  # the rig's true cell; hw.load_*: the defaults
         self._hw = SimRigHw(
             x_origin=hw.x_origin, home_x=hw.x_origin if hw.home_x is None else hw.home_x,
-            load_gain_n=hw.load_gain_n, load_noise_n=hw.load_noise_n, period_s=physics.period,
-            noise_seed=seed & 0xFFFF_FFFF_FFFF_FFFF, load_offset=hw.load_offset,
-            step_timing=STEP_TIMINGS[step_timing])
+            load_gain_n=cell_gain, load_noise_n=hw.load_noise_n, period_s=physics.period,
+            noise_seed=seed & 0xFFFF_FFFF_FFFF_FFFF, load_offset=cell_offset,
+            step_timing=STEP_TIMINGS[step_timing], enc_sign=hw.encoder_sign,
+            drop_n=hw.drop_steps[0], drop_d=hw.drop_steps[1])
+        self._lib.rigfw_set_nvm(str(nvm_path).encode() if nvm_path else None,
+                                hw.load_offset, hw.load_gain_n)
         self._open(self.parameters)
         self._partial = b""
         self._release_stop = False
@@ -303,6 +311,9 @@ class FirmwareMcu:
         lib.rigfw_open.argtypes = [c.POINTER(SimRigHw), c.POINTER(c.c_char_p),
                                    c.POINTER(c.c_double), c.c_int, c.c_char_p, c.c_size_t]
         lib.rigfw_open.restype = c.c_int
+        lib.rigfw_set_nvm.argtypes = [c.c_char_p, c.c_int32, c.c_double]
+        lib.rigfw_set_nvm.restype = None
+        lib.rigfw_stored_seq.restype = c.c_uint32
         lib.rigfw_rx.argtypes = [c.c_char_p, c.c_size_t, c.c_double]
         lib.rigfw_rx.restype = None
         lib.rigfw_tick.argtypes = [c.c_double]

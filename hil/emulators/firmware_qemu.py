@@ -138,12 +138,19 @@ static const double rig_setup_values[RIG_SETUP_COUNT] = {{
 static const sim_rig_hw rig_setup_hw = {{
     .x_origin = {_c_double(hw.x_origin)},
     .home_x = {_c_double(home)},
-    .load_gain_n = {_c_double(hw.load_gain_n)},
+    .load_gain_n = {_c_double(hw.cell[1])},
     .load_noise_n = {_c_double(hw.load_noise_n)},
     .period_s = {_c_double(setup.period)},
     .noise_seed = {seed & 0xFFFF_FFFF_FFFF_FFFF}ull,
-    .load_offset = {int(hw.load_offset)},
+    .load_offset = {int(hw.cell[0])},
+    .enc_sign = {int(hw.encoder_sign)},
+    .drop_n = {int(hw.drop_steps[0])}u,
+    .drop_d = {int(hw.drop_steps[1])}u,
 }};
+
+/* the firmware's default calibration (while none is stored) */
+static const rig_calibration rig_setup_default = {{{int(hw.load_offset)},
+                                                   {_c_double(hw.load_gain_n)}f, 0u}};
 
 #endif
 """

@@ -52,14 +52,31 @@ class RigHardware:
     buffer_capacity: int = 2048
     step_nm: int = 200  # 25 000 steps/rev on a 5 mm lead
     enc_nm: int = 1000  # 1 um optical encoder
-    load_offset: int = 1500  # ADC counts at zero force (amplifier offset)
-    load_gain_n: float = 1e-4  # N per ADC count: +-500 N -> +-5 000 000 counts
+    load_offset: int = 1500  # ADC counts at zero force: the firmware's default calibration
+    load_gain_n: float = 1e-4  # N per ADC count: +-500 N -> +-5 000 000 counts (default)
     adc_min: int = -8_388_608  # 24-bit ADC rails
     adc_max: int = 8_388_607
     load_noise_n: float = 0.2  # rms noise of the load cell and amplifier
     x_origin: float = 0.0  # input position (m) at step count 0 at power-on
     home_x: float | None = None  # reference switch active at x <= home_x (default x_origin)
-    fw_version: int = 0x0102
+    fw_version: int = 0x0103
+    # the emulated rig's own cell and drive, for bring-up (None: as the default calibration)
+    cell_offset: int | None = None  # the cell's true ADC counts at zero force
+    cell_gain_n: float | None = None  # the cell's true N per ADC count
+    encoder_sign: int = 1  # -1: the encoder counts against the steps (wired reversed)
+    drop_steps: tuple[int, int] = (0, 1)  # (n, d): n of every d step pulses are lost
+
+    def __post_init__(self) -> None:
+        n, d = self.drop_steps
+        if self.encoder_sign not in (1, -1) or not 0 <= n < d:
+            raise ValueError(f"encoder_sign must be +-1 and drop_steps (n, d) 0 <= n < d, "
+                             f"not {self.encoder_sign}, {self.drop_steps}")
+
+    @property
+    def cell(self) -> tuple[int, float]:
+        """The cell's true (offset, gain): what tare and span recover."""
+        return (self.load_offset if self.cell_offset is None else self.cell_offset,
+                self.load_gain_n if self.cell_gain_n is None else self.cell_gain_n)
 
     @property
     def period(self) -> float:
@@ -80,10 +97,23 @@ class Sensors:
         self.spike_n = 0.0
         self.spike_samples = 0
         self._last: tuple[int, int] | None = None
+        self.force = 0.0
+        self.lost = 0  # step pulses the drive lost since the last rezero (signed)
+        self._commanded = 0  # the step count of the last reading
+        self._drop_acc = 0
 
     def x(self, steps: int) -> float:
-        """Input position (m) of a step count."""
-        return self.x_origin + steps * self.hw.step_nm / 1e9
+        """Input position (m) of a step count: where the table is (lost steps included)."""
+        return self.x_origin + (steps - self.lost) * self.hw.step_nm / 1e9
+
+    def _lose_steps(self, steps: int) -> None:
+        """The drive loses n of every d pulses (RigHardware.drop_steps), counted exactly as
+        firmware/sim/sim_rig.c counts them."""
+        n, d = self.hw.drop_steps
+        delta, self._commanded = steps - self._commanded, steps
+        self._drop_acc += abs(delta) * n
+        lost, self._drop_acc = divmod(self._drop_acc, d)
+        self.lost += lost if delta >= 0 else -lost
 
     def home_switch(self, steps: int) -> bool:
         """The reference switch: active while the table is at or behind the open position."""
@@ -92,13 +122,17 @@ class Sensors:
 
     def read(self, steps: int, t: float) -> tuple[int, int]:
         """Encoder counts and load-cell raw counts at ``steps`` and time ``t``."""
+        self._lose_steps(steps)
         platen, force = self.physics(self.x(steps), t)
+        self.force = force  # the true force of the last reading (sim_rig_status.input_force)
         if self.spike_samples > 0:
             force += self.spike_n
             self.spike_samples -= 1
-        enc = round((platen - self.platen_zero) / (self.hw.enc_nm / 1e9)) + self.enc_offset
+        counts = round((platen - self.platen_zero) / (self.hw.enc_nm / 1e9))
+        enc = self.hw.encoder_sign * counts + self.enc_offset
         noisy = force + self.rng.gauss(0.0, self.hw.load_noise_n)
-        raw = round(self.hw.load_offset + noisy / self.hw.load_gain_n)
+        offset, gain = self.hw.cell
+        raw = round(offset + noisy / gain)
         raw = min(max(raw, self.hw.adc_min), self.hw.adc_max)
         if self._last is not None:
             enc = self._last[0] if self.enc_stuck else enc
@@ -109,6 +143,7 @@ class Sensors:
     def rezero(self, steps: int, enc_now: int, steps_new: int, enc_new: int) -> None:
         """Redefine counts so that the present position reads (steps_new, enc_new)."""
         self.x_origin = self.x(steps) - steps_new * self.hw.step_nm / 1e9
+        self.lost, self._commanded = 0, steps_new
         self.enc_offset += enc_new - enc_now
 
 
@@ -121,6 +156,7 @@ class McuModel:
         self._out: list[p.Message] = []  # events and telemetry not yet returned
         self.steps = 0
         self.enc, self.load_raw = self.sensors.read(0, 0.0)
+        self.nvm: tuple[int, int, float] | None = None  # (cal_seq, offset, gain): survives boot
         self.boot()
 
     # --- lifecycle ------------------------------------------------------------------------
@@ -157,10 +193,15 @@ class McuModel:
         self._same_load = 0  # consecutive samples with a bit-identical load reading
         self._moved = False  # steps changed in this period (telemetry flag MOVING)
 
+    @property
+    def stored(self) -> tuple[int, int, float]:
+        """(cal_seq, offset, gain) in non-volatile memory; (0, defaults) when none is."""
+        return self.nvm or (0, self.hw.load_offset, self.hw.load_gain_n)
+
     def _stored_calibration(self, cfg: p.Config) -> p.Config:
         """``cfg`` with the load-cell calibration kept in the MCU's non-volatile memory."""
-        return dataclasses.replace(cfg, load_offset=self.hw.load_offset,
-                                   load_gain_n=self.hw.load_gain_n)
+        _, offset, gain = self.stored
+        return dataclasses.replace(cfg, load_offset=offset, load_gain_n=gain)
 
     def _end_session(self) -> None:
         """A session ends (BYE, link loss) or a new one opens: a CONFIG calibration
@@ -223,7 +264,10 @@ class McuModel:
         if not self.session and not isinstance(msg, p.Stop):
             return self._ack(seq, p.Result.NO_SESSION)
         handler: Callable[[p.Message], p.Result] = self._handlers[type(msg)]
-        return self._ack(seq, handler(self, msg))
+        result = handler(self, msg)
+        if isinstance(msg, (p.StoreCalibration, p.ReadCalibration)):
+            return p.CalibrationReply(*dataclasses.astuple(self._ack(seq, result)), *self.stored)
+        return self._ack(seq, result)
 
     def _hello(self, msg: p.Hello, seq: int) -> p.HelloReply:
         if self.state in MOTION_STATES:
@@ -356,9 +400,24 @@ class McuModel:
             self._set_state(p.State.BOOT, p.Reason.COMMAND)
         return p.Result.OK
 
+    def _store_calibration(self, msg: p.StoreCalibration) -> p.Result:
+        """1.3: the calibration to non-volatile memory (record cal_seq + 1) and into use."""
+        if self.state != p.State.IDLE:
+            return p.Result.BAD_STATE
+        if not (math.isfinite(msg.load_gain_n) and msg.load_gain_n > 0
+                and self.hw.adc_min < msg.load_offset < self.hw.adc_max):
+            return p.Result.BAD_VALUE
+        self.nvm = (self.stored[0] + 1, msg.load_offset, msg.load_gain_n)
+        self.cfg = self._stored_calibration(self.cfg)
+        return p.Result.OK
+
+    def _read_calibration(self, _msg: p.ReadCalibration) -> p.Result:
+        return p.Result.OK
+
     _handlers = {
         p.Config: _config, p.TrajChunk: _chunk, p.Start: _start, p.Stop: _stop,
         p.ClearFault: _clear_fault, p.SetPosition: _set_position, p.Bye: _bye,
+        p.StoreCalibration: _store_calibration, p.ReadCalibration: _read_calibration,
     }
 
     def estop(self) -> None:

@@ -25,6 +25,7 @@ import time
 import tty
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from hil.emulators.mcu_model import ModelMcu, RigHardware, RigPhysics
 from hil.link import protocol as p
@@ -107,12 +108,14 @@ class RigEmulator:
         record_telemetry: bool = False,
         realtime: bool = False,
         firmware: bool = False,
+        nvm: Path | None = None,
     ) -> None:
         """``realtime`` asks for SCHED_FIFO scheduling of the serving thread, as a
         firmware's timer interrupt would have (best effort: ignored without the
         permission). ``firmware``: the MCU is the C firmware's host build on the
         simulated rig (``physics`` a :class:`~hil.emulators.rig_physics.ClampPhysics`), not the
-        Python model.
+        Python model; ``nvm``: with ``firmware``, the file that is the MCU's non-volatile
+        memory (the stored calibration; default: memory only, which survives a reset).
         """
         self.hw = hardware or RigHardware()
         self.faults = faults or FaultPlan()
@@ -121,7 +124,7 @@ class RigEmulator:
             from hil.emulators.firmware import FirmwareMcu
 
             self.mcu: ModelMcu | FirmwareMcu = FirmwareMcu(physics, self.hw,
-                                                           self.faults.seed + 1)
+                                                           self.faults.seed + 1, nvm_path=nvm)
         else:
             self.mcu = ModelMcu(physics, self.hw, self.faults.seed + 1)
         self.log = EmulatorLog()

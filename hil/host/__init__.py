@@ -1,1 +1,2 @@
-"""The host side of a run: the plant back-ends (FMU, rig), homing, experiments, recording, RSMs."""
+"""The host side of the rig: what runs on the PC beside the link (plant back-ends, homing,
+experiments, recording, response surfaces, bring-up)."""

@@ -18,8 +18,9 @@ from typing import ClassVar, TypeVar
 
 PROTO_MAJOR = 1
 #: 1.1: telemetry flags HOME_SWITCH and REFERENCED, the extension rule; 1.2: CONFIG re-checks
-#: the buffered trajectory points against its limits (docs/rig-protocol.md, section 5).
-PROTO_MINOR = 2
+#: the buffered trajectory points against its limits (docs/rig-protocol.md, section 5); 1.3:
+#: the load-cell calibration stored on the board (STORE_CALIBRATION, READ_CALIBRATION).
+PROTO_MINOR = 3
 
 HEADER = struct.Struct("<BBH")
 CRC = struct.Struct("<H")
@@ -66,11 +67,14 @@ class MsgType(IntEnum):
     CLEAR_FAULT = 0x08
     SET_POSITION = 0x09
     BYE = 0x0A
+    STORE_CALIBRATION = 0x0B  # 1.3
+    READ_CALIBRATION = 0x0C  # 1.3
     ACK = 0x80
     HELLO_REPLY = 0x81
     TELEMETRY = 0x82
     FAULT = 0x83
     STATE = 0x84
+    CALIBRATION = 0x85  # 1.3: answer to STORE_CALIBRATION and READ_CALIBRATION
 
 
 class State(IntEnum):
@@ -121,6 +125,7 @@ class Result(IntEnum):
     FAULT_ACTIVE = 10
     EMPTY = 11
     STALE = 12
+    NVM_ERROR = 13  # 1.3: the calibration did not verify in non-volatile memory
 
 
 class Reason(IntEnum):
@@ -454,6 +459,23 @@ class Bye(Message):
 
 
 @dataclass(frozen=True, slots=True)
+class StoreCalibration(Message):
+    """1.3: write the load-cell calibration to the MCU's non-volatile memory (IDLE only)."""
+
+    TYPE: ClassVar[MsgType] = MsgType.STORE_CALIBRATION
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<if")
+    load_offset: int = 0
+    load_gain_n: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class ReadCalibration(Message):
+    """1.3: ask for the calibration stored in the MCU's non-volatile memory."""
+
+    TYPE: ClassVar[MsgType] = MsgType.READ_CALIBRATION
+
+
+@dataclass(frozen=True, slots=True)
 class Ack(Message):
     """Answer to a command frame carrying FLAG_ACK_REQ."""
 
@@ -542,6 +564,24 @@ class StateChange(Message):
     sample: int = 0
 
 
+@dataclass(frozen=True, slots=True)
+class CalibrationReply(Message):
+    """1.3: the ACK fields, then the stored calibration (after the command) and its record
+    number ``cal_seq`` (0: none stored, the firmware's defaults)."""
+
+    TYPE: ClassVar[MsgType] = MsgType.CALIBRATION
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<HBBIHH" + "Iif")
+    acked_seq: int = 0
+    result: int = Result.OK
+    state: int = State.BOOT
+    sample: int = 0
+    buf_level: int = 0
+    buf_free: int = 0
+    cal_seq: int = 0
+    load_offset: int = 0
+    load_gain_n: float = 0.0
+
+
 @functools.cache
 def _wire_fields(cls: type[Message]) -> tuple[str, ...]:
     """Names of the fields of ``cls`` that are on the wire, in layout order."""
@@ -552,7 +592,8 @@ MESSAGES: dict[int, type[Message]] = {
     cls.TYPE: cls
     for cls in (
         Hello, Heartbeat, Config, TrajChunk, Start, Stop, EStop, ClearFault, SetPosition, Bye,
-        Ack, HelloReply, Telemetry, FaultReport, StateChange,
+        StoreCalibration, ReadCalibration,
+        Ack, HelloReply, Telemetry, FaultReport, StateChange, CalibrationReply,
     )
 }
 

@@ -231,7 +231,7 @@ class _Pending:
 
     def __init__(self) -> None:
         self.event = threading.Event()
-        self.reply: p.Ack | p.HelloReply | None = None
+        self.reply: p.Ack | p.HelloReply | p.CalibrationReply | None = None
 
 
 class _StopSequence:
@@ -553,7 +553,8 @@ class SerialLink:
     # --- commands -------------------------------------------------------------------------
 
     def command(self, msg: p.Message, *, check: bool = True, retries: int | None = None,
-                waits: Sequence[float] | None = None) -> p.Ack | p.HelloReply:
+                waits: Sequence[float] | None = None,
+                ) -> p.Ack | p.HelloReply | p.CalibrationReply:
         """Send ``msg``, wait for its ACK, retransmit on timeout; CommandError on NAK.
 
         Each attempt waits ``ack_timeout`` (or the next of ``waits``, whose length then
@@ -1022,7 +1023,7 @@ class SerialLink:
                     f"session"))
             else:
                 self._fail(self._silence_error(now))
-        elif isinstance(msg, (p.Ack, p.HelloReply)):
+        elif isinstance(msg, (p.Ack, p.HelloReply, p.CalibrationReply)):
             pending = self._pending.get(msg.acked_seq)
             if pending is not None and pending.reply is None:
                 pending.reply = msg

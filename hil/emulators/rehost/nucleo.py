@@ -66,7 +66,7 @@ from hil.emulators.rehost.stm32f446 import (
     Dma1,
     EncoderTimer,
     Flash,
-    FlashSector,
+    FlashMemory,
     Gpio,
     Iwdg,
     PulseCounter,
@@ -128,11 +128,13 @@ class Plant:
         params = fmu_start_values(physics, hw.x_origin)
         names = (ctypes.c_char_p * len(params))(*(n.encode() for n in params))
         values = (ctypes.c_double * len(params))(*params.values())
+        cell_offset, cell_gain = hw.cell  # the rig's true cell (bring-up options)
         self._hw = SimRigHw(x_origin=hw.x_origin,
                             home_x=hw.x_origin if hw.home_x is None else hw.home_x,
-                            load_gain_n=hw.load_gain_n, load_noise_n=hw.load_noise_n,
+                            load_gain_n=cell_gain, load_noise_n=hw.load_noise_n,
                             period_s=physics.period, noise_seed=seed & (2**64 - 1),
-                            load_offset=hw.load_offset)
+                            load_offset=cell_offset, enc_sign=hw.encoder_sign,
+                            drop_n=hw.drop_steps[0], drop_d=hw.drop_steps[1])
         err = ctypes.create_string_buffer(512)
         if lib.sim_rig_init(ctypes.byref(self._hw), names, values, len(params), err,
                             len(err)) != 0:
@@ -212,13 +214,13 @@ class NucleoBoard:
         self.driver_alarm = self.chain_broken = self.b1_pressed = False
         self.output = bytearray()  # what the MCU sent on USART2, not yet taken
         m = self.machine = Machine()
-        m.map_memory(0x08000000, 0x60000)  # sectors 0-6: the image
+        m.map_memory(0x08000000, 0x20000)  # sectors 0-4: the image
         m.map_memory(0x20000000, 0x20000)  # SRAM1 + SRAM2
         for page in (0x40000000, 0x40003000, 0x40004000, 0x40007000, 0x40010000,
                      0x40020000, 0x40023000, 0x40026000, 0x50060000, 0xE0001000,
                      0xE000E000, 0xE0042000):
             m.map_mmio(page, 0x1000)
-        m.map_mmio(0x08060000, 0x20000)
+        m.map_mmio(0x08020000, 0x60000)  # sectors 5-7: calibration, boot counter
         self.segments = load_elf(m, self.elf)
         find_wfi(m, self.elf)
         self.scs = m.add(SystemControl(m))
@@ -228,7 +230,7 @@ class NucleoBoard:
         self.rcc = m.add(Rcc(m, self.pwr))
         self.flash = m.add(Flash(m))
         self.rcc.flash_latency = lambda: self.flash.regs[0] & 0xF
-        m.add(FlashSector(m, self.flash))
+        m.add(FlashMemory(m, self.flash))
         self.gpio = {p: m.add(Gpio(m, p, self.rcc)) for p in "ABC"}
         self.usart = m.add(Usart(m, self.rcc))
         self.dma = m.add(Dma1(m, self.rcc, self.usart, self.output.extend))
