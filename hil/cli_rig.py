@@ -15,15 +15,16 @@ from hil.backends import fault_names
 from hil.homing import home
 from hil.run_settings import check_port
 from hil.serial_link import CommandError, RigError, SerialLink
-from toggle.args import PROBABILITY, TIME, number
+from toggle.args import PROBABILITY, TIME, length, number
 
 
 def mold_position(text: str) -> float | str:
-    """argparse type of ``hil emulate --x-contact``: a position in m, or ``planned``."""
+    """argparse type of ``hil emulate --x-contact``: a position (m, or with a unit: 40mm),
+    or ``planned``."""
     if text == "planned":
         return text
     try:
-        return number(-1.0, 1.0, "must be a position in m")(text)
+        return length(-1.0, 1.0, "must be a position within 1 m")(text)
     except argparse.ArgumentTypeError as exc:
         raise argparse.ArgumentTypeError(f"{exc} (or 'planned')") from None
 
@@ -31,8 +32,9 @@ def mold_position(text: str) -> float | str:
 def add_emulator_options(e: argparse.ArgumentParser) -> None:
     """Options of ``hil emulate``: the simulated clamp and the injected faults."""
     e.add_argument("--preset", default="chang2021", help="mechanism preset")
-    e.add_argument("--delta-r8", type=number(-5e-3, 5e-3, "must be an error below 5 mm (m)"),
-                   default=0.0, dest="delta_r8", help="length error of link 8, m (e.g. 0.5e-3)")
+    e.add_argument("--delta-r8", type=length(-5e-3, 5e-3, "must be an error within 5 mm"),
+                   default=0.0, dest="delta_r8",
+                   help="length error of link 8, m or with a unit (0.5e-3, 0.5mm, 500um)")
     e.add_argument("--mu", type=number(0.0, 1.0, "must be between 0 and 1"), default=None,
                    help="pin friction (default: the preset's)")
     e.add_argument("--x-contact", type=mold_position, default=None, dest="x_contact",

@@ -22,6 +22,7 @@ from controllers.profiles import ProfileError, read_profile_settings, truncation
 from hil.backends import MAX_SPEED, RigSetup, simulated_speed_limit
 from hil.recording import RUN_FILES
 from hil.samples import Trajectory, TrajectoryError
+from toggle.args import length
 from toggle.elastics import clamp_stroke
 from toggle.files import InputError, check_writable, check_writable_dir, read_text, read_toml
 from toggle.params import ParameterError, load_preset
@@ -78,17 +79,23 @@ class RunSettings:
                 if k not in ("json", "quiet", "force")}
 
 
+#: A length option of hil run: m, or with a unit (0.5mm); its range is :func:`check`'s.
+_LENGTH = length(-math.inf, math.inf, "must be a finite length")
+
+
 def add_number_options(p: argparse.ArgumentParser) -> None:
     """The numeric options of ``hil run`` (parsed as numbers; judged by :func:`check`)."""
-    p.add_argument("--delta-r8", type=float, default=None, dest="delta_r8",
-                   help="length error of link 8, m, e.g. 0.5e-3 (default 0): the simulated "
+    p.add_argument("--delta-r8", type=_LENGTH, default=None, dest="delta_r8",
+                   help="length error of link 8, m or with a unit (0.5e-3, 0.5mm, 500um; "
+                        "default 0 m): the simulated "
                         "clamp's; with --real, the setting of the rig's adjustable link as "
                         "made by hand (the default job plans for it, meta.json records it; "
                         "the host cannot check it: hil emulate takes its own --delta-r8)")
     p.add_argument("--mu", type=float, default=None,
                    help="pin friction of the simulated clamp (default: the preset's)")
-    p.add_argument("--x-contact", type=float, default=None, dest="x_contact",
-                   help="crosshead position at mold contact, m (default: the planned mold "
+    p.add_argument("--x-contact", type=_LENGTH, default=None, dest="x_contact",
+                   help="crosshead position at mold contact, m or with a unit (-0.04, -40mm; "
+                        "default: the planned mold "
                         "for the default job, none with --speed)")
     p.add_argument("--cycles", type=int, default=None,
                    help="forward-backward cycles (default 3)")
@@ -97,7 +104,7 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
                         "(default: the planned minimum-force profile)")
     p.add_argument("--force-limit", type=float, default=None, dest="force_limit",
                    help=f"stop when |input force| exceeds this, N (default "
-                        f"{RUN_DEFAULTS['force_limit']:g}, for the rig's load cell; with --real "
+                        f"{RUN_DEFAULTS['force_limit']:g} N, for the rig's load cell; with --real "
                         f"at most its {LOAD_CELL_RANGE:g}; the simulated rig of a larger "
                         f"clamp, such as lin2003_sm55, needs more)")
     p.add_argument("--watchdog-ms", type=float, default=None, dest="watchdog_ms",
@@ -115,7 +122,7 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
                         "50, at most 1000; the host sends a heartbeat every 20 ms)")
     p.add_argument("--max-duration", type=float, default=None, dest="max_duration",
                    help=f"refuse runs longer than this, s (default "
-                        f"{RUN_DEFAULTS['max_duration']:g})")
+                        f"{RUN_DEFAULTS['max_duration']:g} s)")
 
 
 def read_config(path: Path) -> dict[str, Any]:

@@ -66,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _add_common(p: argparse.ArgumentParser) -> None:
     add_preset_argument(p)
-    p.add_argument("--speed", type=SPEED, default=5e-3, help="crosshead speed, m/s (default 5e-3)")
+    p.add_argument("--speed", type=SPEED, default=5e-3,
+                   help="crosshead speed, m/s (default 5e-3 m/s)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -74,7 +75,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="extra input force of unequal halves (seed 000 Tables 6-8)")
     _add_common(p)
     p.add_argument("--delta-r8", type=LINK_ERROR, default=0.5e-3,
-                   help="length error of link 8 (upper r5), m (default 0.5e-3)")
+                   help="length error of link 8 (upper r5), m or with a unit: 0.5mm, "
+                        "500um (default 0.5e-3 m)")
     add_json_argument(p)
     p.set_defaults(handler=run)
 

@@ -197,7 +197,7 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
                    help="friction coefficients of the curves (default: the paper's, "
                         f"{' '.join(map(str, PAPER_MUS))})")
     p.add_argument("--rpm", type=positive("motor speed in rpm", 1e5), default=200.0,
-                   help="motor speed of the torque figure, rpm (default 200)")
+                   help="motor speed of the torque figure, rpm (default 200 rpm)")
     add_out_argument(p)
     declare_outputs(p, "fig4_tiebar_force.png", "fig5_mechanical_advantage.png",
                     "fig6_thrust.png", "fig7_thrust_max.png", "fig8_motor_torque.png")

@@ -14,19 +14,19 @@ from collections.abc import Callable, Collection, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from toggle.args import integer, number, path, positive
+from toggle.args import integer, length, number, path, positive
 from toggle.params import HALVES, Mechanism, ParameterError, load_preset
 
 MM = 1e3  # metres to millimetres, for tables only
 
 #: Shipped presets that describe a clamp (the press dong2022 is synthesize's only).
 CLAMP_PRESETS = ("chang2021", "lin2003_sm55", "li_micro")
-SPEED = positive("crosshead speed in m/s", 1.0)
+SPEED = positive("crosshead speed in m/s", 1.0, unit="m/s")
 #: A link-length error of the upper half (link 8), m.
-LINK_ERROR = number(-5e-3, 5e-3, "must be a length error below 5 mm, in m")
-FRICTION = number(0.0, 1.0, "must be a friction coefficient between 0 and 1")
-POSITION = number(-1.0, 1.0, "must be a crosshead position within 1 m, in m")
-FORCE = positive("force in N", 1e9)
+LINK_ERROR = length(-5e-3, 5e-3, "must be a length error within 5 mm")
+FRICTION = number(0.0, 1.0, "must be a friction coefficient between 0 and 1", "(1)")
+POSITION = length(-1.0, 1.0, "must be a crosshead position within 1 m")
+FORCE = positive("force in N", 1e9, unit="N")
 SEED = integer(0, 2**32 - 1, "must be a seed between 0 and 2^32 - 1")
 POINTS = integer(2, 100_000, "must be a count of points between 2 and 100000")
 SAMPLES = integer(1, 100_000_000, "must be a number of samples between 1 and 1e8")

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from toggle.args import integer, number, path, positive
+from toggle.args import integer, length, number, path, positive
 from toggle.files import atomic_path, check_writable
 from toggle.params import DYNAMICS_PARAMETERS, HALVES, PAPER_NAMES, ParameterError
 from toggle_cli.common import (
@@ -654,8 +654,10 @@ def _add_protection_arguments(p: argparse.ArgumentParser) -> None:
 
     zone = p.add_argument_group("mold protection: the last distance of platen travel before "
                                 "mold contact")
-    zone.add_argument("--protect-distance", type=positive("distance in m", 10.0, 1e-6),
-                      default=None, help="length of the zone, m of platen travel (default "
+    zone.add_argument("--protect-distance", type=length(1e-6, 10.0, "must be a distance from "
+                                                               "1 um to 10 m"),
+                      default=None, help="length of the zone, m of platen travel or with a "
+                      "unit (0.01, 10mm; default "
                       f"{PROTECT_FRACTION:g} of the platen's travel to contact)")
     zone.add_argument("--protect-speed", type=positive("speed in m/s", 10.0, 1e-6),
                       default=None, help="platen speed cap in the zone, m/s (default none)")
@@ -726,7 +728,7 @@ def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
                         "(default 0)")
     p.add_argument("--contact-speed", type=positive("speed in m/s", 1.0, 1e-6),
                    default=CONTACT_SPEED,
-                   help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
+                   help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED} m/s)")
     p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
                    default=INTERVALS,
                    help=f"time intervals N (default {INTERVALS})")
@@ -744,10 +746,10 @@ def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hold", type=number(0.0, 3600.0, "must be a dwell of 0 to 3600 s"),
                    default=0.0,
                    help="with --cycle: the hold dwell, mold locked (injection, cooling), s "
-                        "(default 0)")
+                        "(default 0 s)")
     p.add_argument("--eject", type=number(0.0, 3600.0, "must be a dwell of 0 to 3600 s"),
                    default=0.0,
-                   help="with --cycle: the ejection dwell at the open position, s (default 0)")
+                   help="with --cycle: the ejection dwell at the open position, s (default 0 s)")
     p.add_argument("--cycle-out", type=path, default=None,
                    help="with --cycle: the whole molding cycle's profile CSV (hil run "
                         "--profile replays it)")
@@ -811,7 +813,7 @@ def _add_trade_off_arguments(p: argparse.ArgumentParser) -> None:
                    default=6, help="force limits per curve (default 6)")
     p.add_argument("--contact-speed", type=positive("speed in m/s", 1.0, 1e-6),
                    default=CONTACT_SPEED,
-                   help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
+                   help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED} m/s)")
     p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
                    default=INTERVALS, help=f"time intervals N (default {INTERVALS})")
     _add_protection_arguments(p)

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from toggle.args import integer, number
+from toggle.args import integer, length, number
 from toggle.params import DIMENSIONS, HALVES, ParameterError, load_preset
 from toggle_cli.common import (
     MM,
@@ -41,7 +41,7 @@ _SHORT = {"stroke_ratio": "Ms", "velocity_ratio": "Mv peak", "force_amplificatio
 
 
 #: A toggle angle as typed, deg.
-ANGLE = number(0.0, 180.0, "must be a toggle angle between 0 and 180 deg")
+ANGLE = number(0.0, 180.0, "must be a toggle angle between 0 and 180 deg", "deg")
 
 
 def _range_arguments(preset: str) -> Callable[[argparse.ArgumentParser], None]:
@@ -154,7 +154,7 @@ def run_study(args: argparse.Namespace) -> int:
     return 0
 
 
-_LENGTH = number(-10.0, 10.0, "must be a length within 10 m, in m")
+_LENGTH = length(-10.0, 10.0, "must be a length within 10 m")
 _COUNT = integer(2, 200, "must be a count of values from 2 to 200")
 
 

@@ -142,7 +142,7 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                    default=[], help=f"refit at most {MAX_FORCE_FITTED} of: "
                                     f"{', '.join(FORCE_FITTABLE)}")
     p.add_argument("--speeds", type=SPEED, nargs="+", default=None,
-                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3); a refit")
+                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3 m/s); a refit")
     p.add_argument("--statistics", nargs="+", choices=STATISTICS, default=None,
                    metavar="STAT",
                    help=f"statistics fitted (default all: {', '.join(STATISTICS)}); a "
