@@ -13,6 +13,7 @@ import argparse
 import hashlib
 import math
 import os
+import stat
 import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -191,12 +192,48 @@ def check(v: dict[str, Any]) -> None:
         check_mold(v["preset"], v["x_contact"])
 
 
+#: pyserial URLs that open a device path (``spy://PATH?options``): the path is checked.
+_DEVICE_URLS = ("spy://", "alt://")
+_PORT_HINT = "a serial device such as /dev/ttyACM0, the pty hil emulate printed, or socket://host:port"
+
+
 def check_port(port: str) -> None:
-    """Refuse a rig port that names a device path where there is none, before the work (a
-    URL such as socket://host:port is tried when the session opens)."""
-    if "://" not in port and not os.path.exists(port):
-        raise ParameterError(f"--port {port}: no such device (a serial device such as "
-                             "/dev/ttyACM0, the pty hil emulate printed, or socket://host:port)")
+    """Refuse a rig port that is no serial device, before the work, in words: a path where
+    there is nothing, a folder, a regular file, a character device that is no terminal
+    (/dev/null: Linux's /sys/dev/char says its subsystem). The device is not opened here
+    (opening a serial port resets some boards); a URL such as socket://host:port is tried
+    when the session opens."""
+    path = port
+    for scheme in _DEVICE_URLS:
+        if port.startswith(scheme):
+            path = port[len(scheme):].split("?")[0]
+    if "://" in path:
+        return
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise ParameterError(f"--port {port}: no such device ({_PORT_HINT})") from None
+    except OSError as exc:
+        raise ParameterError(f"--port {port}: cannot be used "
+                             f"({(exc.strerror or 'unreadable').lower()}; {_PORT_HINT})") from None
+    if stat.S_ISDIR(mode):
+        raise ParameterError(f"--port {port}: is a folder, not a serial device ({_PORT_HINT})")
+    if not stat.S_ISCHR(mode):
+        raise ParameterError(f"--port {port}: is a file, not a serial device ({_PORT_HINT})")
+    subsystem = _device_subsystem(os.stat(path).st_rdev)
+    if subsystem not in (None, "tty"):
+        raise ParameterError(f"--port {port}: is a {subsystem} device, not a serial port "
+                             f"({_PORT_HINT})")
+
+
+def _device_subsystem(rdev: int) -> str | None:
+    """The Linux subsystem of a character device ("tty", "mem", ...), or None where sysfs
+    does not say (a pty slave has no entry there; another system has no sysfs)."""
+    link = Path(f"/sys/dev/char/{os.major(rdev)}:{os.minor(rdev)}/subsystem")
+    try:
+        return Path(os.readlink(link)).name
+    except OSError:
+        return None
 
 
 def check_mold(preset: str, x_contact: float) -> None:
