@@ -118,6 +118,37 @@ def stage_sources(slave_file: Path, preset: str | None, stage: Path) -> tuple[Pa
     return script, packages
 
 
+def build_folder() -> Path:
+    """The one folder ``toggle build-fmu`` writes its FMU into and ``hil run`` takes it from:
+    the checkout's build/ when the project runs from its checkout (an editable install,
+    wherever the command is started), else build/ of the current folder (an installed
+    package has no folder of its own to write in), as ``cargo``'s target/ or CMake's
+    build tree do."""
+    return (ROOT if (ROOT / "pyproject.toml").is_file() else Path.cwd()) / "build"
+
+
+def fmu_preset(path: Path) -> str | None:
+    """The preset an FMU of this project was built for (its String parameter ``preset``'s
+    start value, in either FMU's modelDescription.xml, FMI 2.0 or 3.0); None for another
+    FMU or a file that is none."""
+    from xml.etree import ElementTree
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            root = ElementTree.fromstring(archive.read("modelDescription.xml"))
+    except (OSError, KeyError, zipfile.BadZipFile, ElementTree.ParseError):
+        return None
+    for node in root.iter():
+        if node.get("name") != "preset":
+            continue
+        string = node.find("String")  # FMI 2.0: <ScalarVariable><String start=.../>
+        start = string.get("start") if string is not None else node.get("start")
+        if start is None and node.find("Start") is not None:  # FMI 3.0: <String><Start value>
+            start = node.find("Start").get("value")
+        return start
+    return None
+
+
 def preset_table_text(preset: str) -> str:
     """The TOML text of a preset that the FMU can run (it needs [dynamics] and [drive])."""
     from toggle.params import load_preset, preset_file, preset_table, split_group

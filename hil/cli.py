@@ -22,7 +22,14 @@ from typing import Any, NoReturn
 
 from controllers.progress import Progress
 from hil import cli_rig, cli_rsm, experiment
-from hil.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
+from hil.backends import (
+    FmuPlant,
+    Plant,
+    RigPlant,
+    RigSetup,
+    RunStoppedError,
+    default_fmu_path,
+)
 from hil.experiment import (
     DEFAULT_END_TOL,
     CycleCounter,
@@ -234,6 +241,10 @@ def _record(plant: Plant, trajectory: Trajectory, rec: RunRecorder, guard: Signa
 
 def run(args: argparse.Namespace) -> int:
     s = resolve_settings(args)
+    if s.backend == "fmu":  # which FMU, and so which clamp, the simulated rig is
+        fmu = s.fmu if s.fmu is not None else default_fmu_path(s.preset)
+        print(f"hil run: the simulated rig is the FMU {fmu} (preset {s.preset})",
+              file=sys.stderr)
     guard = SignalGuard()
     with guard:
         try:
@@ -449,7 +460,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="results folder of the run, named on the last line (default "
                         "runs/<time>-<backend>)")
     p.add_argument("--fmu", type=path, default=None,
-                   help="the simulated rig's FMU (default build/ToggleClamp.fmu, built when "
+                   help="the simulated rig's FMU; its preset is the run's unless one is given "
+                        "(default: the build folder's, build/ToggleClamp.fmu as toggle "
+                        "build-fmu wrote it last, or build/PRESET/, built when "
                         "missing or older than the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -10,6 +10,7 @@ a value is judged the same whether it was typed or read from a file.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import math
 import os
@@ -19,7 +20,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from controllers.profiles import ProfileError, read_profile_settings, truncation
+from controllers.profiles import (
+    ProfileError,
+    read_profile_columns,
+    read_profile_settings,
+    truncation,
+)
 from hil.backends import MAX_SPEED, RigSetup, simulated_speed_limit
 from hil.recording import RUN_FILES
 from hil.samples import Trajectory, TrajectoryError
@@ -265,7 +271,28 @@ def _apply_profile(values: dict[str, Any], explicit: set[str]) -> str:
                 f"--profile {path} was planned with {key} = {planned[key]!r}, but "
                 f"{_option(key)} gives {values[key]!r}; drop the option or re-plan")
         values[key] = planned[key]
+        explicit.add(key)  # chosen by the plan: an FMU built for another preset is refused
     return digest
+
+
+def _check_peak(path: Path, force_limit: float, given: bool) -> None:
+    """Refuse, before the work, a profile whose own planned peak input force (its
+    ``input_force [N]`` column) exceeds the force limit: the run would stop at the limit
+    within milliseconds. The limit is the rig's safety stop, so it is never raised to what
+    a file asks for (a file could then lift it past the load cell); the user raises it."""
+    try:
+        forces = read_profile_columns(path, ("input_force [N]",))[:, 0]
+    except ProfileError:  # a bare profile (positions only): the run's limit guards it
+        return
+    peak = float(abs(forces).max())
+    if peak > force_limit:
+        limit = f"--force-limit {force_limit:g} N" + ("" if given else " (the default: the "
+                                                       "prototype rig's load cell)")
+        raise ParameterError(
+            f"--profile {path}: its planned peak input force is {peak:.4g} N, above "
+            f"{limit}; the run would stop at the limit at once. Give a larger --force-limit "
+            f"(at least {peak:.4g} N, with a margin for the simulated rig's as-built "
+            "errors); on the real rig, a plan within its load cell")
 
 
 def _check_whole(path: Path, planned: dict[str, Any], duration: float) -> None:
@@ -295,6 +322,38 @@ def _check_fmu(path: Path) -> None:
                          ) from None
 
 
+def _fmu_preset(values: dict[str, Any], explicit: set[str]) -> None:
+    """The simulated rig's preset and its FMU agree, before the work: without a preset
+    (option, --config or profile) the run takes the preset of --fmu, or of the build
+    folder's ToggleClamp.fmu (the one ``toggle build-fmu`` wrote last); a --fmu built for
+    another preset than the one given is refused."""
+    from fmu_src.build import build_folder, fmu_preset
+
+    if values["fmu"] is not None:
+        fmu = Path(values["fmu"])
+        _check_fmu(fmu)
+    elif "preset" not in explicit:
+        fmu = build_folder() / "ToggleClamp.fmu"
+    else:
+        return
+    built_for = fmu_preset(fmu)
+    if built_for is None:
+        return
+    if "preset" not in explicit:
+        with contextlib.suppress(ParameterError, OSError):  # a preset file's FMU: its name
+            load_preset(built_for)                            # is no preset: the default's
+            values["preset"] = built_for
+        return
+    try:
+        wanted = load_preset(values["preset"]).name
+    except (ParameterError, OSError):
+        return  # refused with its reason below
+    if built_for != wanted:
+        raise InputError(f"--fmu {fmu}: built for preset {built_for}, not {values['preset']}; "
+                         f"drop --preset to run it, or build one: toggle build-fmu --preset "
+                         f"{values['preset']} --out DIR")
+
+
 def resolve_settings(args: argparse.Namespace) -> RunSettings:
     """Merge the command line, the --config file, a profile's settings and the defaults."""
     config = read_config(args.config) if args.config is not None else {}
@@ -304,6 +363,8 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     if values["profile"] is not None and values["speed"] is not None:
         raise ParameterError("give --profile or --speed, not both (a profile sets its speed)")
     digest = _apply_profile(values, explicit) if values["profile"] is not None else None
+    if values["backend"] == "fmu":
+        _fmu_preset(values, explicit)
     try:
         mech = load_preset(values["preset"])
     except (ParameterError, OSError) as exc:
@@ -312,6 +373,9 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
         raise ParameterError(f"--preset (preset) {values['preset']}: hil run needs a preset "
                              "with [dynamics] masses (chang2021, or a TOML file that has them)")
     check(values)
+    if values["profile"] is not None:
+        _check_peak(Path(values["profile"]), values["force_limit"],
+                    "force_limit" in explicit)
     if values["profile"] is None and values["speed"] is None and values["x_contact"] is None:
         # the default job clamps a mold, which the simulated rig has too
         values["x_contact"] = RigSetup(preset=values["preset"], delta_r8=values["delta_r8"],

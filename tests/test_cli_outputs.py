@@ -52,10 +52,10 @@ def test_a_figure_kind_names_its_folder_last_and_json_keeps_stdout(tmp_path: Pat
 @pytest.fixture
 def no_planning(monkeypatch):
     import controllers.planner as planner  # toggle plan loads it when it runs
-    import toggle_cli.plan as plan_cli
+    import toggle_cli.plan_setup as plan_setup
 
     monkeypatch.setattr(planner, "planner_for", lambda *a, **k: pytest.fail("solved first"))
-    monkeypatch.setattr(plan_cli, "_trade_off_curves",
+    monkeypatch.setattr(plan_setup, "trade_off_curves",
                         lambda *a, **k: pytest.fail("planned first"))
 
 

@@ -593,7 +593,7 @@ def test_robust_plan_beats_the_s_curve_on_both_clamps(capsys):
 
 def test_dimension_errors_are_named_as_the_fmu_names_them():
     from fmu_src.toggle_clamp_fmu import ERRORS as FMU_ERRORS
-    from toggle_cli.plan import ERRORS
+    from toggle_cli.plan_setup import ERRORS
 
     assert ERRORS == FMU_ERRORS
     nominal = plan_config("chang2021")

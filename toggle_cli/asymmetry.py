@@ -16,6 +16,7 @@ from toggle_cli.common import (
     add_preset_argument,
     declare_outputs,
     mechanism,
+    output,
     print_json,
 )
 
@@ -84,7 +85,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def plot(args: argparse.Namespace) -> int:
     from toggle.asymmetry import plot_force_curves
 
-    plot_force_curves(mechanism(args), args.out / "asymmetry.png", speed=args.speed)
+    plot_force_curves(mechanism(args), output(args, "asymmetry_{tag}.png"), speed=args.speed)
     return 0
 
 
@@ -92,5 +93,5 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("asymmetry", help="extra input force vs x for delta_r8 = 0..0.75 mm")
     _add_common(p)
     add_out_argument(p)
-    declare_outputs(p, "asymmetry.png")
+    declare_outputs(p, "asymmetry_{tag}.png")
     p.set_defaults(handler=plot)

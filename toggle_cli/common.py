@@ -91,14 +91,31 @@ def add_out_argument(parser: argparse.ArgumentParser) -> None:
 
 def declare_outputs(parser: argparse.ArgumentParser, *names: str) -> None:
     """The files a ``toggle plot`` kind writes into its ``--out`` folder (``str.format``
-    fields from the arguments, e.g. ``"sensitivity_IT{it}.png"``): the command line checks
-    them before the work (:func:`outputs`), and the command takes ``--force``."""
+    fields from the arguments, e.g. ``"sensitivity_IT{it}_{tag}.png"``, ``{tag}`` the
+    preset's :func:`preset_tag`): the command line checks them before the work
+    (:func:`outputs`), and the command takes ``--force``."""
     parser.set_defaults(outputs=names, checks_outputs=True)
+
+
+def preset_tag(preset: str) -> str:
+    """A preset as part of a file name, so that figures of two presets sit side by side: a
+    shipped name as it is (a family's group ``li_micro/6`` as ``li_micro-6``), a preset
+    file by its stem (``design/presets/design-3f2a.toml``: ``design-3f2a``)."""
+    path = Path(preset)
+    return path.stem if path.suffix.lower() == ".toml" else preset.replace("/", "-")
+
+
+def output(args: argparse.Namespace, name: str) -> Path:
+    """``name`` (``str.format`` fields from the arguments, and ``{tag}``) under ``--out``."""
+    fields = vars(args)
+    if getattr(args, "preset", None):
+        fields = {**fields, "tag": preset_tag(args.preset)}
+    return args.out / name.format(**fields)
 
 
 def outputs(args: argparse.Namespace) -> list[Path]:
     """The output files a command declared with :func:`declare_outputs`, under ``--out``."""
-    return [args.out / name.format(**vars(args)) for name in getattr(args, "outputs", ())]
+    return [output(args, name) for name in getattr(args, "outputs", ())]
 
 
 def mechanism(args: argparse.Namespace) -> Mechanism:

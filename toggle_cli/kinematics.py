@@ -16,6 +16,7 @@ from toggle_cli.common import (
     declare_outputs,
     deg,
     mechanism,
+    output,
     print_json,
     table,
 )
@@ -113,21 +114,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def plot(args: argparse.Namespace) -> int:
     from toggle.plots import plot_kinematics
 
-    plot_kinematics(mechanism(args), args.out / "kinematics.png")
+    plot_kinematics(mechanism(args), output(args, "kinematics_{tag}.png"))
     return 0
 
 
 def linkage(args: argparse.Namespace) -> int:
     from toggle.linkage import animate_linkage, plot_linkage
 
-    names = ("linkage.png", "linkage.gif") if args.animate else ("linkage.png",)
+    png, gif = output(args, "linkage_{tag}.png"), output(args, "linkage_{tag}.gif")
     check_writable_dir(args.out, "--out")
-    for name in names:  # before the drawing
-        check_writable(args.out / name, "--out")
+    for name in (png, gif) if args.animate else (png,):  # before the drawing
+        check_writable(name, "--out")
     mech = mechanism(args)
-    plot_linkage(mech, args.out / "linkage.png", args.x)
+    plot_linkage(mech, png, args.x)
     if args.animate:
-        animate_linkage(mech, args.out / "linkage.gif", args.frames)
+        animate_linkage(mech, gif, args.frames)
     return 0
 
 
@@ -135,7 +136,7 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("kinematics", help="L(x), dL/dx and MA of both halves (seed 000 Fig 6)")
     add_preset_argument(p)
     add_out_argument(p)
-    declare_outputs(p, "kinematics.png")
+    declare_outputs(p, "kinematics_{tag}.png")
     p.set_defaults(handler=plot)
     p = kinds.add_parser(
         "linkage", help="the mechanism drawn to scale, both halves, joints labelled as seed 000 "

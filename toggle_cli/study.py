@@ -26,6 +26,7 @@ from toggle_cli.common import (
     add_preset_argument,
     declare_outputs,
     deg,
+    output,
     print_json,
     table,
 )
@@ -277,23 +278,23 @@ def _plot_study(args: argparse.Namespace) -> int:
     results, _ = _run_study(args)
     title = (f"{args.preset} ({args.half} half): seed 004 Figs 3-6, "
              f"alpha {args.alpha_lock:g} to {args.alpha_max:g} deg")
-    plot_study(results, title, args.out / "study.png")
+    plot_study(results, title, output(args, "study_{tag}.png"))
     return 0
 
 
 def _plot_sweep(args: argparse.Namespace) -> int:
     result = _run_sweep(args)  # checks --dim first
     title = f"{args.preset} ({args.half} half): criteria over {' and '.join(result.names)}"
-    plot_sweep(result, title, args.out / "sweep.png")
+    plot_sweep(result, title, output(args, "sweep_{tag}.png"))
     return 0
 
 
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("study", help="Ms, Mv, Mp, psi against toggle angle (seed 004 Figs 3-6)")
     add_arguments_later(p, _range_arguments("li_micro"), add_out_argument)
-    declare_outputs(p, "study.png")
+    declare_outputs(p, "study_{tag}.png")
     p.set_defaults(handler=_plot_study)
     s = kinds.add_parser("sweep", help="contours of the study's criteria over two dimensions")
     add_arguments_later(s, _range_arguments("li_micro/1"), _add_dim_argument, add_out_argument)
-    declare_outputs(s, "sweep.png")
+    declare_outputs(s, "sweep_{tag}.png")
     s.set_defaults(handler=_plot_sweep)
