@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from toggle.args import integer
 from toggle.files import check_writable, check_writable_dir
@@ -23,7 +24,9 @@ from toggle_cli.common import (
 
 
 def summary(mech: Mechanism) -> dict:
-    """Stroke data of each half; top-level values are the lower half's (SI)."""
+    """Stroke data of each half; top-level values are the lower half's (SI; angles wrapped
+    into (-pi, pi] rad, as the table's into (-180, 180] deg: a pose can carry whole
+    turns)."""
     from toggle.kinematics import half_pose, mirror_angles, stroke_limits
 
     halves = {}
@@ -39,7 +42,7 @@ def summary(mech: Mechanism) -> dict:
             "L_toggle": float(pose_tp.L),
             "stroke": float(pose_tp.L - pose_open.L),
             # angle of the platen-side link at the toggle: theta5 (lower) or theta8 (upper)
-            "platen_link_angle_toggle": theta_out,
+            "platen_link_angle_toggle": wrapped(theta_out),
         }
     upper_tp = stroke_limits(mech.upper)[1]
     theta8 = float(mirror_angles(half_pose(upper_tp, mech.upper))[2])
@@ -49,7 +52,7 @@ def summary(mech: Mechanism) -> dict:
         "x_open": lower["x_open"],
         "x_toggle": lower["x_toggle"],
         "stroke": lower["stroke"],
-        "theta8_toggle": theta8,
+        "theta8_toggle": wrapped(theta8),
         "halves": halves,
     }
 
@@ -95,10 +98,16 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def wrapped(rad: float) -> float:
+    """An angle within (-pi, pi] rad (a pose can carry whole turns: the lower half's
+    theta5 at the toggle came out as 6.3308 rad, the upper's theta8 as -0.0476)."""
+    value = math.remainder(rad, math.tau)
+    return math.pi if value == -math.pi else value
+
+
 def _wrapped_deg(rad: float) -> float:
-    """An angle in degrees within (-180, 180] (a pose can carry whole turns)."""
-    value = deg(rad) % 360.0
-    return value - 360.0 if value > 180.0 else value
+    """An angle in degrees within (-180, 180]."""
+    return deg(wrapped(rad))
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
