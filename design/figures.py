@@ -81,8 +81,8 @@ def front_figure(path: Path, keys: Sequence[str], feasible: Sequence[Evaluation]
         ax.scatter(_values(front, a), _values(front, b), s=14, c="tab:blue", label="Pareto set")
         for i, p in enumerate(placements):  # one marker and colour per reference throughout
             ra, rb = _point(p.reference.metrics, a), _point(p.reference.metrics, b)
-            ax.scatter([ra], [rb], marker=_MARKERS[i % len(_MARKERS)], color=f"C{i % 10}",
-                       s=60, edgecolors="k", label=p.name, zorder=3)
+            ax.scatter([ra], [rb], marker=_MARKERS[i % len(_MARKERS)],
+                       color=f"C{(i + 1) % 10}", s=60, edgecolors="k", label=p.name, zorder=3)
             if p.dominated_by is not None:
                 ax.annotate("", (_point(p.dominated_by.metrics, a),
                                  _point(p.dominated_by.metrics, b)),
@@ -117,7 +117,8 @@ def parallel_figure(path: Path, keys: Sequence[str], front: Sequence[Evaluation]
     for row in scaled[:len(front)]:
         ax.plot(xs, row, c="tab:blue", alpha=0.35, lw=0.8)
     for i, (p, row) in enumerate(zip(placements, scaled[len(front):])):
-        ax.plot(xs, row, lw=2.2, color=f"C{i % 10}", marker=_MARKERS[i % len(_MARKERS)],
+        ax.plot(xs, row, lw=2.2, color=f"C{(i + 1) % 10}",
+                marker=_MARKERS[i % len(_MARKERS)],
                 label=p.name)
     ax.set_xticks(xs)
     scales = [_display(k)[1] for k in keys]

@@ -59,9 +59,10 @@ def _add_range_arguments(p: argparse.ArgumentParser, preset: str) -> None:
     p.add_argument("--half", choices=HALVES, default="lower", help="half to study (default lower)")
     p.add_argument("--alpha-lock", type=ANGLE, default=1.0,
                    help="smallest toggle angle, deg: where Mp counts as near lock-up "
-                        f"(default 1; at least {math.degrees(MIN_ANGLE):.2g})")
+                        f"(default 1 deg; at least {math.degrees(MIN_ANGLE):.2g} deg)")
     p.add_argument("--alpha-max", type=ANGLE, default=90.0,
-                   help="largest toggle angle (open clamp), deg (default 90; seed 004 gives none)")
+                   help="largest toggle angle (open clamp), deg (default 90 deg; seed 004 gives "
+                        "none)")
     p.add_argument("--points", type=POINTS, default=90,
                    help="toggle angles in the range (default 90)")
 
