@@ -141,12 +141,27 @@ def test_an_fmu_of_another_preset_is_refused_before_the_work(tmp_path: Path, cap
         "--preset to run it, or build one: toggle build-fmu --preset lin2003_sm55 --out DIR")
 
 
-def test_a_profile_whose_peak_exceeds_the_force_limit_is_refused_before_the_run(
+def test_a_profile_whose_peak_exceeds_a_given_force_limit_is_refused_before_the_run(
         tmp_path: Path, capsys) -> None:
     plan = profile(tmp_path / "sm.csv", peak=1172.0)
-    code, _, err = run_command(hil_main, ["run", "--profile", str(plan)], capsys)
+    code, _, err = run_command(hil_main, ["run", "--profile", str(plan), "--force-limit",
+                                          "400"], capsys)
     assert code == 2 and "planned peak input force is 1172 N, above --force-limit 400 N" in err
     assert "at least 1172 N" in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_simulated_rig_at_the_default_limit_takes_the_limit_its_plan_needs(
+        tmp_path: Path, capsys) -> None:
+    from hil.run_settings import resolve_settings
+
+    plan = profile(tmp_path / "sm.csv", peak=1172.0)
+    args = argparse.Namespace(config=None, json=False, quiet=True, profile=plan)
+    s = resolve_settings(args)
+    assert s.force_limit == 1460.0 and not s.force_limit_given  # 1.25 x 1172 N, 3 digits
+    assert "force limit 1460 N, 1.25 x the plan's peak 1172 N" in capsys.readouterr().err
+    small = profile(tmp_path / "small.csv", peak=100.0)
+    assert resolve_settings(argparse.Namespace(config=None, json=False, quiet=True,
+                                               profile=small)).force_limit == 400.0
 
 
 # --- a plan's header, figures named after their preset -----------------------------------
