@@ -61,10 +61,12 @@ def no_planning(monkeypatch):
 
 @pytest.mark.parametrize("argv, name", [
     (["plot", "trade-off", "--points", "2"], "trade_off_chang2021.png"),
-    (["plot", "plan", str(ROOT / "tests/fmu_fixtures/missing.csv")], "plan_chang2021.png"),
+    (["plot", "plan", "{tmp}/plan.csv"], "plan_lin2003_sm55.png"),  # its header's preset
 ])
 def test_plan_figures_go_into_the_folder_and_refuse_an_existing_one_first(
         argv, name, tmp_path: Path, capsys, no_planning) -> None:
+    (tmp_path / "plan.csv").write_text('# preset = "lin2003_sm55"\n')
+    argv = [arg.format(tmp=tmp_path) for arg in argv]
     (tmp_path / name).write_text("mine\n")
     code, _, err = answer([*argv, "--out", str(tmp_path)], capsys)
     assert code == 2 and err.strip().endswith(
@@ -103,7 +105,7 @@ def test_plot_clamp_writes_into_figures_by_default(tmp_path: Path, monkeypatch,
     code, out, _ = answer(["plot", "clamp", "--mu", "0.1"], capsys)
     assert code == 0 and out.rstrip().splitlines()[-1].startswith("results in figures/ (fig4")
     assert sorted(p.name for p in (tmp_path / "figures").iterdir())[0] == (
-        "fig4_tiebar_force_chang2021.png")
+        "fig4_tiebar_force_lin2003_sm55.png")  # the command's default preset
 
 
 def test_build_fmu_refuses_an_existing_fmu_before_the_build(tmp_path: Path, monkeypatch,
