@@ -480,7 +480,9 @@ def build_parser() -> argparse.ArgumentParser:
                                       "clamp it was planned for)")
     p.add_argument("--preset", default=None,
                    help="clamp preset with [dynamics] masses: chang2021, lin2003_sm55 or a TOML "
-                        "file (li_micro has no masses, dong2022 is a press; default chang2021)")
+                        "file (li_micro has no masses, dong2022 is a press; default: the "
+                        "preset of --fmu, or of the FMU toggle build-fmu wrote last, else "
+                        "chang2021)")
     add_number_options(p)
     p.add_argument("--profile", type=path, default=None,
                    help="planned profile CSV (toggle plan --out); replayed forward and back, "

@@ -114,8 +114,9 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force-limit", type=float, default=None, dest="force_limit",
                    help=f"stop when |input force| exceeds this, N (default "
                         f"{RUN_DEFAULTS['force_limit']:g} N, for the rig's load cell; with --real "
-                        f"at most its {LOAD_CELL_RANGE:g}; the simulated rig of a larger "
-                        f"clamp, such as lin2003_sm55, needs more)")
+                        f"at most its {LOAD_CELL_RANGE:g}; without it the simulated rig of a "
+                        f"larger clamp, such as lin2003_sm55, runs under 1.25 x its plan's "
+                        f"peak; a given limit below the plan's peak is refused)")
     p.add_argument("--watchdog-ms", type=float, default=None, dest="watchdog_ms",
                    help="host watchdog on telemetry silence, ms (default: measured from the "
                         "link when the session opens, 100 on a rig's idle link, at most 1000; "
