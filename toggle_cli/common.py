@@ -107,9 +107,7 @@ def preset_tag(preset: str) -> str:
 
 def output(args: argparse.Namespace, name: str) -> Path:
     """``name`` (``str.format`` fields from the arguments, and ``{tag}``) under ``--out``."""
-    fields = vars(args)
-    if getattr(args, "preset", None):
-        fields = {**fields, "tag": preset_tag(args.preset)}
+    fields = {**vars(args), "tag": preset_tag(getattr(args, "preset", None) or "")}
     return args.out / name.format(**fields)
 
 
