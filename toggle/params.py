@@ -371,6 +371,9 @@ def preset_file(name: str) -> Path | None:
 
 def preset_table(name: str) -> tuple[dict[str, Any], str]:
     """Parsed TOML of a shipped preset or of a file, and the origin used in messages."""
+    if not name.strip():
+        raise UnknownPresetError(f"an empty preset name; shipped: {', '.join(preset_names())}"
+                                 " or a TOML file")
     if Path(name).is_dir():
         raise ParameterError(f"{name} is a directory, not a preset TOML file")
     if (path := preset_file(name)) is not None:
