@@ -297,4 +297,7 @@ def test_hil_emulate_sent_sigint_as_a_background_job_exits_130() -> None:
     finally:
         proc.kill()
     assert proc.returncode == 130, err
-    assert err.strip().endswith("hil emulate: interrupted by SIGINT; the emulated rig is closed")
+    # serving: "hil emulate: interrupted by SIGINT; the emulated rig is closed"; a signal
+    # between the port's line and the serving (a loaded machine): hil's own early handler
+    assert err.strip().splitlines()[-1].startswith(("hil emulate: interrupted by SIGINT",
+                                                    "hil: interrupted by SIGINT")), err
