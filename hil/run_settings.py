@@ -373,8 +373,8 @@ def _fmu_preset(values: dict[str, Any], explicit: set[str]) -> None:
         return  # refused with its reason below
     if built_for != wanted:
         raise InputError(f"--fmu {fmu}: built for preset {built_for}, not {values['preset']}; "
-                         f"drop --preset to run it, or build one: toggle build-fmu --preset "
-                         f"{values['preset']} --out DIR")
+                         f"drop --preset to run it, or drop --fmu to run {values['preset']}'s "
+                         "own FMU (built when missing)")
 
 
 def resolve_settings(args: argparse.Namespace) -> RunSettings:

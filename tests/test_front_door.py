@@ -138,7 +138,7 @@ def test_an_fmu_of_another_preset_is_refused_before_the_work(tmp_path: Path, cap
                                           "lin2003_sm55", "--speed", "5e-3"], capsys)
     assert code == 2 and err.strip() == (
         f"hil run: error: --fmu {fmu}: built for preset chang2021, not lin2003_sm55; drop "
-        "--preset to run it, or build one: toggle build-fmu --preset lin2003_sm55 --out DIR")
+        "--preset to run it, or drop --fmu to run lin2003_sm55's own FMU (built when missing)")
 
 
 def test_a_profile_whose_peak_exceeds_a_given_force_limit_is_refused_before_the_run(
