@@ -281,6 +281,7 @@ def test_design_axes_are_words_with_display_units() -> None:
 
 # --- hil emulate, stopped as a shell's background job ---------------------------------------
 
+@pytest.mark.real_time  # a signal sent to a serving emulator
 def test_hil_emulate_sent_sigint_as_a_background_job_exits_130() -> None:
     """A shell starts a background job with SIGINT ignored; ``kill -INT`` still stops the
     emulator, which exits 130 as README's convention says (it exited 0)."""
