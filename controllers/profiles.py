@@ -224,16 +224,24 @@ def write_profile_csv(path: str | Path, samples: ProfileSamples,
     return path
 
 
+def _read(path: Path) -> str:
+    """A profile's text; ProfileError in words (no such file, a folder, not UTF-8 with its
+    line and column: :func:`toggle.files.read_text`)."""
+    from toggle.files import InputError, read_text
+
+    try:
+        return read_text(path, "profile")
+    except InputError as exc:
+        raise ProfileError(str(exc)) from None
+
+
 def read_profile_columns(path: str | Path, columns: tuple[str, ...] = CSV_COLUMNS
                          ) -> np.ndarray:
     """The named columns (header text with units, :data:`CSV_COLUMNS`) of a profile CSV as
     an array of rows; other columns and the leading ``# key = value`` lines are skipped.
     The time column (first of :data:`CSV_COLUMNS`) must increase over at least two rows."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ProfileError(f"cannot read profile {path}: {exc}") from exc
+    text = _read(path)
     numbered = [(number, ln) for number, ln in enumerate(text.splitlines(), 1)
                 if ln.strip() and not ln.lstrip().startswith("#")]
     lines = [ln for _, ln in numbered]
@@ -294,11 +302,8 @@ def read_profile_settings(path: str | Path) -> dict[str, Any]:
     """The settings a planned profile was made with: its leading ``# key = value`` lines
     (TOML values, SI units) as :func:`write_profile_csv` writes them; {} for a bare CSV."""
     path = Path(path)
-    try:
-        with path.open(encoding="utf-8") as fh:
-            head = list(itertools.takewhile(lambda ln: ln.lstrip().startswith("#"), fh))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ProfileError(f"cannot read profile {path}: {exc}") from exc
+    head = list(itertools.takewhile(lambda ln: ln.lstrip().startswith("#"),
+                                    _read(path).splitlines()))
     text = "\n".join(ln.lstrip()[1:].strip() for ln in head)
     try:
         return tomllib.loads(text)

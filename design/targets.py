@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from toggle.files import InputError, read_text
 from toggle.params import Mechanism, ParameterError, load_preset
 
 if sys.version_info >= (3, 11):
@@ -357,9 +358,12 @@ def targets_from_dict(table: dict[str, Any], origin: str = "<targets>") -> Targe
 def load_targets(path: str | Path) -> Targets:
     """Read a targets file (:func:`targets_from_dict`)."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ParameterError(f"cannot read targets file {path}: {exc}") from exc
+        text = read_text(path, "targets file")  # no such file, a folder, not UTF-8: in words
+    except InputError as exc:
+        raise ParameterError(str(exc)) from None
+    if not text.strip():
+        raise ParameterError(f"targets file {path}: is empty; it needs preset = \"...\", "
+                             "objectives, [targets] and [bounds] (see design/examples/sm55.toml)")
     try:
         table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

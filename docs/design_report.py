@@ -263,7 +263,7 @@ def linkage(preset: Path, records: Path, figure: Path) -> str:
     argv = ["plot", "linkage", "--preset", os.path.relpath(preset, ROOT), "--out",
             os.path.relpath(out, ROOT), "--force"]
     run_cli(main, "toggle", argv)
-    shutil.copyfile(out / "linkage.png", figure)
+    shutil.copyfile(out / f"linkage_{preset.stem}.png", figure)
     return "$ toggle " + " ".join(argv)
 
 

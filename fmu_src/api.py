@@ -31,12 +31,13 @@ def fmu_file_name(native: bool = False, fmi_version: int = 2, interface: str = "
     return f"{model_name(fmi_version, interface)}.fmu"
 
 
-def build_fmu(out: str | Path = "build", preset: str = "chang2021", *, native: bool = False,
+def build_fmu(out: str | Path | None = None, preset: str = "chang2021", *, native: bool = False,
               fmi_version: int = 2, interface: str = "cs", overwrite: bool = False) -> Path:
     """Build the clamp's FMU for a preset into a folder.
 
     Args:
-        out: The folder to write the FMU into (created if missing).
+        out: The folder to write the FMU into (created if missing); default the build
+            folder ``hil run`` reads (the checkout's ``build/``, else ``./build``).
         preset: A preset's name or TOML path with ``[dynamics]`` and ``[drive]``; its values
             are the FMU parameters' start values.
         native: Build the native FMU (CasADi-generated C, no Python at run time) instead of
@@ -59,7 +60,9 @@ def build_fmu(out: str | Path = "build", preset: str = "chang2021", *, native: b
         raise ParameterError("FMI version 3 and interface me|both need native=True (the "
                              "pythonfmu FMU is FMI 2.0 Co-Simulation)")
     load_preset(preset)  # an unreadable or invalid preset: told before the build
-    out = Path(out)
+    from fmu_src.build import build_folder
+
+    out = build_folder() if out is None else Path(out)
     check_writable_dir(out, "out")
     check_writable(out / fmu_file_name(native, fmi_version, interface), "out",
                    force=overwrite)

@@ -32,15 +32,14 @@ from xml.etree.ElementTree import Element, SubElement, indent, tostring
 import casadi as ca
 import numpy as np
 
-from fmu_src.build import (
-    DEFAULT_SLAVE,
+from fmu_src.build import DEFAULT_SLAVE
+from fmu_src.c_code import c_string, fmi_headers
+from fmu_src.description import (
     check_variables,
     real_attributes,
     unit_definitions,
 )
-from fmu_src.build import number_text as _number
-from fmu_src.c_code import c_string, fmi_headers
-from fmu_src.slave import Var
+from fmu_src.description import number_text as _number
 from fmu_src.structure import (
     DRIVE_FIELDS,
     MASS_FIELDS,
@@ -50,6 +49,7 @@ from fmu_src.structure import (
     plant_functions,
     structure_dependencies,
 )
+from fmu_src.variables import Var
 from toggle.kinematics import half_pose
 from toggle.params import (
     DIMENSIONS,
@@ -221,7 +221,7 @@ def _rows(variables: Sequence[Var], fmi_version: int, me: bool) -> list[_Row]:
 
 
 def _description_root(fmi_version: int, name: str, guid: str, description: str) -> Element:
-    from fmu_src.build import project_version
+    from fmu_src.description import project_version
 
     attrib = {"fmiVersion": f"{fmi_version}.0", "modelName": name, "description": description,
               "generationTool": "toggle-clamp native_fmu (CasADi codegen)",

@@ -26,7 +26,7 @@ variables. The base class supplies what pythonfmu 0.7 does not:
   frees everything it holds at once (no reference cycle left for the
   garbage collector to find at interpreter exit);
 * units, descriptions, min/max and ModelStructure dependencies reach
-  modelDescription.xml (see :mod:`fmu_src.build`);
+  modelDescription.xml (see :mod:`fmu_src.description`);
 * input derivatives (FMI 2.0 ``fmi2SetRealInputDerivatives``, which pythonfmu 0.7
   does not pass on): each Real input has two hidden Real variables after the
   table (value references n + 2 i and n + 2 i + 1 for the i-th input, orders 1
@@ -43,94 +43,16 @@ from __future__ import annotations
 
 import math
 import weakref
-from dataclasses import dataclass
 from typing import Any, ClassVar
 from xml.etree.ElementTree import Element
 
-from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real, String
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
 
 from fmu_src import state as fmu_state
+from fmu_src.variables import Var, derivative_name, hidden_names
 
-_DEFAULT_VARIABILITY = {"parameter": "fixed", "input": "continuous", "output": "continuous"}
 _STATE_KEYS = frozenset({"fmu", "values", "phase", "failure", "model", "derivatives"})
-#: Orders of an input's derivatives a master may set (fmi2SetRealInputDerivatives).
-DERIVATIVE_ORDERS = (1, 2)
-
-
-def derivative_name(name: str, order: int) -> str:
-    """The hidden variable that carries input ``name``'s derivative of ``order``."""
-    return f"der{order}_{name}"
-
-
-def hidden_names(variables: tuple[Var, ...] | list[Var]) -> list[str]:
-    """The hidden derivative variables registered after the table, in value-reference order."""
-    return [derivative_name(v.name, k) for v in variables
-            if v.causality == "input" and not v.is_string for k in DERIVATIVE_ORDERS]
-
-
-@dataclass(frozen=True)
-class Var:
-    """One row of a slave's variable table (SI units).
-
-    ``start`` is required for parameters and inputs and forbidden for outputs
-    (they are ``initial="calculated"``). A ``str`` start makes a String
-    parameter, which carries no unit. ``depends_on`` names the inputs an output
-    depends on directly (``()``: none, i.e. no direct feedthrough; ``None``:
-    all inputs, the conservative FMI default).
-    """
-
-    name: str
-    causality: str
-    unit: str
-    description: str
-    start: float | str | None = None
-    min: float | None = None
-    max: float | None = None
-    variability: str | None = None
-    depends_on: tuple[str, ...] | None = None
-    nominal: float | None = None  # the magnitude a master scales its tolerances by
-
-    def __post_init__(self) -> None:
-        if not self.name.isidentifier():
-            raise ValueError(f"variable name {self.name!r} is not a Python identifier")
-        if self.causality not in _DEFAULT_VARIABILITY:
-            allowed = sorted(_DEFAULT_VARIABILITY)
-            raise ValueError(f"{self.name}: causality must be one of {allowed}")
-        if not self.description:
-            raise ValueError(f"{self.name}: a description is required")
-        if (self.start is None) != (self.causality == "output"):
-            raise ValueError(f"{self.name}: parameters and inputs need a start, outputs must not")
-        if self.depends_on is not None and self.causality != "output":
-            raise ValueError(f"{self.name}: only outputs have depends_on")
-        if self.is_string and (self.min is not None or self.max is not None):
-            raise ValueError(f"{self.name}: a String variable has no min/max")
-        if self.min is not None and self.max is not None and not self.min <= self.max:
-            raise ValueError(f"{self.name}: min {self.min} > max {self.max}")
-
-    @property
-    def is_string(self) -> bool:
-        return isinstance(self.start, str)
-
-    @property
-    def initial_value(self) -> float | str:
-        """Attribute value before initialisation (0.0 for outputs, finite)."""
-        return 0.0 if self.start is None else self.start
-
-    def to_pythonfmu(self, owner: weakref.ref) -> Real | String:
-        """The pythonfmu variable object registered for this row, reading ``owner()``."""
-        kind = String if self.is_string else Real
-        initial = {"parameter": Fmi2Initial.exact, "output": Fmi2Initial.calculated}
-        name = self.name
-        return kind(
-            name,
-            causality=Fmi2Causality[self.causality],
-            variability=Fmi2Variability[self.variability or _DEFAULT_VARIABILITY[self.causality]],
-            initial=initial.get(self.causality),
-            description=self.description,
-            getter=lambda: getattr(owner(), name),
-            setter=lambda value: owner()._set(name, value),
-        )
 
 
 class DeclaredSlave(Fmi2Slave):
@@ -345,9 +267,9 @@ class DeclaredSlave(Fmi2Slave):
         import importlib
 
         # build time only, in the building Python: by a name the bundling leaves alone
-        fmu_build = importlib.import_module("fmu_src.build")
+        description = importlib.import_module("fmu_src.description")
         root = super().to_xml(model_options or {})
-        fmu_build.extend_model_description(root, self.VARIABLES, self.initial_dependencies())
+        description.extend_model_description(root, self.VARIABLES, self.initial_dependencies())
         return root
 
     def initial_dependencies(self) -> dict[str, tuple[str, ...]] | None:

@@ -24,6 +24,11 @@ from hypothesis import strategies as st
 NUMBERS = ["0", "-1", "1", "3", "nan", "inf", "-inf", "1e308", "-0.5e-3", "0.5e-3", "25e-3",
            "", "abc", "1e-300", "2", "0.999"]
 TEXTS = ["", "chang2021", "nope", "/tmp", "li_micro/6", "lin2003_sm55", "loop://"]
+#: Lengths with a unit (toggle.args.length), good and bad, besides NUMBERS.
+LENGTHS = ["0.25mm", "250um", "-0.5mm", "1e-3mm", "2.5 cm", "0.25kg", "mm", "1e999mm", "nanmm"]
+#: Rig ports a user gets wrong: no device, a device that is no serial port, a URL to none.
+PORTS = ["/dev/null", "spy://nonexistent", "spy:///dev/null", "/nonexistent/tty", "loop://",
+         "/tmp"]
 
 
 def path_values(root: Path) -> list[str]:
@@ -62,6 +67,10 @@ def _values(action: argparse.Action, paths: list[str]) -> st.SearchStrategy[list
         return st.just([])
     if action.choices is not None:
         pool = [*map(str, action.choices), "nope", ""]
+    elif action.dest == "port":
+        pool = [*PORTS, *paths[:2]]
+    elif getattr(action.type, "__name__", "") == "length":
+        pool = [*NUMBERS, *LENGTHS]
     elif action.type in (float, int) or getattr(action.type, "__name__", "") == "number":
         pool = NUMBERS
     elif action.type is Path or getattr(action.type, "__name__", "") == "path":
@@ -109,8 +118,8 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     import fmu_src.build as build  # toggle build-fmu loads it when it runs
     import fmu_src.native_build as native
     import toggle.linkage as linkage
-    from hil.cli import emulate as hil_emulate
     from hil.cli.interrupts import Interrupted
+    from hil.cli import emulate as hil_emulate
     from hil.emulators.rig_emulator import RigEmulator
     from hil.host import experiment
     from hil.host.samples import Trajectory
@@ -138,6 +147,7 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     mp.setattr(Figure, "tight_layout", lambda fig, **_kw: None)
     mp.setattr(linkage, "animate_linkage", fake_animation)
     mp.setattr(build, "build_fmu", fake_build)
+    mp.setattr(build, "build_folder", lambda: workdir / "build")  # never the checkout's
     mp.setattr(native, "build_native_fmu", fake_build)
     mp.setattr(experiment, "planned_trajectory", lambda *a, **k: canned)
     mp.setattr(RigEmulator, "serve", lambda self: None)

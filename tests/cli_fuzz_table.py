@@ -71,14 +71,21 @@ FAILURES: tuple[tuple[str, ...], ...] = (
 INPUTS = ("preset", "config", "profile", "table", "fmu", "csv", "targets", "runs")
 #: Options whose value is an output (a file or the results folder).
 OUTPUTS = ("out", "cycle_out", "duty_plot", "plot")
-NOT_NUMBERS = ("nan", "inf", "-inf", "abc", "", "1e999", "0x10")
+NOT_NUMBERS = ("nan", "inf", "-inf", "abc", "", "1e999", "0x10", "0.25kg", "mm")
+#: Rig ports that are no serial port (each refused before the work, exit 2), by label.
+BAD_PORTS = {"/dev/null": "/dev/null", "spy://nonexistent": "spy://nonexistent",
+             "a folder": "{folder}", "a regular file": "{file}", "no such device":
+             "/nonexistent/tty"}
 #: Every file name a command writes into its results folder (a folder "holding" them).
+#: Figures named after their preset (toggle_cli.common.preset_tag), by stem.
+TAGGED = ("kinematics", "linkage", "sensitivity_IT7", "asymmetry_vs_it", "fig4_tiebar_force",
+          "fig5_mechanical_advantage", "fig6_thrust", "fig7_thrust_max", "fig8_motor_torque",
+          "study", "sweep", "asymmetry", "plan", "trade_off")
 RESULT_NAMES = (
-    "kinematics.png", "linkage.png", "linkage.gif", "sensitivity_IT7.png",
-    "asymmetry_vs_it.png", "fig4_tiebar_force.png", "fig5_mechanical_advantage.png",
-    "fig6_thrust.png", "fig7_thrust_max.png", "fig8_motor_torque.png",
-    "significance_dong2022.png", "study.png", "sweep.png", "asymmetry.png", "plan.png",
-    "trade_off.png", "ToggleClamp.fmu", "pareto.csv", "pareto.parquet", "all.csv",
+    *(f"{stem}_{tag}.png" for stem in TAGGED
+      for tag in ("chang2021", "lin2003_sm55", "li_micro", "li_micro-1")),
+    "linkage_chang2021.gif", "significance_dong2022.png", "ToggleClamp.fmu", "pareto.csv",
+    "pareto.parquet", "all.csv",
     "front.png", "parallel.png", "meta.json", "samples.csv", "summary.json",
     "force_curves.png", "rsm.json", "rsm_stroke_error.png",
     *(f"tables_{s}.png" for s in ("stroke", "stroke_error", "force_forward_max",
@@ -118,7 +125,8 @@ def make_fixture(root: Path) -> dict[str, dict[str, str]]:
                "/dev/null": Path("/dev/null"), "an existing file": root / "existing.csv",
                "a file as the folder": root / "existing.csv" / "sub",
                "a folder holding results": root / "results",
-               "a folder holding fifos": root / "fifos"}
+               "a folder holding fifos": root / "fifos",
+               "a name of 315 characters": root / ("n" * 315)}
     os.mkfifo(outputs["a fifo"])
     try:
         os.mknod(outputs["a device node"], 0o666 | stat.S_IFCHR, os.makedev(1, 3))
@@ -130,8 +138,10 @@ def make_fixture(root: Path) -> dict[str, dict[str, str]]:
         outputs[kind].mkdir()
         for name in RESULT_NAMES:
             make(outputs[kind] / name)
+    ports = {k: v.format(folder=files["a folder"], file=outputs["an existing file"])
+             for k, v in BAD_PORTS.items()}
     return {"input": {k: str(v) for k, v in files.items()},
-            "output": {k: str(v) for k, v in outputs.items()}}
+            "output": {k: str(v) for k, v in outputs.items()}, "port": ports}
 
 
 def snapshot(root: Path) -> dict[str, tuple[int, int, int]]:
@@ -159,7 +169,7 @@ def _actions(parser: argparse.ArgumentParser) -> list[argparse.Action]:
 
 def _is_number(action: argparse.Action) -> bool:
     return action.type in (float, int) or getattr(action.type, "__name__", "") in (
-        "number", "integer")
+        "number", "integer", "length")
 
 
 def _put(argv: list[str], action: argparse.Action, value: str) -> list[str]:
@@ -187,7 +197,8 @@ def _mistake(rng: random.Random, kind: str, base: list[str],
             and isinstance(a.nargs, (type(None), str)),
             "choice": lambda a: a.choices and a.option_strings,
             "input": lambda a: a.dest in INPUTS,
-            "output": lambda a: a.dest in OUTPUTS}[kind]
+            "output": lambda a: a.dest in OUTPUTS,
+            "port": lambda a: a.dest == "port"}[kind]
     chosen = [a for a in actions if pick(a)]
     if not chosen:
         return None
@@ -196,6 +207,10 @@ def _mistake(rng: random.Random, kind: str, base: list[str],
         return _put(base, action, rng.choice(NOT_NUMBERS)), "not a number"
     if kind == "choice":
         return _put(base, action, rng.choice(["nope", "", "BASH"])), "a choice not offered"
+    if kind == "port":  # hil run takes a port with --real only
+        what = rng.choice(sorted(fixture["port"]))
+        real = ["--real"] if base[:1] == ["run"] else []
+        return [*_put(base, action, fixture["port"][what]), *real], f"port: {what}"
     # an empty --config is a valid one (every setting at its default): not a mistake
     what = rng.choice([w for w in sorted(fixture[kind])
                        if not (action.dest == "config" and w == "empty")])
@@ -204,7 +219,7 @@ def _mistake(rng: random.Random, kind: str, base: list[str],
 
 #: The kinds of line: the mistakes, drawn alike, and a run that fails, drawn in
 #: :data:`FAILURE_SHARE` of the lines.
-KINDS = ("unknown", "value", "number", "choice", "input", "output", "failure")
+KINDS = ("unknown", "value", "number", "choice", "input", "output", "port", "failure")
 FAILURE_SHARE = 0.05
 
 

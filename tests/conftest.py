@@ -36,6 +36,20 @@ settings.load_profile("suite")
 KINDS = ("computing", "real_time", "alone")
 
 
+def pytest_report_header() -> list[str]:
+    """The hil tests that run ``hil run`` without --preset expect chang2021's FMU in the build
+    folder; ``hil run`` takes the preset of the FMU ``toggle build-fmu`` wrote there last
+    (issue 47), so another preset's FMU there is named at the start."""
+    from fmu_src.build import build_folder, fmu_preset
+
+    built = fmu_preset(build_folder() / "ToggleClamp.fmu")
+    if built in (None, "chang2021"):
+        return []
+    return [f"warning: {build_folder() / 'ToggleClamp.fmu'} is built for {built}: hil run "
+            "without --preset runs it, and the hil tests expect chang2021's; restore it "
+            "with `toggle build-fmu --force`"]
+
+
 def _kind(item: pytest.Item) -> str:
     """A test's kind: its (or its module's) mark ``real_time`` or ``alone``, else
     computing."""

@@ -1,4 +1,7 @@
-"""The project's import graph, read from the source (every import, in functions too).
+"""The project's import graph, read from the source (every import, in functions too, and
+the string imports: ``importlib.import_module("pkg.mod")``, ``__import__("pkg.mod")`` and a
+dotted name given to another loader such as ``importlib.util.find_spec`` or
+``pkgutil.resolve_name``).
 
 The floors: the model (toggle) at the bottom; planning (controllers) and the FMU (fmu_src)
 on it; the clamp synthesis (design) and the rig (hil) above; the ``toggle`` command line
@@ -36,8 +39,33 @@ def module_name(path: Path, root: Path = ROOT) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
+#: Functions (by their last name) whose first argument, a string, names a module they load.
+LOADERS = frozenset({"import_module", "__import__", "find_spec", "resolve_name",
+                     "import_string", "spec_from_loader"})
+
+
+def string_import(node: ast.AST) -> str | None:
+    """The module a call such as ``importlib.import_module("fmu_src.description")`` loads:
+    its first argument where that is a string constant (an f-string's constant head up to
+    its last dot, e.g. ``f"toggle_cli.{name}"``: the package); None for any other node."""
+    if not (isinstance(node, ast.Call) and node.args):
+        return None
+    func = node.func
+    name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", None)
+    if name not in LOADERS:
+        return None
+    arg = node.args[0]
+    if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
+        return arg.value.split(":")[0]  # resolve_name's "pkg.mod:attr"
+    if isinstance(arg, ast.JoinedStr) and arg.values and isinstance(arg.values[0], ast.Constant):
+        head = str(arg.values[0].value).rpartition(".")[0]
+        return head or None
+    return None
+
+
 def imports(path: Path, root: Path = ROOT) -> set[str]:
-    """The modules of the project that ``path`` imports (absolute and relative imports)."""
+    """The modules of the project that ``path`` imports (absolute and relative imports, and
+    the string imports :func:`string_import` reads)."""
     name = module_name(path, root)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found: set[str] = set()
@@ -53,6 +81,8 @@ def imports(path: Path, root: Path = ROOT) -> set[str]:
             found.add(module)
             # ``from pkg import mod``: the submodule, where it is one
             found.update(f"{module}.{alias.name}" for alias in node.names)
+        elif (loaded := string_import(node)) is not None:
+            found.add(loaded)
     own = set(packages(root))
     return {m for m in found if m.split(".")[0] in own}
 

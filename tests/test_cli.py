@@ -49,7 +49,8 @@ def test_tolerance_json_has_indices_and_sensitivities(capsys):
 def test_plots_write_png_files(tmp_path, capsys):
     assert main(["plot", "kinematics", "--out", str(tmp_path)]) == 0
     assert main(["plot", "tolerance", "--it", "8", "--out", str(tmp_path)]) == 0
-    for name in ("kinematics.png", "sensitivity_IT8.png", "asymmetry_vs_it.png"):
+    for name in ("kinematics_chang2021.png", "sensitivity_IT8_chang2021.png",
+                 "asymmetry_vs_it_chang2021.png"):
         data = (tmp_path / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
 

@@ -229,7 +229,7 @@ def test_tables_rows_options_are_never_silently_unused(capsys):
 def test_plan_masses_take_commas_or_words_and_refuse_a_field_twice(capsys):
     """``--masses a=1 b=2`` (words, like every other list option) was refused with the
     top-level usage ('unrecognized arguments: b=2'); a field given twice took the last."""
-    from toggle_cli.plan import _masses
+    from toggle_cli.plan_setup import parse_masses as _masses
 
     assert _masses(["platen_friction=5", "platen_rate=2"]) == _masses(
         ["platen_friction=5,platen_rate=2"]) == {"platen_friction": 5.0, "platen_rate": 2.0}

@@ -20,7 +20,7 @@ def test_the_generated_lines_cover_both_commands_and_every_kind_of_mistake(
     assert {line.cli for line in lines} == {"toggle", "hil"}
     labels = {line.kind.split(":")[0] for line in lines}
     assert {"input", "output", "unknown option", "not a number", "an option without value",
-            "a choice not offered", "run failure"} == labels and len(KINDS) == len(labels)
+            "a choice not offered", "run failure", "port"} == labels and len(KINDS) == len(labels)
     assert generate(60, 40, fixture, parsers) == lines  # a seed replays
 
 

@@ -44,7 +44,7 @@ def test_atomic_writes_are_what_the_results_line_names(tmp_path: Path) -> None:
 def test_a_figure_kind_names_its_folder_last_and_json_keeps_stdout(tmp_path: Path,
                                                                    capsys) -> None:
     code, out, _ = answer(["plot", "kinematics", "--out", str(tmp_path)], capsys)
-    assert code == 0 and out == f"results in {tmp_path}/ (kinematics.png)\n"
+    assert code == 0 and out == f"results in {tmp_path}/ (kinematics_chang2021.png)\n"
     code, out, err = answer(["tolerance", "--samples", "0", "--json"], capsys)
     assert code == 0 and json.loads(out) and "results in" not in err  # wrote nothing
 
@@ -52,19 +52,21 @@ def test_a_figure_kind_names_its_folder_last_and_json_keeps_stdout(tmp_path: Pat
 @pytest.fixture
 def no_planning(monkeypatch):
     import controllers.planner as planner  # toggle plan loads it when it runs
-    import toggle_cli.plan as plan_cli
+    import toggle_cli.plan_setup as plan_setup
 
     monkeypatch.setattr(planner, "planner_for", lambda *a, **k: pytest.fail("solved first"))
-    monkeypatch.setattr(plan_cli, "_trade_off_curves",
+    monkeypatch.setattr(plan_setup, "trade_off_curves",
                         lambda *a, **k: pytest.fail("planned first"))
 
 
 @pytest.mark.parametrize("argv, name", [
-    (["plot", "trade-off", "--points", "2"], "trade_off.png"),
-    (["plot", "plan", str(ROOT / "tests/fmu_fixtures/missing.csv")], "plan.png"),
+    (["plot", "trade-off", "--points", "2"], "trade_off_chang2021.png"),
+    (["plot", "plan", "{tmp}/plan.csv"], "plan_lin2003_sm55.png"),  # its header's preset
 ])
 def test_plan_figures_go_into_the_folder_and_refuse_an_existing_one_first(
         argv, name, tmp_path: Path, capsys, no_planning) -> None:
+    (tmp_path / "plan.csv").write_text('# preset = "lin2003_sm55"\n')
+    argv = [arg.format(tmp=tmp_path) for arg in argv]
     (tmp_path / name).write_text("mine\n")
     code, _, err = answer([*argv, "--out", str(tmp_path)], capsys)
     assert code == 2 and err.strip().endswith(
@@ -82,7 +84,7 @@ def test_plot_plan_refuses_a_profile_in_mm(tmp_path: Path, capsys) -> None:
                                             for t in range(11)))
     code, _, err = answer(["plot", "plan", str(csv), "--out", str(tmp_path)], capsys)
     assert code == 2 and f"profile {csv}: its positions span -3.4 to 46.6 m" in err
-    assert "positions are in m" in err and not (tmp_path / "plan.png").exists()
+    assert "positions are in m" in err and not (tmp_path / "plan_chang2021.png").exists()
 
 
 def test_plot_plan_refuses_a_plan_cut_short_naming_it(tmp_path: Path, capsys) -> None:
@@ -94,7 +96,7 @@ def test_plot_plan_refuses_a_plan_cut_short_naming_it(tmp_path: Path, capsys) ->
     code, _, err = answer(["plot", "plan", str(csv), "--out", str(tmp_path)], capsys)
     assert code == 2 and err.count("\n") == 1, err
     assert (f"profile {csv}: truncated: its samples end at 0.3 s, its header says duration = "
-            "0.5 s") in err and not (tmp_path / "plan.png").exists()
+            "0.5 s") in err and not (tmp_path / "plan_chang2021.png").exists()
 
 
 def test_plot_clamp_writes_into_figures_by_default(tmp_path: Path, monkeypatch,
@@ -102,7 +104,8 @@ def test_plot_clamp_writes_into_figures_by_default(tmp_path: Path, monkeypatch,
     monkeypatch.chdir(tmp_path)
     code, out, _ = answer(["plot", "clamp", "--mu", "0.1"], capsys)
     assert code == 0 and out.rstrip().splitlines()[-1].startswith("results in figures/ (fig4")
-    assert sorted(p.name for p in (tmp_path / "figures").iterdir())[0] == "fig4_tiebar_force.png"
+    assert sorted(p.name for p in (tmp_path / "figures").iterdir())[0] == (
+        "fig4_tiebar_force_lin2003_sm55.png")  # the command's default preset
 
 
 def test_build_fmu_refuses_an_existing_fmu_before_the_build(tmp_path: Path, monkeypatch,

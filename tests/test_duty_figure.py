@@ -9,7 +9,7 @@ import pytest
 from controllers.duty import Duty
 from controllers.limits import drive_limits
 from toggle.params import load_preset
-from toggle_cli.plan import DUTY_FILL, duty_figure
+from toggle_cli.plan_figures import DUTY_FILL, duty_figure
 
 
 @pytest.mark.parametrize("peak", [0.05, 0.6, 2.0])  # N m: a tiny cycle, a fair one, too much

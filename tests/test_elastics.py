@@ -156,8 +156,9 @@ def test_cli_plot_writes_figures(tmp_path):
     assert main(["plot", "clamp", "--preset", "lin2003_sm55", "--mu", "0", "0.05",
                  "--out", str(tmp_path)]) == 0
     names = {p.name for p in tmp_path.glob("*.png")}
-    assert {"fig4_tiebar_force.png", "fig5_mechanical_advantage.png", "fig6_thrust.png",
-            "fig7_thrust_max.png", "fig8_motor_torque.png"} <= names
+    assert {f"{name}_lin2003_sm55.png" for name in (
+        "fig4_tiebar_force", "fig5_mechanical_advantage", "fig6_thrust", "fig7_thrust_max",
+        "fig8_motor_torque")} <= names
 
 
 def test_cli_plot_at_a_vanishing_clamp_force_draws_every_figure(tmp_path):
@@ -166,7 +167,7 @@ def test_cli_plot_at_a_vanishing_clamp_force_draws_every_figure(tmp_path):
     The hold is drawn for 1 ms; every figure's data is computed before the first file."""
     assert main(["plot", "clamp", "--preset", "lin2003_sm55", "--clamp-force", "1e-300",
                  "--mu", "0.1", "--out", str(tmp_path)]) == 0
-    assert (tmp_path / "fig8_motor_torque.png").stat().st_size > 0
+    assert (tmp_path / "fig8_motor_torque_lin2003_sm55.png").stat().st_size > 0
 
 
 @pytest.mark.parametrize("delta_r8", [0.0, 0.3e-3])

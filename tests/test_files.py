@@ -106,7 +106,7 @@ def test_the_command_line_refuses_an_existing_figure_before_the_work(
         tmp_path: Path, capsys: pytest.CaptureFixture, umask: None) -> None:
     argv = ["plot", "kinematics", "--out", str(tmp_path)]
     assert main(argv) == 0
-    figure = tmp_path / "kinematics.png"
+    figure = tmp_path / "kinematics_chang2021.png"
     assert stat.S_IMODE(os.stat(figure).st_mode) == 0o644
     before = figure.stat().st_mtime_ns
     capsys.readouterr()

@@ -19,7 +19,7 @@ from fmu_support import (
     validator_problems,
 )
 
-from fmu_src.build import extend_model_description
+from fmu_src.description import extend_model_description
 from fmu_src.host import start_slave
 from fmu_src.slave import Var
 

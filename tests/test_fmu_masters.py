@@ -413,7 +413,8 @@ def test_one_fmu_per_preset_with_its_values_as_start_values(tmp_path: Path,
     from toggle_cli import main
 
     assert main(["build-fmu", "--preset", "lin2003_sm55", "--out", str(tmp_path)]) == 0
-    md = read_model_description(capsys.readouterr().out.strip())
+    assert capsys.readouterr().out == f"results in {tmp_path}/ (ToggleClamp.fmu)\n"
+    md = read_model_description(str(tmp_path / "ToggleClamp.fmu"))
     start = {v.name: v.start for v in md.modelVariables}
     dyn = configure("lin2003_sm55").dynamics
     assert start["preset"] == "lin2003_sm55" and float(start["m_platen"]) == dyn.platen

@@ -43,4 +43,4 @@ def monkeypatch_module():
           suppress_health_check=[HealthCheck.too_slow])
 @given(argv=invocations(build_parser(), PATHS, caps))
 def test_every_hil_command_answers_bad_input_with_one_clear_line(argv: list[str]) -> None:
-    check_answer(main, argv, [OUT], watch=ROOT)
+    check_answer(main, argv, [OUT], watch=ROOT, in_words=True)

@@ -143,7 +143,7 @@ def test_an_unknown_option_is_answered_with_the_sub_commands_usage(
 
 
 @pytest.mark.parametrize("text, says", [
-    ("", "preset must be a preset name or TOML path, but it is missing"),
+    ("", "is empty; it needs preset = \"...\", objectives, [targets] and [bounds]"),
     ('preset = "lin2003_sm55"\n', "objectives must be a list of at least two names"),
     ('preset = "lin2003_sm55"\nobjectives = "close_time"\n', 'got "close_time"'),
 ])

@@ -60,3 +60,26 @@ def test_the_room_check_finds_an_import_up_a_room(tmp_path: Path) -> None:
     assert "hil (the package's own) imports hil.host.run (room host)" in found
     assert "hil.loose: not in a room of ROOMS" in found
     assert not any("hil.cli.main" in f and "link" in f for f in found)
+
+
+def test_string_imports_are_read_and_make_a_circle(tmp_path: Path) -> None:
+    """``importlib.import_module("...")``, ``__import__`` and a dotted name given to another
+    loader count as imports (fmu_src.slave loaded fmu_src.build so, which imported it back:
+    a circle the checker did not see, issue 47)."""
+    (tmp_path / "fmu_src").mkdir()
+    (tmp_path / "fmu_src" / "__init__.py").write_text("")
+    (tmp_path / "fmu_src" / "build.py").write_text("from fmu_src.slave import Var\n")
+    (tmp_path / "fmu_src" / "slave.py").write_text(
+        "import importlib\n"
+        "def to_xml():\n"
+        "    return importlib.import_module('fmu_src.build')\n")
+    (tmp_path / "fmu_src" / "host.py").write_text(
+        "import pkgutil\nx = __import__('fmu_src.state')\n"
+        "y = pkgutil.resolve_name('fmu_src.guard:CODE')\n")
+    (tmp_path / "fmu_src" / "state.py").write_text("")
+    (tmp_path / "fmu_src" / "guard.py").write_text("")
+    graph = module_graph(tmp_path)
+    assert graph["fmu_src.slave"] == {"fmu_src.build"}
+    assert graph["fmu_src.host"] == {"fmu_src.state", "fmu_src.guard"}
+    assert cycles(graph) == [["fmu_src.build", "fmu_src.slave"]]
+    assert "circle: fmu_src.build <-> fmu_src.slave" in findings(tmp_path)

@@ -464,8 +464,8 @@ def test_cli_writes_the_profile_and_the_json(tmp_path, capsys):
     copy = write_profile_csv(tmp_path / "copy.csv", samples)
     np.testing.assert_allclose(read_profile_csv(copy).position, samples.position, rtol=1e-11)
     assert main(["plot", "plan", str(out), "--out", str(tmp_path / "figs")]) == 0
-    png = tmp_path / "figs" / "plan.png"  # the --out folder, named on the last line
-    assert capsys.readouterr().out.rstrip().endswith(f"results in {png.parent}/ (plan.png)")
+    png = tmp_path / "figs" / "plan_chang2021.png"  # the --out folder, named on the last line
+    assert capsys.readouterr().out.rstrip().endswith(f"results in {png.parent}/ ({png.name})")
     assert png.stat().st_size > 10_000
 
 
@@ -593,7 +593,7 @@ def test_robust_plan_beats_the_s_curve_on_both_clamps(capsys):
 
 def test_dimension_errors_are_named_as_the_fmu_names_them():
     from fmu_src.toggle_clamp_fmu import ERRORS as FMU_ERRORS
-    from toggle_cli.plan import ERRORS
+    from toggle_cli.plan_setup import ERRORS
 
     assert ERRORS == FMU_ERRORS
     nominal = plan_config("chang2021")
@@ -672,7 +672,7 @@ def test_trade_off_with_the_mold_and_in_a_dry_cycle(tmp_path, capsys, monkeypatc
     monkeypatch.setattr(ClampPlanner, "trade_off",
                         lambda self, points=6, progress=None: computed[self.config.x_contact])
     assert main(["plot", "trade-off", "--points", "2", "--out", str(tmp_path)]) == 0
-    assert (tmp_path / "trade_off.png").stat().st_size > 10_000
+    assert (tmp_path / "trade_off_chang2021.png").stat().st_size > 10_000
 
 
 def test_the_best_peak_does_not_grow_with_the_duration(chang):

@@ -331,7 +331,7 @@ def test_calibration_refuses_bad_requests(tables):
 
 
 def test_tables_cli_json_and_figures(tmp_path, capsys):
-    assert main(["tables", "--json", "--plot", str(tmp_path)]) == 0
+    assert main(["tables", "--json", "--out", str(tmp_path)]) == 0
     out = json.loads(capsys.readouterr().out)  # stdout is the JSON alone
     assert len(out["rows"]) == 72
     assert sorted(out["figures"]) == sorted(str(p) for p in tmp_path.glob("*.png"))

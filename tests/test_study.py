@@ -244,7 +244,7 @@ def test_cli_study_json_and_sweep(capsys, tmp_path):
     sw = json.loads(capsys.readouterr().out)
     assert sw["criteria"]["stroke_ratio"][0] == [None, None] and len(sw["failures"]) == 2
     assert main(["plot", "study", "--points", "20", "--out", str(tmp_path)]) == 0
-    assert (tmp_path / "study.png").stat().st_size > 10_000
+    assert (tmp_path / "study_li_micro.png").stat().st_size > 10_000
 
 
 def test_an_angle_whose_crosshead_stroke_rounds_to_zero_is_refused(li_micro, capsys):

@@ -18,7 +18,8 @@ from pathlib import Path
 from typing import Any
 
 #: A negative number as the value of an option (argparse takes '-1e-3' for an option).
-_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
+_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*(m|cm|mm|um|\u00b5m|\u03bcm)?$"
+                       r"|^-(inf|nan)$", re.IGNORECASE)
 
 
 def join_negative_numbers(argv: list[str]) -> list[str]:
@@ -33,8 +34,9 @@ def join_negative_numbers(argv: list[str]) -> list[str]:
     return out
 
 
-def number(lo: float, hi: float, what: str) -> Callable[[str], float]:
-    """argparse type: a finite float in [lo, hi]."""
+def number(lo: float, hi: float, what: str, unit: str = "") -> Callable[[str], float]:
+    """argparse type: a finite float in [lo, hi]; ``unit`` (SI) is printed after the default
+    in the help (:class:`HelpFormatter`)."""
     def parse(text: str) -> float:
         try:
             value = float(text)
@@ -44,13 +46,43 @@ def number(lo: float, hi: float, what: str) -> Callable[[str], float]:
             raise argparse.ArgumentTypeError(f"{what}, got {text!r}")
         return value
     parse.__name__ = "number"
+    parse.unit = unit  # type: ignore[attr-defined]  # read by HelpFormatter
     return parse
 
 
-def positive(what: str, hi: float = 1e12, lo: float = 0.0) -> Callable[[str], float]:
-    """argparse type: a finite float in (lo, hi]; ``what`` names the quantity and its unit."""
+#: Length units a length option takes after its number, with their factor to metres.
+LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "\u00b5m": 1e-6, "\u03bcm": 1e-6}
+_LENGTH = re.compile(r"^\s*(?P<number>.*?)\s*(?P<unit>[a-zA-Z\u00b5\u03bc]*)\s*$")
+
+def length(lo: float, hi: float, what: str) -> Callable[[str], float]:
+    """argparse type: a length in [lo, hi] m, in metres (``0.25e-3``) or with a unit
+    (``0.25mm``, ``250um``, ``2.5 cm``, ``0.00025m``), as drives and CAD tools take it."""
+    def parse(text: str) -> float:
+        match = _LENGTH.match(text)
+        unit = (match.group("unit") if match else "") or "m"
+        if match is None or unit not in LENGTH_UNITS:
+            raise argparse.ArgumentTypeError(
+                f"not a length: {text!r} (a number in m, or with a unit: 0.25mm, 250um)")
+        try:
+            value = float(match.group("number")) * LENGTH_UNITS[unit]
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"not a length: {text!r} (a number in m, or with a unit: 0.25mm, 250um)"
+            ) from None
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise argparse.ArgumentTypeError(f"{what}, got {text!r}")
+        return value
+    parse.__name__ = "length"
+    parse.unit = "m"  # type: ignore[attr-defined]
+    return parse
+
+
+def positive(what: str, hi: float = 1e12, lo: float = 0.0, unit: str = ""
+             ) -> Callable[[str], float]:
+    """argparse type: a finite float in (lo, hi]; ``what`` names the quantity and its unit
+    (``unit``, the SI unit alone, is printed after the default in the help)."""
     why = f"must be a {what} > {lo:g}" + (f" and <= {hi:g}" if hi < 1e12 else "")
-    inner = number(lo, hi, why)
+    inner = number(lo, hi, why, unit)
 
     def parse(text: str) -> float:
         value = inner(text)
@@ -58,6 +90,7 @@ def positive(what: str, hi: float = 1e12, lo: float = 0.0) -> Callable[[str], fl
             raise argparse.ArgumentTypeError(f"{why}, got {text!r}")
         return value
     parse.__name__ = "number"
+    parse.unit = unit  # type: ignore[attr-defined]
     return parse
 
 
@@ -76,7 +109,7 @@ def integer(lo: int, hi: int, what: str) -> Callable[[str], int]:
 
 
 PROBABILITY = number(0.0, 1.0, "must be a probability between 0 and 1")
-TIME = number(0.0, 1e6, "must be a time >= 0 s")
+TIME = number(0.0, 1e6, "must be a time >= 0 s", "s")
 
 
 def path(text: str) -> Path:
@@ -87,13 +120,17 @@ def path(text: str) -> Path:
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows ``(default: X)`` unless the help already says its default or there is none
-    (None, False, an empty list)."""
+    """Shows ``(default: X)``, with the unit of a number option's type (``(default: 0 m)``),
+    unless the help already says its default or there is none (None, False, an empty
+    list)."""
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
         if "default" in text or not has_default(action) or not action.option_strings:
             return text
+        unit = getattr(action.type, "unit", "")
+        if unit and isinstance(action.default, (int, float)):
+            return f"{text} (default: %(default)s {unit})"
         return super()._get_help_string(action)
 
 

@@ -118,6 +118,12 @@ def take_written() -> list[Path]:
     return written
 
 
+def note_written(path: Path) -> None:
+    """Count a file written by other means than :func:`atomic_path` (a builder's own
+    rename, such as the FMU's) among what the command wrote, for its results line."""
+    _WRITTEN.append(Path(path))
+
+
 def results_line(files: list[Path]) -> str:
     """``results in DIR/ (a.png, b.csv, presets/)``: the one folder that holds ``files``
     and what is in it, by the path from there (several files of one sub-folder as the
@@ -152,6 +158,7 @@ def check_writable(target: Path, option: str, force: bool | None = None) -> None
     a folder, a device or fifo, an existing file without ``force`` (None: the policy of
     :func:`allow_overwrite`), a folder where nothing can be created (a file is created and
     removed in the nearest existing one)."""
+    check_name_lengths(target, option)
     kind = _existing_kind(target)
     if kind == "directory":
         raise OutputError(f"{option} {target}: is a directory, not a file")
@@ -164,8 +171,32 @@ def check_writable(target: Path, option: str, force: bool | None = None) -> None
     _check_folder(target.parent, option, target)
 
 
+def check_name_lengths(target: Path, option: str) -> None:
+    """Refuse a path with a name longer than the file system takes (``NAME_MAX``, 255 bytes
+    on Linux) or longer than a path may be (``PATH_MAX``), in words, before the work."""
+    name_max, path_max = 255, 4096
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        folder = next((p for p in (target, *target.parents) if p.exists()), Path("."))
+        name_max = os.pathconf(folder, "PC_NAME_MAX")
+        path_max = os.pathconf(folder, "PC_PATH_MAX")
+    for part in target.parts:
+        if len(os.fsencode(part)) > name_max:
+            raise OutputError(f"{option} {_short(part)}: a name of {len(part)} characters; "
+                              f"the file system takes at most {name_max}")
+    if len(os.fsencode(str(target.absolute()))) >= path_max:
+        raise OutputError(f"{option} {_short(str(target))}: a path of {len(str(target))} "
+                          f"characters; the file system takes at most {path_max - 1}")
+
+
+def _short(text: str, keep: int = 40) -> str:
+    """``text`` cut to its first ``keep`` characters and an ellipsis (a name of hundreds of
+    characters is named, not printed)."""
+    return text if len(text) <= keep else f"{text[:keep]}..."
+
+
 def check_writable_dir(target: Path, option: str) -> None:
     """Refuse an output folder that cannot be created or written into."""
+    check_name_lengths(target, option)
     if target.exists() and not target.is_dir():
         raise OutputError(f"{option} {target}: not a directory")
     _check_folder(target, option, target)

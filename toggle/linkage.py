@@ -82,8 +82,11 @@ def draw_linkage(ax: plt.Axes, mech: Mechanism, x: float,
             np.array([plx[1], ply[1]]) + reach * direction]
     ax.plot([e[0] * MM for e in ends], [e[1] * MM for e in ends], color="0.35", lw=8,
             alpha=0.5, solid_capstyle="butt", zorder=1)
-    ax.annotate("9", (ends[1][0] * MM, ends[1][1] * MM), xytext=(8, -4),
-                textcoords="offset points", fontsize=9)
+    # its number where the bar crosses the clamp axis (the bar's ends may lie outside the
+    # view, and an annotation outside it is not drawn)
+    on_axis = plx[0] - ply[0] * direction[0]
+    ax.annotate("9", (on_axis * MM, 0.0), xytext=(7, 5), textcoords="offset points",
+                ha="left", va="bottom", fontsize=9, color="0.3", zorder=5)
     for half, j in joints.items():
         _draw_half(ax, half, j)
     points = [p for j in joints.values() for p in j]
@@ -94,6 +97,37 @@ def draw_linkage(ax: plt.Axes, mech: Mechanism, x: float,
     ax.set_aspect("equal")
     ax.set_xlabel("horizontal position (mm)")
     ax.set_ylabel("vertical position (mm)")
+
+
+#: A joint counts as across the clamp axis beyond this distance from it, m.
+AXIS_TOLERANCE = 1e-5
+#: The names of the joints that can cross the axis, by half: (corner, elbow).
+_CROSSING_NAMES = {"lower": ("joint 3-4", "E"), "upper": ("joint 6-7", "B")}
+
+
+def axis_crossings(mech: Mechanism, x: float) -> list[tuple[str, float]]:
+    """The joints of either half that lie on the other half's side of the clamp axis at
+    crosshead position ``x`` (m), with their height y (m): where the two halves' links pass
+    each other (they must lie in different planes there), as the SM-55's open pose does."""
+    found = []
+    for half, j in clamp_joints(x, mech.lower, mech.upper).items():
+        side = 1.0 if half == "upper" else -1.0
+        for point, name in zip((j.corner, j.elbow), _CROSSING_NAMES[half]):
+            if side * float(point[1]) < -AXIS_TOLERANCE:
+                found.append((name, float(point[1])))
+    return found
+
+
+def crossing_note(crossings: list[tuple[str, float]]) -> str:
+    """Two short lines naming the joints across the axis and how far (empty when none)."""
+    if not crossings:
+        return ""
+    above = ", ".join(name for name, y in crossings if y > 0)
+    below = ", ".join(name for name, y in crossings if y < 0)
+    sides = "; ".join(part for part in (f"{above} above it" if above else "",
+                                         f"{below} below" if below else "") if part)
+    furthest = max(abs(y) for _, y in crossings) * MM
+    return f"the halves cross the clamp axis (by {furthest:.1f} mm):\n{sides}"
 
 
 def _draw_half(ax: plt.Axes, half: str, j: HalfJoints) -> None:
@@ -139,10 +173,12 @@ def plot_linkage(mech: Mechanism, path: Path, x: float | None = None) -> Path:
     for ax, (name, xi) in zip(axes[0], panels):
         draw_linkage(ax, mech, xi, limits)
         platen = clamp_joints(xi, mech.lower, mech.upper)["lower"].platen[0]
-        ax.set_title(f"{name}x = {xi * MM:.2f} mm, L = {float(platen) * MM:.2f} mm",
-                     fontsize=10)
+        note = crossing_note(axis_crossings(mech, xi))
+        ax.set_title(f"{name}x = {xi * MM:.2f} mm, L = {float(platen) * MM:.2f} mm"
+                     + (f"\n{note}" if note else ""), fontsize=10,
+                     color="black" if not note else "darkred")
     fig.suptitle(f"{mech.name}: the double-toggle clamp to scale "
-                 "(links 1-9, joints A-F as seed 000)", fontsize=11)
+                 "(links 1-9, 9 the moving platen; joints A-F as seed 000)", fontsize=11)
     return save_figure(fig, path)
 
 
@@ -158,7 +194,9 @@ def animate_linkage(mech: Mechanism, path: Path, frames: int = 40, fps: int = 12
     def frame(i: int) -> list:
         ax.clear()
         draw_linkage(ax, mech, float(xs[i]), limits)
-        ax.set_title(f"{mech.name}: x = {xs[i] * MM:6.2f} mm", fontsize=10)
+        note = crossing_note(axis_crossings(mech, float(xs[i])))
+        ax.set_title(f"{mech.name}: x = {xs[i] * MM:6.2f} mm" + (f"\n{note}" if note else ""),
+                     fontsize=10)
         return []
 
     frame(0)

@@ -144,12 +144,17 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def check_outputs(args: argparse.Namespace) -> None:
-    """Before the work: the process's overwrite policy from ``--force``, and the files the
-    command declared (:func:`toggle_cli.common.declare_outputs`) checked writable."""
+    """Before the work: the process's overwrite policy from ``--force``, the settings a
+    command takes from its input file (its ``prepare``), and the files the command declared
+    (:func:`toggle_cli.common.declare_outputs`, named after those settings) checked
+    writable."""
     from toggle.files import OutputError, check_writable, check_writable_dir
     from toggle_cli.common import outputs
 
     allow_overwrite(getattr(args, "force", False))
+    prepare = getattr(args, "prepare", None)  # settings read from an input file (plot plan)
+    if prepare is not None:
+        prepare(args)
     targets = outputs(args)
     if targets:
         if args.out.suffix.lower() in (".png", ".gif", ".csv") and not args.out.is_dir():

@@ -16,6 +16,7 @@ from toggle_cli.common import (
     add_preset_argument,
     declare_outputs,
     mechanism,
+    output,
     print_json,
 )
 
@@ -66,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _add_common(p: argparse.ArgumentParser) -> None:
     add_preset_argument(p)
-    p.add_argument("--speed", type=SPEED, default=5e-3, help="crosshead speed, m/s (default 5e-3)")
+    p.add_argument("--speed", type=SPEED, default=5e-3,
+                   help="crosshead speed, m/s (default 5e-3 m/s)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -74,7 +76,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="extra input force of unequal halves (seed 000 Tables 6-8)")
     _add_common(p)
     p.add_argument("--delta-r8", type=LINK_ERROR, default=0.5e-3,
-                   help="length error of link 8 (upper r5), m (default 0.5e-3)")
+                   help="length error of link 8 (upper r5), m or with a unit: 0.5mm, "
+                        "500um (default 0.5e-3 m)")
     add_json_argument(p)
     p.set_defaults(handler=run)
 
@@ -82,7 +85,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def plot(args: argparse.Namespace) -> int:
     from toggle.asymmetry import plot_force_curves
 
-    plot_force_curves(mechanism(args), args.out / "asymmetry.png", speed=args.speed)
+    plot_force_curves(mechanism(args), output(args, "asymmetry_{tag}.png"), speed=args.speed)
     return 0
 
 
@@ -90,5 +93,5 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("asymmetry", help="extra input force vs x for delta_r8 = 0..0.75 mm")
     _add_common(p)
     add_out_argument(p)
-    declare_outputs(p, "asymmetry.png")
+    declare_outputs(p, "asymmetry_{tag}.png")
     p.set_defaults(handler=plot)

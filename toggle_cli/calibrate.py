@@ -84,7 +84,7 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--table", type=path, default=PAPER_TABLES,
                    help="TOML table in the paper's shape (default: seed 000 Tables 6-8)")
     p.add_argument("--speeds", type=SPEED, nargs="+", default=[5e-3, 15e-3],
-                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3)")
+                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3 m/s)")
     p.add_argument("--fit", nargs="+", choices=FITTABLE, metavar="PARAM",
                    default=["free_play", "contact_stiffness", "hersey_transition"],
                    help=f"at most {MAX_FITTED} of: {', '.join(FITTABLE)} (default free_play "

@@ -25,6 +25,7 @@ from toggle_cli.common import (
     declare_outputs,
     deg,
     mechanism,
+    output,
     print_json,
     table,
 )
@@ -133,7 +134,6 @@ def plot(args: argparse.Namespace) -> int:
     from toggle.plots import plt, save_figure
 
     mech = mechanism(args)
-    out = args.out
     results = [analyse_clamping(mech, mu, tiebar_force=args.clamp_force, x_contact=args.contact)
                for mu in args.mu]
     curves = [clamping_curves(mech, r) for r in results]
@@ -149,11 +149,12 @@ def plot(args: argparse.Namespace) -> int:
                         1e-3)
             histories.append((r, torque_history(mech, r, np.linspace(0.0, t_end, 400), speed)))
     panels = [
-        ("fig4_tiebar_force.png", "Total tie-bar force $F_c$ (kN)",
+        ("fig4_tiebar_force_{tag}.png", "Total tie-bar force $F_c$ (kN)",
          lambda c: c.state.tiebar_force / 1e3, False),
-        ("fig5_mechanical_advantage.png", "Mechanical advantage $F_{cl}/F_0$ (1)",
+        ("fig5_mechanical_advantage_{tag}.png", "Mechanical advantage $F_{cl}/F_0$ (1)",
          lambda c: c.mechanical_advantage, True),
-        ("fig6_thrust.png", "Crosshead thrust $F_0$ (kN)", lambda c: c.state.thrust / 1e3, False),
+        ("fig6_thrust_{tag}.png", "Crosshead thrust $F_0$ (kN)",
+         lambda c: c.state.thrust / 1e3, False),
     ]
     for name, ylabel, value, log in panels:
         fig, ax = plt.subplots(figsize=(6, 4))
@@ -166,7 +167,7 @@ def plot(args: argparse.Namespace) -> int:
         ax.invert_xaxis()  # clamping runs from alpha_C down to the straight toggle
         ax.legend()
         ax.set_title(f"{mech.name}: real-mold clamping")
-        save_figure(fig, out / name)
+        save_figure(fig, output(args, name))
         plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -174,7 +175,7 @@ def plot(args: argparse.Namespace) -> int:
     ax.set_xlabel(r"Friction coefficient $\mu$ (1)")
     ax.set_ylabel(r"Maximum thrust $F_{0,\max}$ (kN)")
     ax.set_title(f"{mech.name}: maximum crosshead thrust")
-    save_figure(fig, out / "fig7_thrust_max.png")
+    save_figure(fig, output(args, "fig7_thrust_max_{tag}.png"))
     plt.close(fig)
 
     if histories:
@@ -185,7 +186,7 @@ def plot(args: argparse.Namespace) -> int:
         ax.set_ylabel("Motor torque $T_m$ (N m)")
         ax.legend()
         ax.set_title(f"{mech.name}: {args.rpm:g} rpm, $\\eta$ = {mech.drive.efficiency:g}")
-        save_figure(fig, out / "fig8_motor_torque.png")
+        save_figure(fig, output(args, "fig8_motor_torque_{tag}.png"))
         plt.close(fig)
     return 0
 
@@ -197,8 +198,9 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
                    help="friction coefficients of the curves (default: the paper's, "
                         f"{' '.join(map(str, PAPER_MUS))})")
     p.add_argument("--rpm", type=positive("motor speed in rpm", 1e5), default=200.0,
-                   help="motor speed of the torque figure, rpm (default 200)")
+                   help="motor speed of the torque figure, rpm (default 200 rpm)")
     add_out_argument(p)
-    declare_outputs(p, "fig4_tiebar_force.png", "fig5_mechanical_advantage.png",
-                    "fig6_thrust.png", "fig7_thrust_max.png", "fig8_motor_torque.png")
+    declare_outputs(p, "fig4_tiebar_force_{tag}.png", "fig5_mechanical_advantage_{tag}.png",
+                    "fig6_thrust_{tag}.png", "fig7_thrust_max_{tag}.png",
+                    "fig8_motor_torque_{tag}.png")
     p.set_defaults(handler=plot)

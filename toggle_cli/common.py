@@ -14,19 +14,19 @@ from collections.abc import Callable, Collection, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from toggle.args import integer, number, path, positive
+from toggle.args import integer, length, number, path, positive
 from toggle.params import HALVES, Mechanism, ParameterError, load_preset
 
 MM = 1e3  # metres to millimetres, for tables only
 
 #: Shipped presets that describe a clamp (the press dong2022 is synthesize's only).
 CLAMP_PRESETS = ("chang2021", "lin2003_sm55", "li_micro")
-SPEED = positive("crosshead speed in m/s", 1.0)
+SPEED = positive("crosshead speed in m/s", 1.0, unit="m/s")
 #: A link-length error of the upper half (link 8), m.
-LINK_ERROR = number(-5e-3, 5e-3, "must be a length error below 5 mm, in m")
-FRICTION = number(0.0, 1.0, "must be a friction coefficient between 0 and 1")
-POSITION = number(-1.0, 1.0, "must be a crosshead position within 1 m, in m")
-FORCE = positive("force in N", 1e9)
+LINK_ERROR = length(-5e-3, 5e-3, "must be a length error within 5 mm")
+FRICTION = number(0.0, 1.0, "must be a friction coefficient between 0 and 1", "(1)")
+POSITION = length(-1.0, 1.0, "must be a crosshead position within 1 m")
+FORCE = positive("force in N", 1e9, unit="N")
 SEED = integer(0, 2**32 - 1, "must be a seed between 0 and 2^32 - 1")
 POINTS = integer(2, 100_000, "must be a count of points between 2 and 100000")
 SAMPLES = integer(1, 100_000_000, "must be a number of samples between 1 and 1e8")
@@ -91,14 +91,29 @@ def add_out_argument(parser: argparse.ArgumentParser) -> None:
 
 def declare_outputs(parser: argparse.ArgumentParser, *names: str) -> None:
     """The files a ``toggle plot`` kind writes into its ``--out`` folder (``str.format``
-    fields from the arguments, e.g. ``"sensitivity_IT{it}.png"``): the command line checks
-    them before the work (:func:`outputs`), and the command takes ``--force``."""
+    fields from the arguments, e.g. ``"sensitivity_IT{it}_{tag}.png"``, ``{tag}`` the
+    preset's :func:`preset_tag`): the command line checks them before the work
+    (:func:`outputs`), and the command takes ``--force``."""
     parser.set_defaults(outputs=names, checks_outputs=True)
+
+
+def preset_tag(preset: str) -> str:
+    """A preset as part of a file name, so that figures of two presets sit side by side: a
+    shipped name as it is (a family's group ``li_micro/6`` as ``li_micro-6``), a preset
+    file by its stem (``design/presets/design-3f2a.toml``: ``design-3f2a``)."""
+    path = Path(preset)
+    return path.stem if path.suffix.lower() == ".toml" else preset.replace("/", "-")
+
+
+def output(args: argparse.Namespace, name: str) -> Path:
+    """``name`` (``str.format`` fields from the arguments, and ``{tag}``) under ``--out``."""
+    fields = {**vars(args), "tag": preset_tag(getattr(args, "preset", None) or "")}
+    return args.out / name.format(**fields)
 
 
 def outputs(args: argparse.Namespace) -> list[Path]:
     """The output files a command declared with :func:`declare_outputs`, under ``--out``."""
-    return [args.out / name.format(**vars(args)) for name in getattr(args, "outputs", ())]
+    return [output(args, name) for name in getattr(args, "outputs", ())]
 
 
 def mechanism(args: argparse.Namespace) -> Mechanism:

@@ -66,7 +66,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="an existing Dask scheduler (start one with `dask scheduler` and "
                             "workers with `dask worker tcp://HOST:PORT`); default: a local "
                             "cluster")
-    p.add_argument("--connect-timeout", type=positive("time in s", 3600.0), default=10.0,
+    p.add_argument("--connect-timeout", type=positive("time in s", 3600.0, unit="s"), default=10.0,
                    help="seconds to wait for the --scheduler before giving up")
     where.add_argument("--workers", type=WORKERS, default=None,
                        help="local worker processes (default: one per free core, or none "

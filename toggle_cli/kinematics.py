@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from toggle.args import integer
 from toggle.files import check_writable, check_writable_dir
@@ -16,13 +17,16 @@ from toggle_cli.common import (
     declare_outputs,
     deg,
     mechanism,
+    output,
     print_json,
     table,
 )
 
 
 def summary(mech: Mechanism) -> dict:
-    """Stroke data of each half; top-level values are the lower half's (SI)."""
+    """Stroke data of each half; top-level values are the lower half's (SI; angles wrapped
+    into (-pi, pi] rad, as the table's into (-180, 180] deg: a pose can carry whole
+    turns)."""
     from toggle.kinematics import half_pose, mirror_angles, stroke_limits
 
     halves = {}
@@ -38,7 +42,7 @@ def summary(mech: Mechanism) -> dict:
             "L_toggle": float(pose_tp.L),
             "stroke": float(pose_tp.L - pose_open.L),
             # angle of the platen-side link at the toggle: theta5 (lower) or theta8 (upper)
-            "platen_link_angle_toggle": theta_out,
+            "platen_link_angle_toggle": wrapped(theta_out),
         }
     upper_tp = stroke_limits(mech.upper)[1]
     theta8 = float(mirror_angles(half_pose(upper_tp, mech.upper))[2])
@@ -48,7 +52,7 @@ def summary(mech: Mechanism) -> dict:
         "x_open": lower["x_open"],
         "x_toggle": lower["x_toggle"],
         "stroke": lower["stroke"],
-        "theta8_toggle": theta8,
+        "theta8_toggle": wrapped(theta8),
         "halves": halves,
     }
 
@@ -94,10 +98,16 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def wrapped(rad: float) -> float:
+    """An angle within (-pi, pi] rad (a pose can carry whole turns: the lower half's
+    theta5 at the toggle came out as 6.3308 rad, the upper's theta8 as -0.0476)."""
+    value = math.remainder(rad, math.tau)
+    return math.pi if value == -math.pi else value
+
+
 def _wrapped_deg(rad: float) -> float:
-    """An angle in degrees within (-180, 180] (a pose can carry whole turns)."""
-    value = deg(rad) % 360.0
-    return value - 360.0 if value > 180.0 else value
+    """An angle in degrees within (-180, 180]."""
+    return deg(wrapped(rad))
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -113,21 +123,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def plot(args: argparse.Namespace) -> int:
     from toggle.plots import plot_kinematics
 
-    plot_kinematics(mechanism(args), args.out / "kinematics.png")
+    plot_kinematics(mechanism(args), output(args, "kinematics_{tag}.png"))
     return 0
 
 
 def linkage(args: argparse.Namespace) -> int:
     from toggle.linkage import animate_linkage, plot_linkage
 
-    names = ("linkage.png", "linkage.gif") if args.animate else ("linkage.png",)
+    png, gif = output(args, "linkage_{tag}.png"), output(args, "linkage_{tag}.gif")
     check_writable_dir(args.out, "--out")
-    for name in names:  # before the drawing
-        check_writable(args.out / name, "--out")
+    for name in (png, gif) if args.animate else (png,):  # before the drawing
+        check_writable(name, "--out")
     mech = mechanism(args)
-    plot_linkage(mech, args.out / "linkage.png", args.x)
+    plot_linkage(mech, png, args.x)
     if args.animate:
-        animate_linkage(mech, args.out / "linkage.gif", args.frames)
+        animate_linkage(mech, gif, args.frames)
     return 0
 
 
@@ -135,7 +145,7 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("kinematics", help="L(x), dL/dx and MA of both halves (seed 000 Fig 6)")
     add_preset_argument(p)
     add_out_argument(p)
-    declare_outputs(p, "kinematics.png")
+    declare_outputs(p, "kinematics_{tag}.png")
     p.set_defaults(handler=plot)
     p = kinds.add_parser(
         "linkage", help="the mechanism drawn to scale, both halves, joints labelled as seed 000 "

@@ -1,111 +1,46 @@
-"""``toggle plan``: the clamp stroke that minimises the drive force; ``toggle plot plan``.
+"""``toggle plan``: the clamp stroke that minimises the drive force.
 
 Writes the profile CSV the HIL layer executes (``hil run --profile``) and
 reports the optimised peak and RMS input force against the trapezoidal and
-S-curve strokes of the same duration and limits. Options are SI (m, s, N).
+S-curve strokes of the same duration and limits. Options are SI (m, s, N), lengths also
+with a unit (0.25mm). Its options and what is made of them are in
+:mod:`toggle_cli.plan_setup`; its figures (``toggle plot plan``, ``toggle plot
+trade-off``, ``--duty-plot``) in :mod:`toggle_cli.plan_figures`.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import importlib
 import sys
-from pathlib import Path
 from typing import TYPE_CHECKING
 
-from toggle.args import integer, number, path, positive
 from toggle.files import atomic_path, check_writable
-from toggle.params import DYNAMICS_PARAMETERS, HALVES, PAPER_NAMES, ParameterError
+from toggle.params import ParameterError
+from toggle_cli import plan_setup
 from toggle_cli.common import (
-    FRICTION,
-    LINK_ERROR,
-    POSITION,
     add_arguments_later,
-    add_json_argument,
-    add_out_argument,
-    add_preset_argument,
-    declare_outputs,
     print_json,
     table,
 )
 
+# the plot kinds of this command (toggle_cli.plot asks each command module for them)
+from toggle_cli.plan_figures import (
+    add_plot_parser,  # noqa: F401
+    plot_duty,
+)
+from toggle_cli.plan_setup import (
+    add_plan_arguments,
+    dimensional_errors,
+    plant_and_limits,
+    progress_bar,
+    protection_zone,
+)
+
 if TYPE_CHECKING:
-    from collections.abc import Callable
-
-    import numpy as np
-
-    from controllers.cycle import MoldingCycle
-    from controllers.duty import Duty
     from controllers.limits import DriveLimits
     from controllers.planner import ClampPlanner
-    from controllers.plans import Plan, Protection
-    from controllers.progress import Progress
+    from controllers.plans import Plan
     from toggle.plant import PlantConfig
-
-if TYPE_CHECKING:
-    from matplotlib.figure import Figure
-
-MASS_FIELDS = tuple(field for field, _, _ in DYNAMICS_PARAMETERS.values())
-#: The dimensional errors, named as the FMU names its delta_* parameters.
-ERRORS = tuple(name for half in HALVES for name in PAPER_NAMES[half].values())
-_SHOWN = ("r8",)  # the one of them --help describes
-#: The dry cycle's mold contact before the toggle, m: no clamp force to speak of (mN).
-DRY_CONTACT = 1e-6
-
-
-def _masses(words: list[str] | None) -> dict[str, float] | None:
-    """Parse ``crosshead=40,links=120,platen=500`` (kg; guide_damping in N s/m, the
-    frictions in N), the items separated by commas or given as separate words."""
-    if not words:
-        return None
-    out: dict[str, float] = {}
-    for item in ",".join(words).split(","):
-        name, _, value = item.partition("=")
-        if name.strip() not in MASS_FIELDS:
-            raise ParameterError(f"--masses: unknown field {name.strip()!r}; use {MASS_FIELDS}")
-        if name.strip() in out:
-            raise ParameterError(f"--masses: {name.strip()} is given twice")
-        try:
-            out[name.strip()] = float(value)
-        except ValueError as exc:
-            raise ParameterError(f"--masses: {item!r} is not name=number") from exc
-    return out
-
-
-def _errors(args: argparse.Namespace) -> dict[str, float]:
-    """The dimensional errors given as ``--delta-NAME`` (m), by the FMU's names."""
-    return {name: value for name in ERRORS
-            if (value := getattr(args, f"delta_{name}", None)) is not None}
-
-
-def _progress(args: argparse.Namespace, desc: str = "planning", unit: str = "solve",
-              total: int = 0) -> Progress:
-    """The planning's progress on stderr (:mod:`controllers.progress`), none with
-    ``--json``."""
-    from controllers.progress import Progress
-
-    return Progress(desc, unit, total, enabled=not getattr(args, "json", False))
-
-
-def _plant(args: argparse.Namespace, errors: bool = True) -> tuple[PlantConfig, DriveLimits]:
-    """The plant (with the dimensional errors unless ``errors`` is false) and the limits."""
-    from controllers.limits import drive_limits
-    from controllers.plans import plan_config
-
-    cfg = plan_config(args.preset, mu=args.mu, x_contact=args.x_contact,
-                      clamp_force=args.clamp_force, masses=_masses(args.masses),
-                      errors=_errors(args) if errors else None)
-    limits = drive_limits(cfg.mechanism, velocity=args.v_max, acceleration=args.a_max,
-                          jerk=args.j_max, torque=args.torque_max)
-    return cfg, limits
-
-
-def _protection(args: argparse.Namespace) -> Protection:
-    """The mold-protection zone of ``--protect-distance/-speed/-force``."""
-    from controllers.plans import Protection
-
-    return Protection(args.protect_distance, args.protect_speed, args.protect_force)
 
 
 def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, object]]:
@@ -117,21 +52,21 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     from controllers.planner import best_plan, default_duration, planner_for
     from controllers.profiles import predict
 
-    if args.min_time or not _errors(args):
+    if args.min_time or not dimensional_errors(args):
         raise ParameterError("--robust plans a fixed duration against dimensional errors: "
                              "give --delta-NAME and no --min-time")
-    cfg, limits = _plant(args, errors=False)
+    cfg, limits = plant_and_limits(args, errors=False)
     nominal = planner_for(cfg, limits, args.contact_speed, args.intervals,
-                          protection=_protection(args))
+                          protection=protection_zone(args))
     duration = args.duration or default_duration(nominal)
-    planner, erroneous, curve = robust_planner(cfg, limits, _errors(args), duration,
+    planner, erroneous, curve = robust_planner(cfg, limits, dimensional_errors(args), duration,
                                                args.contact_speed, args.intervals,
-                                               _protection(args))
+                                               protection_zone(args))
     # the nominal plan, to compare, in a second process while this one plans the robust one;
     # the bound is the nominal plant's for both (computed here once, not in each process)
     bound = planner.lower_bound()
     with Background(best_plan, cfg, limits, args.contact_speed, args.intervals,
-                    _protection(args), duration, args.objective, bound) as nominal_plan:
+                    protection_zone(args), duration, args.objective, bound) as nominal_plan:
         plan, plain = planner.best(duration, args.objective), nominal_plan.result()
     report = {}
     for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
@@ -141,44 +76,9 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     return planner, plan, report
 
 
-def _trade_off_curves(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits,
-                      meanwhile: Callable[[], object] = lambda: None
-                      ) -> dict[str, tuple[ClampPlanner, list[Plan]]]:
-    """``--trade-off N``: the fastest stroke under N force limits, with the mold and in a
-    dry cycle (the mold at the toggle: no clamp force), each with its planner.
-    ``meanwhile``: work for this process while it waits for the dry cycle's (the figure's
-    imports, 0.6 s)."""
-    from controllers.background import Background
-    from controllers.planner import planner_for, trade_off_curve
-    from toggle.elastics import clamp_stroke
-
-    dry = cfg.with_(x_contact=clamp_stroke(cfg.mechanism)[1] - DRY_CONTACT)
-    common = (limits, args.contact_speed, args.intervals, _protection(args), args.trade_off)
-    planners = {name: planner_for(plant, *common[:3], protection=common[3])
-                for name, plant in (("mold", cfg), ("dry_cycle", dry))}
-    # seconds of IPOPT per curve: the dry cycle's in a second process (two cores), a bar
-    # on stderr counting both curves' limits (by limit, not the planner's solves: no
-    # reporting())
-    with contextlib.closing(_progress(args, "trade-off", "limit", 2 * args.trade_off)) as bar, \
-            Background(trade_off_curve, dry, *common) as dry_curve:
-        seen = 0
-
-        def tick() -> None:
-            nonlocal seen
-            bar.advance(1 + dry_curve.ticks() - seen)
-            seen = dry_curve.ticks()
-
-        mold = planners["mold"].trade_off(args.trade_off, tick)
-        meanwhile()
-        curves = {"mold": (planners["mold"], mold),
-                  "dry_cycle": (planners["dry_cycle"], dry_curve.result())}
-        bar.advance(dry_curve.ticks() - seen)
-    return curves
-
-
 def _trade_off(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits) -> int:
     """``--trade-off N``: stroke time against peak input force, printed."""
-    curves = _trade_off_curves(args, cfg, limits)
+    curves = plan_setup.trade_off_curves(args, cfg, limits)
     bound = curves["mold"][0].lower_bound()
     if args.json:
         print_json({"preset": cfg.mechanism.name, "peak_force_lower_bound": bound,
@@ -232,16 +132,6 @@ def _export(args: argparse.Namespace, plan: Plan, cfg: PlantConfig, limits: Driv
                               cycle=args.drive_cycle or cam.DRIVE_CYCLE)
 
 
-def _drive_cycle(text: str) -> float:
-    """argparse type of ``--drive-cycle`` (:func:`controllers.cam.parse_cycle`)."""
-    from controllers import cam
-
-    try:
-        return cam.parse_cycle(text)
-    except ParameterError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
 def _molding_cycle(args: argparse.Namespace, plan: Plan, opening: Plan, limits: DriveLimits
                    ) -> dict[str, object]:
     """``--cycle``: the whole molding cycle with the ``--hold`` and ``--eject`` dwells, its
@@ -256,7 +146,7 @@ def _molding_cycle(args: argparse.Namespace, plan: Plan, opening: Plan, limits: 
     drive = plan.config.mechanism.drive
     motor = check_motor(duty, drive, limits, args.rated_torque)
     if args.duty_plot:
-        _plot_duty(args.duty_plot, cycle, limits)
+        plot_duty(args.duty_plot, cycle, limits)
     if args.cycle_out:
         with atomic_path(args.cycle_out) as tmp:
             write_profile_csv(tmp, cycle.samples(), {
@@ -277,7 +167,7 @@ def _planned(args: argparse.Namespace, cfg: PlantConfig, limits: DriveLimits
     if args.robust:
         return _robust(args)
     planner = planner_for(cfg, limits, args.contact_speed, args.intervals,
-                          protection=_protection(args))
+                          protection=protection_zone(args))
     if args.min_time:
         return planner, planner.minimum_time(args.force_limit), None
     return planner, planner.best(args.duration or default_duration(planner), args.objective,
@@ -313,10 +203,10 @@ def run(args: argparse.Namespace) -> int:
     for name in ("cycle_out", "duty_plot"):
         if getattr(args, name):
             check_writable(getattr(args, name), f"--{name.replace('_', '-')}")
-    cfg, limits = _plant(args, errors=not args.robust)
+    cfg, limits = plant_and_limits(args, errors=not args.robust)
     if args.trade_off:
         return _trade_off(args, cfg, limits)
-    with reporting(_progress(args, "closing stroke" if args.cycle else "planning")):
+    with reporting(progress_bar(args, "closing stroke" if args.cycle else "planning")):
         planner, plan, robust = _planned(args, cfg, limits)
         bound = planner.lower_bound()
         if args.cycle:
@@ -380,7 +270,7 @@ def run(args: argparse.Namespace) -> int:
         "peak_force": peak,
         "peak_force_lower_bound": bound,
         "gap_to_bound_percent": 100.0 * (peak - bound) / bound if bound > 0 else None,
-        "dimension_errors": {f"delta_{k}": v for k, v in _errors(args).items()},
+        "dimension_errors": {f"delta_{k}": v for k, v in dimensional_errors(args).items()},
         "robust": robust,
         "rms_force": plan.rms_force,
         "baseline_peak_force": trap,
@@ -505,308 +395,9 @@ def _print_electrical(electrical: dict | None, thermal: dict | None) -> None:
               f"{thermal['time_constant']:.4g} s)")
 
 
-def plot(args: argparse.Namespace) -> int:
-    from controllers.profiles import read_profile_csv
-    from controllers.stroke_reports import baselines
-    from toggle.plots import MM, plt, save_figure
-
-    samples = read_profile_csv(args.csv)
-    cfg, limits = _plant(args)
-    _check_positions(args.csv, samples.position, cfg)
-    duration = float(samples.time[-1] - samples.time[0])
-    base = baselines(cfg, limits, duration)
-    fig, axes = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
-    curves = (("planned", samples), ("trapezoid", base["trapezoidal"]),
-              ("S-curve", base["s_curve"]))
-    for label, s in curves:
-        axes[0].plot(s.time, s.position * MM, label=label)
-        axes[1].plot(s.time, s.velocity * MM, label=label)
-        axes[2].plot(s.time, s.input_force, label=f"{label} (peak {s.peak_force:.4g} N)")
-    axes[0].set_ylabel("crosshead position (mm)")
-    axes[1].set_ylabel("crosshead velocity (mm/s)")
-    axes[2].set_ylabel("input force (N)")
-    axes[2].set_xlabel("time (s)")
-    for ax in axes:
-        ax.legend()
-    axes[0].set_title(f"{cfg.mechanism.name}: planned stroke against the baselines")
-    save_figure(fig, args.out / "plan.png")
-    return 0
-
-
-def _check_positions(csv: Path, x: np.ndarray, cfg: PlantConfig) -> None:
-    """Refuse a profile whose positions leave the preset's stroke by more than a tenth of
-    it: a file in mm (a 45 mm stroke read as 45 m), or one planned for another preset."""
-    from toggle.elastics import clamp_stroke
-
-    x_open, x_tp = clamp_stroke(cfg.mechanism)
-    margin = 0.1 * (x_tp - x_open)
-    if x.min() < x_open - margin or x.max() > x_tp + margin:
-        raise ParameterError(
-            f"profile {csv}: its positions span {x.min():.4g} to {x.max():.4g} m, outside "
-            f"{cfg.mechanism.name}'s stroke {x_open:.4g} to {x_tp:.4g} m (a profile's "
-            "positions are in m; was it planned for another --preset?)")
-
-
-def plot_trade_off(args: argparse.Namespace) -> int:
-    cfg, limits = _plant(args)
-    curves = _trade_off_curves(args, cfg, limits,
-                               meanwhile=lambda: importlib.import_module("toggle.plots"))
-    from toggle.plots import plt, save_figure
-
-    fig, ax = plt.subplots(figsize=(8, 5))
-    for (name, (planner, plans)), marker in zip(curves.items(), "os"):
-        label = (f"with the mold (clamp force {planner.clamp_force():.4g} N)" if name == "mold"
-                 else "dry cycle (mold at the toggle)")
-        ax.plot([p.duration for p in plans], [p.peak_force for p in plans], marker=marker,
-                label=label)
-    bound = curves["mold"][0].lower_bound()
-    ax.axhline(bound, ls="--", color="k", lw=1,
-               label=f"lower bound with the mold, any duration ({bound:.4g} N)")
-    ax.set_xlabel("clamp stroke time (s)")
-    ax.set_ylabel("peak input force (N)")
-    ax.set_title(f"{cfg.mechanism.name}: fastest stroke under each input-force limit")
-    ax.legend()
-    save_figure(fig, args.out / "trade_off.png")
-    return 0
-
-
-def _plot_duty(out: Path, cycle: MoldingCycle, limits: DriveLimits) -> str:
-    """``--duty-plot``: :func:`duty_figure` of the molding cycle, saved."""
-    from toggle.plots import save_figure
-
-    mech, phases = cycle.closing.config.mechanism, cycle.phases
-    return save_figure(duty_figure(
-        cycle.duty(), limits, mech.drive.rated_torque,
-        f"{mech.name}: the motor over a {cycle.cycle_time:.4g} s molding cycle "
-        f"(hold {phases['hold']:g} s, eject {phases['eject']:g} s)"), out)
-
-
-#: The torque-speed plane shows the cycle at this fraction of its height at least: a motor
-#: far larger than the cycle needs squashed the cycle into the axis (1.2 N m for 0.1 N m).
-DUTY_FILL = 0.5
-
-
-def duty_figure(duty: Duty, limits: DriveLimits, rated_torque: float | None,
-                title: str) -> Figure:
-    """The motor's torque and speed over a cycle, in time and on the torque-speed plane
-    (SI; axes labelled with units). The plane is scaled to the cycle: the motor's curve
-    and rated torque are drawn where they fall inside it, and the text says how much of
-    them the cycle uses. Legends sit below the axes, never over the curves."""
-    import numpy as np
-
-    from toggle.plots import plt
-
-    fig, (ax_t, ax_c) = plt.subplots(1, 2, figsize=(12, 5.6))
-    lines = ax_t.plot(duty.time, duty.torque, color="C0", label="motor torque (N m)")
-    lines.append(ax_t.axhline(duty.rms_torque, ls=":", color="C0",
-                              label=f"RMS torque {duty.rms_torque:.3g} N m"))
-    ax_t.set_xlabel("time (s)")
-    ax_t.set_ylabel("motor torque (N m)")
-    ax_s = ax_t.twinx()
-    lines += ax_s.plot(duty.time, duty.speed, color="C1", label="motor speed (rad/s)")
-    ax_s.set_ylabel("motor speed (rad/s)")
-    ax_t.legend(handles=lines, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3,
-                fontsize=9, frameon=False)
-    speed = np.abs(duty.speed)
-    torque = np.abs(duty.torque)
-    top_w, top_t = 1.15 * max(float(speed.max()), 1e-9), 1.15 * max(float(torque.max()), 1e-9)
-    curve_w = np.linspace(0.0, top_w, 200)
-    usable = limits.torque_at(curve_w)
-    top_t = max(top_t, min(float(np.max(usable)), top_t / DUTY_FILL))
-    if rated_torque is not None and rated_torque <= top_t / DUTY_FILL:
-        top_t = max(top_t, 1.1 * rated_torque)
-    ax_c.plot(curve_w, usable, "k", label="usable torque (torque-speed curve)")
-    if rated_torque is not None:
-        ax_c.axhline(rated_torque, ls="--", color="k", lw=1,
-                     label=f"rated (continuous) torque {rated_torque:.3g} N m")
-    ax_c.plot(speed, torque, ".", ms=2, color="C0", label="the cycle (1 ms samples)")
-    ax_c.plot([0.0], [duty.rms_torque], "o", color="C3",
-              label=f"RMS torque {duty.rms_torque:.3g} N m")
-    ax_c.set_xlim(0.0, top_w)
-    ax_c.set_ylim(0.0, top_t)
-    ax_c.set_xlabel("motor speed (rad/s)")
-    ax_c.set_ylabel("motor torque (N m)")
-    use = float(np.max(torque / np.maximum(limits.torque_at(speed), 1e-12)))
-    said = f"peak {use:.0%} of the usable torque at its speed"
-    if rated_torque is not None:
-        said += f"\nRMS {duty.rms_torque / rated_torque:.0%} of the rated torque"
-    above = [f"{name} {value:.3g} N m" for name, value in
-             (("usable", float(np.min(usable))), ("rated", rated_torque))
-             if value is not None and value > top_t]
-    if above:
-        said += f"\nabove this view: {', '.join(above)}"
-    ax_c.text(0.98, 0.97, said, transform=ax_c.transAxes, ha="right", va="top", fontsize=9,
-              bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "none"})
-    ax_c.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=9,
-                frameon=False)
-    fig.suptitle(title)
-    fig.tight_layout()
-    return fig
-
-
-def _add_protection_arguments(p: argparse.ArgumentParser) -> None:
-    from controllers.plans import PROTECT_FRACTION
-
-    zone = p.add_argument_group("mold protection: the last distance of platen travel before "
-                                "mold contact")
-    zone.add_argument("--protect-distance", type=positive("distance in m", 10.0, 1e-6),
-                      default=None, help="length of the zone, m of platen travel (default "
-                      f"{PROTECT_FRACTION:g} of the platen's travel to contact)")
-    zone.add_argument("--protect-speed", type=positive("speed in m/s", 10.0, 1e-6),
-                      default=None, help="platen speed cap in the zone, m/s (default none)")
-    zone.add_argument("--protect-force", type=positive("force in N", 1e9), default=None,
-                      help="input-force cap in the zone, N: a part left in the mold stops "
-                           "the clamp (default none)")
-
-
-def _add_plant_arguments(p: argparse.ArgumentParser) -> None:
-    add_preset_argument(p, accepts=("chang2021", "lin2003_sm55"),
-                        why="li_micro has no [dynamics] (give --masses)")
-    p.add_argument("--mu", type=FRICTION, default=None, help="pin friction (default: preset's)")
-    mold = p.add_mutually_exclusive_group()
-    mold.add_argument("--x-contact", type=POSITION, default=None,
-                      help="crosshead position at mold contact, m (the mold height)")
-    mold.add_argument("--clamp-force", type=positive("force in N", 1e15), default=None,
-                      help="clamp force held in the locked position, N "
-                           "(default: the preset's final tie-bar force)")
-    p.add_argument("--masses", default=None, nargs="+", metavar="NAME=VALUE",
-                   help="override or supply [dynamics]: crosshead=kg,links=kg,platen=kg"
-                        "[,guide_damping=N s/m,guide_friction=N,platen_friction=N,"
-                        "platen_rate=1] (commas or spaces between the items)")
-    p.add_argument("--v-max", type=positive("speed in m/s", 10.0, 1e-4), default=None,
-                   help="crosshead speed limit, m/s (default: the preset's drive)")
-    p.add_argument("--a-max", type=positive("acceleration in m/s^2", 1e3, 1e-4), default=None,
-                   help="acceleration limit, m/s^2 (default: the preset's drive)")
-    p.add_argument("--j-max", type=positive("jerk in m/s^3", 1e6, 1e-4), default=None,
-                   help="jerk limit, m/s^3 (default: the preset's drive)")
-    p.add_argument("--torque-max", type=positive("torque in N m", 1e5, 1e-4), default=None,
-                   help="motor torque at standstill, N m, scaling the torque-speed curve "
-                        "(default: the preset's drive)")
-    errors = p.add_argument_group("dimensional errors, m (named as the FMU's delta_* "
-                                  "parameters; seed 000's names)")
-    for name in ERRORS:
-        errors.add_argument(f"--delta-{name}", dest=f"delta_{name}", type=LINK_ERROR,
-                            default=None, metavar="M", help=argparse.SUPPRESS
-                            if name not in _SHOWN else
-                            f"error of {name}, m (likewise --delta-NAME for every dimension)")
-
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plan", help="plan the clamp stroke that minimises the drive force")
-    add_arguments_later(p, _add_plan_arguments)
+    add_arguments_later(p, add_plan_arguments)
     p.set_defaults(handler=run)
 
 
-def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
-    """The options of ``toggle plan``, whose defaults and choices are the planner's."""
-    from controllers import cam, cam_formats
-    from controllers.plans import CONTACT_SPEED, INTERVALS
-    from controllers.stroke_problem import OBJECTIVES
-
-    _add_plant_arguments(p)
-    p.add_argument("--duration", type=positive("duration in s", 1e4), default=None,
-                   help="stroke duration, s (default: twice the kinematic minimum)")
-    p.add_argument("--min-time", action="store_true",
-                   help="plan the fastest stroke under --force-limit instead")
-    p.add_argument("--force-limit", type=positive("force in N", 1e9), default=None,
-                   help="input-force limit of --min-time, N (default: the torque limit's)")
-    p.add_argument("--objective", choices=OBJECTIVES, default="peak",
-                   help="minimise the peak input force, the integral of its square or the "
-                        "stroke's electrical energy (energy: shaft power with the screw's "
-                        "efficiency by the direction of power flow, plus copper losses) "
-                        "(default peak)")
-    p.add_argument("--energy-weight", type=number(0.0, 1e6, "must be a weight from 0 to 1e6"),
-                   default=0.0,
-                   help="with --objective peak: add this weight times the energy objective "
-                        "(default 0)")
-    p.add_argument("--contact-speed", type=positive("speed in m/s", 1.0, 1e-6),
-                   default=CONTACT_SPEED,
-                   help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
-    p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
-                   default=INTERVALS,
-                   help=f"time intervals N (default {INTERVALS})")
-    p.add_argument("--trade-off", type=integer(2, 100, "must be 2 to 100 points"), default=None,
-                   metavar="POINTS",
-                   help="print the stroke time against the peak input force instead: the "
-                        "fastest stroke under POINTS force limits")
-    _add_protection_arguments(p)
-    p.add_argument("--cycle", action="store_true",
-                   help="plan the opening (break-away) stroke back to the open position too, "
-                        "the fastest under the force limits, and report the cycle's times")
-    p.add_argument("--break-speed", type=positive("speed in m/s", 10.0, 1e-6), default=None,
-                   help="with --cycle: platen speed cap over the protection distance after "
-                        "the mold separates, m/s (default none)")
-    p.add_argument("--hold", type=number(0.0, 3600.0, "must be a dwell of 0 to 3600 s"),
-                   default=0.0,
-                   help="with --cycle: the hold dwell, mold locked (injection, cooling), s "
-                        "(default 0)")
-    p.add_argument("--eject", type=number(0.0, 3600.0, "must be a dwell of 0 to 3600 s"),
-                   default=0.0,
-                   help="with --cycle: the ejection dwell at the open position, s (default 0)")
-    p.add_argument("--cycle-out", type=path, default=None,
-                   help="with --cycle: the whole molding cycle's profile CSV (hil run "
-                        "--profile replays it)")
-    p.add_argument("--duty-plot", type=path, default=None,
-                   help="with --cycle: PNG of the motor's torque and speed over the cycle, on "
-                        "its torque-speed curve")
-    p.add_argument("--rated-torque", type=positive("torque in N m", 1e5, 1e-6), default=None,
-                   help="the motor's rated (continuous) torque the cycle's RMS torque is "
-                        "held to, N m (default: the preset's [drive] rated_torque)")
-    export = p.add_argument_group("cam table export (--export cam --out FILE)")
-    export.add_argument("--export", choices=("cam",), default=None,
-                        help="write the plan as a cam table to --out instead of the profile")
-    export.add_argument("--format", choices=cam_formats.FORMATS, default="csv",
-                        help="csv; plcopen: PLCopen XML (TC6 v2.01) with CODESYS SoftMotion's "
-                        "XYVA cam and a program calling MC_CamTableSelect/MC_CamIn; twincat: "
-                        "the same with TwinCAT's motion-function points; pvt: a drive's "
-                        "position-velocity-time table in whole encoder counts (default csv)")
-    export.add_argument("--points", type=integer(2, 100_000, "must be 2 to 100000 points"),
-                        default=None, help="table points (default: the fewest that keep the "
-                        "plan at the drive cycle; more given and breaking it: refused)")
-    export.add_argument("--interpolation", choices=cam_formats.CSV_INTERPOLATIONS,
-                        default=None, help="how the drive interpolates a csv table (default "
-                        "cubic; plcopen and twincat are fifth-order through X, Y, V, A, pvt "
-                        "cubic through P, V)")
-    export.add_argument("--drive-cycle", type=_drive_cycle, default=None,
-                        help="the drive's interpolation cycle the table is checked at, e.g. "
-                             "125us, 1ms (default 125us)")
-    export.add_argument("--master", choices=cam.MASTERS, default="time",
-                        help="master: time (s) or a virtual master axis, 0-360 deg per stroke "
-                             "(default time)")
-    export.add_argument("--units", choices=cam.UNITS, default=None,
-                        help="slave units: si (m), motor (revolutions), counts (encoder) "
-                             "(default si; pvt: counts)")
-    p.add_argument("--robust", action="store_true",
-                   help="plan for the nominal clamp and the one with the --delta-NAME errors "
-                        "at once (the worst of the two, each against its S-curve)")
-    p.add_argument("--out", type=path, default=None, help="profile CSV to write (SI units)")
-    add_json_argument(p)
-
-
-def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
-    p = kinds.add_parser("plan", help="a planned profile (CSV) against the baselines")
-    p.add_argument("csv", type=path, help="profile CSV written by toggle plan --out")
-    _add_plant_arguments(p)
-    add_out_argument(p)
-    declare_outputs(p, "plan.png")
-    p.set_defaults(handler=plot)
-    p = kinds.add_parser("trade-off", help="stroke time against peak input force, with the "
-                         "mold and in a dry cycle")
-    add_arguments_later(p, _add_trade_off_arguments, add_out_argument)
-    declare_outputs(p, "trade_off.png")
-    p.set_defaults(handler=plot_trade_off)
-
-
-def _add_trade_off_arguments(p: argparse.ArgumentParser) -> None:
-    """The options of ``toggle plot trade-off`` but --out, some defaults the planner's."""
-    from controllers.plans import CONTACT_SPEED, INTERVALS
-
-    _add_plant_arguments(p)
-    p.add_argument("--points", dest="trade_off", type=integer(2, 100, "must be 2 to 100 points"),
-                   default=6, help="force limits per curve (default 6)")
-    p.add_argument("--contact-speed", type=positive("speed in m/s", 1.0, 1e-6),
-                   default=CONTACT_SPEED,
-                   help=f"platen speed limit at mold contact, m/s (default {CONTACT_SPEED})")
-    p.add_argument("--intervals", type=integer(4, 5000, "must be 4 to 5000 intervals"),
-                   default=INTERVALS, help=f"time intervals N (default {INTERVALS})")
-    _add_protection_arguments(p)

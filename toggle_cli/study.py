@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from toggle.args import integer, number
+from toggle.args import integer, length, number
 from toggle.params import DIMENSIONS, HALVES, ParameterError, load_preset
 from toggle_cli.common import (
     MM,
@@ -26,6 +26,7 @@ from toggle_cli.common import (
     add_preset_argument,
     declare_outputs,
     deg,
+    output,
     print_json,
     table,
 )
@@ -41,7 +42,7 @@ _SHORT = {"stroke_ratio": "Ms", "velocity_ratio": "Mv peak", "force_amplificatio
 
 
 #: A toggle angle as typed, deg.
-ANGLE = number(0.0, 180.0, "must be a toggle angle between 0 and 180 deg")
+ANGLE = number(0.0, 180.0, "must be a toggle angle between 0 and 180 deg", "deg")
 
 
 def _range_arguments(preset: str) -> Callable[[argparse.ArgumentParser], None]:
@@ -58,9 +59,10 @@ def _add_range_arguments(p: argparse.ArgumentParser, preset: str) -> None:
     p.add_argument("--half", choices=HALVES, default="lower", help="half to study (default lower)")
     p.add_argument("--alpha-lock", type=ANGLE, default=1.0,
                    help="smallest toggle angle, deg: where Mp counts as near lock-up "
-                        f"(default 1; at least {math.degrees(MIN_ANGLE):.2g})")
+                        f"(default 1 deg; at least {math.degrees(MIN_ANGLE):.2g} deg)")
     p.add_argument("--alpha-max", type=ANGLE, default=90.0,
-                   help="largest toggle angle (open clamp), deg (default 90; seed 004 gives none)")
+                   help="largest toggle angle (open clamp), deg (default 90 deg; seed 004 gives "
+                        "none)")
     p.add_argument("--points", type=POINTS, default=90,
                    help="toggle angles in the range (default 90)")
 
@@ -154,7 +156,7 @@ def run_study(args: argparse.Namespace) -> int:
     return 0
 
 
-_LENGTH = number(-10.0, 10.0, "must be a length within 10 m, in m")
+_LENGTH = length(-10.0, 10.0, "must be a length within 10 m")
 _COUNT = integer(2, 200, "must be a count of values from 2 to 200")
 
 
@@ -277,23 +279,23 @@ def _plot_study(args: argparse.Namespace) -> int:
     results, _ = _run_study(args)
     title = (f"{args.preset} ({args.half} half): seed 004 Figs 3-6, "
              f"alpha {args.alpha_lock:g} to {args.alpha_max:g} deg")
-    plot_study(results, title, args.out / "study.png")
+    plot_study(results, title, output(args, "study_{tag}.png"))
     return 0
 
 
 def _plot_sweep(args: argparse.Namespace) -> int:
     result = _run_sweep(args)  # checks --dim first
     title = f"{args.preset} ({args.half} half): criteria over {' and '.join(result.names)}"
-    plot_sweep(result, title, args.out / "sweep.png")
+    plot_sweep(result, title, output(args, "sweep_{tag}.png"))
     return 0
 
 
 def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("study", help="Ms, Mv, Mp, psi against toggle angle (seed 004 Figs 3-6)")
     add_arguments_later(p, _range_arguments("li_micro"), add_out_argument)
-    declare_outputs(p, "study.png")
+    declare_outputs(p, "study_{tag}.png")
     p.set_defaults(handler=_plot_study)
     s = kinds.add_parser("sweep", help="contours of the study's criteria over two dimensions")
     add_arguments_later(s, _range_arguments("li_micro/1"), _add_dim_argument, add_out_argument)
-    declare_outputs(s, "sweep.png")
+    declare_outputs(s, "sweep_{tag}.png")
     s.set_defaults(handler=_plot_sweep)

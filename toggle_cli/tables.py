@@ -5,13 +5,15 @@ Without ``--fit`` the shipped (calibrated) model is compared with every table. W
 ``--speeds`` and the ``--statistics`` chosen, the stroke reading too when "stroke" is
 among them; the fitted values print with one standard error. Every row prints with
 its residual in units of the printed 3 sigma and the issue's verdict (stroke within
-0.05 mm; forces within 25 % or 3 sigma, delta_r8 = 0 within 3 sigma). ``--plot DIR``
-writes one figure per statistic (measured mean +- 3 sigma against the simulated rig).
+0.05 mm; forces within 25 % or 3 sigma, delta_r8 = 0 within 3 sigma). ``--out DIR``
+writes one figure per statistic (measured mean +- 3 sigma against the simulated rig), as
+every other command's ``--out``; ``--plot DIR``, its old name, still works and says so.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 
 from toggle.args import path
 from toggle.files import check_writable, check_writable_dir
@@ -41,10 +43,11 @@ def run(args: argparse.Namespace) -> int:
     )
 
     labels = {**STAT_LABELS, "stroke": "S"}
-    if args.plot is not None:
-        check_writable_dir(args.plot, "--plot")  # before the simulation, not after it
+    _take_old_plot_option(args)
+    if args.out is not None:
+        check_writable_dir(args.out, "--out")  # before the simulation, not after it
         for stat in STATISTICS:  # plot_tables draws every statistic
-            check_writable(args.plot / f"tables_{stat}.png", "--plot")
+            check_writable(args.out / f"tables_{stat}.png", "--out")
     tables = load_paper_tables()
     nominal = mechanism(args)
     model, fit = RigModel(), None
@@ -69,8 +72,8 @@ def run(args: argparse.Namespace) -> int:
                                                           and reading_refit)
         return "fitted" if shipped else "predicted"
 
-    figures = [] if args.plot is None else plot_tables(
-        tables, nominal, model, args.plot,
+    figures = [] if args.out is None else plot_tables(
+        tables, nominal, model, args.out,
         {(r.statistic, r.speed) for r in rows if role(r) == "fitted"})
     if args.json:  # stdout is the JSON alone: the figures are listed in it
         print_json({
@@ -125,6 +128,17 @@ def _fittable(name: str) -> str:
     return name
 
 
+def _take_old_plot_option(args: argparse.Namespace) -> None:
+    """``--plot DIR``, the old name of ``--out DIR``: taken, with a note on stderr (as git
+    does with a renamed option); both at once are refused."""
+    if args.old_plot is None:
+        return
+    if args.out is not None:
+        raise ValueError("give --out DIR alone (--plot is its old name)")
+    print("toggle tables: --plot is deprecated; use --out DIR", file=sys.stderr)
+    args.out = args.old_plot
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tables",
                        help="the simulated rig against seed 000 Tables 3-8 (fit, predict, plot)")
@@ -142,11 +156,12 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                    default=[], help=f"refit at most {MAX_FORCE_FITTED} of: "
                                     f"{', '.join(FORCE_FITTABLE)}")
     p.add_argument("--speeds", type=SPEED, nargs="+", default=None,
-                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3); a refit")
+                   help="speeds (m/s) whose rows are fitted (default 5e-3 15e-3 m/s); a refit")
     p.add_argument("--statistics", nargs="+", choices=STATISTICS, default=None,
                    metavar="STAT",
                    help=f"statistics fitted (default all: {', '.join(STATISTICS)}); a "
                         "refit: the forces need --fit, 'stroke' alone refits the reading")
-    p.add_argument("--plot", type=path, default=None, metavar="DIR",
-                   help="write one PNG per statistic into DIR")
+    p.add_argument("--out", type=path, default=None, metavar="DIR",
+                   help="write one PNG per statistic into DIR, named on the last line")
+    p.add_argument("--plot", type=path, default=None, dest="old_plot", help=argparse.SUPPRESS)
     add_json_argument(p)

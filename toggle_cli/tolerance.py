@@ -17,6 +17,7 @@ from toggle_cli.common import (
     add_preset_argument,
     declare_outputs,
     mechanism,
+    output,
     print_json,
     table,
 )
@@ -95,8 +96,8 @@ def plot(args: argparse.Namespace) -> int:
     from toggle.plots import plot_it_grades, plot_sensitivity
 
     mech = mechanism(args)
-    plot_sensitivity(mech, args.it, args.out / f"sensitivity_IT{args.it}.png")
-    plot_it_grades(mech, args.out / "asymmetry_vs_it.png")
+    plot_sensitivity(mech, args.it, output(args, "sensitivity_IT{it}_{tag}.png"))
+    plot_it_grades(mech, output(args, "asymmetry_vs_it_{tag}.png"))
     return 0
 
 
@@ -105,5 +106,5 @@ def add_plot_parser(kinds: argparse._SubParsersAction) -> None:
     add_preset_argument(p)
     p.add_argument("--it", type=IT_GRADE, default=10, help="IT grade of the error curves")
     add_out_argument(p)
-    declare_outputs(p, "sensitivity_IT{it}.png", "asymmetry_vs_it.png")
+    declare_outputs(p, "sensitivity_IT{it}_{tag}.png", "asymmetry_vs_it_{tag}.png")
     p.set_defaults(handler=plot)

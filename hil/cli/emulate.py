@@ -52,11 +52,18 @@ def emulate(args: argparse.Namespace) -> int:
     try:
         with guard:
             emulator.serve()
-    except Interrupted:
-        pass
+    except Interrupted as exc:  # the way a server is stopped: 130/143 as every command's
+        return _stopped(exc)
     finally:
         emulator.close()
     return 0
+
+
+def _stopped(exc: Interrupted) -> int:
+    """``hil emulate`` stopped by a signal: one line, and 128 + the signal (130 SIGINT,
+    143 SIGTERM), the shell's convention, as ``hil run`` and ``toggle`` exit."""
+    print(f"hil emulate: {exc}; the emulated rig is closed", file=sys.stderr)
+    return exc.exit_code
 
 
 def serve_until(stopped: Callable[[], bool]) -> None:
@@ -106,9 +113,9 @@ def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) ->
         print(f"hil emulate: {elf} sha256 {board.elf_sha256}", file=sys.stderr, flush=True)
         with guard:
             serve_until(lambda: rig.error is not None)
-        stopped = f"the rehosted board stopped: {rig.error}"
-    except Interrupted:
-        stopped = None
+        stopped: str | Interrupted = f"the rehosted board stopped: {rig.error}"
+    except Interrupted as exc:
+        stopped = exc
     finally:
         rig.close()
         if args.nvm is not None:
@@ -116,10 +123,10 @@ def _emulate_nucleo(args: argparse.Namespace, setup: RigSetup, hardware: Any) ->
                 tmp.write_bytes(bytes(board.flash.memory))
         print(f"hil emulate: emulated/wall time {rig.time_ratio:.3f}; {rig.summary()}",
               file=sys.stderr)
-    if stopped is not None:
-        print(f"hil emulate: error: {stopped}", file=sys.stderr)
-        return 1
-    return 0
+    if isinstance(stopped, Interrupted):
+        return _stopped(stopped)
+    print(f"hil emulate: error: {stopped}", file=sys.stderr)
+    return 1
 
 
 def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> int:
@@ -140,6 +147,5 @@ def _emulate_qemu(args: argparse.Namespace, setup: RigSetup, hardware: Any) -> i
             print(f"hil emulate: error: QEMU ended: {' '.join(rig.output[-3:])}",
                   file=sys.stderr)
             return 1
-    except Interrupted:
-        pass
-    return 0
+    except Interrupted as exc:
+        return _stopped(exc)

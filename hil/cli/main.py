@@ -87,7 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
                                       "clamp it was planned for)")
     p.add_argument("--preset", default=None,
                    help="clamp preset with [dynamics] masses: chang2021, lin2003_sm55 or a TOML "
-                        "file (li_micro has no masses, dong2022 is a press; default chang2021)")
+                        "file (li_micro has no masses, dong2022 is a press; default: the "
+                        "preset of --fmu, or of the FMU toggle build-fmu wrote last, else "
+                        "chang2021)")
     add_number_options(p)
     p.add_argument("--profile", type=path, default=None,
                    help="planned profile CSV (toggle plan --out); replayed forward and back, "
@@ -96,7 +98,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="results folder of the run, named on the last line (default "
                         "runs/<time>-<backend>)")
     p.add_argument("--fmu", type=path, default=None,
-                   help="the simulated rig's FMU (default build/ToggleClamp.fmu, built when "
+                   help="the simulated rig's FMU; its preset is the run's unless one is given "
+                        "(default: the build folder's, build/ToggleClamp.fmu as toggle "
+                        "build-fmu wrote it last, or build/PRESET/, built when "
                         "missing or older than the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

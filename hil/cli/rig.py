@@ -19,15 +19,16 @@ from typing import Any
 from hil.host.run_settings import check_port
 from hil.link import protocol as p
 from hil.link.serial_link import CommandError, RigError, SerialLink
-from toggle.args import PROBABILITY, TIME, integer, number, positive
+from toggle.args import PROBABILITY, TIME, integer, length, number, positive
 
 
 def mold_position(text: str) -> float | str:
-    """argparse type of ``hil emulate --x-contact``: a position in m, or ``planned``."""
+    """argparse type of ``hil emulate --x-contact``: a position (m, or with a unit: 40mm),
+    or ``planned``."""
     if text == "planned":
         return text
     try:
-        return number(-1.0, 1.0, "must be a position in m")(text)
+        return length(-1.0, 1.0, "must be a position within 1 m")(text)
     except argparse.ArgumentTypeError as exc:
         raise argparse.ArgumentTypeError(f"{exc} (or 'planned')") from None
 
@@ -35,8 +36,9 @@ def mold_position(text: str) -> float | str:
 def add_emulator_options(e: argparse.ArgumentParser) -> None:
     """Options of ``hil emulate``: the simulated clamp and the injected faults."""
     e.add_argument("--preset", default="chang2021", help="mechanism preset")
-    e.add_argument("--delta-r8", type=number(-5e-3, 5e-3, "must be an error below 5 mm (m)"),
-                   default=0.0, dest="delta_r8", help="length error of link 8, m (e.g. 0.5e-3)")
+    e.add_argument("--delta-r8", type=length(-5e-3, 5e-3, "must be an error within 5 mm"),
+                   default=0.0, dest="delta_r8",
+                   help="length error of link 8, m or with a unit (0.5e-3, 0.5mm, 500um)")
     e.add_argument("--mu", type=number(0.0, 1.0, "must be between 0 and 1"), default=None,
                    help="pin friction (default: the preset's)")
     e.add_argument("--x-contact", type=mold_position, default=None, dest="x_contact",
@@ -135,10 +137,11 @@ def add_parser(subparsers: Any) -> None:
             a.add_argument("--json", action="store_true", help="print the result as JSON")
         a.set_defaults(handler=handler)
     where = parsers["jog"].add_mutually_exclusive_group(required=True)
-    where.add_argument("--to", type=number(-1.0, 1.0, "must be a position in m"),
-                       help="target, m from step 0 (the home switch's edge)")
-    where.add_argument("--by", type=number(-1.0, 1.0, "must be a distance in m"),
-                       help="distance, m (negative: back toward home)")
+    where.add_argument("--to", type=length(-1.0, 1.0, "must be a position within 1 m"),
+                       help="target, m from step 0 (the home switch's edge), or with a unit "
+                            "(12.5mm)")
+    where.add_argument("--by", type=length(-1.0, 1.0, "must be a distance within 1 m"),
+                       help="distance, m or with a unit (-2mm: back toward home)")
     parsers["jog"].add_argument("--speed", type=positive("must be a speed in m/s", hi=0.05),
                                 default=None, help="m/s (default 5 mm/s)")
     samples = integer(10, 60_000, "must be a whole number of samples in 10..60000")

@@ -8,12 +8,20 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from typing import Any
 
 from controllers.progress import Progress
 from hil.cli.interrupts import Interrupted, SignalGuard
 from hil.host import experiment
-from hil.host.backends import FmuPlant, Plant, RigPlant, RigSetup, RunStoppedError
+from hil.host.backends import (
+    FmuPlant,
+    Plant,
+    RigPlant,
+    RigSetup,
+    RunStoppedError,
+    default_fmu_path,
+)
 from hil.host.experiment import (
     DEFAULT_END_TOL,
     CycleCounter,
@@ -21,7 +29,12 @@ from hil.host.experiment import (
     reciprocating_trajectory,
 )
 from hil.host.recording import RUN_FILES, RunMeta, RunRecorder
-from hil.host.run_settings import BYTES_PER_SAMPLE, RunSettings, resolve_settings
+from hil.host.run_settings import (
+    BYTES_PER_SAMPLE,
+    RunSettings,
+    limit_for_plan,
+    resolve_settings,
+)
 from hil.host.samples import Trajectory, TrajectoryError
 from toggle.elastics import clamp_stroke
 from toggle.files import print_results
@@ -72,6 +85,23 @@ def _trajectory(s: RunSettings, guard: SignalGuard, setup: RigSetup
         guard.check()  # failed solve it made is reported as a planning error
     return _guarded(profile_cycles(forward, s.cycles), s), (
         f"planned (minimum peak input force){f' for {built}' if built else ''}")
+
+
+def _plan_peak(s: RunSettings, setup: RigSetup, forward: Trajectory) -> float:
+    """The peak input force (N) of the default job's plan on the clamp it was planned for
+    (the model, :func:`toggle.plant.plant_outputs`, on the plan's sampled positions)."""
+    import numpy as np
+
+    from controllers.plans import plan_config
+    from toggle.plant import plant_outputs
+
+    errors = {name: delta for name, delta in setup.errors.items() if delta}
+    cfg = plan_config(s.preset, mu=s.mu, x_contact=s.x_contact, errors=errors,
+                      masses=setup.dynamics)
+    velocity = np.gradient(forward.x_cmd, forward.period)
+    forces = plant_outputs(forward.x_cmd, velocity, np.gradient(velocity, forward.period),
+                           cfg).input_force
+    return float(np.max(np.abs(forces)))
 
 
 def _guarded(trajectory: Trajectory, s: RunSettings) -> Trajectory:
@@ -204,6 +234,10 @@ def _record(plant: Plant, trajectory: Trajectory, rec: RunRecorder, guard: Signa
 
 def run(args: argparse.Namespace) -> int:
     s = resolve_settings(args)
+    if s.backend == "fmu":  # which FMU, and so which clamp, the simulated rig is
+        fmu = s.fmu if s.fmu is not None else default_fmu_path(s.preset)
+        print(f"hil run: the simulated rig is the FMU {fmu} (preset {s.preset})",
+              file=sys.stderr)
     guard = SignalGuard()
     with guard:
         try:
@@ -219,6 +253,11 @@ def execute(s: RunSettings, guard: SignalGuard) -> int:
     setup = RigSetup(preset=s.preset, delta_r8=s.delta_r8, mu=s.mu, x_contact=s.x_contact,
                      force_limit=s.force_limit, as_built=s.as_built)
     trajectory, source = _trajectory(s, guard, setup)
+    if s.profile is None and s.speed is None:  # the default job: its plan's peak, known now
+        one_stroke = Trajectory.from_positions(
+            trajectory.x_cmd[:int(trajectory.x_cmd.argmax()) + 1], trajectory.period)
+        limit = limit_for_plan(s, _plan_peak(s, setup, one_stroke), "the default job")
+        s, setup = replace(s, force_limit=limit), replace(setup, force_limit=limit)
     plant = _backend(s)
     plant.configure(setup)
     try:

@@ -233,18 +233,23 @@ class Plant(ABC):
 
 
 def default_fmu_path(preset: str = "chang2021") -> Path:
-    """build/ToggleClamp.fmu of the project checkout (or the current folder) for chang2021;
-    build/<preset>/ToggleClamp.fmu for another shipped preset; for a preset file,
+    """The FMU of ``preset`` in the build folder (:func:`fmu_src.build.build_folder`, the
+    one ``toggle build-fmu`` writes): build/ToggleClamp.fmu where it is built for this
+    shipped preset (the one toggle build-fmu wrote last) or where there is none yet and the
+    preset is chang2021; else build/<preset>/ToggleClamp.fmu; for a preset file,
     build/presets/<its stem>-<hash of its bytes>/ToggleClamp.fmu: one FMU per preset, and a
     new one when the file is edited (its FMU bundles the file as it was)."""
-    from fmu_src.build import ROOT
+    from fmu_src.build import build_folder, fmu_preset
 
-    base = (ROOT if (ROOT / "pyproject.toml").is_file() else Path.cwd()) / "build"
+    base = build_folder()
     path = preset_file(preset)
     if path is not None:
         digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
         return base / "presets" / f"{path.stem}-{digest}" / "ToggleClamp.fmu"
-    return (base if preset == "chang2021" else base / preset) / "ToggleClamp.fmu"
+    current = base / "ToggleClamp.fmu"
+    if (fmu_preset(current) == preset if current.is_file() else preset == "chang2021"):
+        return current
+    return base / preset / "ToggleClamp.fmu"
 
 
 def ensure_fmu(path: Path | None = None, preset: str = "chang2021",

@@ -12,14 +12,18 @@ its defaults and options from here without numpy, SciPy or CasADi.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import math
 import os
+import stat
+import sys
 import zipfile
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from toggle.args import length
 from toggle.files import InputError, check_writable, check_writable_dir, read_text, read_toml
 from toggle.params import ParameterError, load_preset
 
@@ -68,6 +72,7 @@ class RunSettings:
     quiet: bool = False
     force: bool = False  # --force: replace the files of an earlier run in --out
     profile_sha256: str | None = None
+    force_limit_given: bool = False  # by --force-limit or --config, not the default
 
     def record(self) -> dict[str, Any]:
         """JSON-ready copy for meta.json."""
@@ -75,17 +80,23 @@ class RunSettings:
                 if k not in ("json", "quiet", "force")}
 
 
+#: A length option of hil run: m, or with a unit (0.5mm); its range is :func:`check`'s.
+_LENGTH = length(-math.inf, math.inf, "must be a finite length")
+
+
 def add_number_options(p: argparse.ArgumentParser) -> None:
     """The numeric options of ``hil run`` (parsed as numbers; judged by :func:`check`)."""
-    p.add_argument("--delta-r8", type=float, default=None, dest="delta_r8",
-                   help="length error of link 8, m, e.g. 0.5e-3 (default 0): the simulated "
+    p.add_argument("--delta-r8", type=_LENGTH, default=None, dest="delta_r8",
+                   help="length error of link 8, m or with a unit (0.5e-3, 0.5mm, 500um; "
+                        "default 0 m): the simulated "
                         "clamp's; with --real, the setting of the rig's adjustable link as "
                         "made by hand (the default job plans for it, meta.json records it; "
                         "the host cannot check it: hil emulate takes its own --delta-r8)")
     p.add_argument("--mu", type=float, default=None,
                    help="pin friction of the simulated clamp (default: the preset's)")
-    p.add_argument("--x-contact", type=float, default=None, dest="x_contact",
-                   help="crosshead position at mold contact, m (default: the planned mold "
+    p.add_argument("--x-contact", type=_LENGTH, default=None, dest="x_contact",
+                   help="crosshead position at mold contact, m or with a unit (-0.04, -40mm; "
+                        "default: the planned mold "
                         "for the default job, none with --speed)")
     p.add_argument("--cycles", type=int, default=None,
                    help="forward-backward cycles (default 3)")
@@ -94,9 +105,10 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
                         "(default: the planned minimum-force profile)")
     p.add_argument("--force-limit", type=float, default=None, dest="force_limit",
                    help=f"stop when |input force| exceeds this, N (default "
-                        f"{RUN_DEFAULTS['force_limit']:g}, for the rig's load cell; with --real "
-                        f"at most its {LOAD_CELL_RANGE:g}; the simulated rig of a larger "
-                        f"clamp, such as lin2003_sm55, needs more)")
+                        f"{RUN_DEFAULTS['force_limit']:g} N, for the rig's load cell; with --real "
+                        f"at most its {LOAD_CELL_RANGE:g}; without it the simulated rig of a "
+                        f"larger clamp, such as lin2003_sm55, runs under 1.25 x its plan's "
+                        f"peak; a given limit below the plan's peak is refused)")
     p.add_argument("--watchdog-ms", type=float, default=None, dest="watchdog_ms",
                    help="host watchdog on telemetry silence, ms (default: measured from the "
                         "link when the session opens, 100 on a rig's idle link, at most 1000; "
@@ -112,7 +124,7 @@ def add_number_options(p: argparse.ArgumentParser) -> None:
                         "50, at most 1000; the host sends a heartbeat every 20 ms)")
     p.add_argument("--max-duration", type=float, default=None, dest="max_duration",
                    help=f"refuse runs longer than this, s (default "
-                        f"{RUN_DEFAULTS['max_duration']:g})")
+                        f"{RUN_DEFAULTS['max_duration']:g} s)")
 
 
 def read_config(path: Path) -> dict[str, Any]:
@@ -183,12 +195,48 @@ def check(v: dict[str, Any]) -> None:
         check_mold(v["preset"], v["x_contact"])
 
 
+#: pyserial URLs that open a device path (``spy://PATH?options``): the path is checked.
+_DEVICE_URLS = ("spy://", "alt://")
+_PORT_HINT = "a serial device such as /dev/ttyACM0, the pty hil emulate printed, or socket://host:port"
+
+
 def check_port(port: str) -> None:
-    """Refuse a rig port that names a device path where there is none, before the work (a
-    URL such as socket://host:port is tried when the session opens)."""
-    if "://" not in port and not os.path.exists(port):
-        raise ParameterError(f"--port {port}: no such device (a serial device such as "
-                             "/dev/ttyACM0, the pty hil emulate printed, or socket://host:port)")
+    """Refuse a rig port that is no serial device, before the work, in words: a path where
+    there is nothing, a folder, a regular file, a character device that is no terminal
+    (/dev/null: Linux's /sys/dev/char says its subsystem). The device is not opened here
+    (opening a serial port resets some boards); a URL such as socket://host:port is tried
+    when the session opens."""
+    path = port
+    for scheme in _DEVICE_URLS:
+        if port.startswith(scheme):
+            path = port[len(scheme):].split("?")[0]
+    if "://" in path:
+        return
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise ParameterError(f"--port {port}: no such device ({_PORT_HINT})") from None
+    except OSError as exc:
+        raise ParameterError(f"--port {port}: cannot be used "
+                             f"({(exc.strerror or 'unreadable').lower()}; {_PORT_HINT})") from None
+    if stat.S_ISDIR(mode):
+        raise ParameterError(f"--port {port}: is a folder, not a serial device ({_PORT_HINT})")
+    if not stat.S_ISCHR(mode):
+        raise ParameterError(f"--port {port}: is a file, not a serial device ({_PORT_HINT})")
+    subsystem = _device_subsystem(os.stat(path).st_rdev)
+    if subsystem not in (None, "tty"):
+        raise ParameterError(f"--port {port}: is a {subsystem} device, not a serial port "
+                             f"({_PORT_HINT})")
+
+
+def _device_subsystem(rdev: int) -> str | None:
+    """The Linux subsystem of a character device ("tty", "mem", ...), or None where sysfs
+    does not say (a pty slave has no entry there; another system has no sysfs)."""
+    link = Path(f"/sys/dev/char/{os.major(rdev)}:{os.minor(rdev)}/subsystem")
+    try:
+        return Path(os.readlink(link)).name
+    except OSError:
+        return None
 
 
 def check_mold(preset: str, x_contact: float) -> None:
@@ -226,7 +274,50 @@ def _apply_profile(values: dict[str, Any], explicit: set[str]) -> str:
                 f"--profile {path} was planned with {key} = {planned[key]!r}, but "
                 f"{_option(key)} gives {values[key]!r}; drop the option or re-plan")
         values[key] = planned[key]
+        explicit.add(key)  # chosen by the plan: an FMU built for another preset is refused
     return digest
+
+
+#: The simulated rig's force limit over its plan's peak where no limit is given (as-built
+#: errors and the FMU's dynamics add to the plan's force: 8 % measured on lin2003_sm55).
+PLAN_MARGIN = 1.25
+
+
+def limit_for_plan(s: RunSettings, peak: float, what: str) -> float:
+    """The force limit (N) a run of a plan whose own peak input force is ``peak`` (N) runs
+    under, decided before the run:
+
+    * the peak within the limit: the limit;
+    * a limit given (option or --config), or the real rig: refused (ParameterError, exit
+      2), since the run would stop at the limit within milliseconds; the limit is a safety
+      stop and is never raised past what the user said (on the rig: its load cell);
+    * the simulated rig at the default (400 N: the prototype rig's load cell, which a
+      simulated lin2003_sm55 does not have): :data:`PLAN_MARGIN` times the peak, said on
+      stderr, as a simulation of that clamp needs."""
+    if peak <= s.force_limit:
+        return s.force_limit
+    if s.force_limit_given or s.backend == "real":
+        raise ParameterError(
+            f"{what}: its planned peak input force is {peak:.4g} N, above --force-limit "
+            f"{s.force_limit:g} N; the run would stop at the limit at once. Give a larger "
+            f"--force-limit (at least {peak:.4g} N, with a margin for the as-built errors)"
+            + ("; on the real rig, a plan within its load cell" if s.backend == "real" else ""))
+    limit = float(f"{PLAN_MARGIN * peak:.3g}")
+    print(f"hil run: force limit {limit:g} N, {PLAN_MARGIN:g} x the plan's peak {peak:.4g} N "
+          f"(the default {s.force_limit:g} N is the prototype rig's load cell; give "
+          "--force-limit to set it)", file=sys.stderr)
+    return limit
+
+
+def profile_peak(path: Path) -> float | None:
+    """The peak |input force| (N) a profile was planned with (its ``input_force [N]``
+    column); None for a bare profile of positions only."""
+    from controllers.profiles import ProfileError, read_profile_columns
+
+    try:
+        return float(abs(read_profile_columns(path, ("input_force [N]",))[:, 0]).max())
+    except ProfileError:
+        return None
 
 
 def _check_whole(path: Path, planned: dict[str, Any], duration: float) -> None:
@@ -259,6 +350,38 @@ def _check_fmu(path: Path) -> None:
                          ) from None
 
 
+def _fmu_preset(values: dict[str, Any], explicit: set[str]) -> None:
+    """The simulated rig's preset and its FMU agree, before the work: without a preset
+    (option, --config or profile) the run takes the preset of --fmu, or of the build
+    folder's ToggleClamp.fmu (the one ``toggle build-fmu`` wrote last); a --fmu built for
+    another preset than the one given is refused."""
+    from fmu_src.build import build_folder, fmu_preset
+
+    if values["fmu"] is not None:
+        fmu = Path(values["fmu"])
+        _check_fmu(fmu)
+    elif "preset" not in explicit:
+        fmu = build_folder() / "ToggleClamp.fmu"
+    else:
+        return
+    built_for = fmu_preset(fmu)
+    if built_for is None:
+        return
+    if "preset" not in explicit:
+        with contextlib.suppress(ParameterError, OSError):  # a preset file's FMU: its name
+            load_preset(built_for)                            # is no preset: the default's
+            values["preset"] = built_for
+        return
+    try:
+        wanted = load_preset(values["preset"]).name
+    except (ParameterError, OSError):
+        return  # refused with its reason below
+    if built_for != wanted:
+        raise InputError(f"--fmu {fmu}: built for preset {built_for}, not {values['preset']}; "
+                         f"drop --preset to run it, or drop --fmu to run {values['preset']}'s "
+                         "own FMU (built when missing)")
+
+
 def resolve_settings(args: argparse.Namespace) -> RunSettings:
     """Merge the command line, the --config file, a profile's settings and the defaults."""
     from hil.host.backends import RigSetup
@@ -271,6 +394,8 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     if values["profile"] is not None and values["speed"] is not None:
         raise ParameterError("give --profile or --speed, not both (a profile sets its speed)")
     digest = _apply_profile(values, explicit) if values["profile"] is not None else None
+    if values["backend"] == "fmu":
+        _fmu_preset(values, explicit)
     try:
         mech = load_preset(values["preset"])
     except (ParameterError, OSError) as exc:
@@ -292,5 +417,10 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
         check_writable_dir(values["out"], "--out")
         for name in RUN_FILES:
             check_writable(values["out"] / name, "--out")
-    return RunSettings(**values, json=args.json, quiet=args.quiet, profile_sha256=digest,
-                       force=getattr(args, "force", False))
+    s = RunSettings(**values, json=args.json, quiet=args.quiet, profile_sha256=digest,
+                    force=getattr(args, "force", False),
+                    force_limit_given="force_limit" in explicit)
+    peak = profile_peak(s.profile) if s.profile is not None else None
+    if peak is not None:  # before the run: the plan's own peak against the limit
+        s = replace(s, force_limit=limit_for_plan(s, peak, f"--profile {s.profile}"))
+    return s
