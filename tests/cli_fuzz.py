@@ -118,8 +118,8 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     import fmu_src.build as build  # toggle build-fmu loads it when it runs
     import fmu_src.native_build as native
     import toggle.linkage as linkage
-    from hil.cli.interrupts import Interrupted
     from hil.cli import emulate as hil_emulate
+    from hil.cli.interrupts import Interrupted
     from hil.emulators.rig_emulator import RigEmulator
     from hil.host import experiment
     from hil.host.samples import Trajectory
