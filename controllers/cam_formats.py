@@ -385,6 +385,7 @@ def export(path: Path, profile: Profile, cfg: PlantConfig, limits: DriveLimits,
     return {"format": fmt, "points": points, "master": master, "units": units,
             "interpolation": interpolation, "drive_cycle": cycle,
             "checked_cycles": list(cam.checked_cycles(cycle)),
-            "points_found": found,
+            "points_found": found,  # searched; the fewest when tried from 2 up
+            "points_fewest": found and points <= cam.SCAN_POINTS,
             "master_unit": MASTER_UNIT[master], "slave_unit": SLAVE_UNIT[units],
             "as_interpolated": check}
