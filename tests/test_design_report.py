@@ -95,7 +95,7 @@ def test_the_rig_table_changes_are_of_the_magnitude_and_hold_only_across_offsets
     def run(main, prog, argv):
         preset = tmp_path / argv[argv.index("--preset") + 1]  # relative to ROOT
         seen.append(preset)
-        moved = "um" in preset.stem  # F_TP flips sign when moved; the rest does not
+        moved = preset.stem != preset.stem.split("_")[0]  # F_TP flips when moved
         side = preset.stem.startswith("b")
         return json.dumps({key: {"mean": (-100.0 - 10 * side if key == "force_backward_min"
                                           else (-1.0 if moved and key == "force_toggle"
@@ -107,6 +107,7 @@ def test_the_rig_table_changes_are_of_the_magnitude_and_hold_only_across_offsets
     table = report.rig_runs({"a": tmp_path / "a.toml", "b": tmp_path / "b.toml"}, tmp_path)
     assert len(seen) == 2 * len(report.OFFSETS)
     moved = [p for p in seen if "+100um" in p.stem]
+    assert sum("printed" in p.stem for p in seen) == 2
     assert [float(p.read_text().split("x_open = ")[1]) for p in moved] == pytest.approx(
         [-0.0699, -0.0699])
     rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines()}
