@@ -8,8 +8,10 @@
   LREAL, the master and the slave's position, velocity and acceleration over the
   master), the ``ClampCam : MC_CAM_REF`` describing it (byType 3, XYVA: fifth-order
   polynomials between the points), and a program POU ``ClampCamIn`` whose ST body hands
-  ``ClampCam`` to MC_CamTableSelect and couples the slave with MC_CamIn. The form is the
-  IEC initialisation code CODESYS's cam editor generates ("Display Generated Code").
+  ``ClampCam`` to MC_CamTableSelect and couples the slave with MC_CamIn, run by a cyclic
+  task at the drive cycle in the resource (``ClampCamTask``, instance ``ClampCamRun``).
+  The form is the IEC initialisation code CODESYS's cam editor generates ("Display
+  Generated Code").
 * ``twincat``: the same project for TwinCAT's NC camming: ``ARRAY [1..N] OF
   MC_MotionFunctionPoint`` (MasterPos, SlavePos, SlaveVelo, SlaveAcc, each segment a
   MOTIONFUNCTYPE_POLYNOM5_MM quintic) and an MC_CAM_REF of table type
@@ -19,7 +21,10 @@
   the drive interpolates each segment with the cubic through both ends' position and
   velocity (``pv-cubic``).
 
-Each file's creation time is ``SOURCE_DATE_EPOCH`` when set (reproducible exports, the
+Each file states the drive cycle it was checked for (``drive_cycle``, s) and every cycle
+it was checked at (``checked_cycles``: it, 100 us and 125 us, :func:`cam.checked_cycles`);
+a ``cubic`` CSV its spline's end conditions (:data:`cam.END_CONDITIONS`). Each file's
+creation time is ``SOURCE_DATE_EPOCH`` when set (reproducible exports, the
 reproducible-builds convention), else the time of the export, UTC.
 """
 
@@ -118,6 +123,11 @@ DIALECTS = {"plcopen": CODESYS, "twincat": TWINCAT}
 ELEMENTARY = ("BOOL", "LREAL", "INT", "BYTE")
 
 
+def iec_time(seconds: float) -> str:
+    """A duration as an IEC 61131-3 TIME literal in whole microseconds (``T#125us``)."""
+    return f"T#{round(seconds * 1e6)}us"
+
+
 def creation_time() -> dt.datetime:
     """``SOURCE_DATE_EPOCH`` (s since 1970, UTC) when set, else now (UTC, whole seconds)."""
     epoch = os.environ.get("SOURCE_DATE_EPOCH")
@@ -130,11 +140,17 @@ def creation_time() -> dt.datetime:
                              f"{epoch!r}") from None
 
 
-def _header(table: CamTable, interpolation: str, settings: dict[str, object]) -> dict:
+def _header(table: CamTable, interpolation: str, settings: dict[str, object],
+            cycle: float) -> dict:
+    """What the table was made for: the drive cycle it was checked for (s) and every cycle
+    it was checked at, the cubic's end conditions."""
     return {**settings, "master": table.kind, "units": table.units,
-            "interpolation": interpolation, "duration": table.duration,
-            "x_open": table.x_open, "points": int(table.master.size),
-            "created": creation_time().isoformat()}
+            "interpolation": interpolation,
+            "end_conditions": cam.END_CONDITIONS if interpolation == "cubic" else None,
+            "drive_cycle": cycle, "checked_cycles": ", ".join(
+                f"{c * 1e6:g} us" for c in cam.checked_cycles(cycle)),
+            "duration": table.duration, "x_open": table.x_open,
+            "points": int(table.master.size), "created": creation_time().isoformat()}
 
 
 def _comments(header: dict) -> str:
@@ -149,10 +165,11 @@ def _units(table: CamTable) -> tuple[str, str, str, str]:
 
 
 def write_csv(path: str | Path, table: CamTable, interpolation: str,
-              settings: dict[str, object]) -> None:
-    """The table as CSV: ``# key = value`` lines, then the four columns with units."""
+              settings: dict[str, object], cycle: float = DRIVE_CYCLE) -> None:
+    """The table as CSV: ``# key = value`` lines (:func:`_header`), then the four columns
+    with units."""
     buffer = io.StringIO()
-    buffer.write(_comments(_header(table, interpolation, settings)))
+    buffer.write(_comments(_header(table, interpolation, settings, cycle)))
     m, s, v, a = _units(table)
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow([f"master [{m}]", f"slave [{s}]", f"velocity [{v}]",
@@ -172,14 +189,15 @@ def read_csv(path: str | Path) -> tuple[np.ndarray, ...]:
     return _columns(path)
 
 
-def write_pvt(path: str | Path, table: CamTable, settings: dict[str, object]) -> None:
+def write_pvt(path: str | Path, table: CamTable, settings: dict[str, object],
+              cycle: float = DRIVE_CYCLE) -> None:
     """The table as a PVT drive table: time (s), position (counts) and velocity
     (counts/s), the last two whole numbers; refused unless master time and counts."""
     if table.kind != "time" or table.units != "counts" or not table.whole:
         raise ParameterError("a pvt table is in whole encoder counts over time: "
                              "--master time --units counts")
     buffer = io.StringIO()
-    buffer.write(_comments({**_header(table, INTERPOLATION["pvt"], settings),
+    buffer.write(_comments({**_header(table, INTERPOLATION["pvt"], settings, cycle),
                             "time_step": float(table.master[1] - table.master[0])}))
     buffer.write("time [s],position [counts],velocity [counts/s]\n")
     for t, p, v in zip(table.master.tolist(), table.slave.tolist(), table.velocity.tolist()):
@@ -216,9 +234,10 @@ def _struct_value(parent: ET.Element, members: dict[str, str]) -> None:
 
 
 def plcopen_xml(table: CamTable, settings: dict[str, object], fmt: str = "plcopen",
-                name: str = "ClampCam") -> str:
+                name: str = "ClampCam", cycle: float = DRIVE_CYCLE) -> str:
     """The table as a PLCopen TC6 XML v2.01 project for ``fmt``'s motion library
-    (:data:`DIALECTS`; module docstring)."""
+    (:data:`DIALECTS`; module docstring); its resource runs the program in a cyclic task
+    at the drive cycle ``cycle`` (s)."""
     dialect = DIALECTS[fmt]
     ET.register_namespace("", TC6)
     ET.register_namespace("xhtml", XHTML)
@@ -246,6 +265,8 @@ def plcopen_xml(table: CamTable, settings: dict[str, object], fmt: str = "plcope
     _text(_sub(_sub(pou, "body"), "ST"), dialect.body)
     resource = _sub(_sub(_sub(_sub(root, "instances"), "configurations"), "configuration",
                          name="Clamp"), "resource", name="Drive")
+    task = _sub(resource, "task", name=f"{name}Task", interval=iec_time(cycle), priority="1")
+    _sub(task, "pouInstance", name=f"{name}Run", typeName=f"{name}In")
     variables = _sub(resource, "globalVars", name=f"{name}Data")  # MC_CAM_REF: an FB
     points = _sub(variables, "variable", name=f"{name}_A")
     array = _sub(_sub(points, "type"), "array")
@@ -263,7 +284,8 @@ def plcopen_xml(table: CamTable, settings: dict[str, object], fmt: str = "plcope
         for k, v in dialect.cam_ref(n, f"{name}_A").items()})
     m, s, v, a = _units(table)
     text = "; ".join(f"{k} = {value}" for k, value in
-                     _header(table, INTERPOLATION[fmt], settings).items() if value is not None)
+                     _header(table, INTERPOLATION[fmt], settings, cycle).items()
+                     if value is not None)
     _text(_sub(points, "documentation"), "; ".join(
         f"{member} [{unit}]" for member, unit in zip(dialect.xyva, (m, s, v, a))) + f"; {text}")
     ET.indent(root)
@@ -337,30 +359,33 @@ def export(path: Path, profile: Profile, cfg: PlantConfig, limits: DriveLimits,
                                    cycle)
         if needed is None:
             raise ParameterError(f"no {fmt} table of up to {cam.MAX_POINTS} points keeps the "
-                                 f"plan at the {cycle * 1e6:g} us drive cycle")
+                                 f"plan at the {cycle * 1e6:g} us drive cycle and at 100 "
+                                 "and 125 us")
         points, check = needed
     else:
-        check = cam.check_table(build(points), interpolation, cfg, limits, planned_peak,
-                                cycle, profile=profile)
+        check = cam.check_cycles(build(points), interpolation, cfg, limits, planned_peak,
+                                 cam.checked_cycles(cycle), profile=profile)
     if not cam.keeps(check):
         needed = cam.points_needed(build, interpolation, cfg, limits, planned_peak, profile,
                                    cycle)
         raise ParameterError(
             f"the {points}-point {fmt} table ({interpolation}) breaks the plan at the "
-            f"{cycle * 1e6:g} us drive cycle (of the limits, the planned peak force, stroke "
-            f"and peak velocity): {', '.join(cam.breaches(check))}; "
+            f"{cycle * 1e6:g} us drive cycle or at 100 or 125 us (of the limits, the planned "
+            f"peak force, stroke and peak velocity): {', '.join(cam.breaches(check))}; "
             + (f"it needs at least {needed[0]} points (--points {needed[0]}, or no --points)"
                if needed else "no number of points keeps it"))
     table = build(points)
     with atomic_path(path) as tmp:
         if fmt == "csv":
-            write_csv(tmp, table, interpolation, settings)
+            write_csv(tmp, table, interpolation, settings, cycle)
         elif fmt == "pvt":
-            write_pvt(tmp, table, settings)
+            write_pvt(tmp, table, settings, cycle)
         else:
-            tmp.write_text(plcopen_xml(table, settings, fmt))
+            tmp.write_text(plcopen_xml(table, settings, fmt, cycle=cycle))
     return {"format": fmt, "points": points, "master": master, "units": units,
             "interpolation": interpolation, "drive_cycle": cycle,
-            "points_found": found,
+            "checked_cycles": list(cam.checked_cycles(cycle)),
+            "points_found": found,  # searched; the fewest when tried from 2 up
+            "points_fewest": found and points <= cam.SCAN_POINTS,
             "master_unit": MASTER_UNIT[master], "slave_unit": SLAVE_UNIT[units],
             "as_interpolated": check}

@@ -81,17 +81,37 @@ def test_a_failed_command_stops_the_report_naming_it(capsys: pytest.CaptureFixtu
     assert "missing.toml" in capsys.readouterr().err
 
 
-def test_the_rig_table_changes_are_of_the_magnitude(monkeypatch: pytest.MonkeyPatch,
-                                                     tmp_path: Path) -> None:
+def test_the_rig_table_changes_are_of_the_magnitude_and_hold_only_across_offsets(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """The change is of the magnitude (a larger opening pull is positive); each preset runs
+    as placed and with x_open moved by each offset (written beside the records); a change
+    whose sign flips between two offsets is marked as not holding."""
     from hil.cli.run import SUMMARY_ROWS
     report = _report()
-    runs = iter([{key: {"mean": -100.0 if key == "force_backward_min" else 1.0}
-                  for key, *_ in SUMMARY_ROWS},
-                 {key: {"mean": -110.0 if key == "force_backward_min" else 2.0}
-                  for key, *_ in SUMMARY_ROWS}])
-    monkeypatch.setattr(report, "run_cli", lambda main, prog, argv: json.dumps(next(runs)))
+    for name in ("a", "b"):
+        (tmp_path / f"{name}.toml").write_text("[clamp]\nx_open = -0.07\n")
+    seen = []
+
+    def run(main, prog, argv):
+        preset = tmp_path / argv[argv.index("--preset") + 1]  # relative to ROOT
+        seen.append(preset)
+        moved = preset.stem != preset.stem.split("_")[0]  # F_TP flips when moved
+        side = preset.stem.startswith("b")
+        return json.dumps({key: {"mean": (-100.0 - 10 * side if key == "force_backward_min"
+                                          else (-1.0 if moved and key == "force_toggle"
+                                                else 1.0 + side))}
+                           for key, *_ in SUMMARY_ROWS})
+
+    monkeypatch.setattr(report, "run_cli", run)
+    monkeypatch.setattr(report, "ROOT", tmp_path)
     table = report.rig_runs({"a": tmp_path / "a.toml", "b": tmp_path / "b.toml"}, tmp_path)
+    assert len(seen) == 2 * len(report.OFFSETS)
+    moved = [p for p in seen if "+100um" in p.stem]
+    assert sum("printed" in p.stem for p in seen) == 2
+    assert [float(p.read_text().split("x_open = ")[1]) for p in moved] == pytest.approx(
+        [-0.0699, -0.0699])
     rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines()}
-    assert rows["F_B(min) (N)"].endswith("| +10.00 % |")  # a 10 % larger opening pull
-    assert rows["F_F(max) (N)"].endswith("| +100.00 % |")
-    assert rows["stroke error dS (mm)"].endswith("| +1000.0000 mm |")
+    assert "| +10.00 % |" in rows["F_B(min) (N)"] and rows["F_B(min) (N)"].endswith("| yes |")
+    assert "| +100.00 % |" in rows["F_F(max) (N)"]
+    assert "| +1000.0000 mm |" in rows["stroke error dS (mm)"]
+    assert rows["F_TP (N)"].endswith("| no |")

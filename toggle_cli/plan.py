@@ -336,10 +336,11 @@ def run(args: argparse.Namespace) -> int:
     if exported:
         check = exported["as_interpolated"]
         print(f"cam table ({exported['format']}, {exported['points']} points"
-              f"{' (the fewest that keep the plan)' if exported['points_found'] else ''}, "
-              f"master {exported['master_unit']}, slave {exported['slave_unit']}) written to "
-              f"{args.out}; as the drive interpolates it ({exported['interpolation']}) every "
-              f"{exported['drive_cycle'] * 1e6:g} us: velocity "
+              f"{_found(exported)}, master {exported['master_unit']}, slave "
+              f"{exported['slave_unit']}) written to {args.out}; as the drive interpolates "
+              f"it ({exported['interpolation']}) for the {exported['drive_cycle'] * 1e6:g} us "
+              f"drive cycle, the worst at "
+              f"{', '.join(f'{c * 1e6:g}' for c in exported['checked_cycles'])} us: velocity "
               f"{100 * check['velocity']:.2f} %, acceleration {100 * check['acceleration']:.2f} "
               f"%, motor torque {100 * check['motor_torque']:.2f} % of their limits, peak input "
               f"force {100 * check['peak_force']:.2f} % of the plan's; off the plan by at most "
@@ -351,6 +352,15 @@ def run(args: argparse.Namespace) -> int:
               "plan and the S-curve:")
         print(table(("clamp", "robust", "nominal", "S-curve"), rows))
     return 0
+
+
+def _found(exported: dict) -> str:
+    """How the cam table's count was found: tried from 2 up (the fewest), or bisected."""
+    if not exported["points_found"]:
+        return ""
+    if exported["points_fewest"]:
+        return " (the fewest that keep the plan)"
+    return " (the least found that keeps the plan: one fewer does not)"
 
 
 def _print_molding(molding: dict) -> None:
