@@ -269,8 +269,9 @@ def test_a_debugger_halt_freezes_the_watchdog_and_the_tick(elf: Path) -> None:
 
 @pytest.mark.parametrize(("inject", "fault", "value"), [
     ({"rcc__pll_locks": False}, p.Fault.CLOCK, 2),
+    ({"rcc__hse_present": False}, p.Fault.CLOCK, 1),
     ({"adc__present": False}, p.Fault.LOAD_ADC, 1),
-], ids=["pll-never-locks", "adc-missing"])
+], ids=["pll-never-locks", "no-hse", "adc-missing"])
 def test_a_board_fault_at_boot_is_named_and_nothing_moves(elf: Path, inject: dict,
                                                            fault: p.Fault, value: int) -> None:
     board, s = _board(elf, **inject)
@@ -594,3 +595,17 @@ def test_the_host_build_with_the_boards_step_timing_agrees_sample_by_sample(elf:
     loads = [t.load_raw for t in host]
     print(f"{len(host)} samples: enc equal in all, load_raw differs by at most {max(raw)} "
           f"LSB over {min(loads)}..{max(loads)}; table (TIM1 pulses) {board.plant.steps}")
+
+
+def test_hsebyp_changes_only_while_hse_is_off(elf: Path) -> None:
+    """RM0390 6.3.1: HSEBYP may be written only with HSEON clear. The RCC model refuses a
+    write that changes it with HSE on (the image cleared both in one write when HSE was
+    missing); the image sets HSEBYP before HSEON and, without HSE, clears it after."""
+    board, _ = _board(elf)
+    cr = board.rcc.read(0x00, 4)
+    assert cr >> 16 & 1 and cr >> 18 & 1  # booted on the ST-LINK's 8 MHz, bypassed
+    with pytest.raises(UnsupportedAccessError, match="HSEBYP"):
+        board.rcc.write(0x00, 4, cr & ~((1 << 16) | (1 << 18)))  # both in one write
+    board, s = _board(elf, rcc__hse_present=False)
+    s.hello()
+    assert not board.rcc.read(0x00, 4) >> 16 & 7  # HSEON, HSERDY, HSEBYP all clear
