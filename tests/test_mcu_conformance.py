@@ -468,22 +468,34 @@ def test_repeated_estops_latch_once_and_a_stop_from_rest_stays_put(kind: str) ->
     assert {t.steps for t in b.tel[-5:]} == {at} and b.tel[-1].state == p.State.IDLE
 
 
+def test_the_step_limit_is_stated_and_a_config_above_it_refused(kind: str) -> None:
+    """1.3: HELLO_REPLY states the most steps a period may hold (the NUCLEO's TIM1 burst, 256)
+    and CONFIG refuses a larger max_step_delta as BAD_VALUE, the same on the model and the
+    firmware (the image answered such a CONFIG OK, then latched INTERNAL at START)."""
+    b = Bench(kind)
+    reply = b.ack(p.Hello(1, p.PROTO_MINOR, 42))
+    assert reply.max_step_delta_limit == p.MAX_STEP_DELTA == 256
+    assert b.ack(p.Config(max_step_delta=257)).result == p.Result.BAD_VALUE
+    assert b.ack(p.Config(max_step_delta=65_535)).result == p.Result.BAD_VALUE
+    assert b.ack(p.Config(max_step_delta=256)).result == p.Result.OK
+
+
 def test_a_deceleration_that_never_stops_is_refused(bench: Bench) -> None:
     assert bench.ack(p.Config(decel_steps_s2=7.0)).result == p.Result.BAD_VALUE
     assert bench.ack(p.Config(decel_steps_s2=8.0)).result == p.Result.OK
 
 
 def config_after_upload(kind: str) -> list[tuple[str, p.Result]]:
-    """Issue 35's case: 4000-step jumps buffered under max_step_delta 5000, then CONFIGs
-    that the buffered points break (a smaller max_step_delta, narrower travel) and one they
-    obey; (what was sent, the answer) in order, and the first run sample's steps."""
-    b = Bench(kind).session(max_step_delta=5000)
-    b.load([(4000, p.NO_CHECK), (8000, p.NO_CHECK), (12000, p.NO_CHECK)])
-    cases = {"max_step_delta 250": dict(max_step_delta=250),
-             "max_step_delta 3999 (point 0 from the table)": dict(max_step_delta=3999),
-             "steps_max 11999": dict(max_step_delta=5000, steps_max=11_999),
-             "max_step_delta 4000, steps_max 12000": dict(max_step_delta=4000,
-                                                          steps_max=12_000)}
+    """Issue 35's case: 200-step jumps buffered under max_step_delta 256 (the most a board
+    emits in a period, 1.3), then CONFIGs that the buffered points break (a smaller
+    max_step_delta, narrower travel) and one they obey; (what was sent, the answer) in
+    order, and the first run sample's steps."""
+    b = Bench(kind).session(max_step_delta=p.MAX_STEP_DELTA)
+    b.load([(200, p.NO_CHECK), (400, p.NO_CHECK), (600, p.NO_CHECK)])
+    cases = {"max_step_delta 150": dict(max_step_delta=150),
+             "max_step_delta 199 (point 0 from the table)": dict(max_step_delta=199),
+             "steps_max 599": dict(max_step_delta=p.MAX_STEP_DELTA, steps_max=599),
+             "max_step_delta 200, steps_max 600": dict(max_step_delta=200, steps_max=600)}
     answers = [(name, p.Result(b.ack(p.Config(stuck_samples=60_000, **cfg)).result))
                for name, cfg in cases.items()]
     assert b.ack(p.Start()).result == p.Result.OK
@@ -496,7 +508,7 @@ def test_a_config_re_checks_the_buffered_points(kind: str) -> None:
     breaks is refused as that chunk would be, and nothing changes."""
     answers = dict(config_after_upload(kind))
     assert list(answers.values()) == [p.Result.BAD_VALUE, p.Result.BAD_VALUE,
-                                      p.Result.OUT_OF_LIMITS, p.Result.OK, 4000], answers
+                                      p.Result.OUT_OF_LIMITS, p.Result.OK, 200], answers
 
 
 @pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")

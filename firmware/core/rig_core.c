@@ -46,6 +46,9 @@
 
 #define Q16_ONE 65536LL
 
+_Static_assert(RIG_MAX_REPLY >= RIG_LEN_HELLO_REPLY && RIG_MAX_REPLY >= RIG_LEN_ACK,
+               "a reply buffer holds the longest reply");
+
 /* ---- small arithmetic helpers ---------------------------------------------------------- */
 
 /* a + b modulo 2^32, as int32 (offsets: steps = hw_steps + steps_offset). */
@@ -405,6 +408,7 @@ static void cmd_hello(rig_mcu *m, const rig_msg_hello *h, uint16_t seq, reply_bu
     hr.load_gain_n = m->cfg.load_gain_n;
     hr.adc_min = (int32_t)RIG_ADC_MIN;
     hr.adc_max = (int32_t)RIG_ADC_MAX;
+    hr.max_step_delta_limit = (uint16_t)RIG_MAX_STEP_DELTA;
     r->type = RIG_MSG_HELLO_REPLY;
     r->len = (uint8_t)rig_wire_put_hello_reply(r->payload, &hr);
 }
@@ -440,7 +444,8 @@ static uint8_t cmd_config(rig_mcu *m, const rig_msg_config *c) {
     bool valid = c->force_limit_n > 0.0f && c->steps_min < c->steps_max &&
                  c->enc_min < c->enc_max && c->following_error_counts > 0 &&
                  c->load_gain_n >= 0.0f && c->decel_steps_s2 > 0.0f &&
-                 c->max_step_delta > 0 && c->heartbeat_timeout_ms > 0 &&
+                 c->max_step_delta > 0 && c->max_step_delta <= RIG_MAX_STEP_DELTA &&
+                 c->heartbeat_timeout_ms > 0 &&
                  c->stuck_samples > 0 && finite_f(c->force_limit_n) &&
                  finite_f(c->load_gain_n) && finite_f(c->decel_steps_s2);
     /* a deceleration below half a Q16 step per period^2 (~7.6 steps/s^2) would never stop */

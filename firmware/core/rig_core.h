@@ -20,7 +20,7 @@
 #include "rig_hal.h"
 
 #define RIG_PROTO_MAJOR 1u
-#define RIG_PROTO_MINOR 2u
+#define RIG_PROTO_MINOR 3u
 #define RIG_FW_VERSION 0x0102u
 #define RIG_TELEMETRY_HZ 1000u
 #define RIG_POINT_PERIOD_US 1000u
@@ -28,13 +28,16 @@
 #define RIG_BUFFER_CAPACITY 2048u /* trajectory points (16 KiB) */
 #define RIG_STEP_NM 200u
 #define RIG_ENC_NM 1000u
+/* The most steps a board emits in one period (the NUCLEO's TIM1 burst: 256 pulses at 4 us):
+ * CONFIG refuses a larger max_step_delta and HELLO_REPLY states it (1.3). */
+#define RIG_MAX_STEP_DELTA 256u
 #define RIG_ADC_MIN (-8388608L)
 #define RIG_ADC_MAX 8388607L
 #define RIG_MAX_PAYLOAD 250u
 #define RIG_MAX_ENCODED 258u      /* COBS of the largest body, without the delimiter */
 #define RIG_TX_FIFO_BYTES 4096u   /* power of two */
 #define RIG_NO_CHECK INT32_MIN    /* enc_expected: do not check the following error */
-#define RIG_MAX_REPLY 55u         /* HELLO_REPLY, the longest reply */
+#define RIG_MAX_REPLY 57u         /* HELLO_REPLY, the longest reply (RIG_LEN_HELLO_REPLY) */
 
 /* The load-cell calibration stored in non-volatile memory (protocol section 3). */
 typedef struct {

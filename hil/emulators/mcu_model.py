@@ -242,7 +242,7 @@ class McuModel:
             p.PROTO_MAJOR, p.PROTO_MINOR, hw.fw_version, self.boot_id, msg.host_nonce,
             hw.telemetry_hz, round(1e6 * hw.period), p.MAX_CHUNK_POINTS, hw.buffer_capacity,
             hw.step_nm, hw.enc_nm, self.cfg.load_offset, self.cfg.load_gain_n,
-            hw.adc_min, hw.adc_max,
+            hw.adc_min, hw.adc_max, p.MAX_STEP_DELTA,
         )
 
     def _config(self, msg: p.Config) -> p.Result:
@@ -251,7 +251,8 @@ class McuModel:
         valid = (
             msg.force_limit_n > 0 and msg.steps_min < msg.steps_max and msg.enc_min < msg.enc_max
             and msg.following_error_counts > 0 and msg.load_gain_n >= 0 and msg.decel_steps_s2 > 0
-            and msg.max_step_delta > 0 and msg.heartbeat_timeout_ms > 0 and msg.stuck_samples > 0
+            and 0 < msg.max_step_delta <= p.MAX_STEP_DELTA
+            and msg.heartbeat_timeout_ms > 0 and msg.stuck_samples > 0
             and all(math.isfinite(v) for v in (msg.force_limit_n, msg.load_gain_n,
                                                 msg.decel_steps_s2))
         )
