@@ -514,3 +514,49 @@ def test_a_config_re_checks_the_buffered_points(kind: str) -> None:
 @pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")
 def test_the_config_re_check_is_the_same_on_both() -> None:
     assert config_after_upload("model") == config_after_upload("firmware")
+
+
+def config_answers_over_a_full_buffer(kind: str, seed: int) -> list[int]:
+    """A full buffer (2048 points, walks of up to 256 steps a period with one long jump and
+    one far point at random places), then CONFIGs whose limits cut at the buffer's own
+    values, so the first failure lands in any block and both kinds meet in one: the
+    answers in order (the firmware reads only the block its summaries point at)."""
+    rng = np.random.default_rng(seed)
+    n = 2048  # the buffer's capacity
+    jumps = rng.integers(-100, 101, n)
+    big = 64 * int(rng.integers(1, n // 64))  # a block's first point: its jump is read apart
+    far = int(rng.choice(np.setdiff1d(np.arange(1, n - 1), [big - 1, big, big + 1])))
+    jumps[big] = 256 * rng.choice([-1, 1])
+    jumps[far] += 150  # a point out of the walk's way: one jump up, the next down
+    jumps[far + 1] -= 150
+    steps = np.cumsum(jumps)
+    assert np.abs(np.diff(np.concatenate(([0], steps)))).max() <= p.MAX_STEP_DELTA
+    b = Bench(kind).session(max_step_delta=p.MAX_STEP_DELTA, steps_min=-200_000,
+                            steps_max=400_000)
+    b.load([(int(s), p.NO_CHECK) for s in steps], final=False)
+    diffs = np.abs(np.diff(np.concatenate(([0], steps))))
+    answers = []
+    top = np.sort(diffs)[-3:]
+    for k in range(16):
+        if k % 2:  # travel wide: the jumps decide, around the largest ones
+            ack = b.ack(p.Config(stuck_samples=60_000, steps_min=-100_000, steps_max=100_000,
+                                 max_step_delta=int(rng.choice(top))))
+            answers.append(int(ack.result))
+            continue
+        lo = min(int(rng.choice(steps)), 0) - int(rng.integers(0, 2)) * 100_000
+        hi = max(int(rng.choice(steps)), 0) + int(rng.integers(0, 2)) * 100_000
+        delta = int(min(max(int(rng.choice(diffs)), 1), p.MAX_STEP_DELTA))
+        ack = b.ack(p.Config(stuck_samples=60_000, steps_min=lo, steps_max=max(hi, lo + 1),
+                             max_step_delta=delta))
+        answers.append(int(ack.result))
+    return answers
+
+
+@pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")
+@pytest.mark.parametrize("seed", range(4))
+def test_a_config_over_a_full_buffer_answers_as_the_loop(seed: int) -> None:
+    """The firmware's block summaries give the model's loop's answer: OUT_OF_LIMITS or
+    BAD_VALUE for the first failing point, OK when none fails."""
+    model = config_answers_over_a_full_buffer("model", seed)
+    assert set(model) == {p.Result.OK, p.Result.OUT_OF_LIMITS, p.Result.BAD_VALUE}, model
+    assert config_answers_over_a_full_buffer("firmware", seed) == model

@@ -107,6 +107,19 @@ enum {
 };
 #define RIG_CHUNK_FINAL 0x01u
 
+/* CONFIG's re-check of the buffered points (rule 7) reads a block only when its summary
+ * says a point in it fails: at most RIG_BLOCK_POINTS points instead of the whole buffer. */
+#define RIG_BLOCK_POINTS 64u
+#define RIG_BLOCKS (RIG_BUFFER_CAPACITY / RIG_BLOCK_POINTS)
+
+/* Summary of a block of buffered points: their least and greatest step count and the
+ * largest |step change| from the point before (the block's first point of the buffer
+ * excluded: its change is from the present position, read at CONFIG). */
+typedef struct {
+    int32_t min_steps, max_steps;
+    uint32_t max_jump;
+} rig_block;
+
 #define RIG_EVENT_SLOTS 8u   /* FAULT/STATE frames a command may cause, sent after its reply */
 #define RIG_EVENT_MAX 15u    /* largest event payload (FAULT) */
 
@@ -155,6 +168,7 @@ typedef struct {
     /* trajectory ring */
     rig_point points[RIG_BUFFER_CAPACITY];
     uint32_t pt_head, pt_count;
+    rig_block blocks[RIG_BLOCKS]; /* of slots 0..pt_count-1: valid in IDLE (rig_core.c) */
     uint32_t next_index, exec_index;
     uint8_t final_received, accepting;
     int32_t expected_enc;
