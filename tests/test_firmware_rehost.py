@@ -215,16 +215,30 @@ def test_step_pulses_equal_the_commanded_steps_and_meet_the_drivers_timing(elf: 
           f"{timing.dir_setup_s * 1e6:.2f} us ({TMC5160.source})")
 
 
-def test_a_burst_over_256_steps_is_internal(elf: Path) -> None:
+def test_a_step_delta_over_the_boards_limit_is_refused(elf: Path) -> None:
+    """1.3: the image states its 256-step limit and refuses a larger max_step_delta as
+    BAD_VALUE, as the model and the host build do (it took 300, then latched INTERNAL at
+    START: the burst over 256 steps is still not emitted, now unreachable by the wire)."""
     board, s = _board(elf)
-    s.hello()
-    assert s.command(p.Config(max_step_delta=300)).result == p.Result.OK
-    s.upload([(300, NO_CHECK), (300, NO_CHECK)])
-    assert s.command(p.Start()).result == p.Result.OK
-    s.run(0.02)
-    faults = s.faults()
-    assert [(f.fault, f.value) for f in faults] == [(p.Fault.INTERNAL, 1)]
-    assert board.log.pulses == 0 and s.telemetry()[-1].steps == 0
+    assert s.hello().max_step_delta_limit == p.MAX_STEP_DELTA == 256
+    assert s.command(p.Config(max_step_delta=257)).result == p.Result.BAD_VALUE
+    assert s.command(p.Config(max_step_delta=256)).result == p.Result.OK
+    assert not s.faults() and board.log.pulses == 0
+
+
+def test_a_config_over_a_full_buffer_never_makes_a_tick_late(elf: Path) -> None:
+    """A CONFIG re-checking 2048 buffered points took 56 105 instructions in one rig_rx
+    (a tick due in it armed its burst after the 290 us deadline even at CPI 1); with the
+    block summaries it reads one block. Counted exactly by the image's DWT."""
+    from hil.emulators.rehost.tick_cost import measure
+
+    cost = measure(elf)
+    assert cost.late_ticks == 0 and cost.step_errors == 0
+    assert 0 < cost.config_rx < 8_000  # 31 summaries and one 64-point block
+    assert cost.deadline_cpi() >= 3.0, cost
+    print(f"CONFIG over 2048 points: {cost.config_rx} instructions; worst rig_rx "
+          f"{cost.rx_max}, worst tick {cost.tick_max}: the arming deadline holds to CPI "
+          f"{cost.deadline_cpi():.1f}")
 
 
 def _enable_at(board: NucleoBoard, t: int) -> bool:
