@@ -89,6 +89,8 @@ R_COMMAND, R_RUN_COMPLETE, R_FAULT, R_STOP_COMPLETE, R_LINK_LOST = range(5)
 F_FORCE, F_TRAVEL, F_FOLLOWING, F_UNDERRUN, F_SATURATED = 0x01, 0x02, 0x04, 0x08, 0x10
 F_STUCK, F_HEARTBEAT, F_ESTOP, F_DRIVER, F_INTERNAL = 0x20, 0x40, 0x80, 0x100, 0x200
 
+F_BOARD = 0x0200 | 0x0400 | 0x0800 | 0x1000 | 0x2000  # INTERNAL and the board's own
+
 # telemetry flags
 FL_MOVING, FL_FINAL, FL_SATURATED, FL_SESSION = 0x01, 0x02, 0x04, 0x08
 FL_DRIVER, FL_HOME, FL_REFERENCED = 0x10, 0x20, 0x40
@@ -648,8 +650,8 @@ class Mcu:
             flags |= FL_FINAL
         if not ADC_MIN < self.load_raw < ADC_MAX:
             flags |= FL_SATURATED
-        if self.state != ESTOP:
-            flags |= FL_DRIVER
+        if self.state != ESTOP and not self.faults & F_BOARD:  # section 8: the board's faults
+            flags |= FL_DRIVER  # de-energise (this rig raises none of them)
         if round(self.pos) <= 0:  # switch at x_open, active at or behind it
             flags |= FL_HOME
         if self.referenced:

@@ -329,6 +329,31 @@ def test_an_input_fault_while_moving_stops_the_steps(elf: Path, poke: str, fault
     cut = [b for b in board.tim1.bursts if b.cut is not None]
     assert all(b.cut <= limit for b in cut)
     assert board.log.pulses == board.plant.steps == s.telemetry()[-1].steps
+    # a board's fault de-energises the driver in the tick that latched it (section 8)
+    lows = [t for t, level in board.log.enable if not level and t >= t0]
+    assert lows and lows[0] <= limit and not board.enable_level()
+    assert not s.telemetry()[-1].flags & p.TelemetryFlag.DRIVER_ENABLED
+
+
+def test_start_into_an_open_stop_chain_emits_no_step(elf: Path) -> None:
+    """At rest the enable is low, so an open chain looks normal; START enables the driver
+    and the run's first point waits for the chain's feedback: 20 periods later STOP_CHAIN,
+    with not one pulse on PA8 and the enable low again."""
+    board, s = _board(elf)
+    s.hello()
+    s.upload(_profile(50, 20))
+    board.chain_broken = True
+    s.run(0.01)
+    assert not s.faults()
+    t0 = board.machine.now
+    assert s.command(p.Start()).result == p.Result.OK
+    s.run(0.04)
+    assert [(f.fault, f.value) for f in s.faults()] == [(p.Fault.STOP_CHAIN, 1)]
+    last = s.telemetry()[-1]
+    assert last.state == p.State.FAULT and last.steps == 0 and last.exec_index == 0
+    assert board.log.pulses == 0 and not [b for b in board.tim1.bursts if b.n]
+    highs = [t for t, level in board.log.enable if level and t >= t0]
+    assert highs and not board.enable_level()
 
 
 @pytest.mark.parametrize(("inject", "value"), [("crc_errors", 1), ("drdy_stuck", True),
@@ -342,6 +367,7 @@ def test_adc_health_faults_are_named(elf: Path, inject: str, value: object) -> N
     assert [(f.fault, f.value) for f in s.faults()] == [(p.Fault.LOAD_ADC, code)]
     assert s.telemetry()[-1].state == p.State.FAULT
     assert board.log.pulses == board.plant.steps == s.telemetry()[-1].steps
+    assert not board.enable_level()  # de-energised (section 8)
 
 
 def test_an_access_no_model_implements_is_an_error(elf: Path) -> None:

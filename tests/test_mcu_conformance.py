@@ -560,3 +560,33 @@ def test_a_config_over_a_full_buffer_answers_as_the_loop(seed: int) -> None:
     model = config_answers_over_a_full_buffer("model", seed)
     assert set(model) == {p.Result.OK, p.Result.OUT_OF_LIMITS, p.Result.BAD_VALUE}, model
     assert config_answers_over_a_full_buffer("firmware", seed) == model
+
+
+@pytest.mark.parametrize("fault", [p.Fault.INTERNAL, p.Fault.OVERTRAVEL, p.Fault.LOAD_ADC,
+                                   p.Fault.CLOCK, p.Fault.STOP_CHAIN])
+def test_a_boards_fault_de_energises_the_driver_a_force_limit_holds(kind: str,
+                                                                   fault: p.Fault) -> None:
+    """Section 8: the board's own faults take the driver's enable low at the period that
+    latched them (the board can no longer trust its sensing, timing or wiring); FORCE_LIMIT
+    halts with the driver energised, holding the clamp. CLEAR_FAULT is refused while the
+    board still reports it."""
+    b = Bench(kind).session()
+    b.load(ramp(50))
+    assert b.ack(p.Start()).result == p.Result.OK
+    assert b.tick(3).flags & p.TelemetryFlag.DRIVER_ENABLED
+    b.mcu.board_fault(fault, 1)
+    t = b.tick()
+    assert (t.state, t.faults) == (p.State.FAULT, fault)
+    assert not t.flags & p.TelemetryFlag.DRIVER_ENABLED
+    assert b.faults()[-1] == (fault, 1, 0)
+    assert b.ack(p.ClearFault()).result == p.Result.FAULT_ACTIVE
+    b.mcu.board_fault(0)
+    b.tick()  # the next reading shows it gone
+    assert b.ack(p.ClearFault()).result == p.Result.OK
+    b.load([(t.steps + k, p.NO_CHECK) for k, _ in ramp(50)])
+    assert b.ack(p.Start()).result == p.Result.OK
+    b.tick(3)
+    b.mcu.force_spike(500.0, 5)  # over the 400 N limit, under the ADC rail
+    t = b.tick()
+    assert (t.state, t.faults) == (p.State.FAULT, p.Fault.FORCE_LIMIT)
+    assert t.flags & p.TelemetryFlag.DRIVER_ENABLED  # holding position

@@ -438,6 +438,9 @@ void hal_driver_enable(bool on) {
     pin_write(GPIOA, PIN_ENABLE, on);
 }
 
+/* The chain's feedback (PB5) high with the enable on: the contacts pass the enable. */
+bool hal_driver_powered(void) { return driver_on && pin_read(GPIOB, PIN_CHAIN); }
+
 /* ---- encoder: TIM2 -------------------------------------------------------------------------- */
 
 static void encoder_init(void) {

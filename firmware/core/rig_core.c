@@ -44,6 +44,11 @@
     (RIG_F_FORCE_LIMIT | RIG_F_TRAVEL_LIMIT | RIG_F_FOLLOWING_ERROR | RIG_F_LOAD_SATURATED | \
      RIG_F_LOAD_STUCK | RIG_F_DRIVER | RIG_BOARD_FAULTS)
 
+/* The board's faults: it can no longer trust its sensing, timing or wiring, so the driver
+ * is de-energised at once (stop category 0). The others halt holding position: a stepper
+ * without current could be back-driven by the clamp's stored elastic energy. */
+#define DEENERGISING_FAULTS RIG_BOARD_FAULTS
+
 #define Q16_ONE 65536LL
 
 _Static_assert(RIG_MAX_REPLY >= RIG_LEN_HELLO_REPLY && RIG_MAX_REPLY >= RIG_LEN_ACK,
@@ -219,6 +224,7 @@ static void begin_stop(rig_mcu *m, uint8_t target, uint8_t reason) {
 /* The reaction to newly latched bits (section 8): halt, or a controlled stop. */
 static void react(rig_mcu *m, uint16_t bits) {
     if (bits & RIG_F_FOLLOWING_ERROR) m->referenced = 0; /* the encoder may have slipped */
+    if (bits & DEENERGISING_FAULTS) m->driver_enabled = 0; /* low at this tick's end */
     if (bits & HALTING_FAULTS) {
         m->vel_q16 = 0;
         m->halt_pending = 1;
@@ -557,6 +563,7 @@ static uint8_t cmd_start(rig_mcu *m) {
     if (m->state != RIG_STATE_IDLE) return RIG_BAD_STATE;
     if (m->pt_count == 0) return RIG_EMPTY;
     m->driver_enabled = 1;
+    m->awaiting_power = 1; /* the first point waits for hal_driver_powered() */
     m->same_load = 0; /* the run's first sample counts 1 (docs/rig-protocol.md) */
     set_state(m, RIG_STATE_RUNNING, RIG_REASON_COMMAND);
     return RIG_OK;
@@ -874,7 +881,11 @@ void rig_tick(rig_mcu *m, uint32_t t_us) {
      * with the one before this period's motion (a SET_POSITION is no move), as the model. */
     m->period_start_steps = m->steps;
     int32_t delta = 0;
-    if (m->state == RIG_STATE_RUNNING) {
+    if (m->state == RIG_STATE_RUNNING && m->awaiting_power && !hal_driver_powered()) {
+        /* not one step into an unpowered driver: the run's first point waits (the board
+         * names a chain that never confirms, STOP_CHAIN, and the halt emits nothing) */
+    } else if (m->state == RIG_STATE_RUNNING) {
+        m->awaiting_power = 0;
         delta = run_step(m);
     } else if (m->state == RIG_STATE_STOPPING) {
         delta = decelerate(m);

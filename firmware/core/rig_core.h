@@ -146,6 +146,7 @@ typedef struct {
     uint32_t boot_id;
     uint8_t state, session, referenced;
     uint8_t driver_enabled, driver_applied; /* applied: what hal_driver_enable last got */
+    uint8_t awaiting_power; /* START given, the driver's power not yet confirmed */
     uint16_t faults;
     rig_calibration stored;
     rig_config cfg;

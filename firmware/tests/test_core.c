@@ -967,6 +967,66 @@ static void test_estop_and_driver(void) {
     CHECK_EQ(t.faults, RIG_F_DRIVER);
 }
 
+/* The board's faults take the enable low at the tick that latched them (stop category 0);
+ * FORCE_LIMIT halts holding position, the driver energised (docs/rig-protocol.md 8). */
+static void test_board_faults_de_energise_and_limits_hold(void) {
+    static const uint16_t board[5] = {RIG_F_INTERNAL, RIG_F_OVERTRAVEL, RIG_F_LOAD_ADC,
+                                      RIG_F_CLOCK, RIG_F_STOP_CHAIN};
+    int32_t pts[10] = {10, 20, 30, 40, 50, 60, 70, 80, 90, 100};
+    for (unsigned i = 0; i < 5u; i++) {
+        session();
+        CHECK_EQ(chunk(0, 0, pts, 10), RIG_OK);
+        CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+        ticks(2);
+        CHECK(fake.driver_on);
+        fake.board_faults = board[i];
+        rig_msg_telemetry t = ticks(1);
+        CHECK_EQ(t.state, RIG_STATE_FAULT);
+        CHECK_EQ(t.faults, board[i]);
+        CHECK(!fake.driver_on);
+        CHECK(!(t.flags & RIG_TF_DRIVER_ENABLED));
+        fake.board_faults = 0;
+    }
+    session();
+    CHECK_EQ(chunk(0, 0, pts, 10), RIG_OK);
+    CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+    ticks(2);
+    fake.load_base = 1500 + 4000001; /* 400.0001 N */
+    rig_msg_telemetry t = ticks(1);
+    CHECK_EQ(t.faults, RIG_F_FORCE_LIMIT);
+    CHECK(fake.driver_on); /* holding */
+    CHECK(t.flags & RIG_TF_DRIVER_ENABLED);
+}
+
+/* START enables the driver; the run's first point waits until its power is confirmed
+ * (hal_driver_powered): no step into an open stop chain, the board names it. */
+static void test_the_first_point_waits_for_the_drivers_power(void) {
+    session();
+    int32_t pts[3] = {10, 20, 30};
+    CHECK_EQ(chunk(0, 0, pts, 3), RIG_OK);
+    fake.chain_open = true;
+    CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+    rig_msg_telemetry t = ticks(5);
+    CHECK(fake.driver_on);
+    CHECK_EQ(t.state, RIG_STATE_RUNNING);
+    CHECK_EQ(t.exec_index, 0);
+    CHECK_EQ(fake.hw_steps, 0);
+    fake.board_faults = RIG_F_STOP_CHAIN; /* the board's 20 ticks */
+    t = ticks(1);
+    CHECK_EQ(t.state, RIG_STATE_FAULT);
+    CHECK_EQ(fake.hw_steps, 0);
+    CHECK(!fake.driver_on);
+    fake.board_faults = 0;
+    fake.chain_open = false;
+    /* powered at once: the first point in the START tick, as before */
+    session();
+    CHECK_EQ(chunk(0, 0, pts, 3), RIG_OK);
+    CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+    t = ticks(1);
+    CHECK_EQ(t.exec_index, 1);
+    CHECK_EQ(t.steps, 10);
+}
+
 static void test_config_rules(void) {
     session();
     rig_msg_config c = default_cfg();
@@ -1166,6 +1226,8 @@ static const test_case tests[] = {
     T(test_estop_and_driver),
     T(test_config_rules),
     T(test_config_rechecks_buffered_points),
+    T(test_board_faults_de_energise_and_limits_hold),
+    T(test_the_first_point_waits_for_the_drivers_power),
     T(test_telemetry_only_in_a_session_and_tx_fifo),
     T(test_set_position_and_bye),
 };
