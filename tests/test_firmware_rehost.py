@@ -437,6 +437,9 @@ def test_hil_run_on_the_rehosted_image_agrees_with_the_host_build(elf: Path,
     (["--board", "nucleo"], "--board nucleo runs the firmware: give --firmware too"),
     (["--firmware", "--board", "nucleo", "--qemu"], "two ways to run the firmware: give one"),
     (["--firmware", "--board", "nucleo", "--junk", "0.1"], "injects no faults: drop junk"),
+    (["--step-timing", "nucleo"], "--step-timing chooses the host build's table timing"),
+    (["--firmware", "--board", "nucleo", "--step-timing", "nucleo"], "without --board"),
+    (["--load-noise", "-1"], "must be an rms force in N"),
 ])
 def test_hil_emulate_board_refuses_what_it_cannot_do(args: list[str], message: str) -> None:
     import sys
@@ -649,3 +652,89 @@ def test_hsebyp_changes_only_while_hse_is_off(elf: Path) -> None:
     board, s = _board(elf, rcc__hse_present=False)
     s.hello()
     assert not board.rcc.read(0x00, 4) >> 16 & 7  # HSEON, HSERDY, HSEBYP all clear
+
+
+def _pulses_and_moves(board: NucleoBoard, telemetry: list[p.Telemetry]) -> tuple[int, int]:
+    """(rising edges TIM1's model put on PA8, steps the firmware's telemetry commanded)."""
+    pulses = sum(b.rises(b.end) for b in board.tim1.bursts if b.output)
+    pairs = zip(telemetry, telemetry[1:])
+    return pulses, sum(abs(t.steps - prev.steps) for prev, t in pairs
+                       if t.sample == prev.sample + 1 and t.flags & p.TelemetryFlag.MOVING)
+
+
+@pytest.mark.alone
+def test_the_default_job_agrees_with_the_host_build_at_the_boards_step_timing(
+        elf: Path, tmp_path: Path) -> None:
+    """`hil run --real --port PTY` (the default job: homing, 3 cycles) on the rehosted
+    image as `hil emulate --firmware --board nucleo --load-noise 0` serves it, and on `hil
+    emulate --firmware --step-timing nucleo --load-noise 0` from the command line: the same
+    samples and commanded positions; from the cycles' first move on the same encoder
+    counts, and the forces to the ADC's resolution once the start's transient has gone
+    (the plant's state at START depends on the dwell before it, wall-clock time that the
+    rehost emulates slower: docs/firmware.md). On the rehosted image every step pulse of
+    the whole job (homing included) is a rising edge on PA8: their count equals the steps
+    the firmware's telemetry commanded. Minutes: the rehosted image runs below real time."""
+    import csv
+    import signal
+    import sys
+
+    from hil_host import hil
+
+    from hil.emulators.rig_physics import ClampPhysics
+
+    def rows(out: Path) -> list[dict[str, str]]:
+        with (out / "samples.csv").open(newline="") as fh:
+            return list(csv.DictReader(fh))
+
+    setup = RigSetup()
+    hw = RigHardware(x_origin=setup.stroke[0], load_noise_n=0.0)
+    physics = ClampPhysics(setup.preset, setup.delta_r8, setup.mu, setup.x_contact)
+    board = NucleoBoard(elf, physics, hw, seed=1)  # as hil emulate --seed 1 (its default)
+    decoder, telemetry = p.FrameDecoder(), []
+    take = board.take_output
+
+    def tap() -> bytes:
+        data = take()
+        telemetry.extend(m for m in map(p.parse_message, decoder.feed(data))
+                         if isinstance(m, p.Telemetry))
+        return data
+
+    board.take_output = tap  # type: ignore[method-assign]
+    with NucleoRig(board) as rig:
+        code, stdout, stderr = hil("run", "--real", "--port", rig.port, "--quiet", "--out",
+                                   str(tmp_path / "rehost"), timeout=900.0)
+        with rig.paused():
+            rig.check()
+            pulses, commanded = _pulses_and_moves(board, telemetry)
+    assert code == 0 and "3 of 3 cycles complete" in stdout, stderr
+    assert pulses == commanded > 0 and board.log.pulses_ignored == 0
+    proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "emulate", "--firmware",
+                             "--step-timing", "nucleo", "--load-noise", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        port = proc.stdout.readline().strip()
+        assert port.startswith("/dev/"), proc.stderr.read()
+        code, stdout, stderr = hil("run", "--real", "--port", port, "--quiet", "--out",
+                                   str(tmp_path / "host"), "--watchdog-ms", "1000",
+                                   "--heartbeat-ms", "1000", "--ack-ms", "500",
+                                   timeout=300.0)  # bounds a loaded machine keeps
+        assert code == 0 and "3 of 3 cycles complete" in stdout, stderr
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=30)
+    rehost, host = rows(tmp_path / "rehost"), rows(tmp_path / "host")
+    assert len(rehost) == len(host) > 10_000
+    assert [r["x_cmd [m]"] for r in rehost] == [r["x_cmd [m]"] for r in host]
+    counts = [abs(round((float(a["platen [m]"]) - float(b["platen [m]"])) / 1e-6))
+              for a, b in zip(rehost, host)]
+    forces = [abs(float(a["force [N]"]) - float(b["force [N]"])) for a, b in zip(rehost, host)]
+    moved = next(i for i, r in enumerate(host) if r["x_cmd [m]"] != host[0]["x_cmd [m]"])
+    lsb = hw.load_gain_n
+    settled = next(i for i in range(len(forces)) if max(forces[i:]) <= lsb * 1.01)
+    print(f"{len(host)} samples; platen apart by at most {max(counts)} counts "
+          f"({max(counts[moved:])} from the first move, sample {moved}), force by "
+          f"{max(forces):.3g} N ({max(forces[moved:]):.3g} N from the first move; within "
+          f"1 LSB = {lsb:g} N from sample {settled}); {pulses} pulses on PA8 = {commanded} "
+          f"commanded steps; {rig.summary()}")
+    assert max(counts[moved:]) == 0
+    assert settled < 1000  # the start's transient gone within a second of the cycle
