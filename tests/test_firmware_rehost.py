@@ -613,7 +613,7 @@ def test_the_host_build_with_the_boards_step_timing_agrees_sample_by_sample(elf:
     forward = list(stroke_positions(x_open, x_toggle, 40e-3, setup.period, setup.limits))
     points = [(round((x - x_open) / 200e-9), NO_CHECK) for x in forward + forward[-2::-1]]
     config = p.Config(force_limit_n=400.0, steps_min=-50_000, steps_max=400_000,
-                      enc_min=-500_000, enc_max=500_000, max_step_delta=400)
+                      enc_min=-500_000, enc_max=500_000, max_step_delta=p.MAX_STEP_DELTA)
     board, s = _board(elf, hw=hw)
     s.hello()
     assert s.command(config).result == p.Result.OK
@@ -707,6 +707,8 @@ def test_the_default_job_agrees_with_the_host_build_at_the_boards_step_timing(
             rig.check()
             pulses, commanded = _pulses_and_moves(board, telemetry)
     assert code == 0 and "3 of 3 cycles complete" in stdout, stderr
+    print(f"the default job on the rehosted image: {pulses} rising edges on PA8, "
+          f"{commanded} steps commanded in its telemetry; {rig.summary()}")
     assert pulses == commanded > 0 and board.log.pulses_ignored == 0
     proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "emulate", "--firmware",
                              "--step-timing", "nucleo", "--load-noise", "0"],
@@ -734,7 +736,6 @@ def test_the_default_job_agrees_with_the_host_build_at_the_boards_step_timing(
     print(f"{len(host)} samples; platen apart by at most {max(counts)} counts "
           f"({max(counts[moved:])} from the first move, sample {moved}), force by "
           f"{max(forces):.3g} N ({max(forces[moved:]):.3g} N from the first move; within "
-          f"1 LSB = {lsb:g} N from sample {settled}); {pulses} pulses on PA8 = {commanded} "
-          f"commanded steps; {rig.summary()}")
+          f"1 LSB = {lsb:g} N from sample {settled})")
     assert max(counts[moved:]) == 0
     assert settled < 1000  # the start's transient gone within a second of the cycle
