@@ -12,7 +12,9 @@ Blocks: ``nucleo-memory`` (``make -C firmware/board nucleo``: arm-none-eabi-size
 ELF, firmware/board/stack_report.py's chains), ``nucleo-pulses``
 (:func:`hil.emulators.rehost.pulses.full_rate_reversal` against
 :data:`hil.emulators.rehost.pulses.TMC5160`),
-``qemu-memory`` (the QEMU image of the default rig, the same two tools).
+``nucleo-tick`` (:func:`hil.emulators.rehost.tick_cost.measure`: the image's own longest
+``rig_rx`` and ``rig_tick`` in instructions), ``qemu-memory`` (the QEMU image of the
+default rig, the same two tools).
 """
 
 from __future__ import annotations
@@ -113,10 +115,33 @@ def nucleo_pulses() -> str:
     return "\n".join(lines) + "\n"
 
 
+def nucleo_tick() -> str:
+    from hil.emulators.rehost.nucleo import build_nucleo_image
+    from hil.emulators.rehost.tick_cost import CPU_HZ, STEP_ARM_DEADLINE_S, measure
+
+    c = measure(build_nucleo_image())
+    us = lambda n, cpi: n * cpi / CPU_HZ * 1e6  # noqa: E731
+    rows = [("one `rig_rx` call of a CONFIG over the full 2048-point buffer", c.config_rx),
+            ("longest `rig_rx` call (≤ 64 bytes: a frame's CRC, decoding, execution)",
+             c.rx_max),
+            ("longest `rig_tick` (RUNNING, STOPPING, a fault)", c.tick_max)]
+    lines = [f"{c.ticks} ticks, {c.late_ticks} late, {c.step_errors} bursts armed late "
+             "(`board_tick_stats` of the rehosted image, one DWT count per instruction):", "",
+             "| | Instructions | at CPI 1 | at CPI 3 |", "|---|---|---|---|"]
+    lines += [f"| {name} | {_grouped(n)} | {us(n, 1):.0f} µs | {us(n, 3):.0f} µs |"
+              for name, n in rows]
+    lines += ["", f"A tick due during the longest `rig_rx`, plus the longest tick: "
+              f"{_grouped(c.rx_max + c.tick_max)} instructions, within the step generator's "
+              f"{STEP_ARM_DEADLINE_S * 1e6:.0f} µs arming deadline up to a CPI of "
+              f"{c.deadline_cpi():.1f}."]
+    return "\n".join(lines) + "\n"
+
+
 #: Block name -> (generator, cheap).
 BLOCKS: dict[str, tuple[Callable[[], str], bool]] = {
     "nucleo-memory": (nucleo_memory, True),
     "nucleo-pulses": (nucleo_pulses, True),
+    "nucleo-tick": (nucleo_tick, True),
     "qemu-memory": (qemu_memory, False),
 }
 

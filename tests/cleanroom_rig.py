@@ -60,6 +60,7 @@ PERIOD_S = PERIOD_US * 1e-6
 MAX_CHUNK_POINTS = 30
 BUFFER_CAPACITY = 2048
 STEP_NM = 200
+MAX_STEP_DELTA = 256  # 1.3: the most steps a period may hold (HELLO_REPLY, CONFIG)
 ENC_NM = 1000
 ADC_MIN, ADC_MAX = -8_388_608, 8_388_607
 STORED_LOAD_OFFSET = 1500  # the worked example's calibration (section 12)
@@ -93,6 +94,8 @@ R_COMMAND, R_RUN_COMPLETE, R_FAULT, R_STOP_COMPLETE, R_LINK_LOST = range(5)
 F_FORCE, F_TRAVEL, F_FOLLOWING, F_UNDERRUN, F_SATURATED = 0x01, 0x02, 0x04, 0x08, 0x10
 F_STUCK, F_HEARTBEAT, F_ESTOP, F_DRIVER, F_INTERNAL = 0x20, 0x40, 0x80, 0x100, 0x200
 
+F_BOARD = 0x0200 | 0x0400 | 0x0800 | 0x1000 | 0x2000  # INTERNAL and the board's own
+
 # telemetry flags
 FL_MOVING, FL_FINAL, FL_SATURATED, FL_SESSION = 0x01, 0x02, 0x04, 0x08
 FL_DRIVER, FL_HOME, FL_REFERENCED = 0x10, 0x20, 0x40
@@ -105,7 +108,7 @@ CHUNK_HEAD = struct.Struct("<IBB")
 POINT = struct.Struct("<ii")
 SETPOS_FMT = struct.Struct("<ii")
 ACK_FMT = struct.Struct("<HBBIHH")
-HELLO_TAIL = struct.Struct("<BBHIIHHBHIIifii")
+HELLO_TAIL = struct.Struct("<BBHIIHHBHIIifiiH")  # 1.3: max_step_delta_limit at the end
 TELEMETRY_FMT = struct.Struct("<IIIiiiIHHBB")
 FAULT_FMT = struct.Struct("<HIBii")
 STATE_FMT = struct.Struct("<BBBII")
@@ -447,7 +450,7 @@ class Mcu:
         tail = HELLO_TAIL.pack(PROTO_MAJOR, minor, FW_VERSION, self.boot_id, nonce,
                                TELEMETRY_HZ, PERIOD_US, MAX_CHUNK_POINTS, BUFFER_CAPACITY,
                                STEP_NM, ENC_NM, self.load_offset, self.load_gain,
-                               ADC_MIN, ADC_MAX)
+                               ADC_MIN, ADC_MAX, MAX_STEP_DELTA)
         return self._ack(seq, result) + tail
 
     def _estop(self) -> int:
@@ -462,7 +465,8 @@ class Mcu:
         (force, smin, smax, emin, emax, ferr, offset, gain, decel, maxd, hb,
          stuck) = CONFIG_FMT.unpack_from(payload)
         if not (all(math.isfinite(v) for v in (force, gain, decel)) and smin < smax
-                and emin < emax and force > 0 and ferr > 0 and decel > 0 and maxd > 0
+                and emin < emax and force > 0 and ferr > 0 and decel > 0
+                and 0 < maxd <= MAX_STEP_DELTA
                 and hb > 0 and stuck > 0 and gain >= 0):
             return BAD_VALUE
         self.cfg = Config(force, smin, smax, emin, emax, ferr, decel, maxd, hb, stuck)
@@ -673,8 +677,8 @@ class Mcu:
             flags |= FL_FINAL
         if not ADC_MIN < self.load_raw < ADC_MAX:
             flags |= FL_SATURATED
-        if self.state != ESTOP:
-            flags |= FL_DRIVER
+        if self.state != ESTOP and not self.faults & F_BOARD:  # section 8: the board's faults
+            flags |= FL_DRIVER  # de-energise (this rig raises none of them)
         if round(self.pos) <= 0:  # switch at x_open, active at or behind it
             flags |= FL_HOME
         if self.referenced:

@@ -39,7 +39,7 @@ LOAD_RAW_TOLERANCE = 1  # ADC counts (see the module's docstring)
 SPEED = 0.04  # m/s: 200 steps per period, within the CONFIG's max_step_delta
 CONFIG = p.Config(force_limit_n=400.0, steps_min=-50_000, steps_max=400_000,
                   enc_min=-500_000, enc_max=500_000, following_error_counts=1_000,
-                  max_step_delta=400, heartbeat_timeout_ms=250, stuck_samples=200)
+                  max_step_delta=p.MAX_STEP_DELTA, heartbeat_timeout_ms=250, stuck_samples=200)
 PREFILL = 1800  # points sent before START; the host keeps this many ahead
 
 

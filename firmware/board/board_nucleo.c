@@ -103,7 +103,7 @@ _Static_assert(STEP_TICKS_PER_PERIOD == STEP_BURST_PERIOD_TICKS &&
 #define ADC_BAD_CRC 3         /* a frame's output CRC did not match */
 #define ADC_BAD_STATUS 4      /* STATUS: reset, resync, register map or word length */
 #define ADC_SPI_TIMEOUT 5     /* SPI2 did not finish a byte */
-#define CLOCK_NO_HSE 1        /* (a warning only: HSE missing, the PLL runs from HSI) */
+#define CLOCK_NO_HSE 1        /* HSE missing: the PLL runs from HSI, the ADC has no CLKIN */
 #define CLOCK_NO_PLL 2        /* the PLL did not lock: running on HSI, no motion */
 #define CLOCK_NO_OVERDRIVE 3  /* over-drive not ready: HSI, no motion */
 #define CLOCK_NO_SWITCH 4     /* the switch to the PLL did not take: HSI, no motion */
@@ -171,19 +171,32 @@ static bool wait_set(volatile uint32_t *reg, uint32_t mask, uint32_t tries) {
     return false;
 }
 
+static bool wait_clear(volatile uint32_t *reg, uint32_t mask, uint32_t tries) {
+    while (tries--) {
+        if (!(*reg & mask)) return true;
+    }
+    return false;
+}
+
 /* The PLL at 180 MHz, or the HSI at 16 MHz with clock_fault set: every wait is bounded.
  * Returns true on the PLL. */
 static bool clock_to_pll(void) {
     RCC->APB1ENR |= RCC_APB1_PWR;
     PWR->CR |= PWR_CR_VOS_SCALE1;
-    /* 8 MHz from the ST-LINK's MCO into OSC_IN (HSE bypass, Nucleo default SB16/SB50) */
-    RCC->CR |= RCC_CR_HSEBYP | RCC_CR_HSEON;
+    /* 8 MHz from the ST-LINK's MCO into OSC_IN (HSE bypass, Nucleo default SB16/SB50);
+     * RM0390 6.3.1: HSEBYP may change only while HSE is off, so it is set before HSEON and
+     * cleared after HSEON is off and HSERDY has fallen, each in a write of its own */
+    RCC->CR |= RCC_CR_HSEBYP;
+    RCC->CR |= RCC_CR_HSEON;
     if (wait_set(&RCC->CR, RCC_CR_HSERDY, 200000u)) {
         RCC->PLLCFGR = RCC_PLLCFGR(4u, 180u, 2u, 8u, 2u) | RCC_PLLCFGR_SRC_HSE;
-    } else { /* no MCO: the internal 16 MHz RC (1 % accurate: the UART still works) */
-        RCC->CR &= ~(RCC_CR_HSEON | RCC_CR_HSEBYP);
+    } else { /* no MCO: the internal 16 MHz RC (1 % accurate: the UART still works), but the
+              * ADC's CLKIN is HSE through MCO2: no conversions, so a named CLOCK fault */
+        RCC->CR &= ~RCC_CR_HSEON;
+        if (wait_clear(&RCC->CR, RCC_CR_HSERDY, CLOCK_WAIT_TRIES)) RCC->CR &= ~RCC_CR_HSEBYP;
         RCC->PLLCFGR = RCC_PLLCFGR(8u, 180u, 2u, 8u, 2u);
         board_tick_stats.clock_from_hsi = 1u;
+        clock_fault = CLOCK_NO_HSE;
     }
     RCC->CR |= RCC_CR_PLLON;
     if (!wait_set(&RCC->CR, RCC_CR_PLLRDY, CLOCK_WAIT_TRIES)) {
@@ -416,6 +429,9 @@ void hal_driver_enable(bool on) {
     pin_write(GPIOA, PIN_ENABLE, on);
 }
 
+/* The chain's feedback (PB5) high with the enable on: the contacts pass the enable. */
+bool hal_driver_powered(void) { return driver_on && pin_read(GPIOB, PIN_CHAIN); }
+
 /* ---- encoder: TIM2 -------------------------------------------------------------------------- */
 
 static void encoder_init(void) {
@@ -510,7 +526,8 @@ static void adc_init(void) {
 
 /* The latest conversion when DRDY says there is one; the health checks set adc_fault. */
 static int32_t adc_read(void) {
-    if (adc_fault == ADC_MISSING) return adc_last;
+    /* no CLKIN (CLOCK_NO_HSE) means no conversions: CLOCK names the cause, not LOAD_ADC */
+    if (adc_fault == ADC_MISSING || clock_fault == CLOCK_NO_HSE) return adc_last;
     if (pin_read(GPIOB, PIN_DRDY)) { /* high: nothing new since the last read */
         if (++drdy_missed >= ADC_DRDY_TICKS && !adc_fault) adc_fault = ADC_DRDY_TIMEOUT;
         return adc_last;

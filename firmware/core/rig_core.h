@@ -28,13 +28,16 @@
 #define RIG_BUFFER_CAPACITY 2048u /* trajectory points (16 KiB) */
 #define RIG_STEP_NM 200u
 #define RIG_ENC_NM 1000u
+/* The most steps a board emits in one period (the NUCLEO's TIM1 burst: 256 pulses at 4 us):
+ * CONFIG refuses a larger max_step_delta and HELLO_REPLY states it (1.3). */
+#define RIG_MAX_STEP_DELTA 256u
 #define RIG_ADC_MIN (-8388608L)
 #define RIG_ADC_MAX 8388607L
 #define RIG_MAX_PAYLOAD 250u
 #define RIG_MAX_ENCODED 258u      /* COBS of the largest body, without the delimiter */
 #define RIG_TX_FIFO_BYTES 4096u   /* power of two */
 #define RIG_NO_CHECK INT32_MIN    /* enc_expected: do not check the following error */
-#define RIG_MAX_REPLY 55u         /* HELLO_REPLY, the longest reply */
+#define RIG_MAX_REPLY 57u         /* HELLO_REPLY, the longest reply (RIG_LEN_HELLO_REPLY) */
 
 /* The session's limits (CONFIG, protocol section 5). */
 typedef struct {
@@ -100,6 +103,19 @@ enum {
 };
 #define RIG_CHUNK_FINAL 0x01u
 
+/* CONFIG's re-check of the buffered points (rule 7) reads a block only when its summary
+ * says a point in it fails: at most RIG_BLOCK_POINTS points instead of the whole buffer. */
+#define RIG_BLOCK_POINTS 64u
+#define RIG_BLOCKS (RIG_BUFFER_CAPACITY / RIG_BLOCK_POINTS)
+
+/* Summary of a block of buffered points: their least and greatest step count and the
+ * largest |step change| from the point before (the block's first point of the buffer
+ * excluded: its change is from the present position, read at CONFIG). */
+typedef struct {
+    int32_t min_steps, max_steps;
+    uint32_t max_jump;
+} rig_block;
+
 #define RIG_EVENT_SLOTS 8u   /* FAULT/STATE frames a command may cause, sent after its reply */
 #define RIG_EVENT_MAX 15u    /* largest event payload (FAULT) */
 
@@ -126,6 +142,7 @@ typedef struct {
     uint32_t boot_id;
     uint8_t state, session, referenced;
     uint8_t driver_enabled, driver_applied; /* applied: what hal_driver_enable last got */
+    uint8_t awaiting_power; /* START given, the driver's power not yet confirmed */
     uint16_t faults;
     rig_calibration stored;
     rig_config cfg;
@@ -148,6 +165,7 @@ typedef struct {
     /* trajectory ring */
     rig_point points[RIG_BUFFER_CAPACITY];
     uint32_t pt_head, pt_count;
+    rig_block blocks[RIG_BLOCKS]; /* of slots 0..pt_count-1: valid in IDLE (rig_core.c) */
     uint32_t next_index, exec_index;
     uint8_t final_received, accepting;
     int32_t expected_enc;

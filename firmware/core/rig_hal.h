@@ -48,6 +48,11 @@ int32_t hal_step_halt(void);
 /* Energise (true) or disable (false) the stepper driver. */
 void hal_driver_enable(bool on);
 
+/* Whether power reaching the driver is confirmed now (the stop chain's feedback follows
+ * the enable). A run's first point waits for it after START; a board without such
+ * feedback returns true. The board reports a chain that never confirms (STOP_CHAIN). */
+bool hal_driver_powered(void);
+
 /* Latch every input of the period. */
 void hal_read(rig_inputs *in);
 

@@ -162,11 +162,12 @@ size_t rig_wire_put_hello_reply(uint8_t *p, const rig_msg_hello_reply *m) {
     rig_put_f32(p + 43, m->load_gain_n);
     rig_put_i32(p + 47, m->adc_min);
     rig_put_i32(p + 51, m->adc_max);
+    rig_put_u16(p + 55, m->max_step_delta_limit);
     return RIG_LEN_HELLO_REPLY;
 }
 
 bool rig_wire_get_hello_reply(const uint8_t *p, size_t len, rig_msg_hello_reply *out) {
-    if (len < RIG_LEN_HELLO_REPLY) return false;
+    if (len < RIG_LEN_HELLO_REPLY_1_2) return false;
     rig_wire_get_ack(p, len, &out->ack);
     out->proto_major = p[12];
     out->proto_minor = p[13];
@@ -183,6 +184,8 @@ bool rig_wire_get_hello_reply(const uint8_t *p, size_t len, rig_msg_hello_reply 
     out->load_gain_n = rig_get_f32(p + 43);
     out->adc_min = rig_get_i32(p + 47);
     out->adc_max = rig_get_i32(p + 51);
+    out->max_step_delta_limit =
+        len >= RIG_LEN_HELLO_REPLY ? rig_get_u16(p + 55) : (uint16_t)0xFFFFu;
     return true;
 }
 

@@ -23,7 +23,8 @@
 #define RIG_LEN_STORE_CALIBRATION 8u /* 1.3 */
 #define RIG_LEN_CALIBRATION 24u      /* 1.3: the reply */
 #define RIG_LEN_ACK 12u
-#define RIG_LEN_HELLO_REPLY 55u
+#define RIG_LEN_HELLO_REPLY 57u
+#define RIG_LEN_HELLO_REPLY_1_2 55u /* without max_step_delta_limit */
 #define RIG_LEN_TELEMETRY 34u
 #define RIG_LEN_FAULT 15u
 #define RIG_LEN_STATE 11u
@@ -102,6 +103,7 @@ typedef struct {
     int32_t load_offset;
     float load_gain_n;
     int32_t adc_min, adc_max;
+    uint16_t max_step_delta_limit; /* 1.3; 65535 from a 1.2 MCU (no stated limit) */
 } rig_msg_hello_reply;
 
 typedef struct {

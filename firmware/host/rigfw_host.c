@@ -212,3 +212,6 @@ EXPORT void rigfw_force_spike(double newtons, uint32_t samples) {
 EXPORT void rigfw_stick_load(bool on) { sim_rig_stick_load(on); }
 EXPORT void rigfw_stick_encoder(bool on) { sim_rig_stick_encoder(on); }
 EXPORT void rigfw_press_stop(bool pressed) { sim_rig_press_stop(pressed); }
+EXPORT void rigfw_board_fault(uint16_t bits, int32_t detail) {
+    sim_rig_board_fault(bits, detail);
+}

@@ -46,6 +46,8 @@ static struct {
      * the bursts armed at the last tick (running) and at this one (starting later) */
     int32_t table_steps, burst_running, burst_armed;
     bool driver_enabled, stop_pressed;
+    uint16_t board_faults; /* injected: what a board's own checks would report */
+    int32_t board_detail;
     uint32_t reads, kicks, fmu_failures;
     double time_s, platen, force;
     /* sensors */
@@ -310,6 +312,10 @@ void sim_rig_force_spike(double newtons, uint32_t samples) {
 void sim_rig_stick_load(bool on) { sim.load_stuck = on; }
 void sim_rig_stick_encoder(bool on) { sim.enc_stuck = on; }
 void sim_rig_press_stop(bool pressed) { sim.stop_pressed = pressed; }
+void sim_rig_board_fault(uint16_t bits, int32_t detail) {
+    sim.board_faults = bits;
+    sim.board_detail = detail;
+}
 
 void sim_rig_get_status(sim_rig_status *out) {
     out->hw_steps = sim.hw_steps;
@@ -369,6 +375,8 @@ int32_t hal_step_halt(void) {
 
 void hal_driver_enable(bool on) { sim.driver_enabled = on; }
 
+bool hal_driver_powered(void) { return true; } /* no stop chain simulated */
+
 void hal_watchdog_kick(void) { sim.kicks++; }
 
 void hal_read(rig_inputs *in) {
@@ -418,4 +426,6 @@ void hal_read(rig_inputs *in) {
     in->home_switch = x <= sim.hw.home_x + HOME_TOLERANCE_M;
     in->stop_input = sim.stop_pressed;
     in->driver_alarm = false;
+    in->board_faults = sim.board_faults;
+    in->board_detail = sim.board_detail;
 }

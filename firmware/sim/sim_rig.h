@@ -67,6 +67,7 @@ void sim_rig_force_spike(double newtons, uint32_t samples); /* add to the next r
 void sim_rig_stick_load(bool on);    /* the load-cell reading freezes (true) / recovers */
 void sim_rig_stick_encoder(bool on); /* the encoder reading freezes (true) / recovers */
 void sim_rig_press_stop(bool pressed); /* the operator's stop button (stop_input) */
+void sim_rig_board_fault(uint16_t bits, int32_t detail); /* a board's own faults, held */
 
 /* What the rig is doing (for tests and the board's diagnostics). */
 typedef struct {

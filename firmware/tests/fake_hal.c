@@ -38,6 +38,8 @@ void hal_driver_enable(bool on) {
     fake.driver_on = on;
 }
 
+bool hal_driver_powered(void) { return fake.driver_on && !fake.chain_open; }
+
 void hal_read(rig_inputs *in) {
     if (!fake.stepped) fake.order_errors++;
     fake.stepped = false;
@@ -47,6 +49,7 @@ void hal_read(rig_inputs *in) {
     in->home_switch = fake.home_switch;
     in->stop_input = fake.stop_input;
     in->driver_alarm = fake.driver_alarm;
+    in->board_faults = fake.board_faults;
 }
 
 void hal_watchdog_kick(void) { fake.kicks++; }

@@ -19,6 +19,8 @@ typedef struct {
     bool load_stuck, home_switch, stop_input, driver_alarm;
     int32_t halt_return; /* what hal_step_halt reports as not emitted */
     bool driver_on;
+    bool chain_open;       /* hal_driver_powered() false */
+    uint16_t board_faults; /* reported by hal_read */
     uint32_t steps_calls, read_calls, kicks, halts, driver_calls;
     uint32_t order_errors; /* hal_read without a hal_step since the last read, or two steps */
     int32_t last_delta;

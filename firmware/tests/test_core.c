@@ -274,6 +274,11 @@ static void test_example_hello_wire(void) {
     CHECK(hr.load_gain_n == 1e-4f);
     CHECK_EQ(hr.adc_min, -8388608);
     CHECK_EQ(hr.adc_max, 8388607);
+    CHECK_EQ(out[0].len, RIG_LEN_HELLO_REPLY);
+    CHECK_EQ(hr.max_step_delta_limit, RIG_MAX_STEP_DELTA);
+    /* a 1.2 MCU's 55 bytes still parse, stating no limit */
+    CHECK(rig_wire_get_hello_reply(out[0].payload, RIG_LEN_HELLO_REPLY_1_2, &hr));
+    CHECK_EQ(hr.max_step_delta_limit, 0xFFFFu);
     CHECK_EQ(out[1].type, RIG_MSG_STATE);
     CHECK_EQ(out[0].flags, 0);
 }
@@ -964,6 +969,66 @@ static void test_estop_and_driver(void) {
     CHECK_EQ(t.faults, RIG_F_DRIVER);
 }
 
+/* The board's faults take the enable low at the tick that latched them (stop category 0);
+ * FORCE_LIMIT halts holding position, the driver energised (docs/rig-protocol.md 8). */
+static void test_board_faults_de_energise_and_limits_hold(void) {
+    static const uint16_t board[5] = {RIG_F_INTERNAL, RIG_F_OVERTRAVEL, RIG_F_LOAD_ADC,
+                                      RIG_F_CLOCK, RIG_F_STOP_CHAIN};
+    int32_t pts[10] = {10, 20, 30, 40, 50, 60, 70, 80, 90, 100};
+    for (unsigned i = 0; i < 5u; i++) {
+        session();
+        CHECK_EQ(chunk(0, 0, pts, 10), RIG_OK);
+        CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+        ticks(2);
+        CHECK(fake.driver_on);
+        fake.board_faults = board[i];
+        rig_msg_telemetry t = ticks(1);
+        CHECK_EQ(t.state, RIG_STATE_FAULT);
+        CHECK_EQ(t.faults, board[i]);
+        CHECK(!fake.driver_on);
+        CHECK(!(t.flags & RIG_TF_DRIVER_ENABLED));
+        fake.board_faults = 0;
+    }
+    session();
+    CHECK_EQ(chunk(0, 0, pts, 10), RIG_OK);
+    CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+    ticks(2);
+    fake.load_base = 1500 + 4000001; /* 400.0001 N */
+    rig_msg_telemetry t = ticks(1);
+    CHECK_EQ(t.faults, RIG_F_FORCE_LIMIT);
+    CHECK(fake.driver_on); /* holding */
+    CHECK(t.flags & RIG_TF_DRIVER_ENABLED);
+}
+
+/* START enables the driver; the run's first point waits until its power is confirmed
+ * (hal_driver_powered): no step into an open stop chain, the board names it. */
+static void test_the_first_point_waits_for_the_drivers_power(void) {
+    session();
+    int32_t pts[3] = {10, 20, 30};
+    CHECK_EQ(chunk(0, 0, pts, 3), RIG_OK);
+    fake.chain_open = true;
+    CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+    rig_msg_telemetry t = ticks(5);
+    CHECK(fake.driver_on);
+    CHECK_EQ(t.state, RIG_STATE_RUNNING);
+    CHECK_EQ(t.exec_index, 0);
+    CHECK_EQ(fake.hw_steps, 0);
+    fake.board_faults = RIG_F_STOP_CHAIN; /* the board's 20 ticks */
+    t = ticks(1);
+    CHECK_EQ(t.state, RIG_STATE_FAULT);
+    CHECK_EQ(fake.hw_steps, 0);
+    CHECK(!fake.driver_on);
+    fake.board_faults = 0;
+    fake.chain_open = false;
+    /* powered at once: the first point in the START tick, as before */
+    session();
+    CHECK_EQ(chunk(0, 0, pts, 3), RIG_OK);
+    CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
+    t = ticks(1);
+    CHECK_EQ(t.exec_index, 1);
+    CHECK_EQ(t.steps, 10);
+}
+
 static void test_config_rules(void) {
     session();
     rig_msg_config c = default_cfg();
@@ -1014,37 +1079,40 @@ static void test_config_rules(void) {
 }
 
 /* Version 1.2: a CONFIG re-checks the buffered points against its limits (issue 35: a
- * CONFIG of max_step_delta 250 after 4000-step jumps were buffered let them run). */
+ * CONFIG of a smaller max_step_delta after larger jumps were buffered let them run); 1.3:
+ * never above RIG_MAX_STEP_DELTA, the most steps a board emits in a period. */
 static void test_config_rechecks_buffered_points(void) {
     session();
     rig_msg_config c = default_cfg();
-    c.max_step_delta = 5000;
+    c.max_step_delta = RIG_MAX_STEP_DELTA + 1u;
+    CHECK_EQ(config(&c), RIG_BAD_VALUE); /* above what the board can emit */
+    c.max_step_delta = RIG_MAX_STEP_DELTA;
     CHECK_EQ(config(&c), RIG_OK);
-    int32_t jumps[3] = {4000, 8000, 12000}; /* the first from the present position, 0 */
+    int32_t jumps[3] = {200, 400, 600}; /* the first from the present position, 0 */
     CHECK_EQ(chunk(0, RIG_CHUNK_FINAL, jumps, 3), RIG_OK);
-    c.max_step_delta = 250;
+    c.max_step_delta = 150;
     CHECK_EQ(config(&c), RIG_BAD_VALUE);
-    CHECK_EQ(M.cfg.max_step_delta, 5000); /* refused: nothing changed */
-    c.max_step_delta = 3999;              /* point 0 is 4000 steps from the table */
+    CHECK_EQ(M.cfg.max_step_delta, RIG_MAX_STEP_DELTA); /* refused: nothing changed */
+    c.max_step_delta = 199;                              /* point 0 is 200 steps from the table */
     CHECK_EQ(config(&c), RIG_BAD_VALUE);
-    c.max_step_delta = 5000;
-    c.steps_max = 11999; /* narrowed travel: the last point is outside */
+    c.max_step_delta = RIG_MAX_STEP_DELTA;
+    c.steps_max = 599; /* narrowed travel: the last point is outside */
     CHECK_EQ(config(&c), RIG_OUT_OF_LIMITS);
     CHECK_EQ(M.cfg.steps_max, 400000);
-    c.steps_max = 12000;
-    c.max_step_delta = 4000; /* every point still passes: accepted */
+    c.steps_max = 600;
+    c.max_step_delta = 200; /* every point still passes: accepted */
     CHECK_EQ(config(&c), RIG_OK);
-    CHECK_EQ(M.cfg.max_step_delta, 4000);
+    CHECK_EQ(M.cfg.max_step_delta, 200);
     CHECK_EQ(M.pt_count, 3);
     /* the run obeys what the MCU accepted */
     CHECK_EQ(simple(RIG_MSG_START), RIG_OK);
     rig_msg_telemetry tel = ticks(1);
-    CHECK_EQ(tel.steps, 4000);
+    CHECK_EQ(tel.steps, 200);
     tel = ticks(3);
     CHECK_EQ(tel.state, RIG_STATE_IDLE);
     CHECK_EQ(tel.faults, 0);
     /* with the buffer empty only the present position counts */
-    c.max_step_delta = 250;
+    c.max_step_delta = 150;
     CHECK_EQ(config(&c), RIG_OK);
 }
 
@@ -1236,6 +1304,8 @@ static const test_case tests[] = {
     T(test_estop_and_driver),
     T(test_config_rules),
     T(test_config_rechecks_buffered_points),
+    T(test_board_faults_de_energise_and_limits_hold),
+    T(test_the_first_point_waits_for_the_drivers_power),
     T(test_telemetry_only_in_a_session_and_tx_fifo),
     T(test_set_position_and_bye),
     T(test_store_and_read_calibration),

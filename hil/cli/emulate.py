@@ -39,13 +39,18 @@ def emulate(args: argparse.Namespace) -> int:
         raise ParameterError("--nvm is the memory of the host build (--firmware) or of the "
                              "rehosted board (--firmware --board nucleo); the Python model "
                              "keeps its calibration in memory, QEMU's board in RAM")
+    if args.load_noise is not None:
+        hardware = replace(hardware, load_noise_n=args.load_noise)
+    if args.step_timing != "at-once" and (not args.firmware or args.qemu or args.board):
+        raise ParameterError("--step-timing chooses the host build's table timing: give "
+                             "--firmware without --board or --qemu (the board's is nucleo)")
     if args.board == "nucleo":
         return _emulate_nucleo(args, setup, hardware)
     if args.qemu:
         return _emulate_qemu(args, setup, hardware)
     # an MCU's timer interrupt is hard real time: SCHED_FIFO when the OS permits it
     emulator = RigEmulator(physics, hardware, faults, realtime=True, firmware=args.firmware,
-                           nvm=args.nvm)
+                           nvm=args.nvm, step_timing=args.step_timing)
     print(emulator.open(), flush=True)
     emulator.on_port = lambda port: print(port, flush=True)  # after a re-plugged disconnect
     guard = SignalGuard()

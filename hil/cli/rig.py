@@ -74,6 +74,16 @@ def add_emulator_options(e: argparse.ArgumentParser) -> None:
                         "never runs ahead of the wall clock; prints its pty, then the image's "
                         "SHA-256 and the time ratio on stderr (needs gcc-arm-none-eabi, "
                         "libnewlib-arm-none-eabi and the unicorn package)")
+    e.add_argument("--step-timing", choices=("at-once", "nucleo"), default="at-once",
+                   dest="step_timing",
+                   help="with --firmware (the host build): when the simulated table takes a "
+                        "period's steps: at once at the tick (as the Python model), or "
+                        "spread over the period as the NUCLEO board's TIM1 emits them "
+                        "(firmware/core/step_burst.h; what --board nucleo does)")
+    e.add_argument("--load-noise", type=number(0.0, 1e3, "must be an rms force in N"),
+                   default=None, dest="load_noise",
+                   help="rms noise of the load cell, N (default: the emulated hardware's, "
+                        "0.2 N); 0 makes two emulators' forces comparable sample by sample")
 
 
 def add_bringup_emulator_options(e: argparse.ArgumentParser) -> None:

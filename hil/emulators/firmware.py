@@ -335,6 +335,8 @@ class FirmwareMcu:
         for fn in ("rigfw_stick_load", "rigfw_stick_encoder", "rigfw_press_stop"):
             getattr(lib, fn).argtypes = [c.c_bool]
             getattr(lib, fn).restype = None
+        lib.rigfw_board_fault.argtypes = [c.c_uint16, c.c_int32]
+        lib.rigfw_board_fault.restype = None
 
     def _open(self, parameters: dict[str, float]) -> None:
         """Start the rig with these FMU parameters; ValueError naming a refused one."""
@@ -379,6 +381,10 @@ class FirmwareMcu:
         """The operator presses the stop button: held for the next tick, then released."""
         self._lib.rigfw_press_stop(True)
         self._release_stop = True
+
+    def board_fault(self, bits: int, detail: int = 0) -> None:
+        """What a board's own checks report from the next reading on (0: none)."""
+        self._lib.rigfw_board_fault(bits, detail)
 
     def force_spike(self, newtons: float, samples: int) -> None:
         """Add ``newtons`` to the next ``samples`` load-cell readings."""

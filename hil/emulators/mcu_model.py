@@ -27,6 +27,12 @@ HALTING_FAULTS = (
     p.Fault.FORCE_LIMIT | p.Fault.TRAVEL_LIMIT | p.Fault.FOLLOWING_ERROR
     | p.Fault.LOAD_SATURATED | p.Fault.LOAD_STUCK | p.Fault.DRIVER | p.Fault.INTERNAL
 )
+#: The board's own faults (firmware/board/board_nucleo.c): its sensing, timing or wiring can
+#: no longer be trusted, so the driver is de-energised at once (stop category 0). The other
+#: halts hold position: a stepper without current could be back-driven by the clamp.
+BOARD_FAULTS = (p.Fault.INTERNAL | p.Fault.OVERTRAVEL | p.Fault.LOAD_ADC | p.Fault.CLOCK
+                | p.Fault.STOP_CHAIN)
+HALTING_FAULTS |= BOARD_FAULTS
 MOTION_STATES = (p.State.RUNNING, p.State.STOPPING)
 
 
@@ -185,6 +191,8 @@ class McuModel:
         self.last_reply: p.Message | None = None
         self.last_host_rx = 0.0
         self.driver_enabled = False
+        self.board_faults = (0, 0)  # (bits, detail) a board's own checks report: injected
+        self._board_present = 0  # those of the last reading
         self._clear_trajectory()
         self._last_move = 0  # steps of the last period's move: a controlled stop's speed
         self._speed_q16 = 0  # a controlled stop's speed and position, in 1/65536 step
@@ -286,7 +294,7 @@ class McuModel:
             p.PROTO_MAJOR, p.PROTO_MINOR, hw.fw_version, self.boot_id, msg.host_nonce,
             hw.telemetry_hz, round(1e6 * hw.period), p.MAX_CHUNK_POINTS, hw.buffer_capacity,
             hw.step_nm, hw.enc_nm, self.cfg.load_offset, self.cfg.load_gain_n,
-            hw.adc_min, hw.adc_max,
+            hw.adc_min, hw.adc_max, p.MAX_STEP_DELTA,
         )
 
     def _config(self, msg: p.Config) -> p.Result:
@@ -295,7 +303,8 @@ class McuModel:
         valid = (
             msg.force_limit_n > 0 and msg.steps_min < msg.steps_max and msg.enc_min < msg.enc_max
             and msg.following_error_counts > 0 and msg.load_gain_n >= 0 and msg.decel_steps_s2 > 0
-            and msg.max_step_delta > 0 and msg.heartbeat_timeout_ms > 0 and msg.stuck_samples > 0
+            and 0 < msg.max_step_delta <= p.MAX_STEP_DELTA
+            and msg.heartbeat_timeout_ms > 0 and msg.stuck_samples > 0
             and all(math.isfinite(v) for v in (msg.force_limit_n, msg.load_gain_n,
                                                 msg.decel_steps_s2))
         )
@@ -376,7 +385,7 @@ class McuModel:
         if self.state not in (p.State.FAULT, p.State.ESTOP):
             return p.Result.OK
         present = self._check_sensors(apply=False)
-        if present:
+        if present or self._board_present:
             return p.Result.FAULT_ACTIVE
         self.faults = p.Fault.NONE
         self._clear_trajectory()
@@ -460,6 +469,10 @@ class McuModel:
         self._same_load = self._same_load + 1 if self.load_raw == prev_raw else 1
         if self.state in (p.State.IDLE, *MOTION_STATES):
             self._check_sensors(apply=True)
+        bits, detail = self.board_faults
+        self._board_present = bits & BOARD_FAULTS  # of the last reading, as the firmware
+        if self._board_present and self.state != p.State.BOOT:  # in bit order
+            self._faults([(f, detail, 0) for f in p.Fault if f & self._board_present])
         t_us = round((now - self._boot_time) * 1e6) & 0xFFFFFFFF
         if self.session:  # no host, no telemetry (docs/rig-protocol.md, section 5)
             self._out.append(self._telemetry(t_us))
@@ -553,6 +566,8 @@ class McuModel:
             return
         if fault & p.Fault.FOLLOWING_ERROR:
             self.referenced = False  # the encoder may have missed counts: re-home
+        if fault & BOARD_FAULTS:
+            self.driver_enabled = False
         if fault & HALTING_FAULTS:
             self._speed_q16 = 0
             self._discard_buffer()
@@ -669,6 +684,10 @@ class ModelMcu:
     def press_stop(self) -> None:
         """The operator's stop button: ESTOP."""
         self.model.estop()
+
+    def board_fault(self, bits: int, detail: int = 0) -> None:
+        """What a board's own checks report from the next reading on (0: none)."""
+        self.model.board_faults = (bits, detail)
 
     def force_spike(self, newtons: float, samples: int) -> None:
         """Add ``newtons`` to the next ``samples`` load-cell readings."""

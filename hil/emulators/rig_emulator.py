@@ -109,13 +109,15 @@ class RigEmulator:
         realtime: bool = False,
         firmware: bool = False,
         nvm: Path | None = None,
+        step_timing: str = "at-once",
     ) -> None:
         """``realtime`` asks for SCHED_FIFO scheduling of the serving thread, as a
         firmware's timer interrupt would have (best effort: ignored without the
         permission). ``firmware``: the MCU is the C firmware's host build on the
         simulated rig (``physics`` a :class:`~hil.emulators.rig_physics.ClampPhysics`), not the
         Python model; ``nvm``: with ``firmware``, the file that is the MCU's non-volatile
-        memory (the stored calibration; default: memory only, which survives a reset).
+        memory (the stored calibration; default: memory only, which survives a reset);
+        ``step_timing``: its table's timing (:data:`hil.emulators.firmware.STEP_TIMINGS`).
         """
         self.hw = hardware or RigHardware()
         self.faults = faults or FaultPlan()
@@ -123,8 +125,8 @@ class RigEmulator:
         if firmware:
             from hil.emulators.firmware import FirmwareMcu
 
-            self.mcu: ModelMcu | FirmwareMcu = FirmwareMcu(physics, self.hw,
-                                                           self.faults.seed + 1, nvm_path=nvm)
+            self.mcu: ModelMcu | FirmwareMcu = FirmwareMcu(
+                physics, self.hw, self.faults.seed + 1, nvm_path=nvm, step_timing=step_timing)
         else:
             self.mcu = ModelMcu(physics, self.hw, self.faults.seed + 1)
         self.log = EmulatorLog()

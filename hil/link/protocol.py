@@ -19,7 +19,8 @@ from typing import ClassVar, TypeVar
 PROTO_MAJOR = 1
 #: 1.1: telemetry flags HOME_SWITCH and REFERENCED, the extension rule; 1.2: CONFIG re-checks
 #: the buffered trajectory points against its limits (docs/rig-protocol.md, section 5); 1.3:
-#: the load-cell calibration stored on the board (STORE_CALIBRATION, READ_CALIBRATION).
+#: the load-cell calibration stored on the board (STORE_CALIBRATION, READ_CALIBRATION)
+#: and HELLO_REPLY's max_step_delta_limit, which CONFIG's max_step_delta may not exceed.
 PROTO_MINOR = 3
 
 HEADER = struct.Struct("<BBH")
@@ -28,6 +29,9 @@ MAX_PAYLOAD = 250
 MAX_BODY = HEADER.size + MAX_PAYLOAD + CRC.size  # 256
 MAX_ENCODED = MAX_BODY + 1 + MAX_BODY // 254  # 258: COBS worst case, without the delimiter
 MAX_CHUNK_POINTS = 30
+#: The most steps an MCU emits in one period (the boards' TIM1 burst, 256 pulses): CONFIG
+#: refuses a larger max_step_delta, HELLO_REPLY states it (1.3).
+MAX_STEP_DELTA = 256
 NO_CHECK = -(2**31)  # expected encoder count meaning "do not check the following error"
 
 FLAG_ACK_REQ = 0x01  # host -> MCU: answer with an ACK
@@ -494,7 +498,9 @@ class HelloReply(Message):
     """Answer to HELLO: the ACK fields, then the MCU's identity, capacities and scalings."""
 
     TYPE: ClassVar[MsgType] = MsgType.HELLO_REPLY
-    FORMAT: ClassVar[struct.Struct] = struct.Struct("<HBBIHH" + "BBHIIHHBHIIifii")
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<HBBIHH" + "BBHIIHHBHIIifiiH")
+    #: The 1.2 layout, without max_step_delta_limit (a 1.2 MCU states no limit: 65535).
+    FORMAT_1_2: ClassVar[struct.Struct] = struct.Struct("<HBBIHH" + "BBHIIHHBHIIifii")
     acked_seq: int = 0
     result: int = Result.OK
     state: int = State.BOOT
@@ -516,6 +522,14 @@ class HelloReply(Message):
     load_gain_n: float = 1e-4
     adc_min: int = -8_388_608
     adc_max: int = 8_388_607
+    max_step_delta_limit: int = MAX_STEP_DELTA
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> HelloReply:
+        """Payload -> reply; a 1.2 MCU's 55 bytes give ``max_step_delta_limit`` 65535."""
+        if cls.FORMAT_1_2.size <= len(payload) < cls.FORMAT.size:
+            return cls(*cls.FORMAT_1_2.unpack_from(payload), max_step_delta_limit=0xFFFF)
+        return super(HelloReply, cls).unpack(payload)
 
 
 @dataclass(frozen=True, slots=True)

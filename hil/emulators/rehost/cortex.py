@@ -92,7 +92,9 @@ class SystemControl(Peripheral):
 
 class Dwt(Peripheral):
     """0xE0001000: DWT_CTRL's CYCCNTENA and the cycle counter, counting the core's cycles
-    (one per instruction here) while DEMCR.TRCENA and CYCCNTENA are set."""
+    (one per instruction here) while DEMCR.TRCENA and CYCCNTENA are set. The count moves
+    when a chunk of instructions ends: a read inside a chunk gives its start's count, so the
+    difference of two reads is exact only with ``Machine.exact_counts``."""
 
     NAME = "DWT"
     BASE = 0xE0001000

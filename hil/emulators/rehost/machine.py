@@ -137,6 +137,9 @@ class Machine:
         self.active: list[tuple[int, object]] = []  # (exception, the context it interrupted)
         self.vtor = 0
         self.instructions = 0
+        # one instruction per emulator call: DWT's CYCCNT exact to the instruction (else it
+        # moves by whole chunks, up to MAX_CHUNK_S of instructions); about 50 times slower
+        self.exact_counts = False
         self.exceptions_taken: dict[int, int] = {}
         self.on_reset: list[Callable[[str], None]] = []
         self.reset_reasons: list[tuple[int, str]] = []
@@ -304,8 +307,8 @@ class Machine:
     def run_until(self, end: int) -> None:
         """Run the CPU and the peripherals to time ``end`` (units); raises what stopped
         the machine (:class:`UnsupportedAccessError`, an emulator error)."""
-        chunk = seconds(MAX_CHUNK_S)
         while self.now < end:
+            chunk = self.insn_units if self.exact_counts else seconds(MAX_CHUNK_S)
             self._advance()
             if self._reset_request is not None:
                 reason, self._reset_request = self._reset_request, None

@@ -81,7 +81,7 @@ def burst_timing(bursts: list[Burst]) -> PulseTiming:
                        min(setups) if setups else None, min(holds) if holds else None)
 
 
-def _command(board: NucleoBoard, decoder: p.FrameDecoder, msg: p.Message, seq: int,
+def command_answered(board: NucleoBoard, decoder: p.FrameDecoder, msg: p.Message, seq: int,
              tries: int = 20, prefix: bytes = b"") -> tuple[p.Message, list[p.Message]]:
     """Send ``msg`` (again every 10 ms, as bytes sent before the USART is on are lost) until
     its reply comes; the reply and every message seen."""
@@ -112,7 +112,7 @@ def full_rate_reversal(elf: Path, periods: int = 12,
     def command(msg: p.Message, prefix: bytes = b"") -> None:
         nonlocal seq
         seq += 1
-        reply, seen = _command(board, decoder, msg, seq, prefix=prefix)
+        reply, seen = command_answered(board, decoder, msg, seq, prefix=prefix)
         messages.extend(seen)
         if reply.result != p.Result.OK:
             raise RuntimeError(f"{type(msg).__name__} refused: {reply}")

@@ -183,6 +183,9 @@ class Rcc(Peripheral):
             if changed & ~self.CR_WRITABLE or not value & 1:
                 raise self.fail(f"RCC_CR {value:#x}: HSEON, HSEBYP, PLLON are modelled "
                                 f"(HSI stays on; no CSS, trimming, PLLI2S, PLLSAI)")
+            if changed >> 18 & 1 and (self.regs[0] >> 16 & 1 or value >> 16 & 1):
+                raise self.fail(f"RCC_CR {value:#x}: HSEBYP changed with HSEON set (RM0390 "
+                                f"6.3.1: HSEBYP may be written only while HSE is off)")
             self.regs[0] = (self.regs[0] & self.CR_READ_ONLY) | (value & ~self.CR_READ_ONLY)
             return
         if name == "PLLCFGR":
