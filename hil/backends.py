@@ -529,25 +529,28 @@ class RigPlant(Plant):
 
     def link_report(self) -> dict[str, object]:
         """Link statistics of the session (JSON-ready; empty before activation)."""
-        link = self._link
-        if link is None:
-            return {}
-        st, dec = link.stats, link.decoder.stats
-        return {
-            "bad_frames": dec.rejected, "crc_errors": dec.crc_errors,
-            "bad_messages": st.bad_messages, "lost_samples": st.lost_samples,
-            "duplicate_samples": st.duplicates, "retransmissions": st.retransmissions,
-            "queue_dropped": st.queue_dropped,
-            "arrival_gap_p99_s": st.gap_percentile(0.99),
-            "arrival_gap_p999_s": st.gap_percentile(0.999),
-            "arrival_gap_max_s": st.max_arrival_gap,
-            "mcu_clock_excess_max_s": st.max_clock_excess,
-        }
+        return {} if self._link is None else link_report(self._link)
 
     def _deactivate(self) -> None:
         if self._link is not None:
             self._link.close()  # STOP, standstill, BYE, closed port; never raises
             self._link = None
+
+
+def link_report(link: SerialLink) -> dict[str, object]:
+    """Statistics of an open session with the rig (JSON-ready): errors, losses,
+    retransmissions, telemetry arrival gaps."""
+    st, dec = link.stats, link.decoder.stats
+    return {
+        "bad_frames": dec.rejected, "crc_errors": dec.crc_errors,
+        "bad_messages": st.bad_messages, "lost_samples": st.lost_samples,
+        "duplicate_samples": st.duplicates, "retransmissions": st.retransmissions,
+        "late_attempts": st.late_attempts, "queue_dropped": st.queue_dropped,
+        "arrival_gap_p99_s": st.gap_percentile(0.99),
+        "arrival_gap_p999_s": st.gap_percentile(0.999),
+        "arrival_gap_max_s": st.max_arrival_gap,
+        "mcu_clock_excess_max_s": st.max_clock_excess,
+    }
 
 
 def fault_names(faults: int) -> str:
