@@ -34,8 +34,9 @@ def browser_missing() -> str | None:
     return None
 
 
-def chromium(width: int = 1400, height: int = 1250) -> Any:
-    """Headless Chromium (Debian's) with a throw-away profile; quit() it."""
+def chromium(width: int = 1400, height: int = 1250, *extra: str) -> Any:
+    """Headless Chromium (Debian's) with a throw-away profile and ``extra`` flags; quit it
+    with :func:`quit_browser`."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -45,7 +46,7 @@ def chromium(width: int = 1400, height: int = 1250) -> Any:
     for flag in ("--headless", "--no-sandbox", "--disable-gpu",
                  "--disable-background-networking", "--disable-component-update",
                  "--disable-sync", "--no-first-run", f"--user-data-dir={profile}",
-                 f"--window-size={width},{height}"):
+                 f"--window-size={width},{height}", *extra):
         options.add_argument(flag)
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
     driver.profile_dir = profile

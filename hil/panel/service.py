@@ -101,7 +101,10 @@ class RigService:
             return
         from hil.serial_link import RigError, SerialLink
 
-        link = SerialLink(self.port, clear_faults_on_close=False)
+        # a fault that latches in this idle session (a heartbeat lost to a loaded host) is
+        # cleared when it closes for a run, as hil run's own session does; never an ESTOP,
+        # never a fault found latched at open (the operator clears those)
+        link = SerialLink(self.port)
         try:
             link.open()
         except (RigError, OSError) as exc:

@@ -5,7 +5,7 @@ const TOKEN = document.querySelector('meta[name="panel-token"]').content;
 const MAX_POINTS = 20000;  // per trace: the page's memory stays bounded over any run
 const DRAW_PERIOD = 50;    // ms between two redraws
 const panel = {client: null, seq: 0, mine: false, lastMcuT: null, drawn: 0,
-               latency: [], pending: null, curveRun: null};
+               latency: [], pending: null, clicks: []};
 window.panel = panel;  // read by the tests and the benchmark
 const $ = (id) => document.getElementById(id);
 const mm = (m) => (m * 1e3).toFixed(3);
@@ -110,6 +110,8 @@ function lease(take) {
 function act(action, args = {}, moves = false) {
   if (moves && !window.confirm(`${action}: this moves the rig. Go ahead?`)) return Promise.resolve();
   const t_click = Date.now() / 1000;
+  panel.clicks.push({action, t: t_click});
+  if (panel.clicks.length > 100) panel.clicks.shift();
   panel.seq += 1;
   const body = {action, args, client: panel.client, seq: panel.seq, t_click};
   if (moves) body.confirm = true;
