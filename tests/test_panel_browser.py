@@ -97,11 +97,11 @@ def _start_default_job(driver: Any, panel: PanelProcess) -> None:
     driver.switch_to.alert.accept()  # the job moves the rig: the page asks first
 
 
-def _drive(rig: Any, tmp_path: Path, grow_timeout: float) -> None:
+def _drive(rig: Any, tmp_path: Path, grow_timeout: float, *options: str) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.common.keys import Keys
 
-    panel = PanelProcess(tmp_path / "runs", "--real", "--port", rig.port)
+    panel = PanelProcess(tmp_path / "runs", "--real", "--port", rig.port, *options)
     driver = chromium()
     try:
         _start_default_job(driver, panel)
@@ -151,6 +151,9 @@ def test_default_job_from_the_page_on_the_rehosted_nucleo_image_then_stop(
         pytest.skip("the NUCLEO image needs gcc-arm-none-eabi")
     rig = RehostedRig()
     try:
-        _drive(rig, tmp_path, grow_timeout=240)
+        # the rehost runs slower than the wall clock: hil run's timings for it
+        # (docs/firmware.md, "On the rehosted image")
+        _drive(rig, tmp_path, 240, "--ack-ms", "500", "--heartbeat-ms", "1000",
+               "--watchdog-ms", "1000")
     finally:
         rig.close()

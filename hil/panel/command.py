@@ -37,6 +37,12 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--preset", default="chang2021", help="clamp preset of the rig")
     p.add_argument("--force-limit", type=number(1.0, 5000.0, "must be a force in N"),
                    default=400.0, dest="force_limit", help="host-side stop on |input force|, N")
+    for name, what in (("ack-ms", "the host's wait for an ACK"),
+                       ("watchdog-ms", "the host's watchdog on telemetry silence"),
+                       ("heartbeat-ms", "the MCU's heartbeat watchdog")):
+        p.add_argument(f"--{name}", type=number(1.0, 10_000.0, "must be in ms, 1 to 10000"),
+                       default=None, help=f"with --real: {what}, ms, as in hil run (default: "
+                                          "measured from the link when the session opens)")
     p.set_defaults(handler=panel)
 
 
@@ -63,6 +69,9 @@ def panel(args: argparse.Namespace) -> int:
                "--force-limit", repr(args.force_limit)]
     if args.port is not None:
         service += ["--port", args.port]
+    for name in ("ack_ms", "watchdog_ms", "heartbeat_ms"):
+        if getattr(args, name) is not None:
+            service += [f"--{name.replace('_', '-')}", repr(getattr(args, name))]
     state = Panel(new_token(), args.bind, args.http_port, service, args.runs)
     with contextlib.suppress(KeyboardInterrupt):
         asyncio.run(serve(state, lambda url: print(f"hil panel: {url}", flush=True)))

@@ -77,8 +77,13 @@ class RigService:
     """Owns the plant, runs one motion at a time, streams what it measures."""
 
     def __init__(self, backend: str, port: str | None, runs: Path, emit: Outbox,
-                 preset: str = "chang2021", force_limit: float = 400.0) -> None:
+                 preset: str = "chang2021", force_limit: float = 400.0,
+                 timing: dict[str, float | None] | None = None) -> None:
         self.backend, self.port, self.runs, self.emit = backend, port, runs, emit
+        # the link's timing as hil run's --ack-ms, --watchdog-ms, --heartbeat-ms (None:
+        # measured when the session opens), s and ms as RigPlant takes them
+        self.timing = {"ack_timeout": None, "telemetry_timeout": None, "heartbeat_ms": None,
+                       **(timing or {})}
         self.setup = RigSetup(preset=preset, force_limit=force_limit)
         self.stop_requested = threading.Event()
         self.closing = threading.Event()
@@ -104,7 +109,11 @@ class RigService:
         # a fault that latches in this idle session (a heartbeat lost to a loaded host) is
         # cleared when it closes for a run, as hil run's own session does; never an ESTOP,
         # never a fault found latched at open (the operator clears those)
-        link = SerialLink(self.port)
+        t = self.timing
+        link = SerialLink(self.port, ack_timeout=t["ack_timeout"],
+                          telemetry_timeout=t["telemetry_timeout"],
+                          heartbeat_timeout_ms=None if t["heartbeat_ms"] is None
+                          else round(t["heartbeat_ms"]))
         try:
             link.open()
         except (RigError, OSError) as exc:
@@ -238,7 +247,7 @@ class RigService:
             setup = replace(setup, x_contact=setup.planned_mold)
         if self.backend == "rig":
             self.disconnect()  # the run's session (RigPlant) owns the port meanwhile
-            plant: Plant = RigPlant(self.port, notify=self._notify)
+            plant: Plant = RigPlant(self.port, notify=self._notify, **self.timing)
         else:
             plant = FmuPlant(notify=self._notify)
         try:
@@ -367,10 +376,15 @@ def main(argv: list[str] | None = None) -> int:
     a.add_argument("--runs", type=Path, default=Path("runs"))
     a.add_argument("--preset", default="chang2021")
     a.add_argument("--force-limit", type=float, default=400.0)
+    for name in ("ack-ms", "watchdog-ms", "heartbeat-ms"):
+        a.add_argument(f"--{name}", type=float, default=None)
     args = a.parse_args(argv)
+    ms = {"ack_timeout": args.ack_ms, "telemetry_timeout": args.watchdog_ms}
+    timing = {**{k: None if v is None else v * 1e-3 for k, v in ms.items()},
+              "heartbeat_ms": args.heartbeat_ms}
     emit = Outbox()
     service = RigService(args.backend, args.port, args.runs, emit, args.preset,
-                         args.force_limit)
+                         args.force_limit, timing)
     service.connect()
     threading.Thread(target=service.publish, daemon=True).start()
     emit("ready", backend=args.backend)
