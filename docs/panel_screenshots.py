@@ -30,7 +30,8 @@ def main() -> None:
     try:
         driver.get(panel.url)
         wait_until(lambda: page("panel.mine") and page(
-            "document.getElementById('state').textContent") == "IDLE", 120, "the page")
+            "document.getElementById('state').textContent") == "IDLE", 120,
+            lambda: f"the page: {page('document.body.innerText.slice(0, 300)')}")
         for speed, cycles, shot in ((25, 3, "run.png"), (15, 2, None)):
             driver.execute_script(
                 f"document.getElementById('job').value = 'speed';"

@@ -110,7 +110,8 @@ def _drive(rig: Any, tmp_path: Path, grow_timeout: float, *options: str) -> None
         first = wait_until(lambda: _page(driver, chart), grow_timeout,
                            lambda: f"the force chart (page: {_page(driver, message)!r})")
         grown = wait_until(lambda: (n := _page(driver, chart)) > first + 200 and n,
-                           grow_timeout, "the force chart to grow")
+                           grow_timeout, lambda: f"the force chart to grow (page: "
+                           f"{_page(driver, message)!r})")
         assert grown > first
         # the page's newest sample against the rig's clock now (the MCU time of its newest)
         page_t, rig_t = _page(driver, "panel.lastMcuT"), rig.now()

@@ -48,6 +48,8 @@ from toggle.params import load_preset
 BATCH_PERIOD = 0.04
 #: Seconds between two status events.
 STATUS_PERIOD = 0.1
+#: The MCU's heartbeat timeout the idle session asks for, ms (the protocol's longest).
+IDLE_HEARTBEAT_MS = 1000
 #: Actions that move the rig (one at a time, refused while another runs).
 MOTIONS = ("home", "jog", "run", "check", "tare", "span", "store", "clear")
 
@@ -106,17 +108,23 @@ class RigService:
             return
         from hil.serial_link import RigError, SerialLink
 
-        # a fault that latches in this idle session (a heartbeat lost to a loaded host) is
-        # cleared when it closes for a run, as hil run's own session does; never an ESTOP,
-        # never a fault found latched at open (the operator clears those)
+        # realtime: the reader thread (and its heartbeats) at SCHED_FIFO when the OS permits,
+        # as RigPlant's. The idle session asks the MCU for the protocol's longest heartbeat
+        # timeout unless one is given: a loaded host idling for hours must not latch
+        # HEARTBEAT_LOST (a run's session, RigPlant's, keeps the measured or given one). A
+        # fault that latches in this session anyway is cleared when it closes for a run, as
+        # hil run's session does; never an ESTOP, never a fault found latched at open.
         t = self.timing
-        link = SerialLink(self.port, ack_timeout=t["ack_timeout"],
+        link = SerialLink(self.port, realtime=True, ack_timeout=t["ack_timeout"],
                           telemetry_timeout=t["telemetry_timeout"],
-                          heartbeat_timeout_ms=None if t["heartbeat_ms"] is None
+                          heartbeat_timeout_ms=IDLE_HEARTBEAT_MS if t["heartbeat_ms"] is None
                           else round(t["heartbeat_ms"]))
         try:
             link.open()
+            if link.status.state == p.State.IDLE:
+                link.configure(link.config_for())
         except (RigError, OSError) as exc:
+            link.close()
             self.message = f"rig at {self.port}: {exc}"
             return
         self.link = link
