@@ -169,12 +169,14 @@ async function openRuns() {
   const runs = await Promise.all(names.map((n) => api(`/api/runs/${encodeURIComponent(n)}`)));
   Plotly.newPlot("chart-past", runs.map((r) => ({x: r.x.map((v) => v * 1e3), y: r.force, mode: "lines", name: r.name, line: {width: 1}})),
     layout(runs.length > 1 ? "Two runs overlaid: input force against crosshead position" : "Input force against crosshead position", "x [mm]", "F [N]"), config);
-  const head = "<tr><th>statistic</th>" + runs.map((r) => `<th>${esc(r.name)}<br>mean (3 sigma)</th>`).join("") + "<th>prototype (Tables 3-8)</th></tr>";
-  const rows = runs[0].statistics.map((s, i) => {
-    const paper = runs.map((r) => r.statistics[i].paper).find((p) => p);
-    return `<tr><td>${STAT_NAMES[s.key] || s.key}</td>` + runs.map((r) => { const x = r.statistics[i]; return `<td>${fmt(s.key, x.mean)} (${fmt(s.key, x.three_sigma)})</td>`; }).join("")
-      + `<td>${paper ? `Table ${paper.table}: ${fmt(s.key, paper.mean)} (${fmt(s.key, paper.three_sigma)})` : "- (no prototype cell: not a constant-speed run)"}</td></tr>`;
-  });
+  const head = "<tr><th>statistic</th>" + runs.map((r) => `<th>${esc(r.name)}<br>mean (3 sigma)</th>`
+    + `<th>prototype, same condition<br>mean (3 sigma)</th>`).join("") + "</tr>";
+  const cell = (r, key, p) => (p ? `Table ${p.table}: ${fmt(key, p.mean)} (${fmt(key, p.three_sigma)})`
+    : (r.statistics.some((x) => x.paper) ? "-" : "no cell (not a Tables 3-8 condition)"));
+  const rows = runs[0].statistics.map((s, i) => `<tr><td>${STAT_NAMES[s.key] || s.key}</td>` + runs.map((r) => {
+    const x = r.statistics[i];
+    return `<td>${fmt(s.key, x.mean)} (${fmt(s.key, x.three_sigma)})</td><td>${cell(r, s.key, x.paper)}</td>`;
+  }).join("") + "</tr>");
   $("stats").innerHTML = head + rows.join("");
 }
 $("btn-refresh").onclick = listRuns;
