@@ -18,12 +18,16 @@ from hil.run_settings import check_port
 from toggle.args import number
 from toggle.params import ParameterError
 
+DESCRIPTION = ("Start the rig service (the simulated rig, or --real --port P: the rig or its "
+               "emulator) and a web server on loopback; print the page's URL once, with its "
+               "access token. Ctrl-C stops the rig and closes the run's record first.")
+
 
 def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "panel", help="the front panel: live charts, operator actions, past runs, in the "
-                      "browser", description=__doc__.split("\n\n")[1])
-    p.add_argument("--real", action="store_const", const="rig", dest="backend", default="fmu",
+                      "browser", description=DESCRIPTION)
+    p.add_argument("--real", action="store_const", const="rig", dest="backend", default=None,
                    help="the real rig (or an emulator) on --port instead of the FMU")
     p.add_argument("--port", default=None, help="serial URL of the rig (needs --real)")
     p.add_argument("--bind", default="127.0.0.1",
@@ -50,6 +54,7 @@ def panel(args: argparse.Namespace) -> int:
     from hil.panel.access import new_token
     from hil.panel.server import Panel, serve
 
+    args.backend = args.backend or "fmu"
     if args.backend == "rig":
         if args.port is None:
             raise ParameterError("--real needs --port (the rig's serial URL)")
