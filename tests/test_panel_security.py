@@ -294,7 +294,8 @@ def test_a_closed_tab_leaves_the_run_guarded_and_another_page_stops_it(rig_panel
     other = Page(panel)
     try:
         other.drain(1.0)
-        assert len(rig.sent()) > before and rig.sent()[-1][1] == 2  # RUNNING: still going
+        done = [e["message"] for e in other.events if e["type"] in ("done", "notice")]
+        assert len(rig.sent()) > before and rig.sent()[-1][1] == 2, done  # RUNNING: going on
         assert other.lease() == 200  # the command was freed with the tab
         assert other.act("stop")[0] == 200
         wait_until(lambda: other.drain(0.2) or any(
@@ -314,7 +315,7 @@ def test_a_killed_web_server_stops_the_rig_and_loses_no_sample(rig_panel: Any) -
     os.kill(panel.proc.pid, signal.SIGKILL)  # no cleanup at all in the web server
     wait_until(lambda: (run_dir / "summary.json").is_file(), 60,
                "the rig service to close the run")
-    wait_until(lambda: all(state == 1 for _, state in rig.sent()[-20:]), 30,
+    wait_until(lambda: rig.sent()[-1][1] == 1, 30,  # IDLE: at a standstill
                lambda: f"the rig at a standstill (IDLE), not {rig.sent()[-20:]}")
     rows = recorded(run_dir)
     assert [s for s, _ in rows] == sent_until_standstill(rig.sent(), rows[0][0])

@@ -109,11 +109,11 @@ class RigService:
         from hil.serial_link import RigError, SerialLink
 
         # realtime: the reader thread (and its heartbeats) at SCHED_FIFO when the OS permits,
-        # as RigPlant's. The idle session asks the MCU for the protocol's longest heartbeat
-        # timeout unless one is given: a loaded host idling for hours must not latch
-        # HEARTBEAT_LOST (a run's session, RigPlant's, keeps the measured or given one). A
-        # fault that latches in this session anyway is cleared when it closes for a run, as
-        # hil run's session does; never an ESTOP, never a fault found latched at open.
+        # as RigPlant's. One session for the panel's life (runs included, RigPlant's
+        # session=): it asks the MCU for the protocol's longest heartbeat timeout unless one
+        # is given, as a loaded host idling for hours must not latch HEARTBEAT_LOST. At its
+        # end it clears the faults latched during it, as hil run's session does (never an
+        # ESTOP, never a fault found latched at open).
         t = self.timing
         link = SerialLink(self.port, realtime=True, ack_timeout=t["ack_timeout"],
                           telemetry_timeout=t["telemetry_timeout"],
@@ -253,16 +253,18 @@ class RigService:
             from dataclasses import replace
 
             setup = replace(setup, x_contact=setup.planned_mold)
-        if self.backend == "rig":
-            self.disconnect()  # the run's session (RigPlant) owns the port meanwhile
-            plant: Plant = RigPlant(self.port, notify=self._notify, **self.timing)
+        if self.backend == "rig":  # the panel's session: no second handshake
+            self.connect()
+            if self.link is None:
+                raise RunStoppedError(self.message)
+            plant: Plant = RigPlant(self.port, notify=self._notify, session=self.link,
+                                    **self.timing)
         else:
             plant = FmuPlant(notify=self._notify)
         try:
             return self._record(plant, setup, trajectory, source, speed, int(args["cycles"]))
         finally:
             plant.deactivate()
-            self.connect()
 
     def _record(self, plant: Plant, setup: RigSetup, trajectory: Trajectory, source: str,
                 speed: float | None, cycles: int) -> str:
@@ -358,6 +360,8 @@ class RigService:
         next_status = 0.0
         while not self.closing.is_set():
             self._flush_samples()
+            if self.busy is None and self.link is not None:
+                self.link.drain()  # idle telemetry: its status is kept, its queue emptied
             now = time.monotonic()
             if now >= next_status:
                 next_status = now + STATUS_PERIOD
