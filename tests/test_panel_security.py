@@ -251,6 +251,9 @@ def test_security_battery(rig_panel: Any) -> None:
     assert _ws_refused(panel, f"{panel.base}/ws", {"Origin": f"http://{base}"}) == 401
     assert _ws_refused(panel, ws, {"Origin": f"http://{base}"}) == 101
 
+    status, body = _request(panel, "POST", "/api/plan", b"time [s],x\n0,1\n",
+                            {"Content-Type": "text/csv"})
+    assert status == 400 and "not a plan CSV" in body["error"]
     page, watcher = Page(panel), Page(panel)
     try:
         assert page.lease() == 200 and watcher.lease() == 409

@@ -228,6 +228,7 @@ async def action(request: web.Request) -> web.Response:
 
 async def upload_plan(request: web.Request) -> web.Response:
     """A plan CSV (toggle plan --out), checked as ``hil run --profile`` reads it."""
+    from hil.experiment import DEFAULT_PERIOD
     from hil.samples import Trajectory, TrajectoryError
 
     panel: Panel = request.app["panel"]
@@ -238,7 +239,7 @@ async def upload_plan(request: web.Request) -> web.Response:
     path = panel.plans / f"{ident}.csv"
     path.write_bytes(data)
     try:
-        trajectory = Trajectory.from_csv(path)
+        trajectory = Trajectory.from_csv(path, period=DEFAULT_PERIOD)  # as the service
     except (TrajectoryError, ValueError, OSError) as exc:
         path.unlink(missing_ok=True)
         raise RefusedError(400, f"not a plan CSV: {exc}") from None
