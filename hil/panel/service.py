@@ -104,6 +104,9 @@ class RigService:
 
     def connect(self) -> None:
         """Open the idle session (rig back-end); a failure is reported in the status."""
+        if self.link is not None and self.link.failure is not None:
+            self.message = f"the session ended ({self.link.failure}): reconnecting"
+            self.disconnect()  # a watchdog or a lost link ends a session: open a new one
         if self.backend != "rig" or self.link is not None:
             return
         from hil.serial_link import RigError, SerialLink
