@@ -97,9 +97,9 @@ def browser_phase(panel: PanelProcess, stops: int, minutes: float) -> dict[str, 
                                 page(driver, "performance.memory.usedJSHeapSize")))
             time.sleep(2.0)
         driver.find_element("id", "btn-stop").click()
-        wait_until(lambda: "stopped" in message(driver), 60, "the stop")
-        out["runs"].append(page(driver, "document.getElementById('run-dir').textContent"))
-        wait_until(lambda: idle(driver), 60, "IDLE")
+        wait_until(lambda: idle(driver), 60, "IDLE after the long run")
+    except AssertionError as exc:  # the figures measured so far are still printed
+        print(f"  the browser phase ended early: {exc}", flush=True)
     finally:
         quit_browser(driver)
     return out

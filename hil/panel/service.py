@@ -99,11 +99,17 @@ class RigService:
         self._pending_lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._plans: dict[str, Trajectory] = {}
+        self._connect_lock = threading.Lock()
 
     # --- the rig's session -----------------------------------------------------------------
 
     def connect(self) -> None:
-        """Open the idle session (rig back-end); a failure is reported in the status."""
+        """Open the session (rig back-end), or a new one when the last one failed; a failure
+        is reported in the status. From the action thread and the publisher: locked."""
+        with self._connect_lock:
+            self._connect()
+
+    def _connect(self) -> None:
         if self.link is not None and self.link.failure is not None:
             self.message = f"the session ended ({self.link.failure}): reconnecting"
             self.disconnect()  # a watchdog or a lost link ends a session: open a new one
@@ -365,6 +371,8 @@ class RigService:
             self._flush_samples()
             if self.busy is None and self.link is not None:
                 self.link.drain()  # idle telemetry: its status is kept, its queue emptied
+                if self.link.failure is not None:
+                    self.connect()  # a session the watchdog ended: the status of a new one
             now = time.monotonic()
             if now >= next_status:
                 next_status = now + STATUS_PERIOD
