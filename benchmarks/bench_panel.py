@@ -135,11 +135,19 @@ def headless_run(panel: PanelProcess, seconds: float) -> str:
     return asyncio.run(go())
 
 
-def link_line(name: str, meta: dict[str, Any]) -> str:
-    k = meta.get("link") or {}
+COUNTS = ("lost_samples", "late_attempts", "retransmissions", "bad_frames")
+
+
+def link_line(name: str, meta: dict[str, Any], before: dict[str, Any] | None = None) -> str:
+    """The run's link figures; the panel's session outlives a run, so its counts are the
+    session's since ``before`` (an earlier run's meta) when given."""
+    k = dict(meta.get("link") or {})
+    if before is not None:
+        for key in COUNTS:
+            k[key] = k.get(key, 0) - (before.get("link") or {}).get(key, 0)
     return (f"  {name:26s} lost {k.get('lost_samples')}, late {k.get('late_attempts')}, "
             f"retransmitted {k.get('retransmissions')}, bad frames {k.get('bad_frames')}, "
-            f"arrival gap p99 {1e3 * (k.get('arrival_gap_p99_s') or 0):.1f} ms")
+            f"session's arrival gap p99 {1e3 * (k.get('arrival_gap_p99_s') or 0):.1f} ms")
 
 
 def main() -> None:
@@ -178,8 +186,10 @@ def main() -> None:
           f"p95 {np.percentile(d, 95):.0f} ms, max {d.max():.0f} ms (target p95 <= 100 ms)")
     print("link statistics of a constant-speed run at "
           f"{SPEED * 1e3:g} mm/s (from each run's meta.json):")
-    print(link_line("with the browser attached", run_meta(result["runs"][0])))
-    print(link_line("websocket only, no page", run_meta(bare)))
+    if result["runs"]:
+        print(link_line("with the browser attached", run_meta(result["runs"][0])))
+    print(link_line("websocket only, no page", run_meta(bare),
+                    run_meta(result["runs"][-1]) if result["runs"] else None))
     heap = result["heap"]
     if heap:
         mb = [h / 1e6 for _, h in heap]
