@@ -26,6 +26,7 @@ from hil.cli import rig as cli_rig
 from hil.cli import rsm as cli_rsm
 from hil.cli.interrupts import exit_cleanly_on_signals
 from hil.host.run_settings import RUN_DEFAULTS, add_number_options
+from hil.panel import command as panel_command
 from toggle.args import (
     add_completion,
     add_force_options,
@@ -110,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_rig.add_emulator_options(e)
     e.set_defaults(handler=emulate)
     cli_rig.add_parser(sub)
+    panel_command.add_parser(sub)
     cli_rsm.add_parser(sub)
     add_completion(sub, "hil", build_parser)
     add_force_options(parser)

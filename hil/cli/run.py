@@ -19,7 +19,6 @@ from hil.host.backends import (
     Plant,
     RigPlant,
     RigSetup,
-    RunStoppedError,
     default_fmu_path,
 )
 from hil.host.experiment import (
@@ -28,7 +27,13 @@ from hil.host.experiment import (
     profile_cycles,
     reciprocating_trajectory,
 )
-from hil.host.recording import RUN_FILES, RunMeta, RunRecorder
+from hil.host.recording import (
+    RUN_FILES,
+    RunMeta,
+    RunRecorder,
+    prototype_statistics,
+    record_run,
+)
 from hil.host.run_settings import (
     BYTES_PER_SAMPLE,
     RunSettings,
@@ -40,7 +45,6 @@ from toggle.elastics import clamp_stroke
 from toggle.files import print_results
 from toggle.json_text import json_text
 from toggle.params import DYNAMICS_PARAMETERS, ParameterError, load_preset
-from toggle.rig_calibration import load_paper_tables
 
 #: Printed rows of a run summary: (key, label, scale to the printed unit, unit).
 SUMMARY_ROWS = (
@@ -140,21 +144,9 @@ def _duration_text(seconds: float) -> str:
 
 
 def paper_statistics(s: RunSettings) -> dict[str, Any] | None:
-    """Seed 000's measured statistics (Tables 3-8, SI: mean and printed 3 sigma) of the
-    condition this run repeats (a --speed run of the preset they were measured on at one of
-    their speeds and link-8 errors), with the table's number; None for any other run."""
-    if s.speed is None:
-        return None
-    tables = load_paper_tables()
-    cell = tables.cell(s.preset, s.speed, s.delta_r8)
-    if cell is None:
-        return None
-    i, j = cell
-    return {"speed": float(tables.speeds[i]), "delta_r8": float(tables.errors[j]),
-            **{key: {"table": (3 if key == "stroke" else 6) + i,
-                     "mean": float(tables.mean[key][i, j]),
-                     "three_sigma": float(tables.three_sigma[key][i, j])}
-               for key in tables.mean}}
+    """Seed 000's measured statistics of the condition this run repeats
+    (:func:`hil.host.recording.prototype_statistics`); None for any other run."""
+    return prototype_statistics(s.preset, s.speed, s.delta_r8)
 
 
 def _print_summary(summary: dict, count: int, cycles: int, backend: str,
@@ -210,24 +202,12 @@ def _record(plant: Plant, trajectory: Trajectory, rec: RunRecorder, guard: Signa
     # from here a signal only gets noted; the loop acts on it between samples, so the
     # recording and the link are never cut mid-operation
     guard.shield = True
-    samples = plant.run(trajectory, guard.check)
     try:
-        for sample in samples:
-            rec.append(sample)
-            if counter.update(sample.x_cmd):
-                bar.advance()
-            guard.check()
-    except (RunStoppedError, TrajectoryError) as exc:
-        reason = str(exc)
+        reason = record_run(plant, trajectory, rec, guard.check,
+                            lambda sample: counter.update(sample.x_cmd) and bar.advance())
     except Interrupted as exc:
         reason, interrupted = str(exc), exc
     finally:
-        samples.close()
-        for sample in plant.stop():
-            rec.append(sample)
-        rec.annotate(plant=plant.describe(), link=plant.link_report())
-        if reason is not None:
-            rec.abort(reason)
         bar.close()
     return reason, interrupted
 

@@ -394,9 +394,13 @@ class RigPlant(Plant):
                  telemetry_timeout: float | None = None,
                  ack_timeout: float | None = None,
                  heartbeat_ms: float | None = None,
-                 notify: Callable[[str], None] | None = None) -> None:
+                 notify: Callable[[str], None] | None = None,
+                 session: SerialLink | None = None) -> None:
+        """``session``: an open session to run on (the panel's, which outlives the run:
+        deactivation stops the rig but does not close it); None opens one at activation."""
         super().__init__()
         self.port = port
+        self._session = session
         # None: measured from the link when the session opens (hil.link.timing), within
         # bounds; the protocol's 20 ms, 100 ms and 250 ms on a rig's idle link
         self.ack_timeout = ack_timeout
@@ -422,22 +426,23 @@ class RigPlant(Plant):
         nominal = load_preset(s.preset)
         self._L0 = float(output_position(self._x0, nominal.lower))
         self._nominal = nominal
-        self._link = link = SerialLink(
+        self._link = link = self._session or SerialLink(
             self.port, realtime=self.realtime, telemetry_timeout=self.telemetry_timeout,
             point_period_us=round(s.period * 1e6), ack_timeout=self.ack_timeout,
             heartbeat_timeout_ms=None if self.heartbeat_ms is None else round(self.heartbeat_ms))
         try:
-            link.open()
+            self._open(link)
             if link.timing is not None and not link.timing.is_nominal:
                 self.notify(f"the link is slower than a rig's ({link.timing.text()}): ACK "
                             f"timeout {link.ack_timeout * 1e3:.0f} ms, telemetry watchdog "
                             f"{link.telemetry_timeout * 1e3:.0f} ms, the MCU's heartbeat "
                             f"timeout {link.heartbeat_timeout_ms} ms (docs/rig-protocol.md, "
                             f"section 7)")
-            if link.faults_at_open:
+            latched = link.status.faults if self._session else link.faults_at_open
+            if latched:
                 raise RunStoppedError(
                     f"the rig at {self.port} has a latched fault from an earlier session: "
-                    f"{fault_names(link.faults_at_open)} (state "
+                    f"{fault_names(latched)} (state "
                     f"{p.State(link.status.state).name}); check the rig, then clear it with "
                     f"`hil rig clear --port {self.port}`")
             if not link.status.flags & p.TelemetryFlag.REFERENCED:
@@ -450,13 +455,26 @@ class RigPlant(Plant):
                                            steps_min=sc.steps(lo, self._x0),
                                            steps_max=sc.steps(hi, self._x0)))
         except RigError as exc:
-            link.close()
-            self._link = None
+            self._release()
             raise RunStoppedError(f"rig at {self.port}: {exc}") from exc
         except BaseException:
-            link.close()
-            self._link = None
+            self._release()
             raise
+
+    def _open(self, link: SerialLink) -> None:
+        if self._session is None:
+            link.open()
+
+    def _release(self) -> None:
+        """End this back-end's use of the session: close its own; a given one is stopped
+        (never raises) and left open."""
+        if self._link is None:
+            return
+        if self._session is None:
+            self._link.close()  # STOP, standstill, BYE, closed port; never raises
+        else:
+            self._link.stop_quietly()
+        self._link = None
 
     def _move_to(self, x: float, check: Callable[[], None]) -> float:
         from hil.host.homing import move_to
@@ -534,25 +552,26 @@ class RigPlant(Plant):
 
     def link_report(self) -> dict[str, object]:
         """Link statistics of the session (JSON-ready; empty before activation)."""
-        link = self._link
-        if link is None:
-            return {}
-        st, dec = link.stats, link.decoder.stats
-        return {
-            "bad_frames": dec.rejected, "crc_errors": dec.crc_errors,
-            "bad_messages": st.bad_messages, "lost_samples": st.lost_samples,
-            "duplicate_samples": st.duplicates, "retransmissions": st.retransmissions,
-            "queue_dropped": st.queue_dropped,
-            "arrival_gap_p99_s": st.gap_percentile(0.99),
-            "arrival_gap_p999_s": st.gap_percentile(0.999),
-            "arrival_gap_max_s": st.max_arrival_gap,
-            "mcu_clock_excess_max_s": st.max_clock_excess,
-        }
+        return {} if self._link is None else link_report(self._link)
 
     def _deactivate(self) -> None:
-        if self._link is not None:
-            self._link.close()  # STOP, standstill, BYE, closed port; never raises
-            self._link = None
+        self._release()
+
+
+def link_report(link: SerialLink) -> dict[str, object]:
+    """Statistics of an open session with the rig (JSON-ready): errors, losses,
+    retransmissions, telemetry arrival gaps."""
+    st, dec = link.stats, link.decoder.stats
+    return {
+        "bad_frames": dec.rejected, "crc_errors": dec.crc_errors,
+        "bad_messages": st.bad_messages, "lost_samples": st.lost_samples,
+        "duplicate_samples": st.duplicates, "retransmissions": st.retransmissions,
+        "late_attempts": st.late_attempts, "queue_dropped": st.queue_dropped,
+        "arrival_gap_p99_s": st.gap_percentile(0.99),
+        "arrival_gap_p999_s": st.gap_percentile(0.999),
+        "arrival_gap_max_s": st.max_arrival_gap,
+        "mcu_clock_excess_max_s": st.max_clock_excess,
+    }
 
 
 def fault_names(faults: int) -> str:

@@ -39,16 +39,17 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from datetime import datetime
 from pathlib import Path
 from types import TracebackType
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from hil.host.experiment import DEFAULT_END_TOL, Cycle, segment_cycles
-from hil.host.samples import Sample
+from hil.host.samples import Sample, TrajectoryError
 from toggle.elastics import clamp_stroke
 from toggle.json_text import json_text
 from toggle.kinematics import output_position
 from toggle.params import Mechanism
+from toggle.rig_calibration import load_paper_tables
 from toggle.rig_tables import F_TP_LATENCY, TOGGLE_BAND
 
 CSV_COLUMNS = ("time [s]", "x_cmd [m]", "platen [m]", "force [N]", "status", "sample")
@@ -66,6 +67,12 @@ STATISTICS = (
     "force_toggle",
 )
 NOT_CLOSED = "the recording was not closed (the process died); summary recomputed from the CSV"
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from hil.host.backends import Plant
+    from hil.host.samples import Trajectory
 
 
 class RecordingError(ValueError):
@@ -399,3 +406,58 @@ def summarize_run(run_dir: str | Path, *, plot: bool = True) -> dict[str, Any]:
                           title=f"{meta.preset} on {meta.backend}: averaged input force "
                                 f"over {len(cycles)} cycles")
     return summary
+
+
+def record_run(plant: Plant, trajectory: Trajectory, rec: RunRecorder,
+               check: Callable[[], None] = lambda: None,
+               on_sample: Callable[[Sample], None] = lambda _s: None) -> str | None:
+    """Run ``trajectory`` on the active ``plant`` into ``rec``; stop and keep the rest on
+    every ending (``hil run`` and the panel's rig service share it).
+
+    Each sample is recorded, then handed to ``on_sample``, then ``check`` is called (it
+    may raise to end the run: a signal, the panel's STOP). Returns why the run stopped
+    early (None when complete); an exception other than the plant's stop propagates after
+    the samples up to the standstill are recorded and the run is marked aborted.
+    """
+    from hil.host.backends import RunStoppedError
+
+    reason = None
+    samples = plant.run(trajectory, check)
+    try:
+        for sample in samples:
+            rec.append(sample)
+            on_sample(sample)
+            check()
+    except (RunStoppedError, TrajectoryError) as exc:
+        reason = str(exc)
+    except BaseException as exc:
+        reason = str(exc) or type(exc).__name__
+        raise
+    finally:
+        samples.close()
+        for sample in plant.stop():
+            rec.append(sample)
+            on_sample(sample)
+        rec.annotate(plant=plant.describe(), link=plant.link_report())
+        if reason is not None:
+            rec.abort(reason)
+    return reason
+
+
+def prototype_statistics(preset: str, speed: float | None,
+                         delta_r8: float) -> dict[str, Any] | None:
+    """Seed 000's measured statistics (Tables 3-8, SI: mean and printed 3 sigma) of a
+    constant-speed run of ``preset`` at one of their speeds and link-8 errors, with the
+    table's number; None for any other run (a planned or replayed profile)."""
+    if speed is None:
+        return None
+    tables = load_paper_tables()
+    cell = tables.cell(preset, speed, delta_r8)
+    if cell is None:
+        return None
+    i, j = cell
+    return {"speed": float(tables.speeds[i]), "delta_r8": float(tables.errors[j]),
+            **{key: {"table": (3 if key == "stroke" else 6) + i,
+                     "mean": float(tables.mean[key][i, j]),
+                     "three_sigma": float(tables.three_sigma[key][i, j])}
+               for key in tables.mean}}
