@@ -5,10 +5,11 @@ as 1, 2, 3", SC 2011) turns a counter and a key into random bits with no state b
 calls, so the draws of sample i depend on (seed, i) alone: the compiled kernel
 (:mod:`toggle.mc_kernel`) draws them where it uses them, any chunk or thread split gives
 the same numbers, and this numpy implementation (vectorised on uint64, the fallback without
-a C compiler) gives bit for bit the same uniforms. Philox4x32-10 is the Random123
-reference's and cuRAND's, JAX's and TensorFlow's default; numpy's ``Philox`` is its
-4x64 sibling, whose 64x64-bit products do not vectorise (AVX2/AVX-512 multiply 32x32 into
-64 bits). Both implementations are checked against Random123's known-answer vectors.
+a C compiler) gives bit for bit the same uniforms. Philox4x32-10 is Random123's reference
+generator (also cuRAND's Philox and TensorFlow's default); numpy's ``Philox`` is its 4x64
+sibling, whose 64x64-bit products do not vectorise (AVX2/AVX-512 multiply 32x32 into 64
+bits). Both implementations are checked against Random123's known-answer vectors; why this
+generator and how it is tested: docs/tolerance.md.
 
 Layout: the draws of sample i, half ``stream`` (0 lower, 1 upper), dimensions 2b and 2b+1
 come from the block of counter (i mod 2^32, i div 2^32, b, stream) under the key of the
