@@ -16,8 +16,10 @@ With ``--duty`` each round also plans the duty of the candidates' Pareto front o
 back-end, as ``toggle design`` does after its search (design.search.run_search: about
 1.6 s of CPU a design), and the rate is the candidates over both.
 
-Prints the median rate of each, the ratios against the faster of the process and the
-2-worker cluster measured in the same run, the load average and what the default rule saw.
+Prints the median rate of each, its CPU time per candidate (this process and the
+back-end's workers: what it costs whoever shares the cores), the ratios against the faster
+of the process and the 2-worker cluster measured in the same run, the load average and
+what the default rule saw.
 The machine may be shared: the absolute rates are noisy, the ratios within one run are the
 result.
 """
@@ -27,6 +29,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -61,15 +64,30 @@ def candidates(n: int) -> np.ndarray:
                         * (hi - lo))
 
 
+def _cpu_seconds() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def cpu_seconds(runner: Runner) -> float:
+    """CPU seconds so far of this process (the client, the local clusters' schedulers) and
+    of the runner's workers: what a back-end costs, whoever else shares the cores."""
+    workers = runner.client.run(_cpu_seconds).values() if runner.client is not None else ()
+    return _cpu_seconds() + sum(workers)
+
+
 def rates(vectors: np.ndarray, repeats: int, search: int, folder: Path, duty: bool,
           backends: tuple[tuple[str, int | None], ...] = BACKENDS
-          ) -> tuple[dict[str, list[float]], dict[str, float], int, int]:
+          ) -> tuple[dict[str, list[float]], dict[str, list[float]], dict[str, float], int,
+                     int]:
     """Candidates per second of each back-end, round by round (with ``duty``: the front's
-    duty planned too); the seconds each took to start (the cluster, the workers' imports and
-    first evaluations, less the time of those evaluations at the back-end's rate); the
-    default's workers; the front's size."""
+    duty planned too), and its CPU milliseconds per candidate (:func:`cpu_seconds`); the
+    seconds each took to start (the cluster, the workers' imports and first evaluations,
+    less the time of those evaluations at the back-end's rate); the default's workers; the
+    front's size."""
     targets = load_targets(TARGETS)
     out: dict[str, list[float]] = {name: [] for name, _ in backends}
+    cpu: dict[str, list[float]] = {name: [] for name, _ in backends}
     starts, warm, front = {}, {}, 0
     with contextlib.ExitStack() as stack:
         runners = {}
@@ -87,16 +105,17 @@ def rates(vectors: np.ndarray, repeats: int, search: int, folder: Path, duty: bo
         for r in range(repeats):
             for name, runner in runners.items():
                 runner.store = Store(folder / f"{r}-{name}", targets.digest())
-                t0 = time.perf_counter()
+                c0, t0 = cpu_seconds(runner), time.perf_counter()
                 evaluations = runner.evaluate(vectors)
                 if duty:
                     planned = pareto_front(evaluations, targets.objectives)
                     runner.with_duty(planned)
                     front = len(planned)
                 out[name].append(len(vectors) / (time.perf_counter() - t0))
+                cpu[name].append(1e3 * (cpu_seconds(runner) - c0) / len(vectors))
         for name in starts:
             starts[name] = max(0.0, starts[name] - warm[name] / statistics.median(out[name]))
-        return out, starts, runners["default"].workers, front
+        return out, cpu, starts, runners["default"].workers, front
 
 
 def main() -> None:
@@ -123,7 +142,7 @@ def main() -> None:
         time.sleep(args.settle if hogs else 0.0)
         seen = (os.getloadavg()[0], busy_cores(), default_workers(args.search))
         with tempfile.TemporaryDirectory() as tmp:
-            got, starts, chosen, front = rates(vectors, args.repeats, args.search, Path(tmp),
+            got, cpu, starts, chosen, front = rates(vectors, args.repeats, args.search, Path(tmp),
                                                args.duty, backends)
         after = os.getloadavg()[0]
     finally:
@@ -144,6 +163,8 @@ def main() -> None:
         rounds = ", ".join(f"{v:.1f}" for v in got[name])
         print(f"  {name:<26} {med[name]:7.1f} candidates/s  ({med[name] / faster:.2f} x the "
               f"faster of the process and 2 workers; rounds {rounds})")
+    print("  CPU per candidate (this process, its schedulers and the back-end's workers), ms: "
+          + ", ".join(f"{name} {statistics.median(cpu[name]):.1f}" for name, _ in backends))
     pair = [b / a for a, b in zip(got["in this process"], got["Dask, 2 workers"])]
     print(f"  2 workers over the process, round by round: "
           f"{', '.join(f'{r:.2f}' for r in pair)} (median {statistics.median(pair):.2f})")

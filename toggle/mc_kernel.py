@@ -6,7 +6,7 @@ a small C driver loops over the samples, drawing each sample's dimensions with
 :mod:`toggle.philox`'s generator (its C text, the same numbers as its numpy), forming each
 sampled half as ``nominal + scale * draw`` (the same operations, in the same order, as numpy
 does) and calling the generated function inlined. gcc vectorises that loop with glibc's vector
-math library (libmvec: acos, asin, sin, cos four or eight at a time, within 4 ulp), which
+math library (libmvec: acos, asin, sin, cos, log four or eight at a time, within 4 ulp), which
 is what makes the kernel several times faster than numpy's ufunc chain; where libmvec
 is missing a scalar build is used. The library is compiled once per machine and cached
 (:mod:`toggle.c_library`) under a key of its own C text, so editing the kinematics
