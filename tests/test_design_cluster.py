@@ -204,3 +204,17 @@ def test_a_signal_while_the_local_cluster_starts_ends_cleanly(signum: int, said:
     assert search.returncode == 128 + signum, stderr
     assert "Traceback" not in stderr and stderr.splitlines()[-1] == said, stderr
     assert "nothing was kept" in stderr and not (tmp_path / "out").exists()
+
+
+def _worker_settings() -> tuple[str | None, bool]:
+    import dask
+    return (os.environ.get("MALLOC_TRIM_THRESHOLD_"),
+            dask.config.get("distributed.worker.profile.enabled"))
+
+
+def test_local_workers_run_without_the_profiler_and_the_memory_trim(tmp_path):
+    """Dask's defaults cost the duty planning a third more CPU on a worker than in the
+    process (design.runner.WORKER_CONFIG): the runner's own workers go without them."""
+    targets = load_targets(EXAMPLES / "sm55.toml")
+    with Runner(targets, Store(tmp_path, targets.digest()), workers=1) as runner:
+        assert list(runner.client.run(_worker_settings).values()) == [(None, False)]

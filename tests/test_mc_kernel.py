@@ -1,10 +1,10 @@
-"""The compiled Monte Carlo kernel (toggle.mc_kernel) gives today's numpy statistics.
+"""The compiled Monte Carlo kernel (toggle.mc_kernel) gives the numpy path's statistics.
 
-Same seed, same draws: the statistics of monte_carlo() with the kernel equal those of
-the numpy path to 1e-9 relative (with a floor of 1e-9 of the sample's spread plus 1e-15 m,
-for a mean or median that is nearly zero), for every clamp preset and over random
-tolerances;
-samples that cannot assemble behave exactly as before.
+Same seed, same draws (toggle.philox: made in C by the kernel, in numpy by the fallback;
+the same uniforms bit for bit, normals within a few ulps): the statistics of monte_carlo()
+with the kernel equal those of the numpy path to 1e-9 relative (with a floor of 1e-9 of the
+sample's spread plus 1e-15 m, for a mean or median that is nearly zero), for every clamp
+preset and over random tolerances; samples that cannot assemble behave exactly as before.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import pytest
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
-from toggle import mc_kernel
+from toggle import mc_kernel, philox
 from toggle.kinematics import AssemblyError, half_pose, output_position, stroke_limits
 from toggle.params import (
     DIMENSIONS,
@@ -87,6 +87,13 @@ def test_the_kernel_is_compiled_and_equals_the_kinematics_per_sample(chang, kern
     expected = output_position(x, list(nominal[:, None] + scale[:, None] * draws))
     assert bad == 0
     np.testing.assert_allclose(out, expected, rtol=4 * np.finfo(float).eps, atol=0)
+    key, start = philox.key(5), 2**32 - 5000  # across the counter's high word
+    for distribution in ("normal", "uniform"):
+        drawn = np.empty(10_000)
+        assert kernel.sampled(x, nominal, scale, key, start, 1, distribution, drawn) == 0
+        draws = kernel.draws(key, start, drawn.size, 1, distribution)
+        expected = output_position(x, list(nominal[:, None] + scale[:, None] * draws))
+        np.testing.assert_allclose(drawn, expected, rtol=4 * np.finfo(float).eps, atol=0)
 
 
 @pytest.mark.parametrize("preset", clamp_presets())
@@ -140,8 +147,8 @@ def test_samples_that_cannot_assemble_raise_the_same_error(chang, band):
 
 
 def test_a_rounding_level_excursion_is_clipped_as_numpy_does(chang):
-    """A sample whose crosshead-loop acos argument is 1 + 5e-13 is NaN in plain C; numpy
-    clips it (within the 1e-12 slack): that chunk is taken from numpy."""
+    """A half whose crosshead-loop acos argument is 1 + 5e-13 is NaN in plain C; numpy
+    clips it (within the 1e-12 slack): that chunk is taken from numpy, its draws too."""
     x = stroke_limits(chang.lower)[1]
     d, r4a = chang.lower.r1 - chang.lower.r2, chang.lower.r4a
     l = math.hypot(x, d)
@@ -150,14 +157,15 @@ def test_a_rounding_level_excursion_is_clipped_as_numpy_does(chang):
     with np.errstate(invalid="ignore"):
         assert math.isnan(float(half_pose(x, edge, check=False).L))
     assert math.isfinite(float(output_position(x, edge)))
-    nominal = np.array(chang.lower.as_tuple())
-    scale = np.full(len(DIMENSIONS), 1e-5)
-    draws = np.random.default_rng(3).standard_normal((len(DIMENSIONS), 100))
-    draws[:, 0] = (np.array(edge.as_tuple()) - nominal) / scale
-    dims = list(nominal[:, None] + scale[:, None] * draws)
-    assert mc_kernel.load().outputs(x, nominal, scale, draws)[1] >= 1
-    np.testing.assert_array_equal(_outputs(x, chang.lower, scale, draws, "lower"),
-                                  output_position(x, dims))
+    nominal = np.array(edge.as_tuple())
+    scale = np.full(len(DIMENSIONS), 1e-16)  # every sample at the edge, within rounding
+    key = philox.key(3)
+    out = np.empty(100)
+    assert mc_kernel.load().sampled(x, nominal, scale, key, 0, 0, "normal", out) >= 1
+    _outputs(x, edge, scale, key, 0, 0, "normal", out, "lower")
+    draws = philox.draws(key, 0, out.size, 0, "normal")
+    np.testing.assert_array_equal(out, output_position(
+        x, list(nominal[:, None] + scale[:, None] * draws)))
 
 
 @pytest.fixture

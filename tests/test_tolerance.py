@@ -11,7 +11,7 @@ from paper_closed_forms import error_coefficients, upper_pose
 from toggle.iso286 import it_tolerance
 from toggle.kinematics import half_pose, sensitivities, toggle_position
 from toggle.params import DIMENSIONS, ParameterError
-from toggle.tolerance import asymmetry, it_tolerances, monte_carlo
+from toggle.tolerance import QUANTILES, asymmetry, it_tolerances, monte_carlo, percentiles
 
 MM = 1e-3
 UM = 1e-6
@@ -113,3 +113,14 @@ def test_monte_carlo_is_reproducible_with_a_seed(chang):
     c = monte_carlo(chang, tol, samples=5000, seed=8)
     assert a.asymmetry.std == b.asymmetry.std != c.asymmetry.std
     assert np.isfinite(a.asymmetry.percentiles["p99.865"])
+
+
+@pytest.mark.parametrize("n", [2, 3, 10, 1001, 100_000])
+def test_percentiles_are_numpys_to_the_bit(n):
+    """The nested partitions select the same order statistics and interpolate as numpy's
+    linear method does: normal, tied and sorted values."""
+    rng = np.random.default_rng(n)
+    for values in (rng.standard_normal(n), rng.integers(0, 4, n).astype(float),
+                   np.sort(rng.standard_normal(n))[::-1]):
+        expected = np.percentile(values, QUANTILES)
+        np.testing.assert_array_equal(percentiles(values.copy()), expected)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
-from toggle import mc_kernel
+from toggle import mc_kernel, philox
 from toggle.iso286 import it_tolerance
 from toggle.kinematics import output_position, sensitivities, toggle_position
 from toggle.params import DIMENSIONS, HALVES, HalfDims, Mechanism, ParameterError
@@ -93,6 +93,44 @@ def asymmetry(mech: Mechanism, tolerances: Tolerances, x: float | None = None) -
     return AsymmetryReport(x, lower, upper, upper.worst + lower.worst, upper.rss + lower.rss, exact)
 
 
+#: The percentiles a Monte Carlo reports: +-3 sigma, +-1.96 sigma of a normal, the median.
+QUANTILES = (0.135, 2.5, 50.0, 97.5, 99.865)
+
+
+def _order_statistics(values: np.ndarray, ranks: list[int], found: dict[int, float],
+                      offset: int = 0) -> None:
+    """The values of the given ranks (and each rank + 1) of ``values`` into ``found``,
+    partitioning in place around the middle rank and recursing on each side: about 2.5
+    passes for the five quantiles, where one np.partition with all ten ranks makes seven
+    (it selects each rank afresh over what lies to its right)."""
+    if not ranks:
+        return
+    mid = ranks[len(ranks) // 2]
+    values.partition(mid)
+    found[offset + mid] = float(values[mid])
+    if mid + 1 < values.size:
+        found[offset + mid + 1] = float(values[mid + 1:].min())
+    _order_statistics(values[:mid], [r for r in ranks if r < mid], found, offset)
+    _order_statistics(values[mid + 1:], [r - mid - 1 for r in ranks if r > mid], found,
+                      offset + mid + 1)
+
+
+def percentiles(values: np.ndarray, qs: tuple[float, ...] = QUANTILES) -> np.ndarray:
+    """``np.percentile(values, qs)`` (its default linear method, the same bits) for finite
+    values, which are reordered in place: a Monte Carlo's ten million outputs in a third of
+    its time."""
+    n = values.size
+    virtual = (n - 1) * np.true_divide(qs, 100)
+    below = np.floor(virtual).astype(np.intp)
+    above = np.minimum(below + 1, n - 1)
+    found: dict[int, float] = {}
+    _order_statistics(values, sorted(set(below.tolist())), found)
+    a, b = np.array([found[i] for i in below]), np.array([found[i] for i in above])
+    t = virtual - below
+    diff = b - a  # numpy's lerp: from the nearer end
+    return np.where(t >= 0.5, b - diff * (1 - t), a + diff * t)
+
+
 @dataclass(frozen=True)
 class Statistics:
     """Summary of a Monte Carlo sample, metres."""
@@ -103,10 +141,10 @@ class Statistics:
 
     @classmethod
     def of(cls, values: np.ndarray) -> Statistics:
-        qs = (0.135, 2.5, 50.0, 97.5, 99.865)
-        pct = np.percentile(values, qs)
-        return cls(float(values.mean()), float(values.std(ddof=1)),
-                   {f"p{q:g}": float(v) for q, v in zip(qs, pct)})
+        """The summary of ``values``, which are reordered in place (:func:`percentiles`)."""
+        mean, std = float(values.mean()), float(values.std(ddof=1))
+        return cls(mean, std, {f"p{q:g}": float(v)
+                               for q, v in zip(QUANTILES, percentiles(values))})
 
 
 @dataclass(frozen=True)
@@ -118,29 +156,27 @@ class MonteCarloResult:
     asymmetry: Statistics  # L_upper - L_lower
 
 
-def _draw(rng: np.random.Generator, tol: Mapping[str, float], n: int, distribution: str
-          ) -> tuple[np.ndarray, np.ndarray]:
-    """Scale of every dimension and the standard draws (dimensions x n): a sampled
-    dimension is nominal + scale * draw."""
+def _scale(tol: Mapping[str, float], distribution: str) -> np.ndarray:
+    """Scale of every dimension: a sampled dimension is nominal + scale * draw (sigma =
+    band / 3 of a normal draw, the band itself of a uniform draw on [-1, 1))."""
     band = np.array([tol.get(k, 0.0) for k in DIMENSIONS])
-    if distribution == "normal":
-        return band / 3.0, rng.standard_normal((len(DIMENSIONS), n))
-    return band, rng.uniform(-1.0, 1.0, (len(DIMENSIONS), n))
+    return band / 3.0 if distribution == "normal" else band
 
 
-def _outputs(x: float, dims: HalfDims, scale: np.ndarray, draws: np.ndarray, label: str
-             ) -> np.ndarray:
-    """Output positions of the sampled halves: by the compiled kernel, or by numpy where no
-    C compiler works or where a sample's output is not finite (numpy then raises the
+def _outputs(x: float, dims: HalfDims, scale: np.ndarray, key: philox.Key, start: int,
+             stream: int, distribution: str, out: np.ndarray, label: str) -> None:
+    """Output positions of samples ``start ..`` of a half (``stream``) into ``out``: by the
+    compiled kernel, drawing in C, or by numpy (the same draws) where no C compiler works
+    or where a sample's output is not finite (numpy then raises the
     :class:`~toggle.kinematics.AssemblyError` naming it, or clips a rounding-level
     excursion past an acos/asin limit, as it always has)."""
     nominal = np.array(dims.as_tuple())
     kernel = mc_kernel.load()
-    if kernel is not None:
-        out, bad = kernel.outputs(x, nominal, scale, draws)
-        if not bad:
-            return out
-    return output_position(x, list(nominal[:, None] + scale[:, None] * draws), label=label)
+    if kernel is not None and not kernel.sampled(x, nominal, scale, key, start, stream,
+                                                 distribution, out):
+        return
+    draws = philox.draws(key, start, out.size, stream, distribution)
+    out[:] = output_position(x, list(nominal[:, None] + scale[:, None] * draws), label=label)
 
 
 def monte_carlo(
@@ -156,32 +192,31 @@ def monte_carlo(
 ) -> MonteCarloResult:
     """Exact nonlinear Monte Carlo of both halves' outputs at x.
 
-    Every dimension of both halves is drawn independently (numpy): normal with
-    sigma = tolerance / 3, or uniform over +-tolerance. The kinematics are
-    evaluated in chunks by the compiled kernel (:mod:`toggle.mc_kernel`, C
-    generated from the same closed form; numpy where no C compiler works, same
-    results); a sample that cannot assemble raises
-    :class:`~toggle.kinematics.AssemblyError` (the tolerances are too wide).
+    Every dimension of both halves is drawn independently: normal with sigma =
+    tolerance / 3, or uniform over +-tolerance, by the counter-based generator of
+    :mod:`toggle.philox` (sample i's draws depend on the seed and i alone: the chunk
+    size does not change the result). Draws and kinematics are evaluated in chunks by
+    the compiled kernel (:mod:`toggle.mc_kernel`, C generated from the same closed form;
+    numpy where no C compiler works, the same draws and results); a sample that cannot
+    assemble raises :class:`~toggle.kinematics.AssemblyError` (the tolerances are too
+    wide).
     """
     if distribution not in ("normal", "uniform"):
         raise ParameterError(f"distribution must be 'normal' or 'uniform', got {distribution!r}")
     if samples < 2:
         raise ParameterError(f"need at least 2 samples, got {samples}")
     x = toggle_position(mech.lower) if x is None else float(x)
-    rng = np.random.default_rng(seed)
+    key = philox.key(seed)
     nominal = {h: float(output_position(x, mech.half(h))) for h in HALVES}
+    scale = {h: _scale(tolerances[h], distribution) for h in HALVES}
     out = {h: np.empty(samples) for h in HALVES}
     starts = range(0, samples, chunk)
     for start in tqdm(starts, desc="Monte Carlo", unit="chunk", disable=not progress):
-        n = min(chunk, samples - start)
-        for h in HALVES:
-            scale, draws = _draw(rng, tolerances[h], n, distribution)
-            out[h][start:start + n] = _outputs(x, mech.half(h), scale, draws,
-                                               f"{h} half (sampled)")
-    return MonteCarloResult(
-        x=x,
-        samples=samples,
-        lower=Statistics.of(out["lower"] - nominal["lower"]),
-        upper=Statistics.of(out["upper"] - nominal["upper"]),
-        asymmetry=Statistics.of(out["upper"] - out["lower"]),
-    )
+        for stream, h in enumerate(HALVES):
+            _outputs(x, mech.half(h), scale[h], key, start, stream, distribution,
+                     out[h][start:start + chunk], f"{h} half (sampled)")
+    asym = out["upper"] - out["lower"]
+    for h in HALVES:
+        out[h] -= nominal[h]  # the output errors, in place (the arrays are 80 MB at 1e7)
+    return MonteCarloResult(x=x, samples=samples, lower=Statistics.of(out["lower"]),
+                            upper=Statistics.of(out["upper"]), asymmetry=Statistics.of(asym))
