@@ -18,21 +18,30 @@ recently used deleted first (a library's time is refreshed when it is loaded). A
 works in a scratch folder named by host and process (``scratch-HOST-PID-*``); one left by a
 killed compile is removed when the next compile starts. ``toggle cache`` shows and clears
 it (:func:`cache_report`, :func:`clear_cache`).
+
+One compile at a time per cache: a compile holds the cache's lock (``compile.lock``, an
+``flock``) and looks for the library again once it has it, so a second process asking for
+the same library waits for the first's and loads it instead of compiling it again.
+:func:`compile_later` runs a compile detached (its own session, nice 19, no terminal):
+the first answer goes on with the functions interpreted while the library is built for
+the next process.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import hashlib
 import os
 import platform
 import shutil
 import socket
 import subprocess
+import sys
 import tempfile
 import time
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import NamedTuple, TypeVar
 
@@ -50,6 +59,7 @@ KEEP = 24
 #: Default cap on the cache's total size, MB (``TOGGLE_CACHE_MAX_MB``).
 DEFAULT_MAX_MB = 200.0
 _SCRATCH = "scratch-"
+LOCK = "compile.lock"
 
 
 def cache_dir() -> Path:
@@ -268,19 +278,64 @@ def casadi_source(path: Path, functions: Sequence[ca.Function]) -> Path:
     return path
 
 
-def shared_library(name: str, key: str, sources: Callable[[Path], Sources],
-                   load: Callable[[Path], T | None], libs: Sequence[str] = ()) -> T | None:
-    """``load`` applied to the library cached under ``key``, or else to one compiled from
-    ``sources`` (called with a scratch directory; linked with ``libs``) and cached; None
-    where compiling or loading fails."""
-    stem = _stem(name, key, libs)
-    for library in cache_dir().glob(f"{stem}_*.so"):
+def cached_library(name: str, key: str, load: Callable[[Path], T | None],
+                   libs: Sequence[str] = ()) -> T | None:
+    """``load`` applied to the library cached under ``key``; None if there is none (or it
+    does not load). Nothing is compiled."""
+    for library in cache_dir().glob(f"{_stem(name, key, libs)}_*.so"):
         loaded = load(library) if _intact(library) else None
         if loaded is not None:
             with contextlib.suppress(OSError):  # used now: the last to be pruned
                 os.utime(library)
             return loaded
-    library = _compile(sources, stem, libs)
-    loaded = load(library) if library else None
-    _prune(name, library)
+    return None
+
+
+@contextlib.contextmanager
+def compile_lock() -> Iterator[None]:
+    """Hold the cache's compile lock (waiting for another process's compile to end);
+    without a usable cache folder, nothing is held (the compile then fails on its own)."""
+    try:
+        cache_dir().mkdir(parents=True, exist_ok=True)
+        fd = os.open(cache_dir() / LOCK, os.O_RDWR | os.O_CREAT, 0o600)
+    except OSError:
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # the lock goes with the descriptor
+
+
+def shared_library(name: str, key: str, sources: Callable[[Path], Sources],
+                   load: Callable[[Path], T | None], libs: Sequence[str] = ()) -> T | None:
+    """``load`` applied to the library cached under ``key``, or else to one compiled from
+    ``sources`` (called with a scratch directory; linked with ``libs``) and cached, under
+    :func:`compile_lock`; None where compiling or loading fails."""
+    loaded = cached_library(name, key, load, libs)
+    if loaded is not None:
+        return loaded
+    with compile_lock():
+        loaded = cached_library(name, key, load, libs)  # compiled by another meanwhile
+        if loaded is not None:
+            return loaded
+        library = _compile(sources, _stem(name, key, libs), libs)
+        loaded = load(library) if library else None
+        _prune(name, library)
     return loaded
+
+
+def compile_later(argv: Sequence[str]) -> int | None:
+    """Start ``python argv...`` (a compile for the next process) detached: its own session
+    (a Ctrl-C at the terminal and this process's end leave it running), under ``nice -n
+    19`` (its compilers inherit it), no standard streams (nothing of it on this command's
+    output); its process id, or None if it could not start."""
+    nice = shutil.which("nice")
+    command = [*([nice, "-n", "19"] if nice else []), sys.executable, *argv]
+    actions = [(os.POSIX_SPAWN_OPEN, fd, os.devnull, os.O_RDWR, 0) for fd in (0, 1, 2)]
+    try:
+        return os.posix_spawn(command[0], command, dict(os.environ), file_actions=actions,
+                              setsid=True, setsigmask=())  # no signal blocked as here
+    except (OSError, NotImplementedError, AttributeError):  # no posix_spawn (Windows)
+        return None
