@@ -160,7 +160,7 @@ class Run:
         env = dict(os.environ, TOGGLE_CACHE_DIR=str(cache), TOGGLE_COMPILE="background")
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         tic = time.monotonic()
-        proc = subprocess.Popen([*TOGGLE, *shlex.split(command)[2:]], cwd=cwd, env=env,
+        proc = subprocess.Popen([*TOGGLE, *shlex.split(command)[1:]], cwd=cwd, env=env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.lines: list[tuple[float, str]] = []
         reader = threading.Thread(target=self._read, args=(proc, tic))

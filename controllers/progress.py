@@ -68,6 +68,8 @@ class Progress:
         self._last_line: float | None = None
         self._activity: str | None = None
         self._aside, self._aside_since = 0.0, None  # time in named waits, and this one's
+        self._counted_at: float | None = None  # the last count's time, and the solving's
+        self._counted_work = 0.0
         self._bar: Any = None
         self._sources: list[Callable[[], object]] = []
         self._draining = False
@@ -132,6 +134,8 @@ class Progress:
         with self._lock:
             self.n += steps
             self.total = max(self.total, self.n)
+            self._counted_at = self._clock()
+            self._counted_work = self._working(self._counted_at)
             if self._bar is not None:
                 self._bar.total = self.total
                 self._bar.update(steps)
@@ -158,15 +162,24 @@ class Progress:
     def _label(self) -> str:
         return f"{self.desc} ({self._activity})" if self._activity else self.desc
 
-    def eta(self, now: float | None = None) -> float | None:
-        """Seconds left: the time per solve so far (named waits left out) times the solves
-        left; None before the first solve is done."""
-        now = self._clock() if now is None else now
-        if self.n <= 0:
-            return None
+    def _working(self, now: float) -> float:
+        """Seconds of solving up to ``now``: the time since the start less the named
+        waits'."""
         aside = self._aside + (now - self._aside_since if self._aside_since is not None
                                else 0.0)
-        return max(now - self._start - aside, 0.0) / self.n * (self.total - self.n)
+        return max(now - self._start - aside, 0.0)
+
+    def eta(self, now: float | None = None) -> float | None:
+        """Seconds left: the time per solve up to the last count (named waits left out)
+        times the solves left, less the time the current solve has run; once that is
+        spent, at least the solves after the current one. None before a solve is done."""
+        now = self._clock() if now is None else now
+        if self.n <= 0 or self._counted_at is None:
+            return None
+        per_solve = self._counted_work / self.n
+        left = self.total - self.n
+        running = self._working(now) - self._counted_work
+        return max(left * per_solve - running, max(left - 1, 0) * per_solve)
 
     def _eta_text(self, now: float) -> str:
         eta = self.eta(now)

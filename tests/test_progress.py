@@ -84,7 +84,11 @@ def test_the_eta_is_the_time_per_solve_times_the_solves_left_without_the_named_w
         clock.now += 5.0
         bar.advance()
     assert bar.eta() == 10.0  # 5 s a solve, two left
-    assert "ETA 0:10" in bar.line(clock.now - 0.0)
+    assert "ETA 0:10" in bar.line(clock.now)
+    clock.now += 3.0  # into the third solve
+    assert bar.eta() == 7.0
+    clock.now += 4.0  # the third solve overdue: at least the fourth is left
+    assert bar.eta() == 5.0
 
 
 def test_a_closed_progress_writes_nothing_more(monkeypatch):
