@@ -12,7 +12,8 @@ functions, compiling them) is named while it lasts (:func:`doing`).
 What shows, once the work has taken :data:`SHOW_AFTER` s: on a terminal a tqdm bar
 (count, total, elapsed, ETA), redrawn every second by a thread even while one solve or a
 compile lasts; elsewhere (a log, a pipe) a line at least every :data:`LINE_EVERY` s, and
-at a count at most that often. The ETA is the time per solve so far (the named waits left
+at a count at most that often, and the last count at the end if the lines showed an earlier
+one. The ETA is the time per solve so far (the named waits left
 out: they are no solves) times the solves left; none before the first solve is done.
 Closing a progress (:func:`reporting` does it, also on an error) stops its thread, so that
 a command's error, printed after, is the last line of its stderr.
@@ -66,6 +67,7 @@ class Progress:
         self.enabled, self._clock = enabled, clock
         self._start = clock()
         self._last_line: float | None = None
+        self._lines_n = 0  # the count the last line showed
         self._activity: str | None = None
         self._aside, self._aside_since = 0.0, None  # time in named waits, and this one's
         self._counted_at: float | None = None  # the last count's time, and the solving's
@@ -155,7 +157,11 @@ class Progress:
         since = None if self._last_line is None else now - self._last_line
         if since is not None and since < LINE_EVERY * (1.0 if not due_line else 0.98):
             return
-        self._last_line = now
+        self._write_line()
+
+    def _write_line(self) -> None:
+        now = self._clock()
+        self._last_line, self._lines_n = now, self.n
         self.file.write(self.line(now - self._start) + "\n")
         self.file.flush()
 
@@ -208,7 +214,8 @@ class Progress:
                 f"{self._eta_text(self._start + elapsed)}")
 
     def close(self) -> None:
-        """Stop showing (the thread ended before this returns); the bar is left as it is."""
+        """Stop showing (the thread ended before this returns); the bar is left as it is,
+        a line written if the last one showed an earlier count."""
         self._stop.set()
         _live.discard(self)
         if self._thread is not None and self._thread is not threading.current_thread():
@@ -217,6 +224,8 @@ class Progress:
             if self._bar is not None:
                 self._bar.close()
                 self._bar = None
+            elif self._last_line is not None and self._lines_n != self.n:
+                self._write_line()  # the count the last line showed is out of date
 
 
 class Relay(Progress):

@@ -54,6 +54,8 @@ def test_without_a_terminal_a_line_every_line_every_seconds_at_the_counts():
     assert len(lines) == 1 + int((100 - SHOW_AFTER) // LINE_EVERY)
     assert lines[0].startswith("planning:") and f"{int(SHOW_AFTER)}/100" in lines[0]
     assert f"{int(SHOW_AFTER + LINE_EVERY)}/100" in lines[1]
+    bar.close()  # the last count, 100, not shown yet
+    assert out.getvalue().splitlines()[-1].startswith("planning: 100/100 solves done")
 
 
 def test_a_long_wait_without_counts_still_prints_a_line_every_line_every_seconds():
