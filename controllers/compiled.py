@@ -48,6 +48,7 @@ import casadi as ca
 
 from controllers import progress
 from toggle.c_library import (
+    JOB_PREFIX,
     Sources,
     cache_dir,
     cached_library,
@@ -186,7 +187,7 @@ def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list
 
 
 def _job_path(name: str, key: str) -> Path:
-    return cache_dir() / f"job-{name}-{hashlib.sha256(key.encode()).hexdigest()[:24]}.json"
+    return cache_dir() / f"{JOB_PREFIX}{name}-{hashlib.sha256(key.encode()).hexdigest()[:24]}.json"
 
 
 def compile_in_background(name: str, key: str, names: Sequence[str], units: list[Unit]

@@ -146,3 +146,14 @@ def test_a_compile_holds_the_caches_lock_and_looks_again_once_it_has_it(cache: P
     again = c_library.shared_library("probe", "locked", lambda tmp: pytest.fail("compiled"),
                                      lambda p: p)
     assert again == first
+
+
+def test_clearing_removes_a_killed_compiles_job_but_not_a_running_ones(cache: Path) -> None:
+    cache.mkdir(exist_ok=True)
+    left, running = cache / f"{c_library.JOB_PREFIX}a.json", cache / f"{c_library.JOB_PREFIX}b.json"
+    left.write_text("{}")
+    running.write_text("{}")
+    with open(running) as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        assert c_library.clear_cache() == (1, 2)
+    assert not left.exists() and running.exists()

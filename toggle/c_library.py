@@ -60,6 +60,8 @@ KEEP = 24
 DEFAULT_MAX_MB = 200.0
 _SCRATCH = "scratch-"
 LOCK = "compile.lock"
+#: The name's start of a detached compile's input (:func:`compile_later`'s caller's).
+JOB_PREFIX = "job-"
 
 
 def cache_dir() -> Path:
@@ -157,12 +159,24 @@ def cache_report() -> CacheReport:
                        (len(stale), sum(map(_size, stale))), size_cap())
 
 
+def _unlocked(path: Path) -> bool:
+    """Whether no process holds ``path``'s lock (a job file no compile works on)."""
+    try:
+        with open(path, "rb") as held:
+            fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return False
+    return True
+
+
 def clear_cache() -> tuple[int, int]:
-    """Delete every cached library and killed compiles' scratch (a running compile's
-    scratch stays); return (files, bytes) removed."""
+    """Delete every cached library, killed compiles' scratch and the job files no detached
+    compile works on (a running compile's scratch and job stay); return (files, bytes)
+    removed."""
     files, freed = 0, remove_stale_scratch()
     if cache_dir().is_dir():
-        for library in cache_dir().glob("*.so"):
+        jobs = [job for job in cache_dir().glob(f"{JOB_PREFIX}*") if _unlocked(job)]
+        for library in [*cache_dir().glob("*.so"), *jobs]:
             try:
                 size = library.stat().st_size
                 library.unlink()
