@@ -154,25 +154,27 @@ def _sources(units: Callable[[], list[Unit]]) -> Callable[[Path], Sources]:
     return sources
 
 
+def _names_in(units: list[Unit]) -> list[str]:
+    return [fn.name() for _, functions in units for fn in functions]
+
+
 def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]],
-             machine_code: bool = True) -> list[ca.Function]:
+             machine_code: bool = True, first: int = 0) -> list[ca.Function]:
     """The functions ``names`` as machine code from the library cached under ``key``;
-    else built by ``build`` and interpreted while a detached process compiles them for the
-    next time (:func:`compile_mode` ``background``), or compiled, cached and loaded now
-    (``wait``); as built (interpreted) where compiling or loading fails, or without
-    ``machine_code`` (a problem solved once, for which a compile would cost more than it
-    saves)."""
+    else (:func:`compile_mode` ``background``) built by ``build``, the ``first`` units
+    compiled now (small code that carries the arithmetic: seconds; cached as the library
+    ``NAME-first``, which a process asking before the whole library is there loads), the
+    others interpreted, while a detached process compiles them all for the next time; or
+    (``wait``) all compiled, cached and loaded now. As built (interpreted) where compiling
+    or loading fails, or without ``machine_code`` (a problem solved once, for which a
+    compile would cost more than it saves)."""
     if not machine_code:
         return _interpreted(build(), names)
     loaded = cached_library(name, key, lambda library: _load(library, names))
     if loaded is not None:
         return loaded
     if compile_mode() == "background":
-        with progress.doing("building the problem, interpreted: compiled in the "
-                            "background for the next run"):
-            units = build()
-            compile_in_background(name, key, names, units)
-        return _interpreted(units, names)
+        return _first_answer(name, key, names, build, first)
     kept: list[Unit] = []
 
     def units_once() -> list[Unit]:
@@ -184,6 +186,25 @@ def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list
         loaded = shared_library(name, key, _sources(units_once),
                                 lambda library: _load(library, names))
     return loaded if loaded is not None else _interpreted(units_once(), names)
+
+
+def _first_answer(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]],
+                  first: int) -> list[ca.Function]:
+    """:func:`compiled`'s functions on a cache miss, ``background``: the ``first`` units
+    compiled now (without the cache's lock: a detached compile may hold it for a minute),
+    the rest interpreted, all of them handed to a detached compile."""
+    with progress.doing("building the problem (compiled in the background for the next "
+                        "run)"):
+        units = build()
+        compile_in_background(name, key, names, units)
+    functions = dict(zip(_names_in(units), _interpreted(units, _names_in(units))))
+    quick = _names_in(units[:first])
+    if quick:
+        with progress.doing("compiling the plant's jets (seconds)"):
+            loaded = shared_library(f"{name}-first", key, _sources(lambda: units[:first]),
+                                    lambda library: _load(library, quick), lock=False)
+        functions.update(zip(quick, loaded or ()))
+    return [functions[n] for n in names]
 
 
 def _job_path(name: str, key: str) -> Path:

@@ -323,14 +323,16 @@ def compile_lock() -> Iterator[None]:
 
 
 def shared_library(name: str, key: str, sources: Callable[[Path], Sources],
-                   load: Callable[[Path], T | None], libs: Sequence[str] = ()) -> T | None:
+                   load: Callable[[Path], T | None], libs: Sequence[str] = (),
+                   lock: bool = True) -> T | None:
     """``load`` applied to the library cached under ``key``, or else to one compiled from
     ``sources`` (called with a scratch directory; linked with ``libs``) and cached, under
-    :func:`compile_lock`; None where compiling or loading fails."""
+    :func:`compile_lock` (without it where ``lock`` is false: a compile of seconds that
+    must not wait for another's); None where compiling or loading fails."""
     loaded = cached_library(name, key, load, libs)
     if loaded is not None:
         return loaded
-    with compile_lock():
+    with compile_lock() if lock else contextlib.nullcontext():
         loaded = cached_library(name, key, load, libs)  # compiled by another meanwhile
         if loaded is not None:
             return loaded
