@@ -193,14 +193,14 @@ def _first_answer(name: str, key: str, names: Sequence[str], build: Callable[[],
     """:func:`compiled`'s functions on a cache miss, ``background``: the ``first`` units
     compiled now (without the cache's lock: a detached compile may hold it for a minute),
     the rest interpreted, all of them handed to a detached compile."""
-    with progress.doing("building the problem (compiled in the background for the next "
-                        "run)"):
+    with progress.doing("building the problem; compiled in the background for the next "
+                        "run"):
         units = build()
         compile_in_background(name, key, names, units)
     functions = dict(zip(_names_in(units), _interpreted(units, _names_in(units))))
     quick = _names_in(units[:first])
     if quick:
-        with progress.doing("compiling the plant's jets (seconds)"):
+        with progress.doing("compiling the plant's jets"):
             loaded = shared_library(f"{name}-first", key, _sources(lambda: units[:first]),
                                     lambda library: _load(library, quick), lock=False)
         functions.update(zip(quick, loaded or ()))
