@@ -27,7 +27,7 @@ within 30 %).
 The table is written into docs/planning.md between the markers (``--no-docs``: printed
 only). Figures on a shared machine are noisy: one run, beside the hog this starts (one
 process spinning on one core).
-Run: python benchmarks/bench_cold_plans.py [--only TEXT] [--no-docs]
+Run: python benchmarks/bench_cold_plans.py [--list] [--only COMMAND ...] [--no-docs]
 """
 
 from __future__ import annotations
@@ -271,13 +271,14 @@ def write_docs(text: str) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--only", help="the commands containing this text")
+    parser.add_argument("--only", action="append",
+                        help="this command only (as --list prints it; repeatable)")
     parser.add_argument("--no-docs", action="store_true", help="do not rewrite docs/planning.md")
     parser.add_argument("--list", action="store_true", help="list the commands and stop")
     parser.add_argument("--no-hog", action="store_true",
                         help="without the CPU hog (a check of the benchmark itself)")
     args = parser.parse_args()
-    commands = [c for c in documented_commands() if not args.only or args.only in c]
+    commands = [c for c in documented_commands() if not args.only or c in args.only]
     if args.list:
         print("\n".join(f"{c}   [{_skip(c) or 'runs'}]" for c in commands))
         return
