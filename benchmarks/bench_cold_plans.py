@@ -54,7 +54,7 @@ PLACEHOLDER = re.compile(r"<[^>]*>|(?<=\s)[A-Z]+(?=\s|$)")
 #: Files a command writes, for their placeholders (``--out T``).
 OUTPUTS = {"--out": "out.csv", "--cycle-out": "cycle.csv", "--duty-plot": "duty.png"}
 ETA = re.compile(r"ETA (\d+):(\d{2})")
-COMPILE_WAIT = 900.0  # s, the most a detached compile is waited for
+COMPILE_WAIT = 300.0  # s, the most a detached compile is waited for (--compile-wait)
 
 
 def _normalised(line: str) -> list[str]:
@@ -192,7 +192,7 @@ class Run:
 
 
 def _wait_for_compiles(cache: Path) -> float:
-    """Seconds until no compile job is left in the cache."""
+    """Seconds until no compile job is left in the cache (at most COMPILE_WAIT)."""
     tic = time.monotonic()
     while list(cache.glob("job-*.json")) and time.monotonic() - tic < COMPILE_WAIT:
         time.sleep(0.5)
@@ -220,13 +220,17 @@ def measure(commands: list[str], hog: bool = True) -> tuple[list[str], list[Run]
                 cwd.mkdir()
                 cold = Run(command, cache, cwd)
                 wait = _wait_for_compiles(cache)
-                warm = Run(command, cache, cwd)
-                same = _answer_text(cold.out) == _answer_text(warm.out) and (
-                    cold.code == warm.code)
                 answer = _summary(cold.code, cold.out, cold.err)
+                if list(cache.glob("job-*.json")):  # starved: no warm run to speak of
+                    warm_cell, same_cell = f"compile not done in {wait:.0f} s", "-"
+                else:
+                    warm = Run(command, cache, cwd)
+                    warm_cell = f"{warm.wall:.1f} / {warm.cpu:.1f}"
+                    same_cell = "yes" if _answer_text(cold.out) == _answer_text(warm.out) and (
+                        cold.code == warm.code) else "NO"
                 row = (f"| `{command}` | {cold.wall:.1f} / {cold.cpu:.1f} | {wait:.0f} | "
-                       f"{warm.wall:.1f} / {warm.cpu:.1f} | {answer} | "
-                       f"{'yes' if same else 'NO'} | {cold.gap():.1f} | {_eta_cell(cold)} |")
+                       f"{warm_cell} | {answer} | {same_cell} | {cold.gap():.1f} | "
+                       f"{_eta_cell(cold)} |")
                 rows.append(row)
                 print(row, flush=True)
                 if "--robust" in command:
@@ -280,7 +284,10 @@ def main() -> None:
     parser.add_argument("--list", action="store_true", help="list the commands and stop")
     parser.add_argument("--no-hog", action="store_true",
                         help="without the CPU hog (a check of the benchmark itself)")
+    parser.add_argument("--compile-wait", type=float, default=COMPILE_WAIT,
+                        help="the most seconds a detached compile is waited for")
     args = parser.parse_args()
+    globals()["COMPILE_WAIT"] = args.compile_wait
     commands = [c for c in documented_commands() if not args.only or c in args.only]
     if args.list:
         print("\n".join(f"{c}   [{_skip(c) or 'runs'}]" for c in commands))
