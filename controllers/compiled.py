@@ -54,6 +54,7 @@ from toggle.c_library import (
     cached_library,
     casadi_source,
     compile_later,
+    have_compiler,
     shared_library,
 )
 from toggle.params import ParameterError
@@ -173,6 +174,8 @@ def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list
     loaded = cached_library(name, key, lambda library: _load(library, names))
     if loaded is not None:
         return loaded
+    if not have_compiler():  # nothing to compile with: no job written, no scratch made
+        return _interpreted(build(), names)
     if compile_mode() == "background":
         return _first_answer(name, key, names, build, first)
     kept: list[Unit] = []

@@ -116,3 +116,9 @@ def test_interpreted_and_compiled_plans_print_the_same_answer(cache, monkeypatch
         problem_for.cache_clear()
     assert "fixed duration stroke" in cold and "solved in - ms" in cold
     assert warm == cold
+
+
+def test_without_a_compiler_no_job_is_written(cache, monkeypatch, tmp_path):
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    (fn,) = compiled("check", "key", ["jet_check"], _check_units)
+    assert fn.class_name() == "SXFunction" and not cache.exists()

@@ -190,6 +190,11 @@ def _compiler() -> str:
     return os.environ.get("CC", "gcc")
 
 
+def have_compiler() -> bool:
+    """Whether the C compiler (``CC``, default ``gcc``) is there to run."""
+    return shutil.which(_compiler()) is not None
+
+
 def _stem(name: str, key: str, libs: Sequence[str] = ()) -> str:
     """File-name stem of the library for ``key``, also keyed by the toolchain and platform."""
     salt = (key, _compiler(), *_COMPILE, *_LINK, *libs, ca.__version__, platform.machine(),
