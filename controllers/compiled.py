@@ -48,6 +48,7 @@ import casadi as ca
 
 from controllers import progress
 from toggle.c_library import (
+    DETACHED_TIMEOUT,
     JOB_PREFIX,
     Sources,
     cache_dir,
@@ -261,7 +262,8 @@ def main(argv: Sequence[str]) -> int:
         units: list[Unit] = [(tuple(flags), [ca.Function.deserialize(f) for f in functions])
                              for flags, functions in spec["units"]]
         loaded = shared_library(spec["name"], spec["key"], _sources(lambda: units),
-                                lambda library: _load(library, spec["names"]))
+                                lambda library: _load(library, spec["names"]),
+                                timeout=DETACHED_TIMEOUT)
         job.unlink(missing_ok=True)
         return 0 if loaded is not None else 1
     finally:

@@ -53,6 +53,8 @@ Sources = list[tuple[Sequence[str], Path]]
 _COMPILE = ("-fPIC", "-c")
 _LINK = ("-shared", "-s")
 _TIMEOUT = 300  # s, per compiler run
+#: s, per compiler run of a detached compile (nice 19 on a busy machine: it waits its turn)
+DETACHED_TIMEOUT = 3600
 #: Libraries of one name kept (a planner's 'stroke' library is 4 to 10 MB); older ones (of
 #: changed code or plants, other N, robust variants) are deleted.
 KEEP = 24
@@ -208,12 +210,12 @@ def _checksum(data: bytes) -> str:
     return f"{zlib.crc32(data):08x}"
 
 
-def _run_all(commands: list[list[str]]) -> None:
-    """Run the commands in parallel; raise if any fails."""
+def _run_all(commands: list[list[str]], timeout: float = _TIMEOUT) -> None:
+    """Run the commands in parallel; raise if any fails or outlasts ``timeout`` s."""
     jobs = [subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             for cmd in commands]
     try:
-        codes = [job.wait(timeout=_TIMEOUT) for job in jobs]
+        codes = [job.wait(timeout=timeout) for job in jobs]
     finally:
         for job in jobs:
             if job.poll() is None:
@@ -223,7 +225,8 @@ def _run_all(commands: list[list[str]]) -> None:
         raise subprocess.CalledProcessError(max(codes), commands[codes.index(max(codes))])
 
 
-def _compile(sources: Callable[[Path], Sources], stem: str, libs: Sequence[str]) -> Path | None:
+def _compile(sources: Callable[[Path], Sources], stem: str, libs: Sequence[str],
+             timeout: float = _TIMEOUT) -> Path | None:
     """Write the sources into a scratch directory, compile and link them into a library
     named by ``stem`` and its checksum, moved into the cache in one step; None on failure."""
     try:
@@ -233,9 +236,10 @@ def _compile(sources: Callable[[Path], Sources], stem: str, libs: Sequence[str])
             units = sources(Path(tmp))
             objects = [source.with_suffix(".o") for _, source in units]
             _run_all([[_compiler(), *flags, *_COMPILE, "-o", str(obj), str(source)]
-                      for (flags, source), obj in zip(units, objects)])
+                      for (flags, source), obj in zip(units, objects)], timeout)
             shared = Path(tmp) / "library.so"
-            _run_all([[_compiler(), *_LINK, "-o", str(shared), *map(str, objects), *libs]])
+            _run_all([[_compiler(), *_LINK, "-o", str(shared), *map(str, objects), *libs]],
+                     timeout)
             library = cache_dir() / f"{stem}_{_checksum(shared.read_bytes())}.so"
             os.replace(shared, library)
         return library
@@ -329,11 +333,12 @@ def compile_lock() -> Iterator[None]:
 
 def shared_library(name: str, key: str, sources: Callable[[Path], Sources],
                    load: Callable[[Path], T | None], libs: Sequence[str] = (),
-                   lock: bool = True) -> T | None:
+                   lock: bool = True, timeout: float = _TIMEOUT) -> T | None:
     """``load`` applied to the library cached under ``key``, or else to one compiled from
     ``sources`` (called with a scratch directory; linked with ``libs``) and cached, under
     :func:`compile_lock` (without it where ``lock`` is false: a compile of seconds that
-    must not wait for another's); None where compiling or loading fails."""
+    must not wait for another's), each compiler run given ``timeout`` s; None where
+    compiling or loading fails."""
     loaded = cached_library(name, key, load, libs)
     if loaded is not None:
         return loaded
@@ -341,7 +346,7 @@ def shared_library(name: str, key: str, sources: Callable[[Path], Sources],
         loaded = cached_library(name, key, load, libs)  # compiled by another meanwhile
         if loaded is not None:
             return loaded
-        library = _compile(sources, _stem(name, key, libs), libs)
+        library = _compile(sources, _stem(name, key, libs), libs, timeout)
         loaded = load(library) if library else None
         _prune(name, library)
     return loaded
