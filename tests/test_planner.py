@@ -339,10 +339,10 @@ def test_minimum_time_holds_the_torque_speed_curve_and_a_steeper_one_is_slower(c
     assert np.abs(held.acceleration).max() < lim.acceleration
 
 
-def _no_compile(name, key, names, build, machine_code=True):
+def _no_compile(name, key, names, build, machine_code=True, first=0):
     """Stands in for :func:`compiled` where the cache must hold the problem: loads only."""
     assert machine_code
-    return _real_compiled(name, key, names, _fail_build)
+    return _real_compiled(name, key, names, _fail_build, first=first)
 
 
 def test_a_problem_without_machine_code_is_interpreted_and_plans_alike(chang, tmp_path,
