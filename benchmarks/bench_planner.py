@@ -58,7 +58,8 @@ def cold(intervals: int, duration: float) -> dict[str, float]:
 
 def _in_new_process(args: argparse.Namespace, cache: str | None) -> dict[str, float]:
     """:func:`cold` in a new Python process (optionally with another cache directory)."""
-    env = dict(os.environ, **({"TOGGLE_CACHE_DIR": cache} if cache else {}))
+    env = dict(os.environ, TOGGLE_COMPILE="wait",  # the first-ever plan compiles first
+               **({"TOGGLE_CACHE_DIR": cache} if cache else {}))
     out = subprocess.run([sys.executable, __file__, "--child", "--intervals",
                           str(args.intervals), "--duration", str(args.duration)],
                          env=env, check=True, capture_output=True, text=True).stdout

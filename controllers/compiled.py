@@ -20,20 +20,45 @@ content does not match (truncated, damaged: loading it could crash the process) 
 deleted and rebuilt, as is one that does not load. Where no compiler works or the
 cache is not writable, the functions as built are used, interpreted: same results,
 slower. The generic part (compile, cache, load) is :mod:`toggle.c_library`.
+
+The first process of a plant does not wait for the compile (a minute or more for a
+200-interval problem, against seconds for the whole plan interpreted): with
+``TOGGLE_COMPILE`` unset or ``background`` it plans with the functions interpreted (the
+same functions, the same answers to the printed digits) and hands them to a detached
+compile (:func:`toggle.c_library.compile_later`: ``python -m controllers.compiled JOB``,
+nice 19, under the cache's lock and size cap), one per library at a time, so that the next
+process loads them. ``TOGGLE_COMPILE=wait`` compiles before the answer, as before (the
+test suite, and benchmarks that time the compiled code).
 """
 
 from __future__ import annotations
 
 import ast
+import fcntl
 import hashlib
 import importlib.util
+import json
+import os
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import ModuleType
 
 import casadi as ca
 
-from toggle.c_library import Sources, casadi_source, shared_library
+from controllers import progress
+from toggle.c_library import (
+    DETACHED_TIMEOUT,
+    JOB_PREFIX,
+    Sources,
+    cache_dir,
+    cached_library,
+    casadi_source,
+    compile_later,
+    have_compiler,
+    shared_library,
+)
+from toggle.params import ParameterError
 
 #: One translation unit: its optimisation flags and the functions it holds.
 Unit = tuple[tuple[str, ...], list[ca.Function]]
@@ -105,24 +130,145 @@ def _load(library: Path, names: Sequence[str]) -> list[ca.Function] | None:
         return None
 
 
-def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]],
-             machine_code: bool = True) -> list[ca.Function]:
-    """The functions ``names`` as machine code: from the library cached under ``key``, or
-    else built by ``build``, compiled, cached and loaded; as built (interpreted) where
-    compiling or loading fails, or without ``machine_code`` (a problem solved once, for
-    which a compile would cost more than it saves)."""
-    if not machine_code:
-        built = {fn.name(): fn for _, functions in build() for fn in functions}
-        return [built[n] for n in names]
-    units: list[Unit] = []
+#: How a process gets functions no library holds yet (``TOGGLE_COMPILE``): interpreted,
+#: compiled meanwhile in the background for the next process; or compiled first.
+MODES = ("background", "wait")
 
+
+def compile_mode() -> str:
+    """``TOGGLE_COMPILE``: ``background`` (the default) or ``wait``."""
+    mode = os.environ.get("TOGGLE_COMPILE", "").strip().lower() or MODES[0]
+    if mode not in MODES:
+        raise ParameterError(f"TOGGLE_COMPILE={mode!r}: use one of {', '.join(MODES)}")
+    return mode
+
+
+def _interpreted(units: list[Unit], names: Sequence[str]) -> list[ca.Function]:
+    built = {fn.name(): fn for _, functions in units for fn in functions}
+    return [built[n] for n in names]
+
+
+def _sources(units: Callable[[], list[Unit]]) -> Callable[[Path], Sources]:
+    """The C sources of the units (built when first asked for) in a scratch directory."""
     def sources(tmp: Path) -> Sources:
-        units.extend(build())
         return [(flags, casadi_source(tmp / f"unit{k}.c", functions))
-                for k, (flags, functions) in enumerate(units)]
+                for k, (flags, functions) in enumerate(units())]
+    return sources
 
-    loaded = shared_library(name, key, sources, lambda library: _load(library, names))
+
+def _names_in(units: list[Unit]) -> list[str]:
+    return [fn.name() for _, functions in units for fn in functions]
+
+
+def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]],
+             machine_code: bool = True, first: int = 0) -> list[ca.Function]:
+    """The functions ``names`` as machine code from the library cached under ``key``;
+    else (:func:`compile_mode` ``background``) built by ``build``, the ``first`` units
+    compiled now (small code that carries the arithmetic: seconds; cached as the library
+    ``NAME-first``, which a process asking before the whole library is there loads), the
+    others interpreted, while a detached process compiles them all for the next time; or
+    (``wait``) all compiled, cached and loaded now. As built (interpreted) where compiling
+    or loading fails, or without ``machine_code`` (a problem solved once, for which a
+    compile would cost more than it saves)."""
+    if not machine_code:
+        return _interpreted(build(), names)
+    loaded = cached_library(name, key, lambda library: _load(library, names))
     if loaded is not None:
         return loaded
-    built = {fn.name(): fn for _, functions in units or build() for fn in functions}
-    return [built[n] for n in names]
+    if not have_compiler():  # nothing to compile with: no job written, no scratch made
+        return _interpreted(build(), names)
+    if compile_mode() == "background":
+        return _first_answer(name, key, names, build, first)
+    kept: list[Unit] = []
+
+    def units_once() -> list[Unit]:
+        if not kept:
+            kept.extend(build())
+        return kept
+
+    with progress.doing("compiling the problem, once per plant and code"):
+        loaded = shared_library(name, key, _sources(units_once),
+                                lambda library: _load(library, names))
+    return loaded if loaded is not None else _interpreted(units_once(), names)
+
+
+def _first_answer(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]],
+                  first: int) -> list[ca.Function]:
+    """:func:`compiled`'s functions on a cache miss, ``background``: the ``first`` units
+    compiled now (without the cache's lock: a detached compile may hold it for a minute),
+    the rest interpreted, all of them handed to a detached compile."""
+    with progress.doing("building the problem; compiled in the background for the next "
+                        "run"):
+        units = build()
+        compile_in_background(name, key, names, units)
+    functions = dict(zip(_names_in(units), _interpreted(units, _names_in(units))))
+    quick = _names_in(units[:first])
+    if quick:
+        with progress.doing("compiling the plant's jets"):
+            loaded = shared_library(f"{name}-first", key, _sources(lambda: units[:first]),
+                                    lambda library: _load(library, quick), lock=False)
+        functions.update(zip(quick, loaded or ()))
+    return [functions[n] for n in names]
+
+
+def _job_path(name: str, key: str) -> Path:
+    return cache_dir() / f"{JOB_PREFIX}{name}-{hashlib.sha256(key.encode()).hexdigest()[:24]}.json"
+
+
+def compile_in_background(name: str, key: str, names: Sequence[str], units: list[Unit]
+                          ) -> int | None:
+    """Write the units (CasADi's serialisation) to a job file in the cache and start a
+    detached compile of it (:func:`main`); its process id, or None where none started: one
+    of the same library queued or running already (it holds the job file's lock), or no
+    writable cache."""
+    job = _job_path(name, key)
+    try:
+        job.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(job, os.O_RDWR | os.O_CREAT, 0o600)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        text = json.dumps({"name": name, "key": key, "names": list(names), "units": [
+            [list(flags), [fn.serialize() for fn in functions]] for flags, functions in units]})
+        os.ftruncate(fd, 0)
+        with os.fdopen(os.dup(fd), "w", encoding="utf-8") as out:
+            out.write(text)
+        return compile_later(["-m", "controllers.compiled", str(job)])
+    except OSError:  # locked: a compile of this library is on its way
+        return None
+    finally:
+        os.close(fd)  # unlocked: the job's process takes the lock for the compile
+
+
+def main(argv: Sequence[str]) -> int:
+    """The detached compile of a job file (:func:`compile_in_background`): hold its lock
+    (marking the compile as on its way), compile under the cache's lock (where the library
+    is found, by another's compile, nothing is done), delete the job; exit status 0 if
+    the library is in the cache."""
+    job = Path(argv[0])
+    try:
+        fd = os.open(job, os.O_RDWR)
+    except OSError:
+        return 1
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # after the writer's
+        try:
+            with os.fdopen(os.dup(fd), encoding="utf-8") as text:
+                spec = json.loads(text.read())
+        except ValueError:  # empty or cut short: its writer was killed
+            job.unlink(missing_ok=True)
+            return 1
+        units: list[Unit] = [(tuple(flags), [ca.Function.deserialize(f) for f in functions])
+                             for flags, functions in spec["units"]]
+        loaded = shared_library(spec["name"], spec["key"], _sources(lambda: units),
+                                lambda library: _load(library, spec["names"]),
+                                timeout=DETACHED_TIMEOUT)
+        job.unlink(missing_ok=True)
+        return 0 if loaded is not None else 1
+    finally:
+        os.close(fd)
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -486,8 +486,9 @@ class StrokeProblem:
         key = problem_key(self.config, N, self.variants, self.opening) + (
             "\ntorque" if self.torque else "") + ("\nzone" if self.zone else "")
         names = _names(len(self.plants))
+        # the jets (the first unit) carry the arithmetic: compiled for a first answer too
         fn = dict(zip(names, compiled("stroke", key, names, self._symbolic,
-                                      self.machine_code)))
+                                      self.machine_code, first=1)))
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
         L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.n_constraints)
         z = self._nodes(W, P[_P["t_ref"]])[-1]

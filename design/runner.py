@@ -169,6 +169,7 @@ class Runner:
             # Ctrl-C or SIGTERM while the cluster starts is acted on once it is up (stopped
             # half-way, distributed's cleanup failed with a traceback), and its event loop
             # and worker processes never see the terminal's Ctrl-C: this process closes them
+            self._bar.doing(f"starting {n} worker processes")  # named on a pipe's lines
             try:
                 with signals_held(signal.SIGINT, signal.SIGTERM), dask.config.set(WORKER_CONFIG):
                     self._cluster = LocalCluster(
@@ -178,6 +179,7 @@ class Runner:
             except BaseException:
                 self.__exit__()
                 raise
+            self._bar.doing(None)
         return self
 
     def __exit__(self, *exc: object) -> None:

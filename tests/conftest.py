@@ -28,6 +28,10 @@ from hypothesis import strategies as st
 
 from toggle.params import HalfDims, Mechanism, load_preset
 
+# the suite compiles a planner's functions before it plans (as a benchmark does), not in a
+# detached process that would outlive the run; tests/test_cold_plan.py tries the default
+os.environ.setdefault("TOGGLE_COMPILE", "wait")
+
 # no per-example deadline: a second worker or a compile of the planner's problem on the
 # other core makes an example's time meaningless (the tests bound their work by counts)
 settings.register_profile("suite", deadline=None)

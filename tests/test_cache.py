@@ -4,6 +4,7 @@ clears it. Every test has its own TOGGLE_CACHE_DIR."""
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
@@ -71,7 +72,8 @@ def test_the_next_compile_removes_a_killed_compiles_scratch(cache: Path) -> None
     library = c_library.shared_library("probe", "key", sources, lambda p: p)
     assert library is not None and library.parent == cache and library.exists()
     assert not dead.exists()
-    assert [p.name for p in cache.iterdir()] == [library.name]  # no scratch of its own left
+    # no scratch of its own left; the lock file stays
+    assert sorted(p.name for p in cache.iterdir()) == sorted([library.name, c_library.LOCK])
 
 
 def test_the_cache_is_capped_least_recently_used_first(cache: Path,
@@ -120,3 +122,38 @@ def test_toggle_version_loads_no_command() -> None:
     from toggle import __version__
     assert out[0] == f"toggle {__version__}"
     assert out[1] == "0 []"
+
+
+@pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None, reason="no C compiler")
+def test_a_compile_holds_the_caches_lock_and_looks_again_once_it_has_it(cache: Path) -> None:
+    held = []
+
+    def sources(tmp: Path) -> list:
+        with open(cache / c_library.LOCK) as other:  # another process's try, in effect
+            try:
+                fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                held.append(False)
+            except BlockingIOError:
+                held.append(True)
+        source = tmp / "unit0.c"
+        source.write_text("int answer(void) { return 42; }\n")
+        return [((), source)]
+
+    first = c_library.shared_library("probe", "locked", sources, lambda p: p)
+    assert held == [True] and first is not None
+    # the same library asked for again: found (as after another process's compile), not
+    # compiled
+    again = c_library.shared_library("probe", "locked", lambda tmp: pytest.fail("compiled"),
+                                     lambda p: p)
+    assert again == first
+
+
+def test_clearing_removes_a_killed_compiles_job_but_not_a_running_ones(cache: Path) -> None:
+    cache.mkdir(exist_ok=True)
+    left, running = cache / f"{c_library.JOB_PREFIX}a.json", cache / f"{c_library.JOB_PREFIX}b.json"
+    left.write_text("{}")
+    running.write_text("{}")
+    with open(running) as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        assert c_library.clear_cache() == (1, 2)
+    assert not left.exists() and running.exists()

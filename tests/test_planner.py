@@ -339,10 +339,10 @@ def test_minimum_time_holds_the_torque_speed_curve_and_a_steeper_one_is_slower(c
     assert np.abs(held.acceleration).max() < lim.acceleration
 
 
-def _no_compile(name, key, names, build, machine_code=True):
+def _no_compile(name, key, names, build, machine_code=True, first=0):
     """Stands in for :func:`compiled` where the cache must hold the problem: loads only."""
     assert machine_code
-    return _real_compiled(name, key, names, _fail_build)
+    return _real_compiled(name, key, names, _fail_build, first=first)
 
 
 def test_a_problem_without_machine_code_is_interpreted_and_plans_alike(chang, tmp_path,
@@ -819,8 +819,8 @@ def test_progress_counts_each_solve_against_the_total_it_announced(chang, monkey
     (a start skipped on reaching the lower bound counts as done); a minimum-time search
     counts its fastest stroke and each continuation step and tightening (its _fastest
     solves), the total known before the count reaches it."""
-    from controllers.planner import _LATE_STARTS
     from controllers.progress import Progress, reporting
+    from controllers.stroke_solver import LATE_STARTS
 
     _, _, planner, _ = chang
     seen: list[tuple[int, int]] = []
@@ -832,7 +832,7 @@ def test_progress_counts_each_solve_against_the_total_it_announced(chang, monkey
 
     with reporting(Recorded("best", enabled=False)) as bar:
         planner.best(DURATION)
-    assert (bar.n, bar.total) == (2 + len(_LATE_STARTS), 2 + len(_LATE_STARTS))  # warm too
+    assert (bar.n, bar.total) == (2 + len(LATE_STARTS), 2 + len(LATE_STARTS))  # warm too
     assert all(n <= total == bar.total for n, total in seen)
 
     planner.least_peak()  # kept on the planner: not counted below
@@ -857,7 +857,7 @@ def test_toggle_plan_shows_its_solves_on_a_terminal(chang, monkeypatch, capsys):
     import io
 
     from controllers import progress
-    from controllers.planner import _LATE_STARTS
+    from controllers.stroke_solver import LATE_STARTS
 
     class Terminal(io.StringIO):
         def isatty(self) -> bool:
@@ -868,7 +868,7 @@ def test_toggle_plan_shows_its_solves_on_a_terminal(chang, monkeypatch, capsys):
         err = Terminal()
         monkeypatch.setattr("sys.stderr", err)
         assert main(["plan", "--duration", str(DURATION), *json_flag]) == 0
-        starts = 2 + len(_LATE_STARTS)  # the planner has a previous plan: a warm start too
+        starts = 2 + len(LATE_STARTS)  # the planner has a previous plan: a warm start too
         assert (f"| {starts}/{starts} [" in err.getvalue()) is expected
         assert err.getvalue().startswith("\rplanning") is expected
     capsys.readouterr()

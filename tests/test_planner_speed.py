@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from controllers import background, planner
+from controllers import background, planner, stroke_solver
 from controllers.limits import drive_limits
 from controllers.planner import best_plan, planner_for
 from controllers.plans import NO_PROTECTION, plan_config
@@ -94,5 +94,5 @@ def test_a_robust_plans_bar_counts_its_nominal_twins_solves(monkeypatch, capsys,
                  str(INTERVALS)]) == 0
     counts = re.findall(r"\| (\d+)/(\d+) \[", err.getvalue())
     done, total = map(int, counts[-1])
-    assert done == total >= 2 * (1 + len(planner._LATE_STARTS))
+    assert done == total >= 2 * (1 + len(stroke_solver.LATE_STARTS))
     capsys.readouterr()

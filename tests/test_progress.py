@@ -1,12 +1,17 @@
 """The planning's progress (controllers.progress): a count against a total, a tqdm bar on a
-terminal after SHOW_AFTER s, a line at most every LINE_EVERY s elsewhere."""
+terminal after SHOW_AFTER s, a line at least every LINE_EVERY s elsewhere (also while
+nothing counts: a build, a compile), an ETA from the solves' own time, and nothing after a
+command's error."""
 
 from __future__ import annotations
 
 import io
+import time
+from contextlib import redirect_stderr, redirect_stdout
 
 from controllers import progress
 from controllers.progress import LINE_EVERY, SHOW_AFTER, Progress, reporting
+from toggle_cli import main
 
 
 class Terminal(io.StringIO):
@@ -38,17 +43,84 @@ def test_the_bar_counts_against_a_growing_total_on_a_terminal(monkeypatch):
     assert bar.n == 5
 
 
-def test_without_a_terminal_one_line_a_minute():
+def test_without_a_terminal_a_line_every_line_every_seconds_at_the_counts():
     out, clock = io.StringIO(), Clock()
-    bar = Progress("planning", total=100, file=out, clock=clock)
+    bar = Progress("planning", total=100, file=out, clock=clock, heartbeat=False)
     for _ in range(100):
         clock.now += 1.0
         bar.advance()
     lines = out.getvalue().splitlines()
-    # the first once SHOW_AFTER s have passed, then one each LINE_EVERY s: at 2 s and 62 s
+    # the first once SHOW_AFTER s have passed, then one each LINE_EVERY s: at 2 s, 12 s...
     assert len(lines) == 1 + int((100 - SHOW_AFTER) // LINE_EVERY)
     assert lines[0].startswith("planning:") and f"{int(SHOW_AFTER)}/100" in lines[0]
     assert f"{int(SHOW_AFTER + LINE_EVERY)}/100" in lines[1]
+    bar.close()  # the last count, 100, not shown yet
+    assert out.getvalue().splitlines()[-1].startswith("planning: 100/100 solves done")
+
+
+def test_a_long_wait_without_counts_still_prints_a_line_every_line_every_seconds():
+    """A compile or one long solve: the heartbeat's beats write the lines, naming the wait;
+    no ETA before a solve is done."""
+    out, clock = io.StringIO(), Clock()
+    bar = Progress("planning", file=out, clock=clock, heartbeat=False)
+    bar.doing("compiling the problem")
+    for _ in range(60):
+        clock.now += 0.5
+        bar.beat()
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 1 + int((30 - SHOW_AFTER) // LINE_EVERY)
+    assert all(line.startswith("planning (compiling the problem): 0 solves") for line in lines)
+    assert all(line.endswith("ETA ?") for line in lines)
+    assert "0:02 elapsed" in lines[0] and f"0:{2 + int(LINE_EVERY):02d} elapsed" in lines[1]
+
+
+def test_the_eta_is_the_time_per_solve_times_the_solves_left_without_the_named_waits():
+    clock = Clock()
+    bar = Progress("planning", total=0, file=io.StringIO(), clock=clock, heartbeat=False)
+    bar.doing("building the problem")
+    clock.now = 30.0  # a build: no solve's time
+    bar.doing(None)
+    bar.expect(4)
+    assert bar.eta() is None
+    for _ in range(2):
+        clock.now += 5.0
+        bar.advance()
+    assert bar.eta() == 10.0  # 5 s a solve, two left
+    assert "ETA 0:10" in bar.line(clock.now)
+    clock.now += 3.0  # into the third solve
+    assert bar.eta() == 7.0
+    clock.now += 4.0  # the third solve overdue: at least the fourth is left
+    assert bar.eta() == 5.0
+
+
+def test_a_closed_progress_writes_nothing_more(monkeypatch):
+    monkeypatch.setattr(progress, "SHOW_AFTER", 0.0)
+    monkeypatch.setattr(progress, "LINE_EVERY", 0.02)
+    out = io.StringIO()
+    bar = Progress("planning", file=out)
+    time.sleep(0.3)
+    assert out.getvalue().count("\n") >= 2  # the heartbeat wrote
+    bar.close()
+    written = out.getvalue()
+    time.sleep(0.2)
+    assert out.getvalue() == written
+
+
+def test_a_commands_error_is_the_last_line_of_stderr_after_progress_lines(monkeypatch):
+    """A progress a failing path left open (its ``finally`` not reached) is stopped by
+    main() before the error is printed."""
+    monkeypatch.setattr(progress, "SHOW_AFTER", 0.0)
+    monkeypatch.setattr(progress, "LINE_EVERY", 0.02)
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        Progress("planning")  # left open, writing lines every 20 ms
+        time.sleep(0.2)
+        code = main(["plan", "--break-speed", "0.005"])  # refused: no --cycle
+        time.sleep(0.2)
+    lines = err.getvalue().splitlines()
+    assert code == 2 and len(lines) >= 3
+    assert lines[-1].startswith("toggle plan: error: --break-speed")
+    assert all(line.startswith("planning: 0 solves") for line in lines[:-1])
 
 
 def test_nothing_is_shown_when_disabled_or_quick(monkeypatch):

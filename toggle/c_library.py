@@ -18,21 +18,30 @@ recently used deleted first (a library's time is refreshed when it is loaded). A
 works in a scratch folder named by host and process (``scratch-HOST-PID-*``); one left by a
 killed compile is removed when the next compile starts. ``toggle cache`` shows and clears
 it (:func:`cache_report`, :func:`clear_cache`).
+
+One compile at a time per cache: a compile holds the cache's lock (``compile.lock``, an
+``flock``) and looks for the library again once it has it, so a second process asking for
+the same library waits for the first's and loads it instead of compiling it again.
+:func:`compile_later` runs a compile detached (its own session, nice 19, no terminal):
+the first answer goes on with the functions interpreted while the library is built for
+the next process.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import hashlib
 import os
 import platform
 import shutil
 import socket
 import subprocess
+import sys
 import tempfile
 import time
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import NamedTuple, TypeVar
 
@@ -44,12 +53,17 @@ Sources = list[tuple[Sequence[str], Path]]
 _COMPILE = ("-fPIC", "-c")
 _LINK = ("-shared", "-s")
 _TIMEOUT = 300  # s, per compiler run
+#: s, per compiler run of a detached compile (nice 19 on a busy machine: it waits its turn)
+DETACHED_TIMEOUT = 3600
 #: Libraries of one name kept (a planner's 'stroke' library is 4 to 10 MB); older ones (of
 #: changed code or plants, other N, robust variants) are deleted.
 KEEP = 24
 #: Default cap on the cache's total size, MB (``TOGGLE_CACHE_MAX_MB``).
 DEFAULT_MAX_MB = 200.0
 _SCRATCH = "scratch-"
+LOCK = "compile.lock"
+#: The name's start of a detached compile's input (:func:`compile_later`'s caller's).
+JOB_PREFIX = "job-"
 
 
 def cache_dir() -> Path:
@@ -147,12 +161,24 @@ def cache_report() -> CacheReport:
                        (len(stale), sum(map(_size, stale))), size_cap())
 
 
+def _unlocked(path: Path) -> bool:
+    """Whether no process holds ``path``'s lock (a job file no compile works on)."""
+    try:
+        with open(path, "rb") as held:
+            fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return False
+    return True
+
+
 def clear_cache() -> tuple[int, int]:
-    """Delete every cached library and killed compiles' scratch (a running compile's
-    scratch stays); return (files, bytes) removed."""
+    """Delete every cached library, killed compiles' scratch and the job files no detached
+    compile works on (a running compile's scratch and job stay); return (files, bytes)
+    removed."""
     files, freed = 0, remove_stale_scratch()
     if cache_dir().is_dir():
-        for library in cache_dir().glob("*.so"):
+        jobs = [job for job in cache_dir().glob(f"{JOB_PREFIX}*") if _unlocked(job)]
+        for library in [*cache_dir().glob("*.so"), *jobs]:
             try:
                 size = library.stat().st_size
                 library.unlink()
@@ -164,6 +190,11 @@ def clear_cache() -> tuple[int, int]:
 
 def _compiler() -> str:
     return os.environ.get("CC", "gcc")
+
+
+def have_compiler() -> bool:
+    """Whether the C compiler (``CC``, default ``gcc``) is there to run."""
+    return shutil.which(_compiler()) is not None
 
 
 def _stem(name: str, key: str, libs: Sequence[str] = ()) -> str:
@@ -179,12 +210,12 @@ def _checksum(data: bytes) -> str:
     return f"{zlib.crc32(data):08x}"
 
 
-def _run_all(commands: list[list[str]]) -> None:
-    """Run the commands in parallel; raise if any fails."""
+def _run_all(commands: list[list[str]], timeout: float = _TIMEOUT) -> None:
+    """Run the commands in parallel; raise if any fails or outlasts ``timeout`` s."""
     jobs = [subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             for cmd in commands]
     try:
-        codes = [job.wait(timeout=_TIMEOUT) for job in jobs]
+        codes = [job.wait(timeout=timeout) for job in jobs]
     finally:
         for job in jobs:
             if job.poll() is None:
@@ -194,7 +225,8 @@ def _run_all(commands: list[list[str]]) -> None:
         raise subprocess.CalledProcessError(max(codes), commands[codes.index(max(codes))])
 
 
-def _compile(sources: Callable[[Path], Sources], stem: str, libs: Sequence[str]) -> Path | None:
+def _compile(sources: Callable[[Path], Sources], stem: str, libs: Sequence[str],
+             timeout: float = _TIMEOUT) -> Path | None:
     """Write the sources into a scratch directory, compile and link them into a library
     named by ``stem`` and its checksum, moved into the cache in one step; None on failure."""
     try:
@@ -204,9 +236,10 @@ def _compile(sources: Callable[[Path], Sources], stem: str, libs: Sequence[str])
             units = sources(Path(tmp))
             objects = [source.with_suffix(".o") for _, source in units]
             _run_all([[_compiler(), *flags, *_COMPILE, "-o", str(obj), str(source)]
-                      for (flags, source), obj in zip(units, objects)])
+                      for (flags, source), obj in zip(units, objects)], timeout)
             shared = Path(tmp) / "library.so"
-            _run_all([[_compiler(), *_LINK, "-o", str(shared), *map(str, objects), *libs]])
+            _run_all([[_compiler(), *_LINK, "-o", str(shared), *map(str, objects), *libs]],
+                     timeout)
             library = cache_dir() / f"{stem}_{_checksum(shared.read_bytes())}.so"
             os.replace(shared, library)
         return library
@@ -268,19 +301,67 @@ def casadi_source(path: Path, functions: Sequence[ca.Function]) -> Path:
     return path
 
 
-def shared_library(name: str, key: str, sources: Callable[[Path], Sources],
-                   load: Callable[[Path], T | None], libs: Sequence[str] = ()) -> T | None:
-    """``load`` applied to the library cached under ``key``, or else to one compiled from
-    ``sources`` (called with a scratch directory; linked with ``libs``) and cached; None
-    where compiling or loading fails."""
-    stem = _stem(name, key, libs)
-    for library in cache_dir().glob(f"{stem}_*.so"):
+def cached_library(name: str, key: str, load: Callable[[Path], T | None],
+                   libs: Sequence[str] = ()) -> T | None:
+    """``load`` applied to the library cached under ``key``; None if there is none (or it
+    does not load). Nothing is compiled."""
+    for library in cache_dir().glob(f"{_stem(name, key, libs)}_*.so"):
         loaded = load(library) if _intact(library) else None
         if loaded is not None:
             with contextlib.suppress(OSError):  # used now: the last to be pruned
                 os.utime(library)
             return loaded
-    library = _compile(sources, stem, libs)
-    loaded = load(library) if library else None
-    _prune(name, library)
+    return None
+
+
+@contextlib.contextmanager
+def compile_lock() -> Iterator[None]:
+    """Hold the cache's compile lock (waiting for another process's compile to end);
+    without a usable cache folder, nothing is held (the compile then fails on its own)."""
+    try:
+        cache_dir().mkdir(parents=True, exist_ok=True)
+        fd = os.open(cache_dir() / LOCK, os.O_RDWR | os.O_CREAT, 0o600)
+    except OSError:
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # the lock goes with the descriptor
+
+
+def shared_library(name: str, key: str, sources: Callable[[Path], Sources],
+                   load: Callable[[Path], T | None], libs: Sequence[str] = (),
+                   lock: bool = True, timeout: float = _TIMEOUT) -> T | None:
+    """``load`` applied to the library cached under ``key``, or else to one compiled from
+    ``sources`` (called with a scratch directory; linked with ``libs``) and cached, under
+    :func:`compile_lock` (without it where ``lock`` is false: a compile of seconds that
+    must not wait for another's), each compiler run given ``timeout`` s; None where
+    compiling or loading fails."""
+    loaded = cached_library(name, key, load, libs)
+    if loaded is not None:
+        return loaded
+    with compile_lock() if lock else contextlib.nullcontext():
+        loaded = cached_library(name, key, load, libs)  # compiled by another meanwhile
+        if loaded is not None:
+            return loaded
+        library = _compile(sources, _stem(name, key, libs), libs, timeout)
+        loaded = load(library) if library else None
+        _prune(name, library)
     return loaded
+
+
+def compile_later(argv: Sequence[str]) -> int | None:
+    """Start ``python argv...`` (a compile for the next process) detached: its own session
+    (a Ctrl-C at the terminal and this process's end leave it running), under ``nice -n
+    19`` (its compilers inherit it), no standard streams (nothing of it on this command's
+    output); its process id, or None if it could not start."""
+    nice = shutil.which("nice")
+    command = [*([nice, "-n", "19"] if nice else []), sys.executable, *argv]
+    actions = [(os.POSIX_SPAWN_OPEN, fd, os.devnull, os.O_RDWR, 0) for fd in (0, 1, 2)]
+    try:
+        return os.posix_spawn(command[0], command, dict(os.environ), file_actions=actions,
+                              setsid=True, setsigmask=())  # no signal blocked as here
+    except (OSError, NotImplementedError, AttributeError):  # no posix_spawn (Windows)
+        return None

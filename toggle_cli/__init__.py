@@ -122,6 +122,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             if stop is None:
                 raise
             raise stop from None
+        finally:  # no progress line after the error printed below: it is the last line
+            if (shown := sys.modules.get("controllers.progress")) is not None:
+                shown.stop_all()
     except BrokenPipeError:
         return quiet_broken_pipe()
     except Terminated:  # SIGTERM: a planning process that ran is stopped

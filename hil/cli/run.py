@@ -197,7 +197,7 @@ def _record(plant: Plant, trajectory: Trajectory, rec: RunRecorder, guard: Signa
     """
     reason, interrupted = None, None
     print(f"run directory: {rec.dir}", file=sys.stderr)
-    # a bar on a terminal, a line a minute in a log
+    # a bar on a terminal, a line every few seconds in a log (closed below on every ending)
     bar = Progress(f"hil run ({plant.name})", unit="cycle", total=s.cycles, enabled=not s.quiet)
     # from here a signal only gets noted; the loop acts on it between samples, so the
     # recording and the link are never cut mid-operation
