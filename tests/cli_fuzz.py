@@ -123,6 +123,7 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     from hil.emulators.rig_emulator import RigEmulator
     from hil.host import experiment
     from hil.host.samples import Trajectory
+    from hil.panel import server as panel_server
     from toggle.files import atomic_path
 
     def fake_build(out: Path, *_args: object, **_kwargs: object) -> Path:
@@ -142,6 +143,10 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     def stop_at_once(_stopped: object) -> None:
         raise Interrupted(signal.SIGINT)
 
+    async def serve_at_once(_state: object, announce: Callable[[str], None]) -> None:
+        announce("http://127.0.0.1:0/?token=fuzz")  # hil panel: its server ends at once
+
+
     canned = Trajectory.from_positions(np.linspace(-3.4386e-3, 51.5e-3, 50), 1e-3)
     mp.setattr(Figure, "savefig", fake_savefig)
     mp.setattr(Figure, "tight_layout", lambda fig, **_kw: None)
@@ -152,6 +157,7 @@ def cheap_commands(mp: pytest.MonkeyPatch, workdir: Path) -> None:
     mp.setattr(experiment, "planned_trajectory", lambda *a, **k: canned)
     mp.setattr(RigEmulator, "serve", lambda self: None)
     mp.setattr(hil_emulate, "serve_until", stop_at_once)  # QEMU, the rehosted board
+    mp.setattr(panel_server, "serve", serve_at_once)  # hil panel serves until a signal
     workdir.mkdir(parents=True, exist_ok=True)
     mp.chdir(workdir)
 

@@ -16,7 +16,8 @@ from typing import Any
 
 from hil.host.run_settings import check_port
 from toggle.args import number
-from toggle.params import ParameterError
+from toggle.files import check_writable_dir
+from toggle.params import ParameterError, load_preset
 
 DESCRIPTION = ("Start the rig service (the simulated rig, or --real --port P: the rig or its "
                "emulator) and a web server on loopback; print the page's URL once, with its "
@@ -61,6 +62,8 @@ def panel(args: argparse.Namespace) -> int:
         check_port(args.port)
     elif args.port is not None:
         raise ParameterError("--port needs --real")
+    load_preset(args.preset)  # an unknown or invalid preset: told before anything starts
+    check_writable_dir(args.runs, "--runs")  # where every run's record goes: before the start
     if not 0 <= args.http_port <= 65535:
         raise ParameterError(f"--http-port must be a TCP port, got {args.http_port}")
     try:
