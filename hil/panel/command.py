@@ -41,7 +41,8 @@ def add_parser(subparsers: Any) -> None:
                         "listed from there)")
     p.add_argument("--preset", default="chang2021", help="clamp preset of the rig")
     p.add_argument("--force-limit", type=number(1.0, 5000.0, "must be a force in N"),
-                   default=400.0, dest="force_limit", help="host-side stop on |input force|, N")
+                   default=400.0, dest="force_limit",
+                   help="host-side stop on |input force|, N (default 400 N, the rig's load cell)")
     for name, what in (("ack-ms", "the host's wait for an ACK"),
                        ("watchdog-ms", "the host's watchdog on telemetry silence"),
                        ("heartbeat-ms", "the MCU's heartbeat watchdog")):
