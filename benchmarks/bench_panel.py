@@ -32,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hil import protocol as p  # noqa: E402
+from hil.link import protocol as p  # noqa: E402
 from tests.hil_host import spawn  # noqa: E402
 from tests.panel_support import PanelProcess, chromium, quit_browser, wait_until  # noqa: E402
 
