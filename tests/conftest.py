@@ -101,6 +101,19 @@ def _turns(request: pytest.FixtureRequest,
 
 
 @pytest.fixture(scope="session")
+def elf() -> Path:
+    """The NUCLEO-F446RE image (built once, cached in build/) for the rehosted-board tests;
+    skipped where the cross toolchain is missing."""
+    from hil.emulators.firmware_qemu import qemu_available
+    from hil.emulators.rehost.nucleo import build_nucleo_image
+
+    missing = qemu_available(need_qemu=False)
+    if missing:
+        pytest.skip(f"needs the Debian packages: {' '.join(missing)}")
+    return build_nucleo_image()
+
+
+@pytest.fixture(scope="session")
 def chang() -> Mechanism:
     return load_preset("chang2021")
 

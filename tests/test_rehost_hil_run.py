@@ -9,22 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from hil.emulators.firmware_qemu import qemu_available
 from hil.emulators.mcu_model import RigHardware
 from hil.host.backends import RigSetup
 from hil.link import protocol as p
 
 unicorn = pytest.importorskip("unicorn", reason="needs the unicorn package (pip install unicorn)")
 
-from hil.emulators.rehost.nucleo import NucleoBoard, NucleoRig, build_nucleo_image  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def elf() -> Path:
-    missing = qemu_available(need_qemu=False)
-    if missing:
-        pytest.skip(f"needs the Debian packages: {' '.join(missing)}")
-    return build_nucleo_image()
+from hil.emulators.rehost.nucleo import NucleoBoard, NucleoRig  # noqa: E402
 
 
 @pytest.mark.alone
