@@ -25,7 +25,7 @@ unicorn = pytest.importorskip("unicorn", reason="needs the unicorn package (pip 
 from hil.emulators.rehost.machine import UNITS_PER_S, UnsupportedAccessError  # noqa: E402
 from hil.emulators.rehost.nucleo import NucleoBoard, NucleoRig  # noqa: E402
 from hil.emulators.rehost.pulses import TMC5160, full_rate_reversal  # noqa: E402
-from hil.emulators.rehost.stm32f446 import PowerCutError  # noqa: E402
+from hil.emulators.rehost.stm32f446.flash import PowerCutError  # noqa: E402
 
 NO_CHECK = -(2**31)
 
@@ -555,7 +555,7 @@ def test_a_full_sector_goes_on_in_the_other_and_a_cut_there_keeps_the_last(elf: 
     """Sector 5 full of records (4096): the next store goes to sector 6, which the boot
     erased; a power cut in that write keeps sector 5's newest, and the boot after erases the
     torn sector 6 again; once sector 6 holds the newest, the next boot erases sector 5."""
-    from hil.emulators.rehost.stm32f446 import Flash
+    from hil.emulators.rehost.stm32f446.flash import Flash
 
     board, _ = _board(elf)
     sector = Flash.SECTOR_SIZE

@@ -27,16 +27,11 @@ from hil_host import SHORT_RUN, Host, wait_for
 from hil.host.backends import RigPlant, RigSetup, RunStoppedError
 from hil.host.samples import Trajectory
 from hil.link import protocol as p
-from hil.link.serial_link import (
-    ESTOP_REPEATS,
-    STOP_ATTEMPTS,
-    CommandError,
-    HandshakeError,
-    LinkTimeoutError,
-    SerialLink,
-    SilenceWatchdog,
-    sample_distance,
-)
+from hil.link.errors import CommandError, HandshakeError, LinkTimeoutError
+from hil.link.link_commands import ESTOP_REPEATS
+from hil.link.link_stop import STOP_ATTEMPTS
+from hil.link.serial_link import SerialLink
+from hil.link.telemetry_watch import SilenceWatchdog, sample_distance
 
 pytestmark = pytest.mark.real_time
 

@@ -19,8 +19,7 @@ from hil_host import wait_for
 from hil.emulators.mcu_model import RigHardware
 from hil.emulators.rig_emulator import FaultPlan, RigEmulator
 from hil.link import protocol as p
-from hil.link.realtime import SESSION_NICE
-from hil.link.serial_link import (
+from hil.link.errors import (
     CommandError,
     HandshakeError,
     LinkLostError,
@@ -29,8 +28,9 @@ from hil.link.serial_link import (
     RigFaultError,
     RigResetError,
     RigStalledError,
-    SerialLink,
 )
+from hil.link.realtime import SESSION_NICE
+from hil.link.serial_link import SerialLink
 
 pytestmark = pytest.mark.real_time
 

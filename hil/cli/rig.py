@@ -18,7 +18,8 @@ from typing import Any
 
 from hil.host.run_settings import check_port
 from hil.link import protocol as p
-from hil.link.serial_link import CommandError, RigError, SerialLink
+from hil.link.errors import CommandError, RigError
+from hil.link.serial_link import SerialLink
 from toggle.args import PROBABILITY, TIME, integer, length, number, positive
 
 

@@ -419,7 +419,8 @@ class RigPlant(Plant):
     def _activate(self) -> None:
         from hil.host.homing import home
         from hil.link import protocol as p
-        from hil.link.serial_link import RigError, SerialLink
+        from hil.link.errors import RigError
+        from hil.link.serial_link import SerialLink
 
         s = self.setup
         self._x0, _ = s.stroke
@@ -478,7 +479,7 @@ class RigPlant(Plant):
 
     def _move_to(self, x: float, check: Callable[[], None]) -> float:
         from hil.host.homing import move_to
-        from hil.link.serial_link import RigError
+        from hil.link.errors import RigError
 
         try:
             distance = move_to(self._link, x, self._x0, self.setup.limits, check=check)
@@ -492,7 +493,7 @@ class RigPlant(Plant):
 
     def _sample(self, tel: p.Telemetry, total: int) -> Sample:
         from hil.link import protocol as p
-        from hil.link.serial_link import sample_distance
+        from hil.link.telemetry_watch import sample_distance
 
         sc, x0 = self._link.scaling, self._x0
         if tel.faults:
@@ -506,7 +507,7 @@ class RigPlant(Plant):
                       sc.platen(tel.enc), sc.force(tel.load_raw), status, tel.sample)
 
     def _run(self, trajectory: Trajectory) -> Iterator[Sample]:
-        from hil.link.serial_link import RigError, RigFaultError
+        from hil.link.errors import RigError, RigFaultError
 
         link, sc, x0 = self._link, self._link.scaling, self._x0
         x = trajectory.x_cmd

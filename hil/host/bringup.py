@@ -23,7 +23,8 @@ from typing import Any
 from hil.host.backends import RigSetup
 from hil.host.homing import APPROACH_SPEED, ConstantSpeed, move_to
 from hil.link import protocol as p
-from hil.link.serial_link import RigError, SerialLink
+from hil.link.errors import RigError
+from hil.link.serial_link import SerialLink
 from toggle.kinematics import output_position
 from toggle.params import load_preset
 

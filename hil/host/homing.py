@@ -15,7 +15,8 @@ from typing import overload
 from controllers.limits import DriveLimits
 from hil.host.experiment import stroke_positions
 from hil.link import protocol as p
-from hil.link.serial_link import RigError, SerialLink
+from hil.link.errors import RigError
+from hil.link.serial_link import SerialLink
 
 #: Speed of the search for the home switch, m/s.
 SEARCH_SPEED = 5e-3

@@ -116,7 +116,8 @@ class RigService:
             self.disconnect()  # a watchdog or a lost link ends a session: open a new one
         if self.backend != "rig" or self.link is not None:
             return
-        from hil.link.serial_link import RigError, SerialLink
+        from hil.link.errors import RigError
+        from hil.link.serial_link import SerialLink
 
         # realtime: the reader thread (and its heartbeats) at SCHED_FIFO when the OS permits,
         # as RigPlant's. One session for the panel's life (runs included, RigPlant's

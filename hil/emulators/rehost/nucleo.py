@@ -61,23 +61,14 @@ from hil.emulators.rehost.machine import (
     load_elf,
     seconds,
 )
-from hil.emulators.rehost.stm32f446 import (
-    HSE_HZ,
-    Dma1,
-    EncoderTimer,
-    Flash,
-    FlashMemory,
-    Gpio,
-    Iwdg,
-    PulseCounter,
-    Pwr,
-    Rcc,
-    Rng,
-    Spi,
-    StepTimer,
-    TickTimer,
-    Usart,
-)
+from hil.emulators.rehost.stm32f446.clocks import HSE_HZ, Pwr, Rcc
+from hil.emulators.rehost.stm32f446.flash import Flash, FlashMemory
+from hil.emulators.rehost.stm32f446.gpio import Gpio
+from hil.emulators.rehost.stm32f446.iwdg import Iwdg
+from hil.emulators.rehost.stm32f446.rng import Rng
+from hil.emulators.rehost.stm32f446.spi import Spi
+from hil.emulators.rehost.stm32f446.timers import EncoderTimer, PulseCounter, StepTimer, TickTimer
+from hil.emulators.rehost.stm32f446.usart_dma import Dma1, Usart
 from hil.emulators.rig_physics import ClampPhysics
 
 NUCLEO_ELF = BUILD_DIR / "board-nucleo" / "rig.elf"

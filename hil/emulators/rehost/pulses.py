@@ -2,9 +2,9 @@
 driver's STEP/DIR minimums (docs/firmware.md "Stepper driver").
 
 :data:`TMC5160` holds the driver's minimums with their source; :func:`burst_timing`
-measures a run's bursts (:class:`hil.emulators.rehost.stm32f446.Burst`); :func:`full_rate_reversal`
-runs the image through the hardest case, 256 steps per period out and back with an instant
-reversal, and returns what it measured (tests/test_firmware_rehost.py and
+measures a run's bursts (:class:`hil.emulators.rehost.stm32f446.timers.Burst`);
+:func:`full_rate_reversal` runs the image through the hardest case, 256 steps per period out
+and back with an instant reversal, and returns what it measured (tests/test_firmware_rehost.py and
 docs/firmware_figures.py use it).
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 from hil.emulators.mcu_model import RigHardware
 from hil.emulators.rehost.machine import UNITS_PER_S
 from hil.emulators.rehost.nucleo import NucleoBoard
-from hil.emulators.rehost.stm32f446 import Burst
+from hil.emulators.rehost.stm32f446.timers import Burst
 from hil.link import protocol as p
 
 
