@@ -81,7 +81,7 @@ extern bool driver_on;  /* what hal_driver_enable last set */
 extern uint32_t clock_fault;            /* a CLOCK_* code (0: none) */
 extern uint32_t apb1_hz, apb1_timer_hz; /* APB1_HZ, APB1_TIMER_HZ, or HSI_HZ on the fallback */
 
-/* ---- GPIO ------------------------------------------------------------------------------------ */
+/* ---- GPIO ----------------------------------------------------------------------------------- */
 
 static inline void pin_write(gpio_regs *port, uint32_t pin, bool high) {
     port->BSRR = high ? (1u << pin) : (1u << (pin + 16u));
@@ -91,7 +91,7 @@ static inline bool pin_read(const gpio_regs *port, uint32_t pin) {
     return (port->IDR >> pin) & 1u;
 }
 
-/* ---- the files' entry points ------------------------------------------------------------------ */
+/* ---- the files' entry points ---------------------------------------------------------------- */
 
 /* nucleo_system.c */
 void clock_init(void);
