@@ -80,7 +80,7 @@ const vector vector_table[16 + IRQ_COUNT_F446] = {
 };
 #undef D
 
-/* The board's safe state for a fault handler (board_nucleo.c); none on QEMU. */
+/* The board's safe state for a fault handler (nucleo_step.c); none on QEMU. */
 __attribute__((weak)) void board_fault_stop(void) {}
 
 void Default_Handler(void) {

@@ -165,7 +165,7 @@ typedef struct {
     /* trajectory ring */
     rig_point points[RIG_BUFFER_CAPACITY];
     uint32_t pt_head, pt_count;
-    rig_block blocks[RIG_BLOCKS]; /* of slots 0..pt_count-1: valid in IDLE (rig_core.c) */
+    rig_block blocks[RIG_BLOCKS]; /* of slots 0..pt_count-1: valid in IDLE (rig_commands.c) */
     uint32_t next_index, exec_index;
     uint8_t final_received, accepting;
     int32_t expected_enc;

@@ -1,4 +1,4 @@
-/* The hardware interface of the rig firmware: what the portable core (rig_core.c) needs
+/* The hardware interface of the rig firmware: what the portable core (rig_core.h) needs
  * from a board, and nothing more. Each board (firmware/board/, the STM32F4 Nucleo) and the
  * simulated rig (firmware/sim/, the clamp plant) implements these functions; the core
  * calls them only from rig_boot() and rig_tick(), never from rig_rx(), but for

@@ -1,4 +1,4 @@
-/* The step bursts of the NUCLEO-F446RE's step generator (firmware/board/board_nucleo.c,
+/* The step bursts of the NUCLEO-F446RE's step generator (firmware/board/nucleo_step.c,
  * docs/firmware.md "Step generator"): a period's |delta| steps leave as one burst of TIM1
  * counting at STEP_BURST_CLOCK_HZ, started by hardware STEP_PHASE_US after the period's
  * tick and spread over one period less a guard; each pulse period is low, then high for its

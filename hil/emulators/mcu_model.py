@@ -27,7 +27,7 @@ HALTING_FAULTS = (
     p.Fault.FORCE_LIMIT | p.Fault.TRAVEL_LIMIT | p.Fault.FOLLOWING_ERROR
     | p.Fault.LOAD_SATURATED | p.Fault.LOAD_STUCK | p.Fault.DRIVER | p.Fault.INTERNAL
 )
-#: The board's own faults (firmware/board/board_nucleo.c): its sensing, timing or wiring can
+#: The board's own faults (firmware/board/nucleo_inputs.c): its sensing, timing or wiring can
 #: no longer be trusted, so the driver is de-energised at once (stop category 0). The other
 #: halts hold position: a stepper without current could be back-driven by the clamp.
 BOARD_FAULTS = (p.Fault.INTERNAL | p.Fault.OVERTRAVEL | p.Fault.LOAD_ADC | p.Fault.CLOCK

@@ -135,7 +135,7 @@ class Fault(IntFlag):
     ESTOP = 0x0080
     DRIVER = 0x0100
     INTERNAL = 0x0200
-    # reported by a board only (firmware/board/board_nucleo.c; docs/rig-protocol.md sec. 8)
+    # reported by a board only (firmware/board/nucleo_inputs.c; docs/rig-protocol.md sec. 8)
     OVERTRAVEL = 0x0400
     LOAD_ADC = 0x0800
     CLOCK = 0x1000

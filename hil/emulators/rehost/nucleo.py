@@ -74,7 +74,7 @@ from hil.emulators.rig_physics import ClampPhysics
 NUCLEO_ELF = BUILD_DIR / "board-nucleo" / "rig.elf"
 PLANT_PERIOD_S = 1e-3
 
-# pins (docs/firmware.md, board_nucleo.c)
+# pins (docs/firmware.md, board_nucleo.h)
 PA_STEP, PA_DIR, PA_ENABLE, PA_ENC_A, PA_ENC_B = 8, 9, 10, 0, 1
 PB_STOP, PB_DRDY, PB_ADC_RST, PB_ALARM, PB_CHAIN, PB_CS = 0, 1, 2, 4, 5, 12
 PC_HOME, PC_LIMIT_OPEN, PC_LIMIT_CLOSED, PC_CLKIN, PC_B1 = 0, 2, 3, 9, 13

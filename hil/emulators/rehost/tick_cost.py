@@ -21,12 +21,12 @@ from hil.emulators.rehost.nucleo import NucleoBoard
 from hil.emulators.rehost.pulses import command_answered
 from hil.link import protocol as p
 
-#: board_nucleo.c's board_stats, in order (uint32 each).
+#: board_nucleo.h's board_stats, in order (uint32 each).
 STATS = ("ticks", "late_ticks", "tick_max_cycles", "rx_max_cycles", "step_errors",
          "rx_overruns", "boots", "clock_from_hsi", "rng_failed")
 BUFFER_CAPACITY = 2048
 CPU_HZ = 180e6
-STEP_ARM_DEADLINE_S = 290e-6  # board_nucleo.c: hal_step later than this into its period
+STEP_ARM_DEADLINE_S = 290e-6  # nucleo_step.c: hal_step later than this into its period
 
 
 @dataclass(frozen=True)
