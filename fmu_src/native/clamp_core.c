@@ -104,6 +104,26 @@ int core_set_input_derivative(Core *c, unsigned vr, int order, double value) {
 
 /* ---- variables ----------------------------------------------------------------------------- */
 
+/* Outputs of a Model Exchange instance at its states and input, if not current. */
+static int me_outputs(Core *c) {
+    CoreState *s = &c->s;
+    double y[CLAMP_N_OUT];
+    if (!c->stale || s->phase != PHASE_STEPPING) return 1;
+    if (!isfinite(s->r[VR_X_CMD])) {
+        core_say(c, 1, "input x_cmd = %.6g m is not finite", s->r[VR_X_CMD]);
+        return 0;
+    }
+    double a = core_lag_acceleration(s), xvaz[4] = {s->drive[0], s->drive[1], a, s->slip[1]};
+    if (!core_plant(c, s, xvaz, y)) {
+        core_say(c, 1, "no finite plant solution at x = %.6g m", s->drive[0]);
+        return 0;
+    }
+    s->drive[2] = a;
+    memcpy(&s->r[VR_OUT0], y, sizeof y);
+    c->stale = 0;
+    return 1;
+}
+
 int core_get_real(Core *c, const unsigned vr[], size_t n, double value[]) {
     CoreState *s = &c->s;
     int init_mode = s->phase == PHASE_INITIALISING || s->phase == PHASE_FAILED;
@@ -121,7 +141,7 @@ int core_get_real(Core *c, const unsigned vr[], size_t n, double value[]) {
         memcpy(&s->r[VR_OUT0], &n0.r[VR_OUT0], CLAMP_N_OUT * sizeof(double));
         c->stale = 0;
     }
-    if (s->me && !core_me_outputs(c)) return CORE_ERROR;
+    if (s->me && !me_outputs(c)) return CORE_ERROR;
     double v = s->drive[1];
     for (size_t i = 0; i < n; i++) {
         switch (vr[i]) {

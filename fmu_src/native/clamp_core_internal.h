@@ -16,9 +16,8 @@ int core_in_ranges(Core *c, const double *r, int with_input);
 int core_derive(Core *c, const double *r, CoreState *d);
 int core_initial_state(Core *c, CoreState *n);
 
-/* clamp_motion.c: the Model Exchange right-hand side and outputs. */
+/* clamp_motion.c: the Model Exchange right-hand side. */
 double core_lag_acceleration(const CoreState *s);
 double core_slip_rate(double z, double v);
-int core_me_outputs(Core *c);
 
 #endif

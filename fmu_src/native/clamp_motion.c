@@ -133,26 +133,6 @@ double core_slip_rate(double z, double v) {
     return (sign - z) * fabs(v) / CLAMP_SLIP_DISTANCE;
 }
 
-/* Outputs of a Model Exchange instance at its states and input, if not current. */
-int core_me_outputs(Core *c) {
-    CoreState *s = &c->s;
-    double y[CLAMP_N_OUT];
-    if (!c->stale || s->phase != PHASE_STEPPING) return 1;
-    if (!isfinite(s->r[VR_X_CMD])) {
-        core_say(c, 1, "input x_cmd = %.6g m is not finite", s->r[VR_X_CMD]);
-        return 0;
-    }
-    double a = core_lag_acceleration(s), xvaz[4] = {s->drive[0], s->drive[1], a, s->slip[1]};
-    if (!core_plant(c, s, xvaz, y)) {
-        core_say(c, 1, "no finite plant solution at x = %.6g m", s->drive[0]);
-        return 0;
-    }
-    s->drive[2] = a;
-    memcpy(&s->r[VR_OUT0], y, sizeof y);
-    c->stale = 0;
-    return 1;
-}
-
 static int me_ready(Core *c, const char *who) {
     if (!c->s.me || (c->s.phase != PHASE_STEPPING && c->s.phase != PHASE_TERMINATED)) {
         core_say(c, 1, "%s: %s", who, c->s.me ? "not initialised" : "not a Model Exchange instance");
