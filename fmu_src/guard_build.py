@@ -3,10 +3,10 @@
 pythonfmu 0.7's C++ layer breaks FMI rules that co-simulation masters rely on
 (errors only as fmi2Fatal, error messages dropped when logging is off,
 fmi2Terminated stuck after one rejected step, a crash at process exit in
-non-Python hosts). ``fmu_src/guard/fmi2_guard.c`` is a small C layer that
-checks every call and forwards it; this module writes its table of variables
-(``guard_table.h``) from the FMU's modelDescription.xml and compiles it. See
-docs/fmu.md for what the guard does.
+non-Python hosts). ``fmu_src/guard/`` is a small C layer (fmi2_guard.c, with
+guard_load.c and guard_state.c) that checks every call and forwards it; this
+module writes its table of variables (``guard_table.h``) from the FMU's
+modelDescription.xml and compiles it. See docs/fmu.md for what the guard does.
 """
 
 from __future__ import annotations
@@ -22,7 +22,11 @@ from fmpy import read_model_description
 from fmu_src.c_code import c_string, fmi2_headers
 from fmu_src.state import MAGIC, MAX_TEXT, PHASES, VERSION
 
-GUARD_SOURCE = Path(__file__).resolve().parent / "guard" / "fmi2_guard.c"
+GUARD_DIR = Path(__file__).resolve().parent / "guard"
+#: The guard's C files compiled into its library; GUARD_FILES adds their private header.
+GUARD_SOURCES = tuple(GUARD_DIR / name for name in ("fmi2_guard.c", "guard_load.c",
+                                                     "guard_state.c"))
+GUARD_FILES = (*GUARD_SOURCES, GUARD_DIR / "fmi2_guard.h")
 CFLAGS = ("-std=c99", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror", "-fvisibility=hidden")
 PLATFORM = "linux64"
 #: pythonfmu's own library inside the FMU, loaded by the guard.
@@ -93,7 +97,7 @@ def compile_guard(unzipped: Path, out: Path) -> None:
     table = out.parent / "guard_table.h"
     table.write_text(guard_table(unzipped))
     cmd = ["gcc", *CFLAGS, "-I", str(out.parent), "-I", str(fmi2_headers()), "-shared",
-           str(GUARD_SOURCE), "-o", str(out), "-ldl"]
+           *map(str, GUARD_SOURCES), "-o", str(out), "-ldl"]
     result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "LC_ALL": "C"})
     if result.returncode:
         raise RuntimeError(f"compiling the FMI guard failed:\n{' '.join(cmd)}\n{result.stderr}")

@@ -66,8 +66,10 @@ from toggle.plant import (
 
 MODEL = "ToggleClampNative"
 C_DIR = Path(__file__).resolve().parent / "native"
-#: The hand-written C files: the core, the drive lag, and one API file per FMI version.
-CORE_FILES = ("clamp_core.c", "clamp_core.h", "drive_lag.c", "drive_lag.h")
+#: The hand-written C files: the core (its files to compile, then its headers), the drive
+#: lag, and one API file per FMI version.
+CORE_SOURCES = ("clamp_core.c", "clamp_init.c", "clamp_motion.c", "clamp_state.c", "drive_lag.c")
+CORE_FILES = (*CORE_SOURCES, "clamp_core.h", "clamp_core_internal.h", "drive_lag.h")
 API_FILES = {2: "fmi2_clamp.c", 3: "fmi3_clamp.c"}
 GENERATED = "clamp_model"  # clamp_model.c / clamp_model.h
 #: A GNU ld / lld linker script ``INPUT(-lm)`` named as an object file: listed last among
@@ -478,7 +480,7 @@ def generate_sources(folder: Path, preset: str, fmi_version: int = 2,
     api = API_FILES[fmi_version]
     for file in (*CORE_FILES, api):
         shutil.copy2(C_DIR / file, folder / file)
-    return [api, "clamp_core.c", "drive_lag.c", f"{GENERATED}.c"], guid
+    return [api, *CORE_SOURCES, f"{GENERATED}.c"], guid
 
 
 def _run(cmd: list[str]) -> None:

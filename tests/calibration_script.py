@@ -1,5 +1,5 @@
 """The stored-calibration commands of protocol 1.3 (docs/rig-protocol.md, section 5), as one
-script every MCU runs: the Python model and the host build (tests/test_mcu_conformance.py)
+script every MCU runs: the Python model and the host build (tests/test_mcu_config.py)
 and the rehosted NUCLEO image (tests/test_firmware_rehost.py). Their answers must be equal.
 """
 

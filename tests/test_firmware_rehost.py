@@ -506,7 +506,7 @@ def _rebooted(board: NucleoBoard) -> Session:
 
 def test_the_rehosted_image_answers_the_calibration_script_as_the_model(elf: Path) -> None:
     """tests/calibration_script.py: the same answers as the model and the host build
-    (tests/test_mcu_conformance.py), its reboot a power cycle of the board."""
+    (tests/test_mcu_config.py), its reboot a power cycle of the board."""
     from calibration_script import EXPECTED, calibration_script
 
     board, s = _board(elf)

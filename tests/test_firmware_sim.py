@@ -1,7 +1,7 @@
 """The rig firmware's host build (hil/emulators/firmware.py): the C core on the simulated rig.
 
 The simulated rig (firmware/sim/) is an FMI 2.0 master of the native FMU's C code with the
-sensor model of hil.emulators.mcu_model.Sensors. Its physics is checked against the Python model:
+sensor model of hil.emulators.rig_hardware.Sensors. Its physics is checked against the Python model:
 the same protocol session (HELLO, CONFIG, streamed chunks, START, heartbeats) drives
 FirmwareMcu and McuModel over a stroke of the default RigSetup and back, and every
 telemetry sample's steps, enc and load_raw are compared (the protocol fields are

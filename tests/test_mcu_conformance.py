@@ -1,141 +1,26 @@
-"""The conformance checklist of docs/rig-protocol.md §13, over the bytes, against both MCUs.
+"""The conformance checklist of docs/rig-protocol.md §13, over the bytes, against both MCUs:
+framing, sequence numbers, the state machine and its stops, the checks of §8, telemetry.
 
-Every test runs twice: against the Python MCU model (hil.emulators.mcu_model.ModelMcu) and against
-the C firmware's host build on the simulated rig (hil.emulators.firmware.FirmwareMcu), through the
-byte-level interface the rig emulator uses: host frames in, wire frames out, one tick per
-period. The two must give the same answers; ``test_a_whole_session_is_the_same_on_both``
-compares every frame of a scripted session field by field. The defects of issue 27 that
-the model once had (a stop begun at standstill never ended, and the rest) are cases here.
+Every test runs twice: against the Python MCU model (hil.emulators.mcu_model.ModelMcu) and
+against the C firmware's host build on the simulated rig (hil.emulators.firmware.FirmwareMcu),
+through the byte-level interface the rig emulator uses (the bench of tests/mcu_bench.py): host
+frames in, wire frames out, one tick per period. The two must give the same answers;
+``test_a_whole_session_is_the_same_on_both`` compares every frame of a scripted session field
+by field. The defects of issue 27 that the model once had (a stop begun at standstill never
+ended, and the rest) are cases here. CONFIG and the stored calibration are
+tests/test_mcu_config.py.
 """
 
 from __future__ import annotations
 
-import shutil
-from collections.abc import Iterator
-
+import mcu_bench
 import numpy as np
 import pytest
-from calibration_script import EXPECTED, calibration_script
+from mcu_bench import HAVE_GCC, NOISY, Bench, ramp
 
-from hil.emulators.mcu_model import ModelMcu, RigHardware
-from hil.emulators.rig_physics import ClampPhysics
-from hil.host.backends import RigSetup
 from hil.link import protocol as p
 
-X_OPEN = RigSetup().stroke[0]
-QUIET = RigHardware(x_origin=X_OPEN, load_noise_n=0.0)  # noise off: both read alike
-NOISY = RigHardware(x_origin=X_OPEN)
-HAVE_GCC = shutil.which("gcc") is not None
-
-
-def make_mcu(kind: str, hw: RigHardware = QUIET) -> ModelMcu:
-    physics = ClampPhysics("chang2021")
-    if kind == "model":
-        return ModelMcu(physics, hw, 3)
-    from hil.emulators.firmware import FirmwareMcu
-
-    return FirmwareMcu(physics, hw, 3)  # type: ignore[return-value]
-
-
-@pytest.fixture(params=["model", pytest.param("firmware", marks=pytest.mark.skipif(
-    not HAVE_GCC, reason="the firmware's host build needs gcc (Debian package gcc)"))])
-def kind(request: pytest.FixtureRequest) -> str:
-    return request.param
-
-
-class Bench:
-    """An MCU driven in simulated time: frames in, decoded messages out."""
-
-    def __init__(self, kind: str, hw: RigHardware = QUIET) -> None:
-        self.mcu = make_mcu(kind, hw)
-        self.now = 100.0
-        self.seq = 1000
-        self.tel: list[p.Telemetry] = []
-        self.events: list[p.Message] = []  # FAULT and STATE frames, in order
-        self.beating = True  # a HEARTBEAT after every period, as a host sends them
-
-    def _decode(self, wires: list[bytes]) -> list[p.Message]:
-        out = []
-        for wire in wires:
-            assert wire.endswith(b"\x00") and b"\x00" not in wire[:-1]
-            frame = p.decode_frame(wire[:-1])  # a bad CRC raises: the test fails
-            assert frame.flags == 0
-            out.append(p.parse_message(frame))
-        return out
-
-    def raw(self, data: bytes) -> list[p.Message]:
-        """Feed bytes; the replies (ACK, HELLO_REPLY) and events they caused."""
-        msgs = self._decode(self.mcu.receive(data, self.now))
-        self.events += [m for m in msgs if isinstance(m, (p.FaultReport, p.StateChange))]
-        return [m for m in msgs if isinstance(m, (p.Ack, p.HelloReply, p.CalibrationReply))]
-
-    def send(self, msg: p.Message, seq: int | None = None, flags: int = p.FLAG_ACK_REQ,
-             extra: bytes = b"") -> list[p.Message]:
-        if seq is None:
-            self.seq = (self.seq + 1) & 0xFFFF
-            seq = self.seq
-        frame = p.Frame(msg.TYPE, flags, seq, msg.pack() + extra)
-        return self.raw(p.encode_frame(frame))
-
-    def ack(self, msg: p.Message, seq: int | None = None, extra: bytes = b"") -> p.Ack:
-        replies = self.send(msg, seq, extra=extra)
-        assert len(replies) == 1, replies
-        return replies[0]  # type: ignore[return-value]
-
-    def tick(self, n: int = 1) -> p.Telemetry:
-        for _ in range(n):
-            self.now += 1e-3
-            msgs = self._decode(self.mcu.tick(self.now))
-            assert isinstance(msgs[-1], p.Telemetry)
-            self.events += msgs[:-1]
-            self.tel.append(msgs[-1])
-            if self.beating:
-                self.beat()
-        return self.tel[-1]
-
-    def silent(self, n: int = 1) -> None:
-        """``n`` periods without a session: no telemetry (docs/rig-protocol.md, section 5)."""
-        for _ in range(n):
-            self.now += 1e-3
-            msgs = self._decode(self.mcu.tick(self.now))
-            assert not [m for m in msgs if isinstance(m, p.Telemetry)], msgs
-            self.events += msgs
-
-    def session(self, **config: float) -> Bench:
-        """HELLO and CONFIG (a noiseless load cell reads alike for long: stuck_samples is
-        raised unless given)."""
-        assert self.ack(p.Hello(1, 1, 42)).result == p.Result.OK
-        config.setdefault("stuck_samples", 60_000)
-        assert self.ack(p.Config(**config)).result == p.Result.OK
-        self.tick()
-        return self
-
-    def faults(self) -> list[tuple[int, int, int]]:
-        return [(m.fault, m.value, m.limit) for m in self.events
-                if isinstance(m, p.FaultReport)]
-
-    def states(self) -> list[tuple[int, int, int]]:
-        return [(m.old, m.new, m.reason) for m in self.events if isinstance(m, p.StateChange)]
-
-    def load(self, points: list[tuple[int, int]], final: bool = True) -> None:
-        for i in range(0, len(points), 30):
-            last = i + 30 >= len(points)
-            assert self.ack(p.TrajChunk(i, p.TrajChunk.FINAL if final and last else 0,
-                                        tuple(points[i:i + 30]))).result == p.Result.OK
-
-    def beat(self) -> None:
-        self.send(p.Heartbeat(0), flags=0)
-
-
-def ramp(n: int, rate: int = 100, hold: int = 0) -> list[tuple[int, int]]:
-    """n points moving forward at ``rate`` steps per period, then ``hold`` points still."""
-    pts = [(rate * (i + 1), p.NO_CHECK) for i in range(n)]
-    return pts + [(pts[-1][0] if pts else 0, p.NO_CHECK)] * hold
-
-
-@pytest.fixture
-def bench(kind: str) -> Iterator[Bench]:
-    yield Bench(kind).session()
+kind, bench = mcu_bench.kind, mcu_bench.bench  # the bench's fixtures, for pytest
 
 
 # --- framing ------------------------------------------------------------------------------
@@ -354,13 +239,6 @@ def test_heartbeat_loss_at_rest_and_the_stop_input(kind: str) -> None:
     assert tel.state == p.State.ESTOP and not tel.flags & p.TelemetryFlag.DRIVER_ENABLED
 
 
-def test_a_calibration_override_lasts_one_session(kind: str) -> None:
-    b = Bench(kind).session(load_offset=0, load_gain_n=2e-4)
-    assert b.ack(p.Bye()).result == p.Result.OK
-    reply = b.send(p.Hello(1, 1, 43))[0]
-    assert (reply.load_offset, reply.load_gain_n) == (1500, pytest.approx(1e-4, rel=1e-6))
-
-
 # --- telemetry, boots and homing -------------------------------------------------------
 
 
@@ -467,128 +345,6 @@ def test_repeated_estops_latch_once_and_a_stop_from_rest_stays_put(kind: str) ->
     b.ack(p.Stop())
     b.tick(5)
     assert {t.steps for t in b.tel[-5:]} == {at} and b.tel[-1].state == p.State.IDLE
-
-
-def test_the_step_limit_is_stated_and_a_config_above_it_refused(kind: str) -> None:
-    """1.3: HELLO_REPLY states the most steps a period may hold (the NUCLEO's TIM1 burst, 256)
-    and CONFIG refuses a larger max_step_delta as BAD_VALUE, the same on the model and the
-    firmware (the image answered such a CONFIG OK, then latched INTERNAL at START)."""
-    b = Bench(kind)
-    reply = b.ack(p.Hello(1, p.PROTO_MINOR, 42))
-    assert reply.max_step_delta_limit == p.MAX_STEP_DELTA == 256
-    assert b.ack(p.Config(max_step_delta=257)).result == p.Result.BAD_VALUE
-    assert b.ack(p.Config(max_step_delta=65_535)).result == p.Result.BAD_VALUE
-    assert b.ack(p.Config(max_step_delta=256)).result == p.Result.OK
-
-
-def test_a_deceleration_that_never_stops_is_refused(bench: Bench) -> None:
-    assert bench.ack(p.Config(decel_steps_s2=7.0)).result == p.Result.BAD_VALUE
-    assert bench.ack(p.Config(decel_steps_s2=8.0)).result == p.Result.OK
-
-
-def config_after_upload(kind: str) -> list[tuple[str, p.Result]]:
-    """Issue 35's case: 200-step jumps buffered under max_step_delta 256 (the most a board
-    emits in a period, 1.3), then CONFIGs that the buffered points break (a smaller
-    max_step_delta, narrower travel) and one they obey; (what was sent, the answer) in
-    order, and the first run sample's steps."""
-    b = Bench(kind).session(max_step_delta=p.MAX_STEP_DELTA)
-    b.load([(200, p.NO_CHECK), (400, p.NO_CHECK), (600, p.NO_CHECK)])
-    cases = {"max_step_delta 150": dict(max_step_delta=150),
-             "max_step_delta 199 (point 0 from the table)": dict(max_step_delta=199),
-             "steps_max 599": dict(max_step_delta=p.MAX_STEP_DELTA, steps_max=599),
-             "max_step_delta 200, steps_max 600": dict(max_step_delta=200, steps_max=600)}
-    answers = [(name, p.Result(b.ack(p.Config(stuck_samples=60_000, **cfg)).result))
-               for name, cfg in cases.items()]
-    assert b.ack(p.Start()).result == p.Result.OK
-    answers.append(("first run sample's steps", b.tick().steps))
-    return answers
-
-
-def test_a_config_re_checks_the_buffered_points(kind: str) -> None:
-    """Version 1.2 (docs/rig-protocol.md, section 5): a CONFIG whose limits a buffered point
-    breaks is refused as that chunk would be, and nothing changes."""
-    answers = dict(config_after_upload(kind))
-    assert list(answers.values()) == [p.Result.BAD_VALUE, p.Result.BAD_VALUE,
-                                      p.Result.OUT_OF_LIMITS, p.Result.OK, 200], answers
-
-
-@pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")
-def test_the_config_re_check_is_the_same_on_both() -> None:
-    assert config_after_upload("model") == config_after_upload("firmware")
-
-
-# --- 1.3: the stored calibration --------------------------------------------------------
-
-
-def stored_calibration_answers(kind: str) -> list[tuple[object, ...]]:
-    """tests/calibration_script.py on one MCU; its reboot is an MCU reset (the non-volatile
-    memory survives it: the model's, the host build's memory or file)."""
-    b = Bench(kind).session()
-
-    def reboot() -> p.HelloReply:
-        b.mcu.reset()
-        return b.send(p.Hello(1, 3, 44))[0]  # type: ignore[return-value]
-
-    return calibration_script(b.ack, reboot)
-
-
-def test_the_stored_calibration_commands(kind: str) -> None:
-    """STORE_CALIBRATION and READ_CALIBRATION (1.3): refusals, record numbers, the stored
-    calibration in use after a reset, refused without a session."""
-    assert stored_calibration_answers(kind) == EXPECTED
-
-
-@pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")
-def test_the_stored_calibration_is_the_same_on_both() -> None:
-    assert stored_calibration_answers("model") == stored_calibration_answers("firmware")
-
-
-def config_answers_over_a_full_buffer(kind: str, seed: int) -> list[int]:
-    """A full buffer (2048 points, walks of up to 256 steps a period with one long jump and
-    one far point at random places), then CONFIGs whose limits cut at the buffer's own
-    values, so the first failure lands in any block and both kinds meet in one: the
-    answers in order (the firmware reads only the block its summaries point at)."""
-    rng = np.random.default_rng(seed)
-    n = 2048  # the buffer's capacity
-    jumps = rng.integers(-100, 101, n)
-    big = 64 * int(rng.integers(1, n // 64))  # a block's first point: its jump is read apart
-    far = int(rng.choice(np.setdiff1d(np.arange(1, n - 1), [big - 1, big, big + 1])))
-    jumps[big] = 256 * rng.choice([-1, 1])
-    jumps[far] += 150  # a point out of the walk's way: one jump up, the next down
-    jumps[far + 1] -= 150
-    steps = np.cumsum(jumps)
-    assert np.abs(np.diff(np.concatenate(([0], steps)))).max() <= p.MAX_STEP_DELTA
-    b = Bench(kind).session(max_step_delta=p.MAX_STEP_DELTA, steps_min=-200_000,
-                            steps_max=400_000)
-    b.load([(int(s), p.NO_CHECK) for s in steps], final=False)
-    diffs = np.abs(np.diff(np.concatenate(([0], steps))))
-    answers = []
-    top = np.sort(diffs)[-3:]
-    for k in range(16):
-        if k % 2:  # travel wide: the jumps decide, around the largest ones
-            ack = b.ack(p.Config(stuck_samples=60_000, steps_min=-100_000, steps_max=100_000,
-                                 max_step_delta=int(rng.choice(top))))
-            answers.append(int(ack.result))
-            continue
-        lo = min(int(rng.choice(steps)), 0) - int(rng.integers(0, 2)) * 100_000
-        hi = max(int(rng.choice(steps)), 0) + int(rng.integers(0, 2)) * 100_000
-        delta = int(min(max(int(rng.choice(diffs)), 1), p.MAX_STEP_DELTA))
-        ack = b.ack(p.Config(stuck_samples=60_000, steps_min=lo, steps_max=max(hi, lo + 1),
-                             max_step_delta=delta))
-        answers.append(int(ack.result))
-    return answers
-
-
-@pytest.mark.skipif(not HAVE_GCC, reason="the firmware's host build needs gcc (Debian gcc)")
-@pytest.mark.parametrize("seed", range(4))
-def test_a_config_over_a_full_buffer_answers_as_the_loop(seed: int) -> None:
-    """The firmware's block summaries give the model's loop's answer: OUT_OF_LIMITS or
-    BAD_VALUE for the first failing point, OK when none fails."""
-    model = config_answers_over_a_full_buffer("model", seed)
-    assert set(model) == {p.Result.OK, p.Result.OUT_OF_LIMITS, p.Result.BAD_VALUE}, model
-    assert config_answers_over_a_full_buffer("firmware", seed) == model
-
-
 @pytest.mark.parametrize("fault", [p.Fault.INTERNAL, p.Fault.OVERTRAVEL, p.Fault.LOAD_ADC,
                                    p.Fault.CLOCK, p.Fault.STOP_CHAIN])
 def test_a_boards_fault_de_energises_the_driver_a_force_limit_holds(kind: str,

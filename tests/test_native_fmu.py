@@ -117,9 +117,11 @@ def test_archive_has_the_sources_to_rebuild_and_no_fmi_headers(native: Path):
             "sources/clamp_model_data.h"} <= names
     assert not any("fmi2Functions" in n or "win64" in n for n in names)
     build = read_build_description(str(native), validate=True)  # against the FMI 3.0 schema
-    assert build[0].sourceFileSets[0].sourceFiles == ["fmi2_clamp.c", "clamp_core.c",
-                                                      "drive_lag.c", "clamp_model.c",
-                                                      "link_libm.o"]
+    assert build[0].sourceFileSets[0].sourceFiles == [
+        "fmi2_clamp.c", "clamp_core.c", "clamp_init.c", "clamp_motion.c", "clamp_state.c",
+        "drive_lag.c", "clamp_model.c", "link_libm.o"]
+    assert {"sources/clamp_core.h", "sources/clamp_core_internal.h",
+            "sources/drive_lag.h"} <= names
     needed = subprocess.run(["readelf", "-d", str(_library(native))], capture_output=True,
                             text=True, check=True).stdout
     assert "[libm.so.6]" in needed

@@ -31,7 +31,7 @@ from toggle.params import Mechanism
 from toggle.plant import PlantConfig, configure, plant_outputs
 
 #: The encoder's resolution, m: F_TP is read where the platen first comes this close to
-#: its end position (the rig's 1 um optical encoder, hil.emulators.mcu_model).
+#: its end position (the rig's 1 um optical encoder, hil.emulators.rig_hardware).
 TOGGLE_BAND = 1e-6
 #: How long before the encoder reached the toggle the prototype's rig sampled F_TP, s
 #: (fittable, ``toggle tables --fit toggle_latency``): 0, since with the prototype's

@@ -55,7 +55,7 @@ static struct {
     double platen_zero, spike_n;
     uint32_t spike_samples;
     int32_t last_enc, last_raw;
-    uint64_t drop_acc; /* lost pulses: hil.emulators.mcu_model.Sensors._lose_steps */
+    uint64_t drop_acc; /* lost pulses: hil.emulators.rig_hardware.Sensors._lose_steps */
     /* noise: xoshiro256** and Box-Muller with the second deviate kept */
     uint64_t rng[4];
     bool have_spare;
@@ -155,7 +155,8 @@ static int variable(const char *name) {
     return -1;
 }
 
-/* Input position of a step count: as hil.emulators.mcu_model.Sensors.x (steps * step_nm / 1e9). */
+/* Input position of a step count: as hil.emulators.rig_hardware.Sensors.x
+ * (steps * step_nm / 1e9). */
 static double table_x(int32_t steps) {
     return sim.hw.x_origin + (double)((int64_t)steps * 200) / 1e9;
 }
@@ -402,7 +403,7 @@ void hal_read(rig_inputs *in) {
         sim.platen_zero = sim.platen;
         sim.have_zero = true;
     }
-    /* the sensors: hil.emulators.mcu_model.Sensors.read */
+    /* the sensors: hil.emulators.rig_hardware.Sensors.read */
     double force = sim.force;
     if (sim.spike_samples > 0) {
         force += sim.spike_n;

@@ -3,9 +3,9 @@
  * fmi2_clamp.c and the generated clamp_model.c, compiled in): the sim is an FMI 2.0 master
  * of that FMU, one fmi2DoStep per sensor reading, so the rig's mechanics are the FMU's
  * equations and nothing else. On top of the plant it adds the sensors exactly as
- * hil/emulators/mcu_model.py's Sensors.read does: encoder quantisation, load-cell noise (own seeded
- * PRNG), amplifier offset and gain, the 24-bit ADC rails, and the injected sensor faults of
- * hil/emulators/rig_emulator.py's FaultPlan (force spike, stuck load cell, stuck encoder, the
+ * hil/emulators/rig_hardware.py's Sensors.read does: encoder quantisation, load-cell noise
+ * (own seeded PRNG), amplifier offset and gain, the 24-bit ADC rails, and the injected sensor
+ * faults of hil/emulators/rig_emulator.py's FaultPlan (force spike, stuck load cell, stuck encoder, the
  * operator's stop button).
  *
  * One rig per program, static state, no heap in this file (the FMU itself allocates its
@@ -21,7 +21,7 @@
 
 #include "rig_hal.h"
 
-/* The rig's constants (hil.emulators.mcu_model.RigHardware). */
+/* The rig's constants (hil.emulators.rig_hardware.RigHardware). */
 typedef struct {
     double x_origin;     /* input (table) position at hardware step 0, power-on, m */
     double home_x;       /* reference switch active while x <= home_x + 1e-12 m */
@@ -31,8 +31,8 @@ typedef struct {
     uint64_t noise_seed; /* seed of the noise generator: the same seed, the same noise */
     int32_t load_offset; /* ADC counts at zero force */
     int32_t step_timing; /* SIM_RIG_STEPS_AT_ONCE or SIM_RIG_STEPS_NUCLEO (below) */
-    /* bring-up faults (hil.emulators.mcu_model.RigHardware): -1 the encoder counts against the steps
-     * (0 or 1: with them); the drive loses drop_n of every drop_d step pulses (0: none) */
+    /* bring-up faults (hil.emulators.rig_hardware.RigHardware): -1 the encoder counts against
+     * the steps (0 or 1: with them); the drive loses drop_n of every drop_d step pulses (0: none) */
     int32_t enc_sign;
     uint32_t drop_n, drop_d;
 } sim_rig_hw;

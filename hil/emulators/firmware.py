@@ -251,7 +251,7 @@ class FirmwareMcu:
     both return the wire frames the MCU sent (each ending in ``b"\\x00"``). The rig's
     mechanics are the native FMU of ``physics``' preset with the parameters
     :class:`hil.host.backends.FmuPlant` gives it; ``hw`` its sensors (as
-    :class:`hil.emulators.mcu_model.Sensors`); ``seed`` the load-cell noise's.
+    :class:`hil.emulators.rig_hardware.Sensors`); ``seed`` the load-cell noise's.
     """
 
     def __init__(self, physics: ClampPhysics, hw: RigHardware, seed: int,

@@ -6,9 +6,9 @@ speaks the protocol of docs/rig-protocol.md to whoever opens the pty's device pa
 (:class:`~hil.emulators.mcu_model.ModelMcu`, the default) or the C firmware's host build
 (:class:`~hil.emulators.firmware.FirmwareMcu`, ``firmware=True``): both take bytes and return wire
 frames, so the emulator's link faults and its log are the same for both. The mechanics
-are a pluggable :class:`~hil.emulators.mcu_model.RigPhysics` (the firmware's is the native FMU of a
-:class:`~hil.emulators.rig_physics.ClampPhysics`); :class:`FaultPlan` injects link and rig faults.
-Run it in a thread (:meth:`RigEmulator.start`) or in a process of its own
+are a pluggable :class:`~hil.emulators.rig_hardware.RigPhysics` (the firmware's is the native
+FMU of a :class:`~hil.emulators.rig_physics.ClampPhysics`); :class:`FaultPlan` injects link
+and rig faults. Run it in a thread (:meth:`RigEmulator.start`) or in a process of its own
 (:func:`spawn_emulator`).
 """
 

@@ -1,6 +1,6 @@
 """The emulated rig's mechanics: the plant model of :mod:`toggle.plant`, not a copy.
 
-Implements :class:`hil.emulators.mcu_model.RigPhysics` for the emulator: the MCU model
+Implements :class:`hil.emulators.rig_hardware.RigPhysics` for the emulator: the MCU model
 passes the commanded input position once per telemetry period; velocity and
 acceleration follow by backward differences over that period, as in the FMU's
 ideal drive; the rig's dimensional errors are those of the simulated rig

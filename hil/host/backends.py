@@ -257,11 +257,11 @@ def ensure_fmu(path: Path | None = None, preset: str = "chang2021",
     """The FMU of ``preset`` at ``path``, built first if it is missing or older than the
     model sources (``notify`` is told so, before and after the build)."""
     from fmu_src.build import FMU_SRC_DIR, PACKAGE_DIR, build_fmu
-    from fmu_src.guard_build import GUARD_SOURCE
+    from fmu_src.guard_build import GUARD_FILES
 
     path = Path(path) if path is not None else default_fmu_path(preset)
     sources = [*PACKAGE_DIR.rglob("*.py"), *PACKAGE_DIR.rglob("*.toml"),
-               *FMU_SRC_DIR.glob("*.py"), GUARD_SOURCE]
+               *FMU_SRC_DIR.glob("*.py"), *GUARD_FILES]
     newest = max(p.stat().st_mtime for p in sources if p.is_file())
     if not path.is_file() or path.stat().st_mtime < newest:
         why = "missing" if not path.is_file() else "older than the model"
