@@ -118,6 +118,23 @@ def chang() -> Mechanism:
     return load_preset("chang2021")
 
 
+@pytest.fixture(scope="session")
+def chang_plan() -> tuple[Any, Any, Any, Any]:
+    """chang2021's plan configuration, drive limits, planner and a cold-started plan of
+    tests/planner_support.py's DURATION: the planner's tests (tests/test_planner*.py)
+    start from it. Once a session: planner_for keeps the planner for every test anyway."""
+    from planner_support import DURATION
+
+    from controllers.limits import drive_limits
+    from controllers.planner import planner_for
+    from controllers.plans import plan_config
+
+    cfg = plan_config("chang2021")
+    limits = drive_limits(cfg.mechanism)
+    planner = planner_for(cfg, limits)
+    return cfg, limits, planner, planner.solve(DURATION, warm=False)
+
+
 class SwallowedSigint:
     """A Ctrl-C as CasADi meets it during IPOPT: the handler's exception is raised and
     caught, and the solve returns as failed."""

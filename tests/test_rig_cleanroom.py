@@ -1,7 +1,8 @@
 """The project's host against a clean-room MCU written from docs/rig-protocol.md alone.
 
-The rig (tests/cleanroom_rig.py) runs in a spawned process on a pseudo-terminal; the
-host (`hil.cli.main`) runs in this process, exactly as against a real rig.
+The rig (tests/cleanroom_rig.py and the cleanroom_* modules it names) runs in a spawned
+process on a pseudo-terminal; the host (`hil.cli.main`) runs in this process, exactly as
+against a real rig.
 """
 
 from __future__ import annotations
@@ -15,7 +16,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from cleanroom_rig import (
+from cleanroom_commands import Run
+from cleanroom_rig import CleanroomRig
+from cleanroom_wire import (
     ACK,
     ACK_FMT,
     ACK_REQ,
@@ -23,8 +26,6 @@ from cleanroom_rig import (
     HELLO_FMT,
     TELEMETRY,
     TELEMETRY_FMT,
-    CleanroomRig,
-    Run,
     cobs_decode,
     crc16,
     frame,
