@@ -79,9 +79,11 @@ def _child(conn: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> N
 
 class Background:
     """``fn(*args, progress=callable)`` running in a child process; use as a context
-    manager, then :meth:`result`. :meth:`ticks` counts the progress calls seen so far."""
+    manager, then :meth:`result`. :meth:`ticks` counts the progress calls seen so far.
+    ``here``: in this process when the result is asked (the caller knows the child would
+    only repeat this process's work first)."""
 
-    def __init__(self, fn: Callable[..., Any], *args: Any) -> None:
+    def __init__(self, fn: Callable[..., Any], *args: Any, here: bool = False) -> None:
         self._job, self._done = (fn, args), None
         self._ticks = 0
         self._receiving = False
@@ -90,7 +92,7 @@ class Background:
             self._target.add_source(self._drain)
         self._previous_term: Any = None
         self._process: Any = None
-        if parallel():
+        if parallel() and not here:
             context = multiprocessing.get_context("spawn")
             self._conn, child_end = context.Pipe(duplex=False)
             self._process = context.Process(target=_child, args=(child_end, fn, args),

@@ -148,11 +148,15 @@ def _interpreted(units: list[Unit], names: Sequence[str]) -> list[ca.Function]:
     return [built[n] for n in names]
 
 
-def _sources(units: Callable[[], list[Unit]]) -> Callable[[Path], Sources]:
-    """The C sources of the units (built when first asked for) in a scratch directory."""
+def _sources(units: Callable[[], list[Unit]],
+             choose: Callable[[tuple[str, ...], Path], tuple[str, ...]] = lambda f, _: f
+             ) -> Callable[[Path], Sources]:
+    """The C sources of the units (built when first asked for) in a scratch directory,
+    each with its flags (or those ``choose`` makes of them and the source)."""
     def sources(tmp: Path) -> Sources:
-        return [(flags, casadi_source(tmp / f"unit{k}.c", functions))
-                for k, (flags, functions) in enumerate(units())]
+        written = [(flags, casadi_source(tmp / f"unit{k}.c", functions))
+                   for k, (flags, functions) in enumerate(units())]
+        return [(choose(flags, source), source) for flags, source in written]
     return sources
 
 
@@ -161,12 +165,13 @@ def _names_in(units: list[Unit]) -> list[str]:
 
 
 def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]],
-             machine_code: bool = True, first: int = 0) -> list[ca.Function]:
+             machine_code: bool = True, first: Sequence[str] = ()) -> list[ca.Function]:
     """The functions ``names`` as machine code from the library cached under ``key``;
-    else (:func:`compile_mode` ``background``) built by ``build``, the ``first`` units
-    compiled now (small code that carries the arithmetic: seconds; cached as the library
-    ``NAME-first``, which a process asking before the whole library is there loads), the
-    others interpreted, while a detached process compiles them all for the next time; or
+    else (:func:`compile_mode` ``background``) built by ``build``, its first units (one
+    per key in ``first``) compiled now (small code that carries the arithmetic: seconds;
+    each cached as a library ``NAME-first`` under its own key, so that another problem
+    with the same unit, as a robust plan's nominal clamp, loads it), the others
+    interpreted, while a detached process compiles them all for the next time; or
     (``wait``) all compiled, cached and loaded now. As built (interpreted) where compiling
     or loading fails, or without ``machine_code`` (a problem solved once, for which a
     compile would cost more than it saves)."""
@@ -192,8 +197,25 @@ def compiled(name: str, key: str, names: Sequence[str], build: Callable[[], list
     return loaded if loaded is not None else _interpreted(units_once(), names)
 
 
+#: The largest unit of C (bytes) compiled for a first answer with its own flags; a larger
+#: one is compiled at -O0. gcc -O1's register allocation grows faster than the code: a
+#: symmetric clamp's jets (0.44 MB) take 2.1 s of CPU at -O1 and run 2-5 times faster than
+#: at -O0 (worth it), a robust plan's erroneous clamp (unequal halves: 1.4 MB) took about
+#: 10 s at -O1 against 1.7 s at -O0. The detached compile for the next process keeps each
+#: unit's own flags. The same arithmetic either way (no fast-math): the same answers.
+FIRST_ANSWER_MAX_BYTES = 1_000_000
+
+
+def first_answer_flags(flags: tuple[str, ...], source: Path) -> tuple[str, ...]:
+    """A unit's flags for a first answer: its own, or -O0 for a unit of C too large to
+    optimise in seconds (:data:`FIRST_ANSWER_MAX_BYTES`)."""
+    if source.stat().st_size <= FIRST_ANSWER_MAX_BYTES:
+        return flags
+    return (*(f for f in flags if not f.startswith("-O")), "-O0")
+
+
 def _first_answer(name: str, key: str, names: Sequence[str], build: Callable[[], list[Unit]],
-                  first: int) -> list[ca.Function]:
+                  first: Sequence[str]) -> list[ca.Function]:
     """:func:`compiled`'s functions on a cache miss, ``background``: the ``first`` units
     compiled now (without the cache's lock: a detached compile may hold it for a minute),
     the rest interpreted, all of them handed to a detached compile."""
@@ -202,11 +224,12 @@ def _first_answer(name: str, key: str, names: Sequence[str], build: Callable[[],
         units = build()
         compile_in_background(name, key, names, units)
     functions = dict(zip(_names_in(units), _interpreted(units, _names_in(units))))
-    quick = _names_in(units[:first])
-    if quick:
+    for unit, unit_key in zip(units, first):
+        quick = _names_in([unit])
         with progress.doing("compiling the plant's jets"):
-            loaded = shared_library(f"{name}-first", key, _sources(lambda: units[:first]),
-                                    lambda library: _load(library, quick), lock=False)
+            loaded = shared_library(f"{name}-first", unit_key,
+                                    _sources(lambda u=unit: [u], first_answer_flags),
+                                    lambda library, q=quick: _load(library, q), lock=False)
         functions.update(zip(quick, loaded or ()))
     return [functions[n] for n in names]
 

@@ -360,7 +360,7 @@ class StrokeProblem:
         # prm: x_contact, mu, the plant's MASSES
         z, prm = ca.SX.sym("z", 3), ca.SX.sym("prm", 2 + len(MASSES))
         dynamics = symbolic_copy(_NEUTRAL_DYNAMICS, **dict(zip(MASSES, ca.vertsplit(prm[2:]))))
-        jets = []
+        units: list[Unit] = []  # one unit of jets per plant: compiled in parallel
         for k, plant in enumerate(self.plants):
             plant = plant.with_(mechanism=replace(plant.mechanism, dynamics=dynamics))
             # the opening stroke is the closing one run backwards in time: v -> -v
@@ -370,14 +370,14 @@ class StrokeProblem:
             speed = -free.platen_velocity if self.opening else free.platen_velocity
             outputs = (free.input_force, mold.input_force, speed, free.input_force,
                        mold.input_force, speed, speed)
-            jets += [fn for name, out, nodes in zip(_OUTPUTS, outputs, self._spans())
-                     for fn in _jets(f"{name}{k}_", ca.SX(out), z, prm,
-                                     nodes.stop - nodes.start)]
+            jets = [fn for name, out, nodes in zip(_OUTPUTS, outputs, self._spans())
+                    for fn in _jets(f"{name}{k}_", ca.SX(out), z, prm, nodes.stop - nodes.start)]
             if k == 0:
-                force = ca.Function("input_force", [z, prm], [mold.input_force], {"cse": True})
+                jets.append(ca.Function("input_force", [z, prm], [mold.input_force],
+                                        {"cse": True}))
+            units.append((_OPTIMISATION["jets"], jets))
         *values, hess = self._model_functions()
-        return [(_OPTIMISATION["jets"], [*jets, force]), (_OPTIMISATION["model"], values),
-                (_OPTIMISATION["model"], [hess])]
+        return [*units, (_OPTIMISATION["model"], values), (_OPTIMISATION["model"], [hess])]
 
     def _model(self, w: ca.SX, w0: ca.SX, p: ca.SX, data: ca.SX) -> tuple[ca.SX, ca.SX]:
         """Objective and constraints with each plant output replaced by its Taylor model
@@ -486,9 +486,18 @@ class StrokeProblem:
         key = problem_key(self.config, N, self.variants, self.opening) + (
             "\ntorque" if self.torque else "") + ("\nzone" if self.zone else "")
         names = _names(len(self.plants))
-        # the jets (the first unit) carry the arithmetic: compiled for a first answer too
+        # the jets (a unit per plant, first) carry the arithmetic: compiled for a first
+        # answer too, each under a key of its own plant (the torque rows and the zone are
+        # the model's: a robust plan's nominal clamp, a plan with mold protection, load
+        # the jets another problem of the plant compiled)
+        jets = ["\n".join((_SOURCE, repr(astuple(neutral(plant))), repr(N), f"plant {k}",
+                           *(("opening",) * self.opening)))
+                for k, plant in enumerate(self.plants)]
         fn = dict(zip(names, compiled("stroke", key, names, self._symbolic,
-                                      self.machine_code, first=1)))
+                                      self.machine_code, first=jets)))
+        #: whether the whole problem came compiled from the disk cache (a second process
+        #: of this plant loads it in milliseconds; else it would build it again)
+        self.loaded = fn[_MODEL_NAMES[-1]].is_a("External")
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
         L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.n_constraints)
         z = self._nodes(W, P[_P["t_ref"]])[-1]

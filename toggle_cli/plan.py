@@ -63,10 +63,13 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
                                                args.contact_speed, args.intervals,
                                                protection_zone(args))
     # the nominal plan, to compare, in a second process while this one plans the robust one;
-    # the bound is the nominal plant's for both (computed here once, not in each process)
+    # the bound is the nominal plant's for both (computed here once, not in each process).
+    # Here, after the robust plan, where the nominal problem was built now: a second
+    # process would build it again, seconds of CPU for a solve of one or two
     bound = planner.lower_bound()
     with Background(best_plan, cfg, limits, args.contact_speed, args.intervals,
-                    protection_zone(args), duration, args.objective, bound) as nominal_plan:
+                    protection_zone(args), duration, args.objective, bound,
+                    here=not nominal.problem.loaded) as nominal_plan:
         plan, plain = planner.best(duration, args.objective), nominal_plan.result()
     report = {}
     for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
