@@ -13,7 +13,7 @@ chunk by chunk as the samples are made (:class:`Summary`), in C by the compiled 
   samples (the pilot) place a window around each percentile, WINDOW_Z of its standard
   errors wide; the pass counts the values below each window and keeps those inside, and
   the order statistics are selected among those (a few hundred thousand of ten million).
-  Where a window missed its rank (a chance of about 1e-12 each) or held more than its
+  Where a window missed its rank (a chance below 1e-6 each) or held more than its
   room (many tied values), :meth:`Summary.statistics` leaves that output's percentiles
   out and the caller selects them from all the samples, as :func:`percentiles` does: the
   same values either way, the values of ``np.percentile``.
