@@ -97,7 +97,7 @@ class Summary:
         self.lo, self.hi = np.empty(len(OUTPUTS) * w), np.empty(len(OUTPUTS) * w)
         cap = np.empty(len(OUTPUTS) * w, dtype=np.int64)
         m = lower.size
-        for o, v in enumerate(self._values(lower, upper)):
+        for o, v in enumerate(self.values(lower, upper)):
             ordered = np.sort(v)
             for k, q in enumerate(qs):
                 p, j = q / 100, o * w + k
@@ -113,7 +113,8 @@ class Summary:
         self.below = np.zeros(cap.size, dtype=np.int64)
         self.filled = np.zeros(cap.size, dtype=np.int64)
 
-    def _values(self, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, ...]:
+    def values(self, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The outputs of samples from each half's L: the errors and the asymmetry."""
         return lower - self.nominal[0], upper - self.nominal[1], upper - lower
 
     def add(self, start: int, lower: np.ndarray, upper: np.ndarray, kernel: object = None
@@ -126,7 +127,7 @@ class Summary:
                               self.kept, self.base, self.cap, self.filled)
             return
         n, w = lower.size, len(self.qs)
-        for o, v in enumerate(self._values(lower, upper)):
+        for o, v in enumerate(self.values(lower, upper)):
             d = v - self.shift[o]
             for b in range(start // BLOCK, (start + n - 1) // BLOCK + 1):
                 part = slice(max(b * BLOCK, start) - start, min((b + 1) * BLOCK, start + n) - start)

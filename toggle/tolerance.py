@@ -18,7 +18,7 @@ import numpy as np
 from toggle import mc_kernel, philox
 from toggle.iso286 import it_tolerance
 from toggle.kinematics import output_position, sensitivities, toggle_position
-from toggle.mc_summary import PILOT, QUANTILES, Summary, percentiles
+from toggle.mc_summary import OUTPUTS, PILOT, QUANTILES, Summary, percentiles
 from toggle.params import DIMENSIONS, HALVES, HalfDims, Mechanism, ParameterError
 
 #: Per half, per dimension: a tolerance band half-width or an error, metres.
@@ -200,9 +200,7 @@ def monte_carlo(
         for start in range(0, samples, chunk):
             outputs(start, min(chunk, samples - start),
                     [out[start:start + chunk] for out in whole])
-        values = dict(zip(("lower", "upper", "asymmetry"),
-                          (whole[0] - nominal["lower"], whole[1] - nominal["upper"],
-                           whole[1] - whole[0])))
+        values = dict(zip(OUTPUTS, summary.values(*whole)))
         found = {k: (mean, std, percentiles(values[k]) if pct is None else pct)
                  for k, (mean, std, pct) in found.items()}
     stats = {k: Statistics(mean, std, {f"p{q:g}": float(v) for q, v in zip(QUANTILES, pct)})
