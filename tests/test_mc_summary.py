@@ -9,6 +9,8 @@ from __future__ import annotations
 import functools
 import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -152,3 +154,16 @@ def test_an_error_after_progress_lines_is_the_last_line(every_count_shown, capsy
     assert len(lines) >= 2 and lines[0].startswith("Monte Carlo: ")
     assert lines[-1] == "toggle tolerance: error: lower half (sampled): cannot assemble"
     assert "\r" not in err
+
+
+def test_the_command_loads_neither_scipy_nor_tqdm():
+    """``toggle tolerance --samples N`` (fresh process): scipy.optimize alone cost 0.3 s of
+    CPU, a third of a 1e7-sample run; tqdm draws only a terminal's bar."""
+    probe = ("import json, sys, contextlib, io, toggle_cli\n"
+             "with contextlib.redirect_stdout(io.StringIO()):\n"
+             "    code = toggle_cli.main(['tolerance', '--samples', '70000'])\n"
+             "print(code, json.dumps(sorted({m.split('.')[0] for m in sys.modules}\n"
+             "                              & {'scipy', 'tqdm', 'matplotlib'})))\n")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True).stdout.split(maxsplit=1)
+    assert out[0] == "0" and json.loads(out[1]) == []
