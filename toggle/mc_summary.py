@@ -5,10 +5,10 @@ L - L_nominal and the asymmetry L_upper - L_lower) of a run of n samples, accumu
 chunk by chunk as the samples are made (:class:`Summary`), in C by the compiled kernel
 (:mod:`toggle.mc_kernel`'s ``toggle_mc_accumulate``) or by the same operations in numpy:
 
-* Mean and σ from the sums of d = v - shift and d² (shift: the nominal asymmetry, zero
-  for the errors), each block of :data:`BLOCK` samples summed in sample order whatever
-  the chunks, the blocks added exactly (``math.fsum``): a run's result does not depend
-  on its chunk size, and C and numpy give the same bits.
+* Mean and σ from the sums of d = v - shift and d² (shift: the pilot's mean, so that a
+  mean far from zero costs σ no digits), each block of :data:`BLOCK` samples summed in
+  sample order whatever the chunks, the blocks added exactly (``math.fsum``): a run's
+  result does not depend on its chunk size, and C and numpy give the same bits.
 * The percentiles are order statistics, selected exactly: the first :data:`PILOT`
   samples (the pilot) place a window around each percentile, WINDOW_Z of its standard
   errors wide; the pass counts the values below each window and keeps those inside, and
@@ -92,12 +92,13 @@ class Summary:
                  upper: np.ndarray, qs: tuple[float, ...] = QUANTILES) -> None:
         self.n, self.qs, w = n, qs, len(qs)
         self.nominal = np.array(nominal, dtype=np.float64)
-        self.shift = np.array([0.0, 0.0, nominal[1] - nominal[0]])
         self.sums = np.zeros(((n + BLOCK - 1) // BLOCK, len(OUTPUTS), 2))
         self.lo, self.hi = np.empty(len(OUTPUTS) * w), np.empty(len(OUTPUTS) * w)
         cap = np.empty(len(OUTPUTS) * w, dtype=np.int64)
         m = lower.size
-        for o, v in enumerate(self.values(lower, upper)):
+        pilot = self.values(lower, upper)
+        self.shift = np.array([float(v.mean()) for v in pilot])
+        for o, v in enumerate(pilot):
             ordered = np.sort(v)
             for k, q in enumerate(qs):
                 p, j = q / 100, o * w + k
