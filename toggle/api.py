@@ -10,14 +10,17 @@ them are private by convention and may change.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from toggle.elastics import ClampingResult, analyse_clamping
 from toggle.kinematics import half_motion, stroke_limits
 from toggle.params import Mechanism, ParameterError, load_preset
 from toggle.tolerance import AsymmetryReport, MonteCarloResult, asymmetry, it_tolerances
 from toggle.tolerance import monte_carlo as _monte_carlo
+
+if TYPE_CHECKING:  # the statics load scipy.optimize (0.3 s): only clamping_force needs them
+    from toggle.elastics import ClampingResult
 
 
 @dataclass(frozen=True)
@@ -140,5 +143,7 @@ def clamping_force(mechanism: str | Mechanism, mu: float | None = None, *,
         ClampingError: No clamp data, or both ``clamp_force`` and ``x_contact`` given.
         StaticsError: A friction coefficient out of range.
     """
+    from toggle.elastics import analyse_clamping
+
     return analyse_clamping(_mechanism(mechanism), mu, tiebar_force=clamp_force,
                             x_contact=x_contact)

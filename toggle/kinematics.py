@@ -34,9 +34,9 @@ from typing import Any, NamedTuple
 
 import casadi as ca
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
 
 from toggle.params import DIMENSIONS, HalfDims
+from toggle.roots import brentq
 
 ca.GlobalOptions.setNumpyMode(True)
 
@@ -364,6 +364,8 @@ def stroke_limits(dims: HalfDims) -> tuple[float, float]:
     before = xs < x_tp
     i = int(np.argmax(np.where(before, np.asarray(pose.theta3), -np.inf)))
     lo, hi = xs[max(i - 1, 0)], xs[min(i + 1, int(np.count_nonzero(before)) - 1)]
+    from scipy.optimize import minimize_scalar  # only here: its import costs 0.3 s
+
     best = minimize_scalar(lambda x: -float(half_pose(x, dims).theta3), bounds=(lo, hi),
                            method="bounded", options={"xatol": 1e-13})
     return float(best.x), x_tp

@@ -34,6 +34,7 @@ import numpy as np
 from toggle import philox
 from toggle.c_library import Sources, casadi_c, shared_library
 from toggle.kinematics import output_position
+from toggle.mc_summary import QUANTILES
 from toggle.params import DIMENSIONS
 
 _DRIVER = r"""
@@ -126,6 +127,79 @@ long toggle_mc_sampled(long start, long n, uint32_t k0, uint32_t k1, uint32_t st
                   : sampled(start, n, k0, k1, stream, 0, x, nom, sc, out);
 }
 
+/* The summary of samples start .. start + n - 1 of a run, from both halves' outputs
+   (toggle/mc_summary.py: the same operations as its numpy): the outputs v are the lower and
+   upper errors L - nominal and the asymmetry L_upper - L_lower; per block of `block`
+   samples (the run's, whatever the call) the sums of d = v - shift and of d * d, in sample
+   order; per quantile window j of an output, the count of values below lo[j] and the values
+   in [lo[j], hi[j]] (kept from base[j], at most cap[j]; filled[j] counts them all).
+   Branch-free where it can be (the counts vectorise); the rare values inside a window are
+   flagged first, then kept. */
+#define SUB 1024
+
+void toggle_mc_accumulate(long start, long n, const double *restrict lower,
+                          const double *restrict upper, const double *restrict nominal,
+                          const double *restrict shift, long block, double *restrict sums,
+                          const double *restrict lo, const double *restrict hi,
+                          int64_t *restrict below, double *restrict kept,
+                          const int64_t *restrict base, const int64_t *restrict cap,
+                          int64_t *restrict filled)
+{
+    for (long t = 0; t < n; t += SUB) {
+        const long m = n - t < SUB ? n - t : SUB;
+        double v[3][SUB];
+        for (long i = 0; i < m;) {
+            const long b = (start + t + i) / block;
+            const long end = (b + 1) * block - start - t < m ? (b + 1) * block - start - t : m;
+            double s[6];
+            for (int k = 0; k < 6; k++)
+                s[k] = sums[6 * b + k];
+            for (; i < end; i++) {
+                const double lw = lower[t + i], up = upper[t + i];
+                v[0][i] = lw - nominal[0];
+                v[1][i] = up - nominal[1];
+                v[2][i] = up - lw;
+                for (int o = 0; o < 3; o++) {
+                    const double d = v[o][i] - shift[o];
+                    s[2 * o] += d;
+                    s[2 * o + 1] += d * d;
+                }
+            }
+            for (int k = 0; k < 6; k++)
+                sums[6 * b + k] = s[k];
+        }
+        for (int o = 0; o < 3; o++) {
+            const double *w = v[o];
+            const double *l = lo + o * N_QUANTILES, *h = hi + o * N_QUANTILES;
+            for (int k = 0; k < N_QUANTILES; k++) {
+                int64_t c = 0;
+                for (long i = 0; i < m; i++)
+                    c += w[i] < l[k];
+                below[o * N_QUANTILES + k] += c;
+            }
+            unsigned char in[SUB];
+            for (long i = 0; i < m; i++) {
+                int f = 0;
+                for (int k = 0; k < N_QUANTILES; k++)
+                    f |= (w[i] >= l[k]) & (w[i] <= h[k]);
+                in[i] = (unsigned char)f;
+            }
+            for (long i = 0; i < m; i++) {
+                if (!in[i])
+                    continue;
+                for (int k = 0; k < N_QUANTILES; k++) {
+                    const int j = o * N_QUANTILES + k;
+                    if (w[i] >= l[k] && w[i] <= h[k]) {
+                        if (filled[j] < cap[j])
+                            kept[base[j] + filled[j]] = w[i];
+                        filled[j]++;
+                    }
+                }
+            }
+        }
+    }
+}
+
 /* The draws themselves (dimensions x n), for the tests' comparison with numpy. */
 void toggle_mc_draws(long start, long n, uint32_t k0, uint32_t k1, uint32_t stream,
                      int normal, double *restrict out)
@@ -149,7 +223,7 @@ void toggle_philox4x32(const uint32_t *counter, const uint32_t *key, uint32_t *o
 """
 
 _COMMON = ("-std=c11", "-Wall", "-Wextra", "-Werror", "-Wno-unused-parameter",
-           "-ffp-contract=off", f"-DN_DIMS={len(DIMENSIONS)}")
+           "-ffp-contract=off", f"-DN_DIMS={len(DIMENSIONS)}", f"-DN_QUANTILES={len(QUANTILES)}")
 #: Builds tried in turn: vectorised with libmvec for this CPU, then plain scalar C.
 _VARIANTS = (
     ((*_COMMON, "-O3", "-march=native", "-fno-math-errno", "-fno-trapping-math",
@@ -162,6 +236,7 @@ _ARRAY = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
 
 _U32 = ctypes.c_uint32
 _WORDS = np.ctypeslib.ndpointer(dtype=np.uint32, flags="C_CONTIGUOUS")
+_LONGS = np.ctypeslib.ndpointer(dtype=np.int64, flags="C_CONTIGUOUS")
 _DRAWS = (ctypes.c_long, ctypes.c_long, _U32, _U32, _U32, ctypes.c_int)
 
 
@@ -182,6 +257,11 @@ class Kernel:
         self._sampled = _function(lib, "toggle_mc_sampled", ctypes.c_long, *_DRAWS,
                                   ctypes.c_double, _ARRAY, _ARRAY, _ARRAY)
         self._draws = _function(lib, "toggle_mc_draws", None, *_DRAWS, _ARRAY)
+        self.accumulate = _function(lib, "toggle_mc_accumulate", None, ctypes.c_long,
+                                    ctypes.c_long, _ARRAY, _ARRAY, _ARRAY, _ARRAY,
+                                    ctypes.c_long, _ARRAY, _ARRAY, _ARRAY, _LONGS, _ARRAY,
+                                    _LONGS, _LONGS, _LONGS)
+        """:mod:`toggle.mc_summary`'s accumulation in C (its arguments: that module's)."""
         self._philox = _function(lib, "toggle_philox4x32", None, _WORDS, _WORDS, _WORDS)
 
     def sampled(self, x: float, nominal: np.ndarray, scale: np.ndarray, key: philox.Key,

@@ -10,15 +10,15 @@ kinematics, deterministically (extreme deviations) and by Monte Carlo.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from tqdm import tqdm
 
 from toggle import mc_kernel, philox
 from toggle.iso286 import it_tolerance
 from toggle.kinematics import output_position, sensitivities, toggle_position
+from toggle.mc_summary import OUTPUTS, PILOT, QUANTILES, Summary, percentiles
 from toggle.params import DIMENSIONS, HALVES, HalfDims, Mechanism, ParameterError
 
 #: Per half, per dimension: a tolerance band half-width or an error, metres.
@@ -93,44 +93,6 @@ def asymmetry(mech: Mechanism, tolerances: Tolerances, x: float | None = None) -
     return AsymmetryReport(x, lower, upper, upper.worst + lower.worst, upper.rss + lower.rss, exact)
 
 
-#: The percentiles a Monte Carlo reports: +-3 sigma, +-1.96 sigma of a normal, the median.
-QUANTILES = (0.135, 2.5, 50.0, 97.5, 99.865)
-
-
-def _order_statistics(values: np.ndarray, ranks: list[int], found: dict[int, float],
-                      offset: int = 0) -> None:
-    """The values of the given ranks (and each rank + 1) of ``values`` into ``found``,
-    partitioning in place around the middle rank and recursing on each side: about 2.5
-    passes for the five quantiles, where one np.partition with all ten ranks makes seven
-    (it selects each rank afresh over what lies to its right)."""
-    if not ranks:
-        return
-    mid = ranks[len(ranks) // 2]
-    values.partition(mid)
-    found[offset + mid] = float(values[mid])
-    if mid + 1 < values.size:
-        found[offset + mid + 1] = float(values[mid + 1:].min())
-    _order_statistics(values[:mid], [r for r in ranks if r < mid], found, offset)
-    _order_statistics(values[mid + 1:], [r - mid - 1 for r in ranks if r > mid], found,
-                      offset + mid + 1)
-
-
-def percentiles(values: np.ndarray, qs: tuple[float, ...] = QUANTILES) -> np.ndarray:
-    """``np.percentile(values, qs)`` (its default linear method, the same bits) for finite
-    values, which are reordered in place: a Monte Carlo's ten million outputs in a third of
-    its time."""
-    n = values.size
-    virtual = (n - 1) * np.true_divide(qs, 100)
-    below = np.floor(virtual).astype(np.intp)
-    above = np.minimum(below + 1, n - 1)
-    found: dict[int, float] = {}
-    _order_statistics(values, sorted(set(below.tolist())), found)
-    a, b = np.array([found[i] for i in below]), np.array([found[i] for i in above])
-    t = virtual - below
-    diff = b - a  # numpy's lerp: from the nearer end
-    return np.where(t >= 0.5, b - diff * (1 - t), a + diff * t)
-
-
 @dataclass(frozen=True)
 class Statistics:
     """Summary of a Monte Carlo sample, metres."""
@@ -188,7 +150,7 @@ def monte_carlo(
     distribution: str = "normal",
     seed: int | None = 0,
     chunk: int = 65_536,
-    progress: bool = False,
+    progress: Callable[[int], object] | None = None,
 ) -> MonteCarloResult:
     """Exact nonlinear Monte Carlo of both halves' outputs at x.
 
@@ -197,26 +159,50 @@ def monte_carlo(
     :mod:`toggle.philox` (sample i's draws depend on the seed and i alone: the chunk
     size does not change the result). Draws and kinematics are evaluated in chunks by
     the compiled kernel (:mod:`toggle.mc_kernel`, C generated from the same closed form;
-    numpy where no C compiler works, the same draws and results); a sample that cannot
-    assemble raises :class:`~toggle.kinematics.AssemblyError` (the tolerances are too
-    wide).
+    numpy where no C compiler works, the same draws and results) and summarised as they
+    come, no sample kept (:mod:`toggle.mc_summary`); ``progress`` is called with the
+    count of each chunk's samples once they are done. A sample that cannot assemble
+    raises :class:`~toggle.kinematics.AssemblyError` (the tolerances are too wide).
     """
     if distribution not in ("normal", "uniform"):
         raise ParameterError(f"distribution must be 'normal' or 'uniform', got {distribution!r}")
     if samples < 2:
         raise ParameterError(f"need at least 2 samples, got {samples}")
+    if chunk < 1:
+        raise ParameterError(f"chunk must be at least 1 sample, got {chunk}")
     x = toggle_position(mech.lower) if x is None else float(x)
     key = philox.key(seed)
     nominal = {h: float(output_position(x, mech.half(h))) for h in HALVES}
     scale = {h: _scale(tolerances[h], distribution) for h in HALVES}
-    out = {h: np.empty(samples) for h in HALVES}
-    starts = range(0, samples, chunk)
-    for start in tqdm(starts, desc="Monte Carlo", unit="chunk", disable=not progress):
+    kernel = mc_kernel.load()
+    pilot = min(samples, PILOT)
+    buffers = [np.empty(max(pilot, min(chunk, samples))) for _ in HALVES]
+
+    def outputs(start: int, n: int, into: list[np.ndarray] = buffers) -> list[np.ndarray]:
         for stream, h in enumerate(HALVES):
             _outputs(x, mech.half(h), scale[h], key, start, stream, distribution,
-                     out[h][start:start + chunk], f"{h} half (sampled)")
-    asym = out["upper"] - out["lower"]
-    for h in HALVES:
-        out[h] -= nominal[h]  # the output errors, in place (the arrays are 80 MB at 1e7)
-    return MonteCarloResult(x=x, samples=samples, lower=Statistics.of(out["lower"]),
-                            upper=Statistics.of(out["upper"]), asymmetry=Statistics.of(asym))
+                     into[stream][:n], f"{h} half (sampled)")
+        return [out[:n] for out in into]
+
+    first = outputs(0, pilot)
+    summary = Summary(samples, (nominal["lower"], nominal["upper"]), *first)
+    summary.add(0, *first, kernel)
+    if progress is not None:
+        progress(pilot)
+    for start in range(pilot, samples, chunk):
+        n = min(chunk, samples - start)
+        summary.add(start, *outputs(start, n), kernel)
+        if progress is not None:
+            progress(n)
+    found = summary.statistics()
+    if any(pct is None for _, _, pct in found.values()):  # a window missed: all the samples
+        whole = [np.empty(samples) for _ in HALVES]
+        for start in range(0, samples, chunk):
+            outputs(start, min(chunk, samples - start),
+                    [out[start:start + chunk] for out in whole])
+        values = dict(zip(OUTPUTS, summary.values(*whole)))
+        found = {k: (mean, std, percentiles(values[k]) if pct is None else pct)
+                 for k, (mean, std, pct) in found.items()}
+    stats = {k: Statistics(mean, std, {f"p{q:g}": float(v) for q, v in zip(QUANTILES, pct)})
+             for k, (mean, std, pct) in found.items()}
+    return MonteCarloResult(x=x, samples=samples, **stats)

@@ -24,6 +24,7 @@ from toggle_cli.common import (
 
 
 def run(args: argparse.Namespace) -> int:
+    from controllers.progress import Progress, reporting
     from toggle import mechanical_errors
     from toggle.tolerance import monte_carlo
 
@@ -48,8 +49,11 @@ def run(args: argparse.Namespace) -> int:
         "rss": {h: budgets[h].rss for h in HALVES},
     }
     if args.samples:
-        mc = monte_carlo(mech, tol, x=rep.x, samples=args.samples, distribution=args.distribution,
-                         seed=args.seed, progress=not args.json)
+        with reporting(Progress("Monte Carlo", "sample", args.samples,
+                                enabled=not args.json)) as progress:
+            mc = monte_carlo(mech, tol, x=rep.x, samples=args.samples,
+                             distribution=args.distribution, seed=args.seed,
+                             progress=progress.advance)
         data["monte_carlo"] = asdict(mc)
     if args.json:
         print_json(data)
