@@ -229,7 +229,7 @@ static uint8_t cmd_start(rig_mcu *m) {
     if (m->pt_count == 0) return RIG_EMPTY;
     m->driver_enabled = 1;
     m->awaiting_power = 1; /* the first point waits for hal_driver_powered() */
-    m->same_load = 0; /* the run's first sample counts 1 (docs/rig-protocol.md) */
+    m->same_load = 0; /* the run's first sample counts 1 (docs/rig-protocol-behaviour.md) */
     rig_set_state(m, RIG_STATE_RUNNING, RIG_REASON_COMMAND);
     return RIG_OK;
 }

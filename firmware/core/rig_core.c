@@ -22,7 +22,7 @@
  *    the driver alarm latches DRIVER in every state but BOOT and keeps ESTOP as the state.
  *    CLEAR_FAULT's "present condition" list is section 8's (not the stop input or alarm).
  *  - All FAULT frames of a period's checks carry the period's state and precede its STATE
- *    frame (docs/rig-protocol.md: "before the period's STATE").
+ *    frame (docs/rig-protocol-behaviour.md: "before the period's STATE").
  *  - A halting fault found after the period's hal_step calls hal_step_halt() and the count
  *    not emitted is taken off `steps` before the telemetry (the count actually output).
  *  - A controlled stop starts from the present step rate: vel_q16 is the last period's

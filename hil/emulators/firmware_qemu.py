@@ -242,7 +242,7 @@ def await_firmware(send: Callable[[bytes], None], receive: Callable[[float], byt
                    timeout: float, ended: Callable[[], bool], state: Callable[[], str],
                    what: str) -> None:
     """Return once an emulated MCU's firmware answered a HELLO and then a BYE: what an
-    emulator does before it publishes its port (docs/rig-protocol.md, section 7, "Emulated
+    emulator does before it publishes its port (docs/rig-protocol-behaviour.md, section 7, "Emulated
     MCUs"), so a host that opens the port finds the firmware running, and the BYE ends the
     session the HELLO opened (no heartbeat watchdog is left armed for the host to find
     latched). Each is sent every 100 ms until its answer: bytes sent before the firmware
@@ -287,7 +287,8 @@ class QemuRig:
     opened the port before lost its first HELLOs. ``answer_timeout`` bounds that wait (s).
     ``realtime``: QEMU's threads run SCHED_FIFO at QEMU_PRIORITY when the OS permits it
     (:attr:`realtime` says whether it did), so a loaded machine slows the guest's clock
-    less; what it still slows, the guest's own clock shows (docs/rig-protocol.md, section 7).
+    less; what it still slows, the guest's own clock shows (docs/rig-protocol-behaviour.md,
+    section 7).
     """
 
     def __init__(self, elf: Path, *, icount: bool = False, monitor: bool = False,

@@ -375,7 +375,7 @@ class NucleoBoard:
 
 class NucleoRig:
     """:class:`NucleoBoard` served on a pseudo-terminal (:attr:`port`) by a thread that
-    paces it, as docs/rig-protocol.md (section 7, "Emulated MCUs") asks of an emulator:
+    paces it, as docs/rig-protocol-behaviour.md (section 7, "Emulated MCUs") asks of an emulator:
     emulated time never runs faster than the wall clock (a slice that took longer than its
     emulated millisecond is not made up later: that time is lost, and the image's own
     clock, its ``t_us``, shows it), and :attr:`port` is published only once the image
