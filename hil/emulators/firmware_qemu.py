@@ -8,7 +8,7 @@ USART to a pseudo-terminal of ours: ``QemuRig(...).port`` is a serial port that 
 rig protocol, for :class:`hil.link.serial_link.SerialLink` or ``hil run --real``. (QEMU's own
 ``-serial pty`` notices a host opening the pty only by polling once a second and ignores
 its bytes until then: every HELLO of a host's 120 ms handshake was lost.) See
-docs/firmware.md.
+docs/firmware-emulated.md.
 """
 
 from __future__ import annotations
@@ -281,7 +281,7 @@ class QemuRig:
     on an exception in the ``with`` block). Every start writes a fresh random seed into
     the image's RAM (the boot id: the F405 model has no RNG). ``icount``: run with
     ``-icount shift=0`` (one instruction per ns of virtual time: the tick measurement of
-    docs/firmware.md); ``monitor``: open QEMU's monitor on a private socket for
+    docs/firmware-emulated.md); ``monitor``: open QEMU's monitor on a private socket for
     :meth:`read_words`. :attr:`port` is published only once the guest's firmware answered
     a HELLO (its session then ended with BYE): it boots in 1.2-1.8 s, and a host that
     opened the port before lost its first HELLOs. ``answer_timeout`` bounds that wait (s).

@@ -14,8 +14,8 @@ the step pulses have driven (rising edges on PA8 in TIM1's bursts, direction PA9
 only while the driver is enabled on PA10), its platen position is the encoder TIM2 counts,
 its force (as load-cell counts with the sim's noise) is what the ADS131M02 converts, and its
 home switch is PC0. The host build with ``step_timing="nucleo"`` feeds the same plant the
-same positions at the same instants (docs/firmware.md "Host build and rehost, sample by
-sample").
+same positions at the same instants (docs/firmware-emulated.md "Host build and rehost,
+sample by sample").
 
 :class:`NucleoBoard` is the board (run it to a time, poke its inputs, read what it did);
 :class:`NucleoRig` serves it on a pseudo-terminal, paced so emulated time never runs
