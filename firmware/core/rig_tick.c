@@ -34,7 +34,8 @@ static int32_t run_step(rig_mcu *m) {
     return 0;
 }
 
-/* STOPPING: one period of the Q16 stop law (docs/rig-protocol-behaviour.md). Returns the step delta. */
+/* STOPPING: one period of the Q16 stop law (docs/rig-protocol-behaviour.md). Returns the step
+ * delta. */
 static int32_t decelerate(rig_mcu *m) {
     int64_t v = m->vel_q16;
     int64_t mag = v < 0 ? -v : v;
