@@ -1,11 +1,11 @@
-"""The numbers, tables and figures of docs/design.md, from the commands it documents.
+"""The numbers, tables and figures of docs/design-runs.md, from the commands it documents.
 
 Run from the repository: ``.venv/bin/python docs/design_report.py``. It runs each documented
 ``toggle design`` command as written (in this process, through the command line; the record
 goes to build/design/ and a rerun resumes from it, with --force over a finished run's
 files), reads the record back by replaying the same seeded search (nothing is computed
 again: it checks that), and prints the Markdown of
-docs/design.md's tables: seed 004's groups against the front, and the SM-55 redesign with
+docs/design-runs.md's tables: seed 004's groups against the front, and the SM-55 redesign with
 every objective and constraint against the SM-55, both opened by the same rule. Writes the
 figures to docs/design/ and the chosen SM-55 design to design/examples/sm55_design.toml
 (the SM-55 opened by the same rule to build/design/sm55_reference.toml), runs

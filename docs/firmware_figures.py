@@ -1,7 +1,8 @@
-"""The figures of docs/firmware.md, measured, written between its marker comments.
+"""The figures of the firmware's pages, measured, written between their marker comments.
 
 Run from the repository: ``.venv/bin/python docs/firmware_figures.py`` rewrites every block
-``<!-- figures:NAME -->`` ... ``<!-- /figures:NAME -->`` of docs/firmware.md with what it
+``<!-- figures:NAME -->`` ... ``<!-- /figures:NAME -->`` of docs/firmware.md and
+docs/firmware-emulated.md (:data:`BLOCKS` names each block's page) with what it
 measures now; ``--check`` writes nothing and exits 1 naming the blocks whose text differs
 (stale); ``--cheap`` does only the blocks that take seconds (the NUCLEO image's memory and
 its step pulses on the rehosted TIM1), leaving the QEMU image's (a build of the generated
@@ -34,7 +35,7 @@ from stack_report import report as stack_report  # noqa: E402
 
 from hil.emulators.firmware import section_sizes  # noqa: E402
 
-DOC = ROOT / "docs" / "firmware.md"
+DOCS = ROOT / "docs"
 FLASH_SECTIONS = (".isr_vector", ".text", ".rodata", ".ARM.exidx", ".data")
 RAM_SECTIONS = (".data", ".bss", ".noinit")
 BLOCK = re.compile(r"(<!-- figures:(?P<name>[\w-]+) -->\n)(?P<body>.*?)"
@@ -137,16 +138,24 @@ def nucleo_tick() -> str:
     return "\n".join(lines) + "\n"
 
 
-#: Block name -> (generator, cheap).
-BLOCKS: dict[str, tuple[Callable[[], str], bool]] = {
-    "nucleo-memory": (nucleo_memory, True),
-    "nucleo-pulses": (nucleo_pulses, True),
-    "nucleo-tick": (nucleo_tick, True),
-    "qemu-memory": (qemu_memory, False),
+#: Block name -> (generator, cheap, the page under docs/ that holds it).
+BLOCKS: dict[str, tuple[Callable[[], str], bool, str]] = {
+    "nucleo-memory": (nucleo_memory, True, "firmware-emulated.md"),
+    "nucleo-pulses": (nucleo_pulses, True, "firmware.md"),
+    "nucleo-tick": (nucleo_tick, True, "firmware-emulated.md"),
+    "qemu-memory": (qemu_memory, False, "firmware-emulated.md"),
 }
+PAGES = sorted({page for _, _, page in BLOCKS.values()})
 
 
-def update(text: str, names: list[str], where: str = DOC.name) -> tuple[str, list[str]]:
+def blocks_of(doc: Path, names: list[str]) -> list[str]:
+    """Of ``names``, the blocks the page named like ``doc`` holds; all of them for a file
+    named like no page."""
+    mine = [n for n in names if BLOCKS[n][2] == doc.name]
+    return mine if doc.name in PAGES else names
+
+
+def update(text: str, names: list[str], where: str = "the document") -> tuple[str, list[str]]:
     """``text`` (of the file ``where``) with the blocks ``names`` regenerated, and the names
     whose body changed. ValueError naming a block the text lacks."""
     found = {m.group("name") for m in BLOCK.finditer(text)}
@@ -174,25 +183,31 @@ def main(argv: list[str] | None = None) -> int:
                         help="write nothing; exit 1 if a block is stale")
     parser.add_argument("--cheap", action="store_true",
                         help="only the blocks that take seconds")
-    parser.add_argument("--doc", type=Path, default=DOC, help="the document (default: %(default)s)")
+    parser.add_argument("--doc", type=Path, help="one document, with the blocks of the page "
+                        "of its name (default: every page, docs/" + ", docs/".join(PAGES) + ")")
     args = parser.parse_args(argv)
-    names = [n for n, (_, cheap) in BLOCKS.items() if cheap or not args.cheap]
+    names = [n for n, (_, cheap, _) in BLOCKS.items() if cheap or not args.cheap]
+    docs = [args.doc] if args.doc else [DOCS / page for page in PAGES]
+    written: dict[Path, tuple[str, str, list[str]]] = {}
     try:
-        text = args.doc.read_text()
-        new, stale = update(text, names, args.doc.name)
+        for doc in docs:
+            text = doc.read_text()
+            written[doc] = (text, *update(text, blocks_of(doc, names), doc.name))
     except (OSError, ValueError, RuntimeError, subprocess.CalledProcessError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.check:
-        for name in stale:
-            print(f"{args.doc}: block {name} is stale (run docs/firmware_figures.py)")
-        return 1 if stale else 0
-    if new != text:
-        from toggle.files import atomic_path
+        for doc, (_, _, stale) in written.items():
+            for name in stale:
+                print(f"{doc}: block {name} is stale (run docs/firmware_figures.py)")
+        return 1 if any(stale for _, _, stale in written.values()) else 0
+    from toggle.files import atomic_path
 
-        with atomic_path(args.doc) as tmp:
-            tmp.write_text(new)
-    print(f"{args.doc}: {', '.join(stale) or 'nothing'} regenerated")
+    for doc, (text, new, stale) in written.items():
+        if new != text:
+            with atomic_path(doc) as tmp:
+                tmp.write_text(new)
+        print(f"{doc}: {', '.join(stale) or 'nothing'} regenerated")
     return 0
 
 

@@ -1,4 +1,5 @@
-"""Clean-room MCU of the clamp test rig, written from docs/rig-protocol.md (v1.1) alone.
+"""Clean-room MCU of the clamp test rig, written from docs/rig-protocol.md and
+docs/rig-protocol-behaviour.md (v1.1) alone.
 
 None of the project's protocol, host or emulator code was read or imported to write
 this: COBS, CRC-16/CCITT-FALSE, the message layouts, the state machine, the safety

@@ -1,6 +1,7 @@
-"""The clean-room rig's wire, written from docs/rig-protocol.md alone (tests/cleanroom_rig.py
-says how): the document's constants, message types, result codes, states, fault and
-telemetry bits, message layouts, and the framing (COBS, CRC-16/CCITT-FALSE)."""
+"""The clean-room rig's wire, written from docs/rig-protocol.md and
+docs/rig-protocol-behaviour.md alone (tests/cleanroom_rig.py says how): the document's
+constants, message types, result codes, states, fault and telemetry bits, message layouts,
+and the framing (COBS, CRC-16/CCITT-FALSE)."""
 
 from __future__ import annotations
 

@@ -95,7 +95,7 @@ def recorded_samples(run_dir: Path) -> list[int]:
 
 def sent_samples(log: EmulatorLog, first: int, earliest_boot: bool = False) -> list[int]:
     """What the emulator sent intact for the run whose first recorded sample is ``first``: from
-    the run's START to the first sample at standstill (docs/rig-protocol.md, section 11).
+    the run's START to the first sample at standstill (docs/rig-protocol-behaviour.md, section 11).
 
     The run is the latest START at or before ``first`` in a boot that sent ``first`` intact:
     the START's own sample may have been corrupted on the wire (the dropped-bytes fault), so the

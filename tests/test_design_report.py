@@ -1,4 +1,4 @@
-"""docs/design.md replays (issue 38): its script reruns the documented command and reads the
+"""docs/design-runs.md replays (issue 38): its script reruns the documented command and reads the
 record back without computing anything; the same seed gives the same record and the same
 tables whether the record was computed in the process or on two workers; the comparison
 lists every objective and constraint of a design and its reference, losses included."""

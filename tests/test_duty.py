@@ -120,7 +120,7 @@ def test_the_winding_heats_to_the_rated_rise_at_the_rated_torque():
         check_motor(duty, DRIVE, drive_limits(MECH))
 
 
-#: The SM-55 molding cycle of docs/planning.md: an 8 s hold, a 1.5 s ejection.
+#: The SM-55 molding cycle of docs/planning-drive.md: an 8 s hold, a 1.5 s ejection.
 SM55_CYCLE = ["plan", "--preset", "lin2003_sm55", "--cycle", "--hold", "8", "--eject", "1.5"]
 
 

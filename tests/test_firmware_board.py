@@ -1,4 +1,5 @@
-"""The rig firmware's board images (firmware/board/, docs/firmware.md).
+"""The rig firmware's board images (firmware/board/, docs/firmware.md and
+docs/firmware-emulated.md).
 
 The NUCLEO-F446RE image is built with -Werror and must link and fit the F446RE (it is not
 run: no board here). The QEMU image (netduinoplus2, STM32F405) is the same core on the
@@ -33,7 +34,7 @@ RAM_BYTES = 128 * 1024
 # least one of three consecutive windows. On the MCU's clock the rate is exact (t_us =
 # sample * 1000, no gap in sample). On the wall clock QEMU's SysTick follows the host, but
 # each period costs the guest about 234 000 instructions of the simulated plant in
-# software double precision (docs/firmware.md); when other jobs starve QEMU of its core, a
+# software double precision (docs/firmware-emulated.md); when other jobs starve QEMU of its core, a
 # period that elapses while the SysTick interrupt is already pending is lost (measured:
 # 1000 per second on an idle host, 750-815 at a load of 3.7 on two cores).
 LOW, HIGH = 700, 1150

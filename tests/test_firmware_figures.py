@@ -1,4 +1,5 @@
-"""docs/firmware_figures.py: docs/firmware.md's measured figures are the script's output.
+"""docs/firmware_figures.py: the measured figures of docs/firmware.md and
+docs/firmware-emulated.md are the script's output.
 
 The cheap blocks (the NUCLEO image's memory, its step pulses on the rehosted TIM1) are
 measured again and compared with the document; the QEMU block takes a build of the
@@ -41,8 +42,8 @@ def test_the_documents_cheap_figures_are_current(figures: ModuleType,
 
 def test_a_stale_figure_is_named_and_regenerated(figures: ModuleType, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
-    doc = tmp_path / "firmware.md"
-    shutil.copyfile(figures.DOC, doc)
+    doc = tmp_path / "firmware-emulated.md"  # the page that holds nucleo-memory
+    shutil.copyfile(figures.DOCS / doc.name, doc)
     text = doc.read_text()
     start = text.index("<!-- figures:nucleo-memory -->")
     end = text.index("<!-- /figures:nucleo-memory -->")
@@ -56,8 +57,21 @@ def test_a_stale_figure_is_named_and_regenerated(figures: ModuleType, tmp_path: 
 
 def test_a_document_without_the_blocks_is_refused(figures: ModuleType, tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
-    doc = tmp_path / "firmware.md"
+    doc = tmp_path / "firmware-emulated.md"
     doc.write_text("# no figures here\n")
     assert figures.main(["--check", "--cheap", "--doc", str(doc)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: firmware.md has no block nucleo-memory, nucleo-pulses")
+    assert err.startswith("error: firmware-emulated.md has no block nucleo-memory, nucleo-tick")
+    other = tmp_path / "notes.md"  # named like no page: it must hold every block
+    other.write_text("# no figures here\n")
+    assert figures.main(["--check", "--cheap", "--doc", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: notes.md has no block nucleo-memory, nucleo-pulses, nucleo-tick")
+
+
+def test_each_block_is_on_the_page_the_script_names(figures: ModuleType) -> None:
+    """Each block sits on the page BLOCKS names, and only there (the page was split)."""
+    for name, (_, _, page) in figures.BLOCKS.items():
+        holders = [p.name for p in (ROOT / "docs").glob("*.md")
+                   if f"<!-- figures:{name} -->" in p.read_text(encoding="utf-8")]
+        assert holders == [page], (name, holders)

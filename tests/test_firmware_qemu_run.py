@@ -5,7 +5,7 @@ The recipe of docs/rig.md with ``hil emulate --firmware --qemu`` and with ``hil 
 cycle at 40 mm/s. The two builds run the same core on the same plant (the native FMU's
 C, compiled for the Cortex-M4 and for this machine), so the platen reads the same
 encoder count in every sample; forces carry each run's own load-cell noise. (The default
-job, 3 cycles: 18602 samples on both, stroke 44.9870 mm on both; docs/firmware.md.)
+job, 3 cycles: 18602 samples on both, stroke 44.9870 mm on both; docs/firmware-emulated.md.)
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The NUCLEO-F446RE image rehosted (hil/emulators/rehost/, docs/firmware.md "The rehosted image").
+"""The NUCLEO-F446RE image rehosted (hil/emulators/rehost/,
+docs/firmware-emulated.md "The rehosted image").
 
 The ELF `make -C firmware/board nucleo` writes, bytes unchanged, runs on the unicorn CPU
 emulator with models of the STM32F446 peripherals and the ADS131M02, joined to the
@@ -146,10 +147,10 @@ def test_the_image_is_the_flashed_elf_and_answers_hello_on_a_pty(elf: Path) -> N
 
 def test_the_plain_host_runs_a_trajectory_on_the_paced_pty(elf: Path) -> None:
     """The host with no timeouts given (as `hil run --real --port PTY`: measured when the
-    session opens, docs/rig-protocol.md section 7) on the pty NucleoRig publishes once the
+    session opens, docs/rig-protocol-behaviour.md section 7) on the pty NucleoRig publishes once the
     image answered HELLO and BYE: 300 ms of trajectory out and back, every sample received,
     the image's clock never faster than the wall clock. (The default job takes minutes on
-    the rehost: docs/firmware.md "The rehosted image".)"""
+    the rehost: docs/firmware-emulated.md "The rehosted image".)"""
     pytest.importorskip("serial")
     from hil.link.serial_link import SerialLink
 

@@ -68,7 +68,8 @@ class Case:
     completes: bool = False  # link noise: the motion completes; the run fails on its data
     in_flight: int = 0  # samples the host may never read (written just before a hang-up)
     # timeouts fixed by hand where the case is timed against them (the host measures them
-    # from the link otherwise, longer on a loaded machine: docs/rig-protocol.md, section 7)
+    # from the link otherwise, longer on a loaded machine: docs/rig-protocol-behaviour.md,
+    # section 7)
     args: tuple[str, ...] = ()
 
 

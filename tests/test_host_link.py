@@ -301,7 +301,7 @@ def test_a_deaf_rig_gets_one_stop_sequence_and_is_left_at_once(
     assert mcu.deaf and link._ser is None and plant.link is None
     frames = [r for r in mcu.after_deaf() if r.kind != p.MsgType.TRAJ_CHUNK]  # the failed one's
     if frames and frames[0].kind == p.MsgType.HELLO:  # a silence is first asked whether the
-        frames = frames[1:]  # MCU reset (docs/rig-protocol.md, section 10): once
+        frames = frames[1:]  # MCU reset (docs/rig-protocol-behaviour.md, section 10): once
     kinds = [r.kind for r in frames]
     stops = kinds.count(p.MsgType.STOP)
     assert kinds == [p.MsgType.STOP] * stops + [p.MsgType.ESTOP] * ESTOP_REPEATS, kinds
@@ -464,7 +464,7 @@ def test_the_reader_restarts_the_silence_count_when_it_wakes_late(
 def test_an_mcu_whose_clock_runs_slow_gets_watchdogs_on_its_clock(
         wall_period: float, points: int, fake: Callable[..., FakeMcu]) -> None:
     """An emulator may run its MCU slower than the wall clock if it reports its own time
-    (docs/rig-protocol.md, section 7, "Emulated MCUs"): here 1000 us of t_us per 3 ms, and
+    (docs/rig-protocol-behaviour.md, section 7, "Emulated MCUs"): here 1000 us of t_us per 3 ms, and
     per 120 ms (a sample every 120 ms tripped the host's 100 ms watchdog). The host
     measures the rate at open and waits 100 ms of the MCU's clock for telemetry, at most
     1 s; a run at that pace completes without a false stall."""

@@ -1,4 +1,5 @@
-"""The host's timeouts from the measured link (hil/link/timing.py, docs/rig-protocol.md §7)."""
+"""The host's timeouts from the measured link (hil/link/timing.py,
+docs/rig-protocol-behaviour.md §7)."""
 
 from __future__ import annotations
 

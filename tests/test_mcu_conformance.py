@@ -1,5 +1,5 @@
-"""The conformance checklist of docs/rig-protocol.md §13, over the bytes, against both MCUs:
-framing, sequence numbers, the state machine and its stops, the checks of §8, telemetry.
+"""The conformance checklist of docs/rig-protocol-behaviour.md §13, over the bytes, against
+both MCUs: framing, sequence numbers, the state machine and its stops, the checks of §8, telemetry.
 
 Every test runs twice: against the Python MCU model (hil.emulators.mcu_model.ModelMcu) and
 against the C firmware's host build on the simulated rig (hil.emulators.firmware.FirmwareMcu),

@@ -160,7 +160,7 @@ def test_default_job_from_the_page_on_the_rehosted_nucleo_image_then_stop(
     rig = RehostedRig()
     try:
         # the rehost runs slower than the wall clock: hil run's timings for it
-        # (docs/firmware.md, "On the rehosted image")
+        # (docs/firmware-emulated.md, "On the rehosted image")
         _drive(rig, tmp_path, 240, "--ack-ms", "500", "--heartbeat-ms", "1000",
                "--watchdog-ms", "1000")
     finally:

@@ -1,10 +1,10 @@
-"""Why docs/design.md's rig row of the SM-55 flipped with 4 um of open position (issue 46):
+"""Why docs/design-runs.md's rig row of the SM-55 flipped with 4 um of open position (issue 46):
 ``hil run`` drives the planner's minimum-peak plan of the preset, and for the SM-55 (opened
 to the targets' mold stroke, x_open = -69.954 mm) that problem has two families of local
 optima whose peaks are 0.24 % apart and whose RMS input forces are 5 % apart. Which one
 the planner's starts land in changes with a micrometre of x_open, and the rig's RMS force,
 opening pull and toggle force with it; the rig's physics, driven by one plan, moves
-smoothly (docs/design.md). A claim on the rig's figures therefore holds only where it
+smoothly (docs/design-runs.md). A claim on the rig's figures therefore holds only where it
 holds across such perturbations (docs/design_report.py)."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """`hil emulate --firmware --board nucleo` from the command line: whole `hil run` jobs on
-the rehosted NUCLEO image (docs/firmware.md, "The rehosted image"), its options, and the
+the rehosted NUCLEO image (docs/firmware-emulated.md, "The rehosted image"), its options, and the
 host build they are compared with. Minutes each: marked ``alone`` or ``real_time``."""
 
 from __future__ import annotations
@@ -176,7 +176,7 @@ def test_the_default_job_agrees_with_the_host_build_at_the_boards_step_timing(
     samples and commanded positions; from the cycles' first move on the same encoder
     counts, and the forces to the ADC's resolution once the start's transient has gone
     (the plant's state at START depends on the dwell before it, wall-clock time that the
-    rehost emulates slower: docs/firmware.md). On the rehosted image every step pulse of
+    rehost emulates slower: docs/firmware-emulated.md). On the rehosted image every step pulse of
     the whole job (homing included) is a rising edge on PA8: their count equals the steps
     the firmware's telemetry commanded. Minutes: the rehosted image runs below real time."""
     import csv

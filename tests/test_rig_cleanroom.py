@@ -1,4 +1,5 @@
-"""The project's host against a clean-room MCU written from docs/rig-protocol.md alone.
+"""The project's host against a clean-room MCU written from docs/rig-protocol.md
+and docs/rig-protocol-behaviour.md alone.
 
 The rig (tests/cleanroom_rig.py and the cleanroom_* modules it names) runs in a spawned
 process on a pseudo-terminal; the host (`hil.cli.main`) runs in this process, exactly as

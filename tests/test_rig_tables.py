@@ -52,7 +52,7 @@ NOMINAL = load_preset("chang2021")
 X_OPEN, X_TP = stroke_limits(NOMINAL.lower)
 #: Rows of the predicted Tables 5 and 8 (25 mm/s) the shipped model misses, as
 #: (statistic, delta_r8 in mm); asserted to miss, so an improvement is noticed.
-#: docs/unequal-halves.md section 9.6 says why (delta_r8 = 0: by the printed 3 sigma).
+#: docs/unequal-halves-results.md section 9.6 says why (delta_r8 = 0: by the printed 3 sigma).
 KNOWN_MISSES = {
     ("force_forward_max", 0.0), ("force_forward_rms", 0.0), ("force_backward_min", 0.0),
     ("force_backward_rms", 0.0),

@@ -82,7 +82,8 @@ class AsymmetryParams:
     contact_stiffness, drive_stiffness; takeup_return and rate_strengthening from earlier
     fits, the latter at its limit of zero friction at rest; boundary friction, which the
     fits chose) and
-    the rest from its materials and sizes (docs/unequal-halves.md, sections 4 and 9).
+    the rest from its materials and sizes (docs/unequal-halves.md, sections 4 and 9;
+    the shipped fit: docs/unequal-halves-results.md, section 9.5).
     """
 
     free_play: float = 0.1441e-3  # delta0, m: platen tilt in the bushings + pin clearances

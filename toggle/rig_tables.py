@@ -93,7 +93,8 @@ class RigReading:
 
 
 #: The prototype's reading, fitted with the force model on Tables 3-4 and 6-7
-#: (``toggle tables --fit ...``, docs/unequal-halves.md section 9).
+#: (``toggle tables --fit ...``, docs/unequal-halves.md section 9; the shipped fit:
+#: docs/unequal-halves-results.md section 9.5).
 CHANG2021_READING = RigReading(datum=0.4032e-3, lever=0.648, compliance=0.869e-6)
 
 
@@ -113,7 +114,7 @@ AS_BUILT = {"chang2021": CHANG2021_AS_BUILT}
 #: the log of the platen's speed (platen_rate 1.81: 23 N at 10 mm/s, 35 N at 50 mm/s).
 #: Referred to the input by dL/dx it drags the stroke's start (x 2.1) and fades to nothing
 #: at the toggle, so it gives the delta_r8 = 0 rows their force without an F_TP
-#: (docs/unequal-halves.md section 9.5). Data of the rig like the as-built errors: the
+#: (docs/unequal-halves-results.md section 9.5). Data of the rig like the as-built errors: the
 #: preset, the planner's and the FMU's defaults stay without it; the simulated rig
 #: (:func:`rig_dynamics`) adds it.
 CHANG2021_DYNAMICS: dict[str, float] = {"platen_friction": 4.26, "platen_rate": 1.81}

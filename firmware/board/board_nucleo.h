@@ -48,7 +48,7 @@
 #define PIN_CLKIN 9u   /* PC9  MCO2 AF0: 8 MHz to the ADC's CLKIN */
 #define PIN_B1 13u     /* PC13 the Nucleo's user button B1 (low when pressed) */
 
-/* FAULT values of the board's faults (docs/rig-protocol.md section 8) */
+/* FAULT values of the board's faults (docs/rig-protocol-behaviour.md section 8) */
 #define INTERNAL_STEP_BURST 1 /* a burst over 256 steps or armed too late: not emitted */
 #define INTERNAL_LATE_TICK 2  /* a tick ran more than one period late */
 #define ADC_MISSING 1         /* no ADS131M02 answered at boot (ID register, CRC) */

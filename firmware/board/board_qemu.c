@@ -15,7 +15,7 @@
  * rig_tick(), the transmit FIFO drains; nothing preempts rig_tick() but the two ISRs,
  * which touch only the ring and the tick counter.
  *
- * Measurement (docs/firmware.md): the link wraps the core's calls of hal_read and hal_step
+ * Measurement (docs/firmware-emulated.md): the link wraps the core's calls of hal_read and hal_step
  * (-Wl,--wrap) to time, in SysTick counts, the whole tick, the simulated rig's part (the
  * FMU step in hal_read, which the real board replaces by an SPI read) and the delay from
  * the tick's start to hal_step. SysTick->VAL is only readable under -icount (QEMU 7.2

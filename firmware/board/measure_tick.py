@@ -1,4 +1,4 @@
-"""Worst-case tick of the QEMU image (docs/firmware.md, "Measured").
+"""Worst-case tick of the QEMU image (docs/firmware-emulated.md, "Measured").
 
 Boots the image under ``-icount shift=0`` (one guest instruction per ns of virtual time),
 opens a session, streams a run forward and back (enc_expected unchecked) with heartbeats,

@@ -104,7 +104,7 @@ static uint8_t point_rule(int32_t steps_min, int32_t steps_max, uint16_t max_ste
  * it was last emptied (a run leaves for IDLE only with its buffer empty or discarded, and
  * a chunk with first_index 0 clears it), so every block's summary is exact: a block is
  * read point by point only when it holds a failing point, and the loop's first failure is
- * in the first such block. At most one block of points is read (docs/firmware.md: a tick
+ * in the first such block. At most one block of points is read (docs/firmware-emulated.md: a tick
  * is never late for a CONFIG; the loop over 2048 points took 56 105 instructions). */
 static uint8_t buffered_points_rule(const rig_mcu *m, const rig_msg_config *c) {
     int64_t prev = m->steps;
@@ -229,7 +229,7 @@ static uint8_t cmd_start(rig_mcu *m) {
     if (m->pt_count == 0) return RIG_EMPTY;
     m->driver_enabled = 1;
     m->awaiting_power = 1; /* the first point waits for hal_driver_powered() */
-    m->same_load = 0; /* the run's first sample counts 1 (docs/rig-protocol.md) */
+    m->same_load = 0; /* the run's first sample counts 1 (docs/rig-protocol-behaviour.md) */
     rig_set_state(m, RIG_STATE_RUNNING, RIG_REASON_COMMAND);
     return RIG_OK;
 }

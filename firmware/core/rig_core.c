@@ -22,7 +22,7 @@
  *    the driver alarm latches DRIVER in every state but BOOT and keeps ESTOP as the state.
  *    CLEAR_FAULT's "present condition" list is section 8's (not the stop input or alarm).
  *  - All FAULT frames of a period's checks carry the period's state and precede its STATE
- *    frame (docs/rig-protocol.md: "before the period's STATE").
+ *    frame (docs/rig-protocol-behaviour.md: "before the period's STATE").
  *  - A halting fault found after the period's hal_step calls hal_step_halt() and the count
  *    not emitted is taken off `steps` before the telemetry (the count actually output).
  *  - A controlled stop starts from the present step rate: vel_q16 is the last period's
@@ -37,15 +37,15 @@
  */
 #include "rig_core_internal.h"
 
-/* docs/rig-protocol.md: dv = round(decel * 1e-6 * 65536), from the f32 value in double, once at
- * CONFIG. The double operations are the model's, in its order: (double)decel is exact, the
- * product with the double nearest 1e-6 is correctly rounded (IEEE-754, as in Python), and
- * * 65536 is exact (a power of two), so the result is bit-identical to the model's before
- * the final rounding, which is Python's round() (half to even). For the default 5e6: 5e6 is
- * exact in binary32; 5e6 * 1e-6 rounds to exactly 5.0 in double (the error of the constant
- * 1e-6, ~4.5e-23, times 5e6 is ~2.3e-16, below half an ulp of 5.0, 4.4e-16); 5.0 * 65536 =
- * 327680.0 exactly -> dv = 327680 (5 steps per period per period = 1 m/s^2 at 1 ms).
- * On the Cortex-M4F double is done in software (libgcc), once per CONFIG. */
+/* docs/rig-protocol-behaviour.md (section 8): dv = round(decel * 1e-6 * 65536), from the f32 value
+ * in double, once at CONFIG. The double operations are the model's, in its order: (double)decel is
+ * exact, the product with the double nearest 1e-6 is correctly rounded (IEEE-754, as in Python),
+ * and * 65536 is exact (a power of two), so the result is bit-identical to the model's before the
+ * final rounding, which is Python's round() (half to even). For the default 5e6: 5e6 is exact in
+ * binary32; 5e6 * 1e-6 rounds to exactly 5.0 in double (the error of the constant 1e-6, ~4.5e-23,
+ * times 5e6 is ~2.3e-16, below half an ulp of 5.0, 4.4e-16); 5.0 * 65536 = 327680.0 exactly -> dv
+ * = 327680 (5 steps per period per period = 1 m/s^2 at 1 ms). On the Cortex-M4F double is done in
+ * software (libgcc), once per CONFIG. */
 int64_t rig_stop_dv_q16(float decel_steps_s2) {
     double x = (double)decel_steps_s2 * 1e-6 * 65536.0;
     if (!(x > 0.0)) return 0;

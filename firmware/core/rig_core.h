@@ -198,7 +198,8 @@ size_t rig_tx_take(rig_mcu *m, uint8_t *out, size_t max);
 /* Bytes waiting in the transmit FIFO. */
 size_t rig_tx_pending(const rig_mcu *m);
 
-/* Q16 stop deceleration per period for a CONFIG's decel_steps_s2 (docs/rig-protocol.md):
+/* Q16 stop deceleration per period for a CONFIG's decel_steps_s2
+ * (docs/rig-protocol-behaviour.md, section 8):
  * round(decel * 1e-6 * 65536), half to even as Python's round(), clamped to [0, 2^62]. */
 int64_t rig_stop_dv_q16(float decel_steps_s2);
 

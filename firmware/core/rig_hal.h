@@ -24,7 +24,7 @@ typedef struct {
     /* faults the board itself found this period (RIG_F_INTERNAL, RIG_F_OVERTRAVEL,
      * RIG_F_LOAD_ADC, RIG_F_CLOCK, RIG_F_STOP_CHAIN of rig_core.h): each latches as a
      * halting fault with board_detail as its FAULT frame's value (which input, which
-     * check: docs/rig-protocol.md section 8); 0 on a board without such checks */
+     * check: docs/rig-protocol-behaviour.md section 8); 0 on a board without such checks */
     uint16_t board_faults;
     int32_t board_detail;
 } rig_inputs;

@@ -1,6 +1,6 @@
 /* The core's receive path (rig_core.h: rig_rx, rig_link_lost): every byte through the
  * framing (rig_frame.c), and each good frame through section 2's type and length rules and
- * section 6's seq rules (with docs/rig-protocol.md) to one command (rig_commands.c). */
+ * section 6's seq rules (with docs/rig-protocol-behaviour.md) to one command (rig_commands.c). */
 #include "rig_core_internal.h"
 
 /* Minimal payload length of a host type; -1: unknown type. TRAJ_CHUNK is checked whole
@@ -42,11 +42,12 @@ static void send_reply(rig_mcu *m, const rig_reply *r) {
 }
 
 /* One valid host frame (good CRC): section 2's type/length rules, section 6's seq rules
- * with docs/rig-protocol.md, then the command. */
+ * with docs/rig-protocol-behaviour.md, then the command. */
 static void handle_frame(rig_mcu *m, const rig_frame *f) {
     bool ack_req = (f->flags & RIG_FLAG_ACK_REQ) != 0;
     rig_reply r;
-    m->last_rx_us = m->t_us; /* any valid host frame feeds the watchdog (docs/rig-protocol.md) */
+    /* any valid host frame feeds the watchdog (docs/rig-protocol-behaviour.md) */
+    m->last_rx_us = m->t_us;
     int need = f->type >= 0x80u ? -1 : min_payload(f->type);
     if (need < 0) { /* unknown, or an MCU->host type: an unknown command */
         if (ack_req) {
@@ -74,8 +75,8 @@ static void handle_frame(rig_mcu *m, const rig_frame *f) {
         rig_execute(m, f, &r);
         store = true; /* a new host starts at a random seq, whatever the answer */
     } else if (is_stop) {
-        /* always executed, also with the stored seq (docs/rig-protocol.md); stored only when
-         * newer, so an old seq does not re-base the order */
+        /* always executed, also with the stored seq (docs/rig-protocol-behaviour.md); stored
+         * only when newer, so an old seq does not re-base the order */
         rig_execute(m, f, &r);
         store = !m->have_last_seq || seq_newer(f->seq, m->last_seq);
     } else if (m->have_last_seq && f->seq == m->last_seq) {

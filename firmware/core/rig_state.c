@@ -113,9 +113,10 @@ void rig_restore_calibration(rig_mcu *m) {
     m->cfg.load_gain_n = m->stored.load_gain_n;
 }
 
-/* The checks of section 8 on the present reading, in bit order (docs/rig-protocol.md): every
- * failing check latches; each new bit sends its FAULT frame (all with the period's state),
- * and only then the reaction runs, so the period's STATE frame follows every FAULT frame.
+/* The checks of section 8 on the present reading, in bit order
+ * (docs/rig-protocol-behaviour.md): every failing check latches; each new bit sends its FAULT
+ * frame (all with the period's state), and only then the reaction runs, so the period's STATE
+ * frame follows every FAULT frame.
  * FOLLOWING_ERROR and LOAD_STUCK only in RUNNING. Returns the bits whose condition holds;
  * latches and reacts only when apply (CLEAR_FAULT asks with apply false). */
 uint16_t rig_check_sensors(rig_mcu *m, bool apply) {
@@ -138,7 +139,7 @@ uint16_t rig_check_sensors(rig_mcu *m, bool apply) {
         value[0] = round_half_even_f(force);
         limit[0] = round_half_even_f(c->force_limit_n);
     }
-    /* travel: steps before enc; the bound crossed is the limit (docs/rig-protocol.md) */
+    /* travel: steps before enc; the bound crossed is the limit (docs/rig-protocol-behaviour.md) */
     if (m->steps < c->steps_min || m->steps > c->steps_max) {
         found |= RIG_F_TRAVEL_LIMIT;
         value[1] = m->steps;

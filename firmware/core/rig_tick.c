@@ -34,7 +34,8 @@ static int32_t run_step(rig_mcu *m) {
     return 0;
 }
 
-/* STOPPING: one period of the Q16 stop law (docs/rig-protocol.md). Returns the step delta. */
+/* STOPPING: one period of the Q16 stop law (docs/rig-protocol-behaviour.md). Returns the step
+ * delta. */
 static int32_t decelerate(rig_mcu *m) {
     int64_t v = m->vel_q16;
     int64_t mag = v < 0 ? -v : v;
@@ -95,7 +96,7 @@ void rig_tick(rig_mcu *m, uint32_t t_us) {
     /* an ESTOP received since the last tick: cancel what is left of that period's pulses */
     apply_halt(m);
     sync_driver(m);
-    /* heartbeat watchdog (docs/rig-protocol.md) */
+    /* heartbeat watchdog (docs/rig-protocol-behaviour.md) */
     if (m->session) {
         uint32_t silence = t_us - m->last_rx_us;
         uint32_t timeout = (uint32_t)m->cfg.heartbeat_timeout_ms * 1000u;

@@ -6,8 +6,8 @@
  *
  * Shared with the simulated rig (firmware/sim/sim_rig.c, sim_rig_hw.step_timing), which can
  * emit a period's steps with this timing, so that the host build's table moves at the
- * instants the rehosted board's does (docs/firmware.md "Host build and rehost, sample by
- * sample"). Header only, no state.
+ * instants the rehosted board's does (docs/firmware-emulated.md "Host build and rehost,
+ * sample by sample"). Header only, no state.
  */
 #ifndef STEP_BURST_H
 #define STEP_BURST_H

@@ -1,8 +1,9 @@
 /* The unit tests of the firmware core (firmware/core/) on the fake HAL: the harness and the
  * runner; the tests are in test_*.c (core_test.h lists them): the worked examples of
- * docs/rig-protocol.md section 12 byte for byte, the framing rules of section 2, the seq
- * rules of section 6, and the behaviours of sections 5, 8 and 9 with docs/rig-protocol.md that
- * the conformance suite compares with hil/emulators/mcu_model.py. Ends with the line
+ * docs/rig-protocol-behaviour.md section 12 byte for byte, the framing rules of section 2
+ * (docs/rig-protocol.md), the seq rules of section 6, and the behaviours of sections 5, 8 and 9
+ * with docs/rig-protocol.md and docs/rig-protocol-behaviour.md that the conformance suite
+ * compares with hil/emulators/mcu_model.py. Ends with the line
  * "core tests: N passed, 0 failed" (exit status 1 if any failed).
  */
 #include "core_test.h"

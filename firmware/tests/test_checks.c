@@ -223,7 +223,7 @@ void test_estop_and_driver(void) {
 }
 
 /* The board's faults take the enable low at the tick that latched them (stop category 0);
- * FORCE_LIMIT halts holding position, the driver energised (docs/rig-protocol.md 8). */
+ * FORCE_LIMIT halts holding position, the driver energised (docs/rig-protocol-behaviour.md 8). */
 void test_board_faults_de_energise_and_limits_hold(void) {
     static const uint16_t board[5] = {RIG_F_INTERNAL, RIG_F_OVERTRAVEL, RIG_F_LOAD_ADC,
                                       RIG_F_CLOCK, RIG_F_STOP_CHAIN};

@@ -1,7 +1,7 @@
 /* The core's unit tests (core_test.h): the seq rules of section 6 and replies only on ACK_REQ. */
 #include "core_test.h"
 
-/* ---- seq rules (section 6, docs/rig-protocol.md) -------------------------------------------- */
+/* ---- seq rules (section 6, docs/rig-protocol-behaviour.md) ---------------------------------- */
 
 void test_seq_rules(void) {
     session();

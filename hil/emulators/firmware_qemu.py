@@ -8,7 +8,7 @@ USART to a pseudo-terminal of ours: ``QemuRig(...).port`` is a serial port that 
 rig protocol, for :class:`hil.link.serial_link.SerialLink` or ``hil run --real``. (QEMU's own
 ``-serial pty`` notices a host opening the pty only by polling once a second and ignores
 its bytes until then: every HELLO of a host's 120 ms handshake was lost.) See
-docs/firmware.md.
+docs/firmware-emulated.md.
 """
 
 from __future__ import annotations
@@ -242,7 +242,7 @@ def await_firmware(send: Callable[[bytes], None], receive: Callable[[float], byt
                    timeout: float, ended: Callable[[], bool], state: Callable[[], str],
                    what: str) -> None:
     """Return once an emulated MCU's firmware answered a HELLO and then a BYE: what an
-    emulator does before it publishes its port (docs/rig-protocol.md, section 7, "Emulated
+    emulator does before it publishes its port (docs/rig-protocol-behaviour.md, section 7, "Emulated
     MCUs"), so a host that opens the port finds the firmware running, and the BYE ends the
     session the HELLO opened (no heartbeat watchdog is left armed for the host to find
     latched). Each is sent every 100 ms until its answer: bytes sent before the firmware
@@ -281,13 +281,14 @@ class QemuRig:
     on an exception in the ``with`` block). Every start writes a fresh random seed into
     the image's RAM (the boot id: the F405 model has no RNG). ``icount``: run with
     ``-icount shift=0`` (one instruction per ns of virtual time: the tick measurement of
-    docs/firmware.md); ``monitor``: open QEMU's monitor on a private socket for
+    docs/firmware-emulated.md); ``monitor``: open QEMU's monitor on a private socket for
     :meth:`read_words`. :attr:`port` is published only once the guest's firmware answered
     a HELLO (its session then ended with BYE): it boots in 1.2-1.8 s, and a host that
     opened the port before lost its first HELLOs. ``answer_timeout`` bounds that wait (s).
     ``realtime``: QEMU's threads run SCHED_FIFO at QEMU_PRIORITY when the OS permits it
     (:attr:`realtime` says whether it did), so a loaded machine slows the guest's clock
-    less; what it still slows, the guest's own clock shows (docs/rig-protocol.md, section 7).
+    less; what it still slows, the guest's own clock shows (docs/rig-protocol-behaviour.md,
+    section 7).
     """
 
     def __init__(self, elf: Path, *, icount: bool = False, monitor: bool = False,

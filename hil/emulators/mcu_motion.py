@@ -1,6 +1,6 @@
 """One telemetry period of the MCU firmware, without any I/O: the heartbeat watchdog, the
 trajectory's execution, the controlled stop in Q16 fixed point, and the checks of §8 on the
-period's sensor readings (docs/rig-protocol.md).
+period's sensor readings (docs/rig-protocol-behaviour.md).
 """
 
 from __future__ import annotations

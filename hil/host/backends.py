@@ -437,8 +437,8 @@ class RigPlant(Plant):
                 self.notify(f"the link is slower than a rig's ({link.timing.text()}): ACK "
                             f"timeout {link.ack_timeout * 1e3:.0f} ms, telemetry watchdog "
                             f"{link.telemetry_timeout * 1e3:.0f} ms, the MCU's heartbeat "
-                            f"timeout {link.heartbeat_timeout_ms} ms (docs/rig-protocol.md, "
-                            f"section 7)")
+                            f"timeout {link.heartbeat_timeout_ms} ms "
+                            f"(docs/rig-protocol-behaviour.md, section 7)")
             latched = link.status.faults if self._session else link.faults_at_open
             if latched:
                 raise RunStoppedError(

@@ -2,7 +2,7 @@
 
 Both run before a recorded run, at safe speeds, with the encoder check off; neither is
 recorded. The reference is the rig's home switch, active while the table is at or
-behind the open position x_open (docs/rig-protocol.md, section 10): after homing, step
+behind the open position x_open (docs/rig-protocol-behaviour.md, section 10): after homing, step
 count 0 is x_open and encoder count 0 is the platen there.
 """
 

@@ -66,8 +66,9 @@ class RunSettings:
     fmu: Path | None
     #: the simulated rig carries the prototype's as-built errors (toggle.rig_tables)
     as_built: bool
-    ack_ms: float | None = None  # the host's wait for an ACK (docs/rig-protocol.md §6)
-    heartbeat_ms: float | None = None  # the MCU's heartbeat watchdog (docs/rig-protocol.md §7)
+    ack_ms: float | None = None  # the host's wait for an ACK (docs/rig-protocol-behaviour.md §6)
+    #: the MCU's heartbeat watchdog (docs/rig-protocol-behaviour.md §7)
+    heartbeat_ms: float | None = None
     json: bool = False
     quiet: bool = False
     force: bool = False  # --force: replace the files of an earlier run in --out

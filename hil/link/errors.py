@@ -1,4 +1,4 @@
-"""The errors of the rig link (docs/rig-protocol.md, sections 7, 10 and 11).
+"""The errors of the rig link (docs/rig-protocol-behaviour.md, sections 7, 10 and 11).
 
 Every failure a :class:`hil.link.serial_link.SerialLink` session can meet is a
 :class:`RigError`, so callers (homing, bring-up, the back-ends, the panel) catch one base

@@ -1,6 +1,7 @@
 """Commands of a :class:`hil.link.serial_link.SerialLink` session (docs/rig-protocol.md,
-sections 5 and 6): each sent with acknowledgement and retransmission, the emergency stop
-sent at once, and a trajectory streamed in chunks with flow control.
+section 5, docs/rig-protocol-behaviour.md, section 6): each sent with acknowledgement and
+retransmission, the emergency stop sent at once, and a trajectory streamed in chunks with
+flow control.
 
 :class:`LinkCommands` is one part of SerialLink (a mixin, not used alone): it works on the
 session's state that ``SerialLink.__init__`` sets (the port, the pending replies, the

@@ -1,5 +1,5 @@
 """The telemetry side of a :class:`hil.link.serial_link.SerialLink` session
-(docs/rig-protocol.md, sections 7, 10 and 11).
+(docs/rig-protocol-behaviour.md, sections 7, 10 and 11).
 
 A reader thread decodes the frames, sends the heartbeats, checks each sample (boot id,
 order, the MCU's clock, new faults), queues it for :meth:`LinkReader.next_sample`, hands
@@ -112,10 +112,10 @@ class LinkReader:
 
     def _probe_for_reset(self, now: float) -> None:
         """The telemetry fell silent: an MCU that reset has no session and sends none
-        (docs/rig-protocol.md, sections 5 and 10), so ask it with a HELLO, answered within
-        an ACK timeout. A new boot id is :class:`RigResetError`, the same one (a stall:
-        the HELLO may have taken the session over) or none the watchdog's
-        :class:`LinkTimeoutError`, as before the probe."""
+        (docs/rig-protocol.md, section 5; docs/rig-protocol-behaviour.md, section 10), so ask
+        it with a HELLO, answered within an ACK timeout. A new boot id is
+        :class:`RigResetError`, the same one (a stall: the HELLO may have taken the session
+        over) or none the watchdog's :class:`LinkTimeoutError`, as before the probe."""
         seq, nonce = self._next_seq(), random.getrandbits(32)
         self._reset_probe = (seq, nonce)
         self._silence.since = now + self.ack_timeout - self._silence.timeout

@@ -1,4 +1,4 @@
-"""The stop that ends a session (docs/rig-protocol.md, section 6), and what follows it.
+"""The stop that ends a session (docs/rig-protocol-behaviour.md, section 6), and what follows it.
 
 The stop sequence goes out once per START: STOP, STOP_ATTEMPTS attempts with one seq, then
 ESTOP if no STOP was acknowledged; later calls return its outcome without sending more.

@@ -135,7 +135,8 @@ class Fault(IntFlag):
     ESTOP = 0x0080
     DRIVER = 0x0100
     INTERNAL = 0x0200
-    # reported by a board only (firmware/board/nucleo_inputs.c; docs/rig-protocol.md sec. 8)
+    # reported by a board only (firmware/board/nucleo_inputs.c;
+    # docs/rig-protocol-behaviour.md sec. 8)
     OVERTRAVEL = 0x0400
     LOAD_ADC = 0x0800
     CLOCK = 0x1000
@@ -206,7 +207,7 @@ class Message:
         """Payload bytes -> message; MessageError when it is shorter than the layout.
 
         Bytes beyond the layout are ignored: a later minor version appends fields
-        (docs/rig-protocol.md, section 10).
+        (docs/rig-protocol-behaviour.md, section 10).
         """
         if len(payload) < cls.FORMAT.size:
             raise MessageError(

@@ -8,7 +8,7 @@ telemetry queue, stop and emergency stop. Any failure (watchdog timeout, MCU sta
 disconnect, MCU reset, rig fault) is raised from the next :meth:`SerialLink.next_sample`
 call, after every sample received before it; :meth:`SerialLink.finish_run` then returns
 the rest of the run up to the standstill, and :meth:`SerialLink.close` ends the session
-cleanly (docs/rig-protocol.md, sections 7, 10 and 11).
+cleanly (docs/rig-protocol-behaviour.md, sections 7, 10 and 11).
 
 This module holds the session's state, its opening (the handshake and the measurement of
 the link) and its closing; the class's other parts are the reader thread and the
@@ -52,7 +52,7 @@ HOST_POINT_PERIOD_US = 1000
 #: Host watchdog on telemetry arrival, s: a soft bound above the host's scheduling jitter
 #: (measured on a loaded 2-core PC shared with other work, 20 soak runs: p99 3-6 ms, p99.9
 #: 7-11 ms, longest gap 28-68 ms). The hard real-time stops are the MCU's
-#: (docs/rig-protocol.md, section 7).
+#: (docs/rig-protocol-behaviour.md, section 7).
 DEFAULT_TELEMETRY_TIMEOUT = 0.1
 #: Largest allowed excess of the MCU's own clock between two received samples over their
 #: sample distance, s: a larger jump means the MCU missed periods (a stalled firmware).

@@ -1,4 +1,4 @@
-"""What the host watches in the telemetry stream (docs/rig-protocol.md, section 7).
+"""What the host watches in the telemetry stream (docs/rig-protocol-behaviour.md, section 7).
 
 :func:`sample_distance` orders sample indices across the wrap of the MCU's u32 counter,
 :class:`SilenceWatchdog` expires when telemetry stops arriving (not counting time in which
@@ -31,7 +31,7 @@ def sample_distance(sample: int, ref: int) -> int:
 
 
 class SilenceWatchdog:
-    """The host's telemetry-silence watchdog (docs/rig-protocol.md, section 7).
+    """The host's telemetry-silence watchdog (docs/rig-protocol-behaviour.md, section 7).
 
     It expires ``timeout`` s after its count started: at the last telemetry arrival
     (:meth:`restart`), or when the reader woke more than ``late`` s later than it asked

@@ -2,7 +2,7 @@
 
 A rig's MCU answers a command within about 4 ms and streams telemetry on a clock that
 keeps wall time, so the protocol's timeouts fit it: 20 ms for an ACK, 100 ms of telemetry
-silence, 250 ms of heartbeat silence at the MCU (docs/rig-protocol.md, sections 6 and 7).
+silence, 250 ms of heartbeat silence at the MCU (docs/rig-protocol-behaviour.md, sections 6 and 7).
 An emulated MCU on a loaded machine (QEMU, a rehosted image) answers in tens or hundreds of
 milliseconds and its clock runs slower than the wall clock: each tick it cannot run in
 time is lost, and its ``t_us`` reports its own time. The host measures both when it opens

@@ -9,7 +9,7 @@ to each action at once (accepted or refused), ``samples`` batches every
 as its samples come, in this process, so the web server crashing loses nothing: this
 process then sees stdin close, stops the rig (no operator can press STOP any more),
 records every sample up to the standstill, closes the run and exits. A dead service leaves
-the rig to the MCU's heartbeat watchdog (docs/rig-protocol.md section 7).
+the rig to the MCU's heartbeat watchdog (docs/rig-protocol-behaviour.md section 7).
 
 Every motion goes through the existing back-ends and link (hil.host.backends,
 hil.host.homing), so the

@@ -1,7 +1,7 @@
 /* What QEMU 7.2's netduinoplus2 (STM32F405) emulates: a tiny image that tries each
  * peripheral the rig firmware would use and reports on every USART (the one QEMU connects
  * to -serial is the one whose lines arrive). Run by firmware/board/probe/run_probe.py;
- * its findings are in docs/firmware.md. Not part of the rig firmware. */
+ * its findings are in docs/firmware-emulated.md. Not part of the rig firmware. */
 #include <stdint.h>
 
 #include "stm32f4_regs.h"

@@ -14,8 +14,8 @@ the step pulses have driven (rising edges on PA8 in TIM1's bursts, direction PA9
 only while the driver is enabled on PA10), its platen position is the encoder TIM2 counts,
 its force (as load-cell counts with the sim's noise) is what the ADS131M02 converts, and its
 home switch is PC0. The host build with ``step_timing="nucleo"`` feeds the same plant the
-same positions at the same instants (docs/firmware.md "Host build and rehost, sample by
-sample").
+same positions at the same instants (docs/firmware-emulated.md "Host build and rehost,
+sample by sample").
 
 :class:`NucleoBoard` is the board (run it to a time, poke its inputs, read what it did);
 :class:`NucleoRig` serves it on a pseudo-terminal, paced so emulated time never runs
@@ -375,7 +375,7 @@ class NucleoBoard:
 
 class NucleoRig:
     """:class:`NucleoBoard` served on a pseudo-terminal (:attr:`port`) by a thread that
-    paces it, as docs/rig-protocol.md (section 7, "Emulated MCUs") asks of an emulator:
+    paces it, as docs/rig-protocol-behaviour.md (section 7, "Emulated MCUs") asks of an emulator:
     emulated time never runs faster than the wall clock (a slice that took longer than its
     emulated millisecond is not made up later: that time is lost, and the image's own
     clock, its ``t_us``, shows it), and :attr:`port` is published only once the image

@@ -4,7 +4,7 @@ The rehosted Cortex-M4 counts one DWT cycle per instruction, so the image's own
 ``board_tick_stats`` (its longest ``rig_tick`` and ``rig_rx`` in CYCCNT counts, its late
 ticks and step-arming errors) are instruction counts here. The session is the costly one
 for the receive path: a full 2048-point buffer, then a CONFIG that re-checks all of it and
-one refused at its last block (docs/firmware.md, "Measured"), then a run, a STOP in motion,
+one refused at its last block (docs/firmware-emulated.md, "Measured"), then a run, a STOP in motion,
 ESTOP and CLEAR_FAULT. The counts are taken with ``Machine.exact_counts`` (CYCCNT exact to
 the instruction) from the last three chunks of the upload on; the earlier ones are not
 counted (the same 30-point frames, at a chunk's resolution).
