@@ -486,17 +486,14 @@ class StrokeProblem:
         key = problem_key(self.config, N, self.variants, self.opening) + (
             "\ntorque" if self.torque else "") + ("\nzone" if self.zone else "")
         names = _names(len(self.plants))
-        # the jets (a unit per plant, first) carry the arithmetic: compiled for a first
-        # answer too, each under a key of its own plant (the torque rows and the zone are
-        # the model's: a robust plan's nominal clamp, a plan with mold protection, load
-        # the jets another problem of the plant compiled)
+        # the jets (a unit per plant, first) carry the arithmetic: compiled for a first answer
+        # too, each keyed by its plant alone (a robust plan's nominal clamp reuses them)
         jets = ["\n".join((_SOURCE, repr(astuple(neutral(plant))), repr(N), f"plant {k}",
                            *(("opening",) * self.opening)))
                 for k, plant in enumerate(self.plants)]
         fn = dict(zip(names, compiled("stroke", key, names, self._symbolic,
                                       self.machine_code, first=jets)))
-        #: whether the whole problem came compiled from the disk cache (a second process
-        #: of this plant loads it in milliseconds; else it would build it again)
+        #: whether it all came compiled from the disk cache (else another process rebuilds it)
         self.loaded = fn[_MODEL_NAMES[-1]].is_a("External")
         W, P = ca.MX.sym("x", self.size), ca.MX.sym("p", self.n_parameters)
         L_f, L_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.n_constraints)

@@ -67,11 +67,3 @@ def test_the_broken_link_check_is_on(tmp_path: Path) -> None:
                           capture_output=True, text=True, timeout=300,
                           env={"NO_MKDOCS_2_WARNING": "1", "PATH": "/usr/bin:/bin"})
     assert done.returncode != 0 and "nowhere.md" in done.stderr
-
-
-def test_no_page_is_over_600_lines() -> None:
-    """The developers' guide's file limit holds for the pages too (issue 47: a long page is
-    split by topic, each part in the nav)."""
-    long = {str(p.relative_to(ROOT)): n for p in (ROOT / "docs").rglob("*.md")
-            if (n := len(p.read_text(encoding="utf-8").splitlines())) > 600}
-    assert not long, long

@@ -36,3 +36,14 @@ def test_the_scan_finds_a_machine_path() -> None:
     assert MACHINE_PATH.search("load with --preset /t" "mp/x/design.toml")
     assert not MACHINE_PATH.search("build/firmware/board-nucleo/rig.elf")
     assert not MACHINE_PATH.search("see docs/work/notes and ~/.cache/toggle-clamp")
+
+
+#: The developers' guide: "no file over 600 lines" (issue 47), code, tests and pages alike;
+#: a long file is split by what its parts do.
+MAX_LINES = 600
+
+
+def test_no_tracked_file_is_over_600_lines() -> None:
+    long = {str(path.relative_to(ROOT)): n for path in tracked_text_files()
+            if (n := len(path.read_text(errors="replace").splitlines())) > MAX_LINES}
+    assert not long, long
