@@ -315,7 +315,7 @@ class StrokeSolver(StrokeReports):
         key = (self.worst_peak if weights[1] == 0 else (lambda p: p.rms_force)
                if objective == "rms" else (lambda p: float(p.solution["f"][0])))
         good = self.lower_bound() * (1 + GAP) if weights[1] == 0 else 0.0
-        solves.expect(1 + (previous is not None) + len(LATE_STARTS))
+        solves.expect(self.best_solves())
         plans = [self.solve(duration, objective, warm=False, energy_weight=energy_weight)]
         solves.advance()
         if previous is not None:
@@ -334,6 +334,10 @@ class StrokeSolver(StrokeReports):
                 plans.append(plan)
         self.problem.last = min(plans, key=key)
         return self.problem.last
+
+    def best_solves(self) -> int:
+        """The solves :meth:`best` announces now (some may be skipped)."""
+        return 1 + (self.last is not None) + len(LATE_STARTS)
 
     def lower_bound(self) -> float:
         """A lower bound on the peak input force of any stroke under this planner's

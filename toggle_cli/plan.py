@@ -47,6 +47,7 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     """The robust planner (``--robust``): the nominal clamp with the erroneous one as a
     variant, each weighed against its own S-curve; and the report of the robust plan, the
     nominal plan and the S-curve on each clamp."""
+    from controllers import progress as solves
     from controllers.api import robust_planner
     from controllers.background import Background
     from controllers.planner import best_plan, default_duration, planner_for
@@ -62,14 +63,16 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     planner, erroneous, curve = robust_planner(cfg, limits, dimensional_errors(args), duration,
                                                args.contact_speed, args.intervals,
                                                protection_zone(args))
-    # the nominal plan, to compare, in a second process while this one plans the robust one;
-    # the bound is the nominal plant's for both (computed here once, not in each process).
-    # Here, after the robust plan, where the nominal problem was built now: a second
-    # process would build it again, seconds of CPU for a solve of one or two
+    # the nominal plan, to compare, in a second process while this one plans the robust one
+    # (here, after it, where the nominal problem was built now: a second process would
+    # build it again, seconds of CPU for a solve of one or two), its solves in the count
+    # and the ETA from the start; the bound is the nominal plant's for both (computed here
+    # once, not in each process)
     bound = planner.lower_bound()
-    with Background(best_plan, cfg, limits, args.contact_speed, args.intervals,
-                    protection_zone(args), duration, args.objective, bound,
-                    here=not nominal.problem.loaded) as nominal_plan:
+    with solves.reserved(nominal.best_solves()), \
+            Background(best_plan, cfg, limits, args.contact_speed, args.intervals,
+                       protection_zone(args), duration, args.objective, bound,
+                       here=not nominal.problem.loaded) as nominal_plan:
         plan, plain = planner.best(duration, args.objective), nominal_plan.result()
     report = {}
     for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
