@@ -135,7 +135,8 @@ def test_the_compiled_problems_key_hashes_its_declaration_not_the_solving():
 def own_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A disk cache of its own (other processes prune the shared one) holding chang2021's
     8-interval problem and its torque sibling, compiled once (seconds each) for the tests
-    whose new problem of another plant must load them without a compile."""
+    that load them: another plant's new problem (no compile allowed), the machine code an
+    interpreted problem is compared with."""
     cache = tmp_path_factory.mktemp("cache")
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("TOGGLE_CACHE_DIR", str(cache))
@@ -197,7 +198,7 @@ def _no_compile(name, key, names, build, machine_code=True, first=0):
 
 
 def test_a_problem_without_machine_code_is_interpreted_and_plans_alike(chang_plan, tmp_path,
-                                                                      monkeypatch):
+                                                                      own_cache, monkeypatch):
     """A problem without machine code, what a design's duty takes: no compile and
     nothing in the cache (an empty one here), CasADi's own functions, and the plan the
     compiled problem finds."""
@@ -211,7 +212,10 @@ def test_a_problem_without_machine_code_is_interpreted_and_plans_alike(chang_pla
     assert not problem.with_torque.machine_code  # a sibling of its own, interpreted too
     plan = interpreted.solve(DURATION, warm=False)
     assert list(tmp_path.iterdir()) == []  # nothing compiled, nothing cached
-    machine = ClampPlanner(cfg, limits, intervals=8).solve(DURATION, warm=False)
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(own_cache))  # the compiled one, loaded
+    compiled_planner = ClampPlanner(cfg, limits, intervals=8)
+    assert compiled_planner.problem._force.class_name() == "External"
+    machine = compiled_planner.solve(DURATION, warm=False)
     assert machine.peak_force == pytest.approx(plan.peak_force, rel=1e-8)
     np.testing.assert_allclose(machine.profile.v, plan.profile.v, rtol=1e-6, atol=1e-9)
 
