@@ -6,6 +6,7 @@ planning the same stroke."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -130,7 +131,22 @@ def test_the_compiled_problems_key_hashes_its_declaration_not_the_solving():
     assert not {"controllers.planner", "controllers.stroke_reports", "controllers.plans"} & used
 
 
-def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang_plan, tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def own_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A disk cache of its own (other processes prune the shared one) holding chang2021's
+    8-interval problem and its torque sibling, compiled once (seconds each) for the tests
+    that load them: another plant's new problem (no compile allowed), the machine code an
+    interpreted problem is compared with."""
+    cache = tmp_path_factory.mktemp("cache")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("TOGGLE_CACHE_DIR", str(cache))
+        cfg = plan_config("chang2021")
+        ClampPlanner(cfg, drive_limits(cfg.mechanism), intervals=8).problem.with_torque  # noqa: B018
+    return cache
+
+
+def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang_plan, own_cache,
+                                                               monkeypatch):
     cfg, limits, planner, plan = chang_plan
     faster = planner_for(cfg, replace(limits, velocity=0.05))
     rougher = planner_for(cfg.with_(mu=cfg.friction * 1.5), limits)
@@ -144,8 +160,7 @@ def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang_plan, tmp_pat
     assert slow.peak_force > plan.peak_force  # more pin friction, more thrust
     # a new process (a new problem) loads the compiled functions another v_max and mu left
     # in the disk cache (its own here: other processes prune the shared one), no compile
-    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
-    ClampPlanner(cfg, limits, intervals=8)
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(own_cache))
     monkeypatch.setattr("controllers.stroke_problem.compiled", _no_compile)
     other = ClampPlanner(cfg.with_(mu=cfg.friction * 1.5), replace(limits, velocity=0.03),
                          intervals=8)
@@ -153,7 +168,7 @@ def test_a_change_of_v_max_or_mu_reuses_the_compiled_problem(chang_plan, tmp_pat
     assert other.solve(DURATION).profile.v.max() <= 0.03 * (1 + 1e-6)  # at the nodes
 
 
-def test_a_change_of_the_drive_reuses_the_compiled_problem(chang_plan, tmp_path, monkeypatch):
+def test_a_change_of_the_drive_reuses_the_compiled_problem(chang_plan, own_cache, monkeypatch):
     """Rotor inertia, torque-speed curve and masses are parameters of the compiled problem:
     another rotor, curve or platen neither rebuilds the problem in this process nor
     recompiles in a new one; the masses count (a heavier platen, more inertia force)."""
@@ -169,8 +184,7 @@ def test_a_change_of_the_drive_reuses_the_compiled_problem(chang_plan, tmp_path,
         planner_for(heavy, limits)._force(heavier.samples.position, heavier.samples.velocity,
                                           heavier.samples.acceleration),
         heavier.samples.input_force, rtol=1e-9, atol=1e-9)
-    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(tmp_path))
-    ClampPlanner(cfg, limits, intervals=8).problem.with_torque  # noqa: B018 - both problems
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(own_cache))  # both problems, nominal plant
     monkeypatch.setattr("controllers.stroke_problem.compiled", _no_compile)
     other = ClampPlanner(heavy, steep, intervals=8)
     assert other.problem._force.class_name() == "External"
@@ -184,7 +198,7 @@ def _no_compile(name, key, names, build, machine_code=True, first=0):
 
 
 def test_a_problem_without_machine_code_is_interpreted_and_plans_alike(chang_plan, tmp_path,
-                                                                      monkeypatch):
+                                                                      own_cache, monkeypatch):
     """A problem without machine code, what a design's duty takes: no compile and
     nothing in the cache (an empty one here), CasADi's own functions, and the plan the
     compiled problem finds."""
@@ -198,7 +212,10 @@ def test_a_problem_without_machine_code_is_interpreted_and_plans_alike(chang_pla
     assert not problem.with_torque.machine_code  # a sibling of its own, interpreted too
     plan = interpreted.solve(DURATION, warm=False)
     assert list(tmp_path.iterdir()) == []  # nothing compiled, nothing cached
-    machine = ClampPlanner(cfg, limits, intervals=8).solve(DURATION, warm=False)
+    monkeypatch.setenv("TOGGLE_CACHE_DIR", str(own_cache))  # the compiled one, loaded
+    compiled_planner = ClampPlanner(cfg, limits, intervals=8)
+    assert compiled_planner.problem._force.class_name() == "External"
+    machine = compiled_planner.solve(DURATION, warm=False)
     assert machine.peak_force == pytest.approx(plan.peak_force, rel=1e-8)
     np.testing.assert_allclose(machine.profile.v, plan.profile.v, rtol=1e-6, atol=1e-9)
 

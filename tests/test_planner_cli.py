@@ -82,7 +82,8 @@ def test_trade_off_with_the_mold_and_in_a_dry_cycle(tmp_path, capsys, monkeypatc
     # both curves in this process, where the patch is (tests/test_background.py: the
     # second process)
     monkeypatch.setattr(background, "parallel", lambda: False)
-    assert main(["plan", "--trade-off", "2", "--json"]) == 0
+    # a coarse problem (60 intervals): the same curves and margins, a third of the time
+    assert main(["plan", "--trade-off", "2", "--intervals", "60", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert len(ticks) == 4  # the progress bar moved once per force limit of both curves
     for name in ("trade_off", "trade_off_dry_cycle"):

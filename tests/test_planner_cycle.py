@@ -48,9 +48,12 @@ def test_mold_protection_caps_hold_between_the_nodes(chang_plan):
 
 
 def test_mold_protection_speed_cap_binds_and_lengthens_the_stroke(chang_plan):
-    cfg, limits, planner, _ = chang_plan
+    """On a coarse problem (60 intervals): the cap, the longer stroke and the protection
+    time as at the default 200, in a quarter of the time (two minimum-time continuations)."""
+    cfg, limits, _, _ = chang_plan
+    planner = planner_for(cfg, limits, intervals=60)
     fast = planner.minimum_time(15.0)
-    capped = planner_for(cfg, limits, protection=Protection(speed=5e-3))
+    capped = planner_for(cfg, limits, intervals=60, protection=Protection(speed=5e-3))
     assert capped.problem is planner.problem  # the caps are parameters: no rebuild
     slow = capped.minimum_time(15.0, start=fast)
     inside, speed = _in_zone(capped, slow)
