@@ -81,14 +81,20 @@ class Background:
     """``fn(*args, progress=callable)`` running in a child process; use as a context
     manager, then :meth:`result`. :meth:`ticks` counts the progress calls seen so far.
     ``here``: in this process when the result is asked (the caller knows the child would
-    only repeat this process's work first)."""
+    only repeat this process's work first). ``expected``: the job's solves, announced on
+    the parent's progress now (so that its ETA covers them from the start), the job's own
+    announcements counted against them."""
 
-    def __init__(self, fn: Callable[..., Any], *args: Any, here: bool = False) -> None:
+    def __init__(self, fn: Callable[..., Any], *args: Any, here: bool = False,
+                 expected: int = 0) -> None:
         self._job, self._done = (fn, args), None
         self._ticks = 0
         self._receiving = False
         self._target = solves.current()  # the parent's progress the job's counts join
+        self._ahead = expected if self._target is not None else 0
         if self._target is not None:
+            if expected:
+                self._target.expect(expected)
             self._target.add_source(self._drain)
         self._previous_term: Any = None
         self._process: Any = None
@@ -121,8 +127,10 @@ class Background:
             self._ticks += steps
             if self._target is not None:
                 self._target.advance(steps)
-        elif self._target is not None:
-            self._target.expect(steps)
+        elif self._target is not None:  # beyond what was announced ahead
+            taken = min(steps, self._ahead)
+            self._ahead -= taken
+            self._target.expect(steps - taken)
 
     def _drain(self) -> None:
         self._receive(block=False)
@@ -173,6 +181,8 @@ class Background:
         """Stop the child if it still runs, and restore SIGTERM's handler."""
         if self._target is not None:
             self._target.remove_source(self._drain)
+            if self._ahead:
+                self._target.expect(-self._ahead)  # announced, never expected
             self._target = None
         if self._process is not None:
             if self._process.is_alive():

@@ -74,7 +74,6 @@ class Progress:
         self._aside, self._aside_since = 0.0, None  # time in named waits, and this one's
         self._counted_at: float | None = None  # the last count's time, and the solving's
         self._counted_work = 0.0
-        self._reserved = 0  # solves announced ahead (:meth:`reserve`) not yet expected
         self._bar: Any = None
         self._sources: list[Callable[[], object]] = []
         self._draining = False
@@ -124,31 +123,12 @@ class Progress:
             self._draining = False
 
     def expect(self, steps: int) -> None:
-        """``steps`` more solves are coming (those :meth:`reserve` announced first)."""
+        """``steps`` more solves are coming (fewer than announced: negative)."""
         self._drain()
         with self._lock:
-            taken = min(steps, self._reserved)
-            self._reserved -= taken
-            self._set_total(self.total + steps - taken)
-
-    def reserve(self, steps: int) -> None:
-        """``steps`` solves that will be expected later (a job run after this process's
-        own solves) counted in the total now, so that the ETA covers them from the start;
-        the part never expected is dropped by :meth:`release`."""
-        with self._lock:
-            self._reserved += steps
-            self._set_total(self.total + steps)
-
-    def release(self) -> None:
-        """Drop the reserved solves that were never expected."""
-        with self._lock:
-            self._set_total(max(self.total - self._reserved, self.n))
-            self._reserved = 0
-
-    def _set_total(self, total: int) -> None:
-        self.total = total
-        if self._bar is not None:
-            self._bar.total = total
+            self.total = max(self.total + steps, self.n)
+            if self._bar is not None:
+                self._bar.total = self.total
 
     def advance(self, steps: int = 1) -> None:
         """``steps`` solves are done (or skipped)."""
@@ -313,19 +293,6 @@ def describe(desc: str) -> None:
     """The planner's caller's: name the phase now planned."""
     if (progress := _current.get()) is not None:
         progress.describe(desc)
-
-
-@contextlib.contextmanager
-def reserved(steps: int) -> Iterator[None]:
-    """:meth:`Progress.reserve` ``steps`` on the current progress for the block's length."""
-    progress = _current.get()
-    if progress is not None:
-        progress.reserve(steps)
-    try:
-        yield
-    finally:
-        if progress is not None:
-            progress.release()
 
 
 @contextlib.contextmanager

@@ -47,7 +47,6 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     """The robust planner (``--robust``): the nominal clamp with the erroneous one as a
     variant, each weighed against its own S-curve; and the report of the robust plan, the
     nominal plan and the S-curve on each clamp."""
-    from controllers import progress as solves
     from controllers.api import robust_planner
     from controllers.background import Background
     from controllers.planner import best_plan, default_duration, planner_for
@@ -69,10 +68,10 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     # and the ETA from the start; the bound is the nominal plant's for both (computed here
     # once, not in each process)
     bound = planner.lower_bound()
-    with solves.reserved(nominal.best_solves()), \
-            Background(best_plan, cfg, limits, args.contact_speed, args.intervals,
-                       protection_zone(args), duration, args.objective, bound,
-                       here=not nominal.problem.loaded) as nominal_plan:
+    with Background(best_plan, cfg, limits, args.contact_speed, args.intervals,
+                    protection_zone(args), duration, args.objective, bound,
+                    here=not nominal.problem.loaded,
+                    expected=nominal.best_solves()) as nominal_plan:
         plan, plain = planner.best(duration, args.objective), nominal_plan.result()
     report = {}
     for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
