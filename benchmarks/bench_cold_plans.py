@@ -224,7 +224,9 @@ def measure(commands: list[str], hog: bool = True) -> tuple[list[str], list[Run]
                 if list(cache.glob("job-*.json")):  # starved: no warm run to speak of
                     warm_cell, same_cell = f"compile not done in {wait:.0f} s", "-"
                 else:
-                    warm = Run(command, cache, cwd)
+                    warm_cwd = Path(tmp) / f"cwd{k}-warm"  # its own: --out files are new
+                    warm_cwd.mkdir()
+                    warm = Run(command, cache, warm_cwd)
                     warm_cell = f"{warm.wall:.1f} / {warm.cpu:.1f}"
                     same_cell = "yes" if _answer_text(cold.out) == _answer_text(warm.out) and (
                         cold.code == warm.code) else "NO"

@@ -178,6 +178,28 @@ def test_the_jobs_solves_join_the_parents_progress(monkeypatch, parallel):
     assert bar._sources == []  # the job is no source of it after its block
 
 
+@pytest.mark.parametrize(("here", "expected", "job_solves"), [
+    (True, 5, 3), (True, 2, 3), (False, 4, 4)])
+def test_a_jobs_solves_announced_ahead_are_in_the_total_from_the_start(
+        monkeypatch, here, expected, job_solves):
+    """Issue 45: a robust plan's nominal twin, solved after the robust plan, was counted only
+    when it began, so the first ETAs left its solves out (65 % short). Announced ahead
+    (``expected``), they are in the total at once; the job's own announcement is counted
+    against them (no double count); what it never announced leaves the total at the end."""
+    from controllers.progress import Progress, reporting
+
+    monkeypatch.setattr(background, "parallel", lambda: True)
+    with reporting(Progress("planning", enabled=False)) as bar:
+        bar.expect(4)  # the parent's own solves
+        with Background(jobs.solves, job_solves, here=here, expected=expected) as job:
+            assert bar.total == 4 + expected  # before the job announced anything
+            bar.advance(4)
+            assert job.result() == job_solves
+            bar.advance(0)  # drains the child's counts
+            assert bar.total == 4 + max(expected, job_solves)
+        assert (bar.n, bar.total) == (4 + job_solves, 4 + job_solves)
+
+
 def test_a_job_runs_its_own_jobs_in_its_process(two_cores):
     with Background(jobs.nested) as job:
         assert job.result() is False

@@ -17,7 +17,12 @@ import numpy as np
 import pytest
 
 from controllers import compiled as compiled_module
-from controllers.compiled import compile_in_background, compiled
+from controllers.compiled import (
+    FIRST_ANSWER_MAX_BYTES,
+    compile_in_background,
+    compiled,
+    first_answer_flags,
+)
 from controllers.planner import planner_for
 from controllers.stroke_problem import StrokeProblem, problem_for
 from toggle.params import ParameterError
@@ -126,3 +131,43 @@ def test_without_a_compiler_no_job_is_written(cache, monkeypatch, tmp_path):
     monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
     (fn,) = compiled("check", "key", ["jet_check"], _check_units)
     assert fn.class_name() == "SXFunction" and not cache.exists()
+
+
+def test_a_first_answer_compiles_a_large_unit_without_optimisation(tmp_path):
+    """gcc -O1 on a robust plan's erroneous clamp (1.4 MB of jets) took 10 s of CPU
+    against 1.7 s at -O0: a first answer compiles so large a unit at -O0."""
+    small, large = tmp_path / "small.c", tmp_path / "large.c"
+    small.write_bytes(b" " * FIRST_ANSWER_MAX_BYTES)
+    large.write_bytes(b" " * (FIRST_ANSWER_MAX_BYTES + 1))
+    assert first_answer_flags(("-O1",), small) == ("-O1",)
+    assert first_answer_flags(("-O1", "-fno-math-errno"), large) == ("-fno-math-errno", "-O0")
+
+
+def test_a_robust_problem_loads_its_nominal_clamps_jets_compiled_for_the_nominal_one(cache):
+    """The jets are compiled one unit per plant, each keyed by its plant alone: the
+    nominal problem's first answer compiles the nominal clamp's; the robust problem (the
+    nominal clamp and an erroneous one) compiles only the erroneous clamp's."""
+    from controllers.plans import plan_config
+    from toggle.plant import with_errors
+
+    cfg = plan_config("chang2021")
+    erroneous = cfg.with_(mechanism=with_errors(cfg.mechanism, {"r8": 0.25e-3})[0])
+    compiles = []
+    real = compiled_module.shared_library
+
+    def counted(name, key, *args, **kwargs):
+        found = compiled_module.cached_library(name, key, lambda library: library)
+        compiles.append((name, found is None))
+        return real(name, key, *args, **kwargs)
+
+    try:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(compiled_module, "shared_library", counted)
+            nominal = problem_for(cfg, 8)
+            robust = problem_for(cfg, 8, (erroneous,))
+    finally:
+        problem_for.cache_clear()
+    assert compiles == [("stroke-first", True), ("stroke-first", False),
+                        ("stroke-first", True)]
+    assert not nominal.loaded and not robust.loaded  # the models interpreted meanwhile
+    assert len(list(cache.glob("stroke-first_*.so"))) == 2

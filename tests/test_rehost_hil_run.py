@@ -170,7 +170,9 @@ def _pulses_and_moves(board: NucleoBoard, telemetry: list[p.Telemetry]) -> tuple
 @pytest.mark.alone
 def test_the_default_job_agrees_with_the_host_build_at_the_boards_step_timing(
         elf: Path, tmp_path: Path) -> None:
-    """`hil run --real --port PTY` (the default job: homing, 3 cycles) on the rehosted
+    """`hil run --real --port PTY --cycles 1` (the default job's plan, homing and the first
+    of its 3 cycles: the whole job, measured in docs/firmware-emulated.md, took the suite a
+    minute alone and checks nothing more) on the rehosted
     image as `hil emulate --firmware --board nucleo --load-noise 0` serves it, and on `hil
     emulate --firmware --step-timing nucleo --load-noise 0` from the command line: the same
     samples and commanded positions; from the cycles' first move on the same encoder
@@ -207,12 +209,12 @@ def test_the_default_job_agrees_with_the_host_build_at_the_boards_step_timing(
     board.take_output = tap  # type: ignore[method-assign]
     with NucleoRig(board) as rig:
         code, stdout, stderr = hil("run", "--real", "--port", rig.port, "--quiet", "--out",
-                                   str(tmp_path / "rehost"), timeout=900.0)
+                                   str(tmp_path / "rehost"), "--cycles", "1", timeout=900.0)
         with rig.paused():
             rig.check()
             pulses, commanded = _pulses_and_moves(board, telemetry)
-    assert code == 0 and "3 of 3 cycles complete" in stdout, stderr
-    print(f"the default job on the rehosted image: {pulses} rising edges on PA8, "
+    assert code == 0 and "1 of 1 cycles complete" in stdout, stderr
+    print(f"the default job's first cycle on the rehosted image: {pulses} rising edges on PA8, "
           f"{commanded} steps commanded in its telemetry; {rig.summary()}")
     assert pulses == commanded > 0 and board.log.pulses_ignored == 0
     proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "emulate", "--firmware",
@@ -222,15 +224,15 @@ def test_the_default_job_agrees_with_the_host_build_at_the_boards_step_timing(
         port = proc.stdout.readline().strip()
         assert port.startswith("/dev/"), proc.stderr.read()
         code, stdout, stderr = hil("run", "--real", "--port", port, "--quiet", "--out",
-                                   str(tmp_path / "host"), "--watchdog-ms", "1000",
+                                   str(tmp_path / "host"), "--cycles", "1", "--watchdog-ms", "1000",
                                    "--heartbeat-ms", "1000", "--ack-ms", "500",
                                    timeout=300.0)  # bounds a loaded machine keeps
-        assert code == 0 and "3 of 3 cycles complete" in stdout, stderr
+        assert code == 0 and "1 of 1 cycles complete" in stdout, stderr
     finally:
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=30)
     rehost, host = rows(tmp_path / "rehost"), rows(tmp_path / "host")
-    assert len(rehost) == len(host) > 10_000
+    assert len(rehost) == len(host) > 5_000
     assert [r["x_cmd [m]"] for r in rehost] == [r["x_cmd [m]"] for r in host]
     counts = [abs(round((float(a["platen [m]"]) - float(b["platen [m]"])) / 1e-6))
               for a, b in zip(rehost, host)]
