@@ -152,6 +152,16 @@ def _summary(code: int, out: str, err: str) -> str:
         return f"{len(rows)} points from {rows[0][0]} N" if rows else out.splitlines()[0][:70]
 
 
+def _argv(command: str) -> list[str]:
+    """The command's arguments, a preset file named from the checkout (as the docs run it)
+    by its absolute path: each run has a scratch folder of its own."""
+    words = shlex.split(command)[1:]
+    for k, word in enumerate(words[:-1]):
+        if word == "--preset" and words[k + 1].endswith(".toml"):
+            words[k + 1] = str(ROOT / words[k + 1])
+    return words
+
+
 class Run:
     """One command in a new process: wall, CPU, output, and stderr's lines with their
     arrival times (s from the start)."""
@@ -160,7 +170,7 @@ class Run:
         env = dict(os.environ, TOGGLE_CACHE_DIR=str(cache), TOGGLE_COMPILE="background")
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         tic = time.monotonic()
-        proc = subprocess.Popen([*TOGGLE, *shlex.split(command)[1:]], cwd=cwd, env=env,
+        proc = subprocess.Popen([*TOGGLE, *_argv(command)], cwd=cwd, env=env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.lines: list[tuple[float, str]] = []
         reader = threading.Thread(target=self._read, args=(proc, tic))
@@ -199,12 +209,18 @@ def _wait_for_compiles(cache: Path) -> float:
     return time.monotonic() - tic
 
 
+#: An ETA is printed in whole seconds: its error is judged against the larger of 30 % of
+#: the time then left and this resolution (an "ETA 0:00" 0.4 s before the end is right).
+ETA_RESOLUTION = 1.0
+
+
 def _eta_cell(run: Run) -> str:
     etas = run.eta_errors()
     if not etas:
         return "none printed"
     worst = max(abs(eta - left) / max(left, 1e-9) for _, eta, left in etas)
-    return f"{len(etas)}, worst {100 * worst:.0f} %"
+    off = sum(abs(eta - left) > max(0.3 * left, ETA_RESOLUTION) for _, eta, left in etas)
+    return f"{len(etas)}, worst {100 * worst:.0f} %, {off} beyond 30 % (or 1 s)"
 
 
 def measure(commands: list[str], hog: bool = True) -> tuple[list[str], list[Run]]:
@@ -256,8 +272,9 @@ def table(rows: list[str], robust: list[Run], documented: int) -> str:
              "CPU in s (CPU: the command and its planning process, not the detached "
              "compile). Gap: the longest time without a line on stderr (a pipe) in the "
              "cold run; ETAs: those printed in the cold run and the worst error against "
-             "the time then left. Targets: cold <= 15 s, warm <= 5 s, gap <= 10 s, ETAs "
-             "within 30 %.", "",
+             "the time then left, and how many missed it by more than 30 % of that (or "
+             "the ETA's 1 s resolution). Targets: cold <= 15 s, warm <= 5 s, gap <= 10 s, "
+             "ETAs within 30 %.", "",
              "| command | cold wall / CPU | compile | warm wall / CPU | answer | equal | "
              "gap | ETAs |", "|---|---|---|---|---|---|---|---|", *rows]
     for run in robust:
