@@ -31,6 +31,7 @@
 #include "rig_setup.h"
 #include "sim_rig.h"
 #include "stm32f4_regs.h"
+#include "boot_mix.h"
 
 #define SYSCLK_HZ 168000000u /* QEMU netduinoplus2's fixed processor clock */
 #define SYSTICK_RELOAD (SYSCLK_HZ / RIG_TELEMETRY_HZ)
@@ -143,15 +144,6 @@ static void uart_drain(void) {
 }
 
 /* ---- boot id ------------------------------------------------------------------------------ */
-
-static uint32_t mix32(uint32_t h) { /* a 32-bit avalanche (xor-shift-multiply) */
-    h ^= h >> 16;
-    h *= 0x7FEB352Du;
-    h ^= h >> 15;
-    h *= 0x846CA68Bu;
-    h ^= h >> 16;
-    return h;
-}
 
 static uint32_t boot_id(void) {
     if (persist.magic != NOINIT_MAGIC) {

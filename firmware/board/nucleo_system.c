@@ -2,6 +2,7 @@
  * ST-LINK's 8 MHz, or the HSI with a CLOCK fault), the pins, the independent watchdog and the
  * boot id (the RNG mixed with the boot counter, never 0 nor the previous boot's). */
 #include "board_nucleo.h"
+#include "boot_mix.h"
 
 #define CLOCK_WAIT_TRIES 100000u /* each wait: well over the datasheet's lock/ready times */
 #define IWDG_PRESCALER_DIV8 1u /* LSI 32 kHz / 8 = 4 kHz */
@@ -149,15 +150,6 @@ void watchdog_init(void) {
 }
 
 /* ---- boot id --------------------------------------------------------------------------- */
-
-static uint32_t mix32(uint32_t h) { /* a 32-bit avalanche (xor-shift-multiply) */
-    h ^= h >> 16;
-    h *= 0x7FEB352Du;
-    h ^= h >> 15;
-    h *= 0x846CA68Bu;
-    h ^= h >> 16;
-    return h;
-}
 
 /* 32 bits from the RNG (PLLQ's 45 MHz), 0 if it reports a seed or clock error. */
 static uint32_t rng_word(void) {
