@@ -488,8 +488,7 @@ class StrokeProblem:
         names = _names(len(self.plants))
         # the jets (a unit per plant, first) carry the arithmetic: compiled for a first answer
         # too, each keyed by its plant alone (a robust plan's nominal clamp reuses them)
-        jets = ["\n".join((_SOURCE, repr(astuple(neutral(plant))), repr(N), f"plant {k}",
-                           *(("opening",) * self.opening)))
+        jets = [f"{problem_key(plant, N, opening=self.opening)}\nplant {k}"
                 for k, plant in enumerate(self.plants)]
         fn = dict(zip(names, compiled("stroke", key, names, self._symbolic,
                                       self.machine_code, first=jets)))
