@@ -5,8 +5,9 @@ starts, a minimum-time search's continuation steps, a trade-off's force limits) 
 each one done (:func:`advance`) on the :class:`Progress` of the current context
 (:func:`reporting`); without one both do nothing, so the answers are the same either way.
 The count grows while the planner learns more (the continuation's steps are known once
-the fastest stroke's peak is), and a skipped solve (a best-of-N ending early on reaching
-the lower bound) counts as done. A wait that is no solve (building the problem's
+the fastest stroke's peak is), and shrinks by the solves skipped (a best-of-N ending
+early on reaching the lower bound: counted as done, they made the time per solve look
+short). A wait that is no solve (building the problem's
 functions, compiling them) is named while it lasts (:func:`doing`).
 
 What shows, once the work has taken :data:`SHOW_AFTER` s: on a terminal a tqdm bar
@@ -15,7 +16,8 @@ compile lasts; elsewhere (a log, a pipe) a line every :data:`LINE_EVERY` s (8: a
 10 s apart on a busy machine), at a count at most that often, and the last count at the
 end if the lines showed an earlier one. The ETA is the time per solve up to the last count
 (the named waits left out: they are no solves) times the solves left, less what the
-current solve has taken; none before the first solve is done.
+current solve has taken; none before the first solve is done, nor while the current solve
+has run longer than the time per solve.
 Closing a progress (:func:`reporting` does it, also on an error) stops its thread, so that
 a command's error, printed after, is the last line of its stderr.
 
@@ -179,15 +181,18 @@ class Progress:
 
     def eta(self, now: float | None = None) -> float | None:
         """Seconds left: the time per solve up to the last count (named waits left out)
-        times the solves left, less the time the current solve has run; once that is
-        spent, at least the solves after the current one. None before a solve is done."""
+        times the solves left, less the time the current solve has run. None before a
+        solve is done, and while the current solve has run longer than a solve takes:
+        then its end is not known (a last solve's ETA showed 0:00 for as long as it ran)."""
         now = self._clock() if now is None else now
         if self.n <= 0 or self._counted_at is None:
             return None
         per_solve = self._counted_work / self.n
         left = self.total - self.n
         running = self._working(now) - self._counted_work
-        return max(left * per_solve - running, max(left - 1, 0) * per_solve)
+        if left > 0 and running > per_solve:
+            return None
+        return max(left * per_solve - running, 0.0)
 
     def _eta_text(self, now: float) -> str:
         eta = self.eta(now)

@@ -89,8 +89,27 @@ def test_the_eta_is_the_time_per_solve_times_the_solves_left_without_the_named_w
     assert "ETA 0:10" in bar.line(clock.now)
     clock.now += 3.0  # into the third solve
     assert bar.eta() == 7.0
-    clock.now += 4.0  # the third solve overdue: at least the fourth is left
-    assert bar.eta() == 5.0
+    clock.now += 4.0  # the third solve overdue: its end unknown (it said 0:05 before)
+    assert bar.eta() is None and "ETA ?" in bar.line(clock.now)
+    clock.now += 1.0
+    bar.advance()  # 6 s a solve over three
+    assert bar.eta() == 6.0
+    clock.now += 7.0  # the last solve overdue: unknown, where it said 0:00 until its end
+    assert bar.eta() is None
+
+
+def test_skipped_solves_leave_the_total_and_not_the_time_per_solve():
+    """A best-of-N that skips its late starts (it reached the lower bound) takes them off
+    the total: counted as done they made the time per solve look short, and the ETA of the
+    solves after them (a robust plan's twin's, a cycle's opening) with it."""
+    clock = Clock()
+    bar = Progress("planning", total=0, file=io.StringIO(), clock=clock, heartbeat=False)
+    bar.expect(4)  # a best of four
+    clock.now += 2.0
+    bar.advance()
+    bar.expect(-3)  # the late starts skipped
+    bar.expect(4)  # the next best of four
+    assert (bar.n, bar.total) == (1, 5) and bar.eta() == 8.0  # 2 s a solve, four left
 
 
 def test_a_closed_progress_writes_nothing_more(monkeypatch):
