@@ -167,6 +167,7 @@ class Run:
     arrival times (s from the start)."""
 
     def __init__(self, command: str, cache: Path, cwd: Path) -> None:
+        self.command = command
         env = dict(os.environ, TOGGLE_CACHE_DIR=str(cache), TOGGLE_COMPILE="background")
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         tic = time.monotonic()
@@ -251,7 +252,7 @@ def measure(commands: list[str], hog: bool = True) -> tuple[list[str], list[Run]
                        f"{_eta_cell(cold)} |")
                 rows.append(row)
                 print(row, flush=True)
-                if "--robust" in command:
+                if "--robust" in command and cold.code == 0:  # not the refusal
                     robust.append(cold)
     finally:
         if spinning is not None:
@@ -278,8 +279,8 @@ def table(rows: list[str], robust: list[Run], documented: int) -> str:
              "| command | cold wall / CPU | compile | warm wall / CPU | answer | equal | "
              "gap | ETAs |", "|---|---|---|---|---|---|---|---|", *rows]
     for run in robust:
-        lines += ["", "The robust plan's cold run on a pipe, its stderr lines (time, "
-                  "ETA printed, time then left):", "", "```"]
+        lines += ["", f"`{run.command}` cold on a pipe, its stderr lines (time from the "
+                  "start, the line):", "", "```"]
         lines += [f"{t:6.1f} s  {line.rstrip()}" for t, line in run.lines]
         lines += [f"{run.wall:6.1f} s  (end)", "```"]
     return "\n".join(lines)

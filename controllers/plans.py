@@ -14,12 +14,12 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import brentq
 
 from controllers.profiles import Profile, ProfileSamples, predict
 from toggle.elastics import ClampingError, clamp_stroke, contact_for_clamp_force
 from toggle.params import Mechanism, ParameterError
 from toggle.plant import PlantConfig, configure, plant_outputs
+from toggle.roots import brentq
 
 CONTACT_SPEED = 5e-3  # m/s, default limit on the platen's speed at mold contact
 #: Default mold-protection distance: this fraction of the platen's travel from the open

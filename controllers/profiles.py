@@ -22,10 +22,10 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.optimize import brentq
 
 from toggle.params import tomllib
 from toggle.plant import PlantConfig, plant_outputs
+from toggle.roots import brentq
 
 #: The CSV columns, units in the header (``hil run --profile`` reads time and position).
 CSV_COLUMNS = ("time [s]", "position [m]", "velocity [m/s]", "acceleration [m/s^2]",

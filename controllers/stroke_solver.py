@@ -20,7 +20,6 @@ import time
 
 import casadi as ca
 import numpy as np
-from scipy.optimize import brentq
 
 from controllers import progress as solves
 from controllers.bounds import peak_lower_bound
@@ -30,6 +29,7 @@ from controllers.stroke_problem import StrokeProblem, objective_weights
 from controllers.stroke_reports import StrokeReports
 from toggle.interrupts import signals_survive
 from toggle.params import ParameterError
+from toggle.roots import brentq
 
 #: best(): stretches of the late S-curve starts, and the gap to the lower bound that ends
 #: the search (relative).

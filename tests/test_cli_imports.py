@@ -92,3 +92,17 @@ def test_hil_parses_its_command_lines_without_the_heavy_modules(argv: list[str])
     out = subprocess.run([sys.executable, "-c", HIL_PROBE, *argv], capture_output=True,
                          text=True, check=True).stdout
     assert json.loads(out.strip().splitlines()[-1]) == []
+
+
+def test_a_plan_loads_no_scipy_optimize() -> None:
+    """``toggle plan`` in a fresh process: its roots are toggle.roots' Brent (scipy's to the
+    bit, tests/test_roots.py), so neither it nor the job processes a trade-off or a robust
+    plan spawns pay scipy.optimize's 0.27 s import (issue 45: a third of the 0.45 s a
+    planning process spent before its first solve)."""
+    probe = ("import json, sys\n"
+             "from toggle_cli import main\n"
+             "main(['plan', '--intervals', '40', '--duration', '3', '--json'])\n"
+             "print(json.dumps(sorted(m for m in sys.modules if m.startswith('scipy'))))\n")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True).stdout
+    assert json.loads(out.strip().splitlines()[-1]) == []

@@ -42,7 +42,6 @@ from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.optimize import brentq
 
 from toggle.elastics import (
     ClampingError,
@@ -52,6 +51,7 @@ from toggle.elastics import (
     crosshead_travel,
 )
 from toggle.params import Drive, Mechanism, ParameterError
+from toggle.roots import brentq
 
 
 def drive_data(mech: Mechanism) -> Drive:

@@ -33,10 +33,10 @@ from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
 
 from toggle.kinematics import check_stroke, half_pose, stroke_limits
 from toggle.params import HALVES, ClampData, HalfDims, Mechanism
+from toggle.roots import brentq
 from toggle.statics import CLOSING, check_friction, force_ratios, linkage_angles
 
 #: |F0 / F_cl| below this counts as zero thrust (the frictionless toggle, where the
@@ -263,6 +263,8 @@ def thrust_peak(
     xs = np.linspace(x_contact, x_final, 401)
     i = int(np.argmax(thrust(xs)))
     lo, hi = xs[max(i - 1, 0)], xs[min(i + 1, xs.size - 1)]
+    from scipy.optimize import minimize_scalar  # only here: its import costs 0.3 s
+
     best = minimize_scalar(lambda v: -float(thrust(v)), bounds=(lo, hi), method="bounded",
                            options={"xatol": 1e-13})
     return -float(best.fun), float(best.x)

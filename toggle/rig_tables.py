@@ -23,12 +23,12 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.optimize import brentq
 
 from toggle.asymmetry import AsymmetryParams, slip_state_along
 from toggle.kinematics import stroke_limits
 from toggle.params import Mechanism
 from toggle.plant import PlantConfig, configure, plant_outputs
+from toggle.roots import brentq
 
 #: The encoder's resolution, m: F_TP is read where the platen first comes this close to
 #: its end position (the rig's 1 um optical encoder, hil.emulators.rig_hardware).
