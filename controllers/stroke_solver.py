@@ -343,7 +343,7 @@ class StrokeSolver(StrokeReports):
         polynomial start's plan was within 0.25 % of the best of all four starts in each
         of the 33 cases of ``benchmarks/bench_robust_starts.py`` (2 presets, 6 error sets,
         3 durations: within :data:`GAP`, the search's own tolerance), where the late
-        starts cost two thirds of a robust plan's time."""
+        starts took three quarters of the solving (docs/planning.md)."""
         return () if self.variants and objective == "peak" else LATE_STARTS
 
     def best_solves(self, objective: str = "peak") -> int:
