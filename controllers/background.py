@@ -70,7 +70,7 @@ def _child(conn: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> N
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a pending one is dropped
     try:
-        result = ("result", fn(*args, progress=Relay(lambda kind, n: conn.send((kind, n)))))
+        result = ("result", fn(*args, progress=Relay(lambda *count: conn.send(count))))
     except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it
         result = ("error", exc)
     conn.send(result)
@@ -82,19 +82,20 @@ class Background:
     manager, then :meth:`result`. :meth:`ticks` counts the progress calls seen so far.
     ``here``: in this process when the result is asked (the caller knows the child would
     only repeat this process's work first). ``expected``: the job's solves, announced on
-    the parent's progress now (so that its ETA covers them from the start), the job's own
-    announcements counted against them."""
+    the parent's progress now with their ``weight`` (so that its ETA covers them from the
+    start), the job's own announcements counted against them."""
 
     def __init__(self, fn: Callable[..., Any], *args: Any, here: bool = False,
-                 expected: int = 0) -> None:
+                 expected: int = 0, weight: float = 1.0) -> None:
         self._job, self._done = (fn, args), None
         self._ticks = 0
         self._receiving = False
         self._target = solves.current()  # the parent's progress the job's counts join
         self._ahead = expected if self._target is not None else 0
+        self._weight = weight
         if self._target is not None:
             if expected:
-                self._target.expect(expected)
+                self._target.expect(expected, weight)
             self._target.add_source(self._drain)
         self._previous_term: Any = None
         self._process: Any = None
@@ -121,16 +122,17 @@ class Background:
     def _terminate(signum: int, frame: FrameType | None) -> None:
         raise Terminated(f"signal {signum}")
 
-    def _count(self, kind: str, steps: int) -> None:
+    def _count(self, kind: str, steps: int, weight: float = 1.0) -> None:
         """A count of the job's: its ticks, and the parent's progress."""
         if kind == "tick":
             self._ticks += steps
             if self._target is not None:
-                self._target.advance(steps)
-        elif self._target is not None:  # beyond what was announced ahead
+                self._target.advance(steps, weight)
+        elif self._target is not None:  # in place of what was announced ahead
             taken = min(steps, self._ahead)
             self._ahead -= taken
-            self._target.expect(steps - taken)
+            self._target.expect(steps, weight)  # first: the total never dips below n
+            self._target.expect(-taken, self._weight)
 
     def _drain(self) -> None:
         self._receive(block=False)
@@ -153,15 +155,15 @@ class Background:
             return
         while self._done is None and (block or self._conn.poll()):
             try:
-                kind, value = self._conn.recv()
+                kind, *value = self._conn.recv()
             except EOFError:
                 self._process.join()
                 raise RuntimeError(f"the planning process ended without an answer "
                                    f"(exit status {self._process.exitcode})") from None
             if kind in ("tick", "expect"):
-                self._count(kind, value)
+                self._count(kind, *value)
             else:
-                self._done = (kind, value)
+                self._done = (kind, value[0])
 
     def ticks(self) -> int:
         """The child's progress calls received so far (without waiting)."""
@@ -182,7 +184,7 @@ class Background:
         if self._target is not None:
             self._target.remove_source(self._drain)
             if self._ahead:
-                self._target.expect(-self._ahead)  # announced, never expected
+                self._target.expect(-self._ahead, self._weight)  # announced, never came
             self._target = None
         if self._process is not None:
             if self._process.is_alive():

@@ -133,9 +133,9 @@ class ClampPlanner(StrokeSolver):
         if continued and start is not None:
             plan: Plan | None = start
         else:
-            solves.expect(1)
+            solves.expect(1, self.solve_weight)
             plan = self._fastest(self.force_limit, start, warm)
-            solves.advance()
+            solves.advance(1, self.solve_weight)
         if plan is None:
             raise PlanningError(self._unreachable(limit, None))
         top = min(self.worst_peak(plan), self.force_limit)
@@ -145,11 +145,11 @@ class ClampPlanner(StrokeSolver):
                 " (the least peak of any duration it finds)"))
         levels = self._levels(top, limit, _TRADE_STEP if continued else _LIMIT_STEP)
         imposed = limit
-        solves.expect(len(levels))
+        solves.expect(len(levels), self.solve_weight)
         for level in levels:
             imposed = level
             reached = self._fastest(level, plan, True)
-            solves.advance()
+            solves.advance(1, self.solve_weight)
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
@@ -161,9 +161,9 @@ class ClampPlanner(StrokeSolver):
             imposed -= 1.5 * max(excess, 0.0)
             factor /= 1.0 + 1.5 * max(over, 0.0)
             self._torque = self._torque or over > 0
-            solves.expect(1)
+            solves.expect(1, self.solve_weight)
             reached = self._fastest(imposed, plan, True, factor)
-            solves.advance()
+            solves.advance(1, self.solve_weight)
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
@@ -269,10 +269,10 @@ class ClampPlanner(StrokeSolver):
         if self._least is None:
             previous = self.problem.last
             start = self.best(default_duration(self))
-            solves.expect(1)
+            solves.expect(1, self.solve_weight)
             plan, ok = self._run(WEIGHTS["peak"], (self.t_ref, self.longest),
                                  self.force_limit, "peak", start, True)
-            solves.advance()
+            solves.advance(1, self.solve_weight)
             self._least = min([start, *([plan] if ok else [])], key=self.worst_peak)
             self.problem.last = previous
         return self._least

@@ -17,7 +17,9 @@ compile lasts; elsewhere (a log, a pipe) a line every :data:`LINE_EVERY` s (8: a
 end if the lines showed an earlier one. The ETA is the time per solve up to the last count
 (the named waits left out: they are no solves) times the solves left, less what the
 current solve has taken; none before the first solve is done, nor while the current solve
-has run longer than the time per solve.
+has run longer than the time per solve. Solves are weighed by their problem's size (a
+robust problem's, with its variant's rows, take half as long again as its nominal twin's:
+:attr:`controllers.stroke_solver.StrokeSolver.solve_weight`).
 Closing a progress (:func:`reporting` does it, also on an error) stops its thread, so that
 a command's error, printed after, is the last line of its stderr.
 
@@ -67,6 +69,7 @@ class Progress:
                  file: TextIO | None = None, enabled: bool = True,
                  clock: Callable[[], float] = time.monotonic, heartbeat: bool = True) -> None:
         self.desc, self.unit, self.n, self.total = desc, unit, 0, total
+        self._units = [0.0, float(total)]  # the solves' weights, done and in all
         self.file = file if file is not None else sys.stderr
         self.enabled, self._clock = enabled, clock
         self._start = clock()
@@ -124,22 +127,26 @@ class Progress:
         finally:
             self._draining = False
 
-    def expect(self, steps: int) -> None:
-        """``steps`` more solves are coming (fewer than announced: negative)."""
+    def expect(self, steps: int, weight: float = 1.0) -> None:
+        """``steps`` more solves are coming (fewer than announced: negative), each of
+        ``weight``: its expected time relative to the others' (the ETA's)."""
         self._drain()
         with self._lock:
             self.total = max(self.total + steps, self.n)
+            self._units[1] = max(self._units[1] + steps * weight, self._units[0])
             if self._bar is not None:
                 self._bar.total = self.total
 
-    def advance(self, steps: int = 1) -> None:
-        """``steps`` solves are done (or skipped)."""
+    def advance(self, steps: int = 1, weight: float = 1.0) -> None:
+        """``steps`` solves of ``weight`` are done."""
         self._drain()
         if steps <= 0:
             return
         with self._lock:
             self.n += steps
             self.total = max(self.total, self.n)
+            self._units[0] += steps * weight
+            self._units[1] = max(self._units[1], self._units[0])
             self._counted_at = self._clock()
             self._counted_work = self._working(self._counted_at)
             if self._bar is not None:
@@ -180,19 +187,21 @@ class Progress:
         return max(now - self._start - aside, 0.0)
 
     def eta(self, now: float | None = None) -> float | None:
-        """Seconds left: the time per solve up to the last count (named waits left out)
-        times the solves left, less the time the current solve has run. None before a
-        solve is done, and while the current solve has run longer than a solve takes:
-        then its end is not known (a last solve's ETA showed 0:00 for as long as it ran)."""
+        """Seconds left: the time per unit of weight up to the last count (named waits
+        left out) times the weight of the solves left, less the time the current solve
+        has run. None before a solve is done, and while the current solve has run longer
+        than a solve of the weight left on average takes: then its end is not known (a
+        last solve's ETA showed 0:00 for as long as it ran)."""
         now = self._clock() if now is None else now
-        if self.n <= 0 or self._counted_at is None:
+        done, total = self._units
+        if self.n <= 0 or self._counted_at is None or done <= 0:
             return None
-        per_solve = self._counted_work / self.n
+        per_unit = self._counted_work / done
         left = self.total - self.n
         running = self._working(now) - self._counted_work
-        if left > 0 and running > per_solve:
+        if left > 0 and running > per_unit * (total - done) / left:
             return None
-        return max(left * per_solve - running, 0.0)
+        return max((total - done) * per_unit - running, 0.0)
 
     def _eta_text(self, now: float) -> str:
         eta = self.eta(now)
@@ -237,21 +246,21 @@ class Progress:
 
 class Relay(Progress):
     """The progress of a job in another process: each :meth:`expect` and :meth:`advance`
-    is sent (``send(kind, steps)``, kind ``"expect"`` or ``"tick"``) to the parent, which
-    shows it; nothing is shown here."""
+    is sent (``send(kind, steps, weight)``, kind ``"expect"`` or ``"tick"``) to the
+    parent, which shows it; nothing is shown here."""
 
-    def __init__(self, send: Callable[[str, int], object]) -> None:
+    def __init__(self, send: Callable[[str, int, float], object]) -> None:
         super().__init__("job", enabled=False)
         self._send = send
 
-    def expect(self, steps: int) -> None:
-        super().expect(steps)
-        self._send("expect", steps)
+    def expect(self, steps: int, weight: float = 1.0) -> None:
+        super().expect(steps, weight)
+        self._send("expect", steps, weight)
 
-    def advance(self, steps: int = 1) -> None:
-        super().advance(steps)
+    def advance(self, steps: int = 1, weight: float = 1.0) -> None:
+        super().advance(steps, weight)
         if steps > 0:
-            self._send("tick", steps)
+            self._send("tick", steps, weight)
 
     def __call__(self) -> None:
         """One step done: the plain progress callback of a job that counts its own."""
@@ -282,16 +291,17 @@ def reporting(progress: Progress) -> Iterator[Progress]:
         progress.close()
 
 
-def expect(steps: int) -> None:
-    """The planner's: ``steps`` more solves are coming (on the current :class:`Progress`)."""
+def expect(steps: int, weight: float = 1.0) -> None:
+    """The planner's: ``steps`` more solves of ``weight`` are coming (on the current
+    :class:`Progress`)."""
     if (progress := _current.get()) is not None:
-        progress.expect(steps)
+        progress.expect(steps, weight)
 
 
-def advance(steps: int = 1) -> None:
-    """The planner's: ``steps`` solves are done or skipped."""
+def advance(steps: int = 1, weight: float = 1.0) -> None:
+    """The planner's: ``steps`` solves of ``weight`` are done."""
     if (progress := _current.get()) is not None:
-        progress.advance(steps)
+        progress.advance(steps, weight)
 
 
 def describe(desc: str) -> None:

@@ -144,9 +144,9 @@ def test_progress_counts_each_solve_against_the_total_it_announced(chang_plan, m
     seen: list[tuple[int, int]] = []
 
     class Recorded(Progress):
-        def advance(self, steps: int = 1) -> None:  # the total as announced before it
-            seen.append((self.n + steps, self.total))
-            super().advance(steps)
+        def advance(self, steps: int = 1, weight: float = 1.0) -> None:
+            seen.append((self.n + steps, self.total))  # the total as announced before it
+            super().advance(steps, weight)
 
     run, runs = ClampPlanner._run, []
 

@@ -9,6 +9,8 @@ import io
 import time
 from contextlib import redirect_stderr, redirect_stdout
 
+import pytest
+
 from controllers import progress
 from controllers.progress import LINE_EVERY, SHOW_AFTER, Progress, reporting
 from toggle_cli import main
@@ -95,6 +97,23 @@ def test_the_eta_is_the_time_per_solve_times_the_solves_left_without_the_named_w
     bar.advance()  # 6 s a solve over three
     assert bar.eta() == 6.0
     clock.now += 7.0  # the last solve overdue: unknown, where it said 0:00 until its end
+    assert bar.eta() is None
+
+
+def test_the_eta_weighs_each_solve_by_its_problems_size():
+    """A robust plan's solve (weight 2.4: its rows in thousands) took 2.4 s; its nominal
+    twin's four solves (1.6 each) are left: 6.4 s, where counting solves alike said 9.6 s
+    (issue 45: the robust plan's ETA of 0:04 with 2.1 s left)."""
+    clock = Clock()
+    bar = Progress("planning", total=0, file=io.StringIO(), clock=clock, heartbeat=False)
+    bar.expect(1, 2.4)
+    bar.expect(4, 1.6)
+    clock.now += 2.4
+    bar.advance(1, 2.4)
+    assert (bar.n, bar.total) == (1, 5) and bar.eta() == pytest.approx(6.4)
+    clock.now += 1.0
+    assert bar.eta() == pytest.approx(5.4)
+    clock.now += 0.7  # longer than a solve of 1.6: that one's end is unknown
     assert bar.eta() is None
 
 

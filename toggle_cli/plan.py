@@ -71,7 +71,8 @@ def _robust(args: argparse.Namespace) -> tuple[ClampPlanner, Plan, dict[str, obj
     with Background(best_plan, cfg, limits, args.contact_speed, args.intervals,
                     protection_zone(args), duration, args.objective, bound,
                     here=not nominal.problem.loaded,
-                    expected=nominal.best_solves(args.objective)) as nominal_plan:
+                    expected=nominal.best_solves(args.objective),
+                    weight=nominal.solve_weight) as nominal_plan:
         plan, plain = planner.best(duration, args.objective), nominal_plan.result()
     report = {}
     for name, plant in (("nominal", cfg), ("erroneous", erroneous)):
