@@ -4,9 +4,10 @@
 and 1.25 times (``controllers.stroke_solver.LATE_STARTS``): on the nominal clamp a late
 start wins the peak by 0.4 % (chang2021 at 3.1 s). A robust plan (the clamp with an
 erroneous variant, ``toggle plan --robust``) judges the worst peak over both, and its
-lower bound is the nominal clamp's, so it never stops early and ran all four starts: two
-thirds of its time. This solves each start on its own for two presets, six sets of
-dimensional errors and three durations (0.8, 1 and 1.3 times the default) and prints the
+lower bound is the nominal clamp's, so it never stopped early and ran all four starts, the
+late ones three quarters of its solving. This solves each start on its own for two
+presets, six sets of dimensional errors and three durations (0.8, 1 and 1.3 times the
+default) and prints the
 worst peak from the polynomial start, the best of the late ones, what the late starts gain
 over the polynomial (in % of the best) and the seconds each took; ``late_starts()`` skips
 them for a robust peak where the largest gain stays within ``GAP``.
