@@ -46,7 +46,6 @@ from collections.abc import Callable
 import numpy as np
 
 from controllers import background
-from controllers import progress as solves
 from controllers.background import Background
 from controllers.limits import DriveLimits
 from controllers.plans import (
@@ -78,6 +77,9 @@ _LEAST_MARGIN = 1e-4
 #: of four, are 32 % apart; steps of 8 % took 26 solves, one step 11, the same curve to
 #: 2e-5).
 _TRADE_STEP = 0.4
+#: A limit re-imposed where the 1 ms samples exceed it between the nodes: lower by this
+#: times the excess (and a trade-off's next point by this times the last excess, ahead).
+_TIGHTEN_BY = 1.5
 
 
 class ClampPlanner(StrokeSolver):
@@ -137,9 +139,9 @@ class ClampPlanner(StrokeSolver):
         if continued and start is not None:
             plan: Plan | None = start
         else:
-            solves.expect(1, self.solve_weight)
+            self._expect(1)
             plan = self._fastest(self.force_limit, start, warm)
-            solves.advance(1, self.solve_weight)
+            self._advance()
         if plan is None:
             raise PlanningError(self._unreachable(limit, None))
         top = min(self.worst_peak(plan), self.force_limit)
@@ -151,13 +153,13 @@ class ClampPlanner(StrokeSolver):
         # a trade-off's point: its limit imposed lower from the start by what the samples
         # rose above the last point's between the nodes, which spares the re-plan that
         # tightening would be (a third of the dry cycle's curve; the same margin it adds)
-        levels[-1] *= (1 - 1.5 * self._between) if continued else 1.0
+        levels[-1] *= (1 - _TIGHTEN_BY * self._between) if continued else 1.0
         imposed = limit
-        solves.expect(len(levels), self.solve_weight)
+        self._expect(len(levels))
         for level in levels:
             imposed = level
             reached = self._fastest(level, plan, True)
-            solves.advance(1, self.solve_weight)
+            self._advance()
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
@@ -167,12 +169,12 @@ class ClampPlanner(StrokeSolver):
             excess, over = self.worst_peak(plan) - limit, self.torque_ratio(plan) - 1.0
             if excess <= 0 and over <= 0:
                 break
-            imposed -= 1.5 * max(excess, 0.0)
-            factor /= 1.0 + 1.5 * max(over, 0.0)
+            imposed -= _TIGHTEN_BY * max(excess, 0.0)
+            factor /= 1.0 + _TIGHTEN_BY * max(over, 0.0)
             self._torque = self._torque or over > 0
-            solves.expect(1, self.solve_weight)
+            self._expect(1)
             reached = self._fastest(imposed, plan, True, factor)
-            solves.advance(1, self.solve_weight)
+            self._advance()
             if reached is None:
                 raise PlanningError(self._unreachable(limit, plan))
             plan = reached
@@ -278,10 +280,10 @@ class ClampPlanner(StrokeSolver):
         if self._least is None:
             previous = self.problem.last
             start = self.best(default_duration(self))
-            solves.expect(1, self.solve_weight)
+            self._expect(1)
             plan, ok = self._run(WEIGHTS["peak"], (self.t_ref, self.longest),
                                  self.force_limit, "peak", start, True)
-            solves.advance(1, self.solve_weight)
+            self._advance()
             self._least = min([start, *([plan] if ok else [])], key=self.worst_peak)
             self.problem.last = previous
         return self._least

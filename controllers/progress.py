@@ -194,7 +194,7 @@ class Progress:
         last solve's ETA showed 0:00 for as long as it ran)."""
         now = self._clock() if now is None else now
         done, total = self._units
-        if self.n <= 0 or self._counted_at is None or done <= 0:
+        if done <= 0:  # no solve counted yet
             return None
         per_unit = self._counted_work / done
         left = self.total - self.n

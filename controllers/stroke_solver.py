@@ -316,21 +316,21 @@ class StrokeSolver(StrokeReports):
                if objective == "rms" else (lambda p: float(p.solution["f"][0])))
         good = self.lower_bound() * (1 + GAP) if weights[1] == 0 else 0.0
         late = self.late_starts(objective)
-        solves.expect(self.best_solves(objective), self.solve_weight)
+        self._expect(self.best_solves(objective))
         plans = [self.solve(duration, objective, warm=False, energy_weight=energy_weight)]
-        solves.advance(1, self.solve_weight)
+        self._advance()
         if previous is not None:
             plans.append(self.solve(duration, objective, start=previous,
                                     energy_weight=energy_weight))
-            solves.advance(1, self.solve_weight)
+            self._advance()
         for left, stretch in enumerate(late):
             if key(min(plans, key=key)) <= good:
-                solves.expect(left - len(late), self.solve_weight)  # skipped: no longer coming
+                self._expect(left - len(late))  # skipped: no longer coming
                 break
             plan, ok = self._run(weights, (duration, duration), self.force_limit,
                                  objective, None, False,
                                  guess=self._late_guess(duration, stretch))
-            solves.advance(1, self.solve_weight)
+            self._advance()
             if ok:
                 plans.append(plan)
         self.problem.last = min(plans, key=key)
@@ -353,6 +353,14 @@ class StrokeSolver(StrokeReports):
         chang2021's robust problem has 2412 rows to its nominal twin's 1607, and its solve
         took 1.8 times as long an iteration)."""
         return self.problem.n_constraints / 1000
+
+    def _expect(self, steps: int) -> None:
+        """Announce ``steps`` solves of this planner on the progress (:attr:`solve_weight`)."""
+        solves.expect(steps, self.solve_weight)
+
+    def _advance(self) -> None:
+        """Count one solve of this planner done on the progress."""
+        solves.advance(1, self.solve_weight)
 
     def best_solves(self, objective: str = "peak") -> int:
         """The solves :meth:`best` announces now (some may be skipped)."""
