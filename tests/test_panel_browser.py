@@ -39,7 +39,8 @@ class ModelRig:
     """The model MCU's emulator in this process (its log is read live)."""
 
     def __init__(self) -> None:
-        self.emulator = RigEmulator(ClampPhysics("chang2021"), RigHardware(x_origin=X_OPEN))
+        self.emulator = RigEmulator(ClampPhysics("chang2021"), RigHardware(x_origin=X_OPEN),
+                                    realtime=True)
         self.port = self.emulator.start()
         self.mcu_period = 1e-3
 
