@@ -5,8 +5,8 @@ real limits, planned.
 StrokeSolver`: a given duration, the best of several starts, the lower bound) with the
 searches built on it: the fastest stroke under a force limit, the least peak of any
 duration and the trade-off between the two; :func:`planner_for` keeps one planner per
-plant, and the jobs (:func:`best_plan`, :func:`trade_off_curve`, :func:`least_peak_job`)
-run them in a second process (:mod:`controllers.background`). The plant with its mold is
+plant, and the jobs (:func:`best_plan`, :func:`trade_off_curve`) run them in a second
+process (:mod:`controllers.background`). The plant with its mold is
 :func:`controllers.plans.plan_config`'s; the reports on a plan (peaks, torque,
 protection zone, binding limits) are :mod:`controllers.stroke_reports`'s.
 
@@ -45,8 +45,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from controllers import background
-from controllers.background import Background
 from controllers.limits import DriveLimits
 from controllers.plans import (
     CONTACT_SPEED,
@@ -104,9 +102,6 @@ class ClampPlanner(StrokeSolver):
     #: imposed at its nodes and midpoints (relative): a trade-off's next point imposes its
     #: limit lower by 1.5 times that from the start (:meth:`minimum_time`).
     _between = 0.0
-    #: :func:`planner_for`'s arguments that made this planner, for a job that needs the
-    #: same planner in a second process (:func:`least_peak_job`); None if made otherwise.
-    recipe: tuple[object, ...] | None = None
 
     def minimum_time(self, force_limit: float | None = None, *, start: Plan | None = None,
                      warm: bool = True, continued: bool = False, ask_least: bool = True
@@ -126,9 +121,8 @@ class ClampPlanner(StrokeSolver):
         (a minute and a half on chang2021 at 14.91 N). The limit and the motor's
         torque-speed curve are imposed at the nodes and interval
         midpoints; where the plan's 1 ms samples through the plant still exceed either, it
-        is tightened by the excess and the plan repeated. ``ask_least`` false: the least
-        peak's refusal is left to the caller (:meth:`trade_off`, which has it computed in a
-        second process meanwhile)."""
+        is tightened by the excess and the plan repeated. ``ask_least`` false: no least
+        peak is asked (:meth:`trade_off`'s points)."""
         limit = self.force_limit if force_limit is None else min(force_limit, self.force_limit)
         if not (math.isfinite(limit) and limit > 0):
             raise ParameterError(f"force limit must be > 0 N, got {force_limit!r}")
@@ -186,9 +180,14 @@ class ClampPlanner(StrokeSolver):
         """The trade-off between stroke time and peak input force: the fastest stroke under
         ``points`` force limits from the unconstrained fastest stroke's peak down to just
         above :meth:`lower_bound` (geometrically spaced; without a bound, as for a mold at
-        the toggle, down to a quarter of that peak), each continued from the last; limits
-        no stroke meets are left out. ``progress`` is called after each of the ``points``
-        limits (each is several seconds of IPOPT)."""
+        the toggle, down to a quarter of that peak), each continued from the last; the curve
+        ends at the first limit the continuation does not reach. ``progress`` is called
+        after each of the ``points`` limits (each is several seconds of IPOPT).
+
+        No point asks :meth:`least_peak` (issue 45): a point reached is a stroke within its
+        limit, so no duration's least peak lies above that limit, and a point not reached
+        ends the curve either way. Asked ahead in a third process, it took two of the dry
+        cycle curve's and this curve's cores beside a hog, and refused nothing."""
         if not (isinstance(points, int) and points >= 2):
             raise ParameterError(f"points must be an integer >= 2, got {points!r}")
         tick = progress or (lambda: None)
@@ -199,72 +198,18 @@ class ClampPlanner(StrokeSolver):
         top = min(self.worst_peak(fastest), self.force_limit)
         bound = self.lower_bound()
         bottom = bound * (1 + GAP) if bound > 0 else top / 4
-        limits = [float(v) for v in np.geomspace(top, bottom, points)[1:]]
-        return self._trade_off_points([fastest], limits, tick, background.parallel())
-
-    def _trade_off_points(self, plans: list[Plan], limits: list[float],
-                          tick: Callable[[], object], ahead: bool) -> list[Plan]:
-        """The trade-off's points under ``limits`` after ``plans``, each continued from the
-        last, up to the first no stroke meets. ``ahead``: where a limit first asks for the
-        least peak (:meth:`minimum_time`), it is computed in a second process
-        (:func:`least_peak_job`, from this planner's state then) while the points go on
-        here, and their refusals are decided once it is known: the same points, and a
-        mold curve's seconds of :meth:`best` off this process's path."""
-        plans = list(plans)
-        job: Background | None = None
-        asked = 0  # the index into plans of the point that asked for the least peak
-        torque = []  # self._torque before each point, to restore where the curve ends
-        broke = False  # the last point's continuation failed
-        with contextlib.ExitStack() as stack:
-            for limit in limits:
-                top = min(self.worst_peak(plans[-1]), self.force_limit)
-                if (ahead and job is None and self._least is None and self.recipe
-                        and self._asks_least(limit, top)):
-                    job = stack.enter_context(Background(
-                        least_peak_job, self.recipe, self.lower_bound(), self._torque,
-                        self.problem.last))
-                    asked = len(plans)
-                torque.append(self._torque)
-                try:
-                    plan = self.minimum_time(limit, start=plans[-1], continued=True,
-                                             ask_least=job is None)
-                except PlanningError:
-                    broke = True
-                    break
-                finally:
-                    tick()
-                plans.append(plan)
-            if job is None:
-                return plans
+        plans = [fastest]
+        for limit in (float(v) for v in np.geomspace(top, bottom, points)[1:]):
+            torque, last = self._torque, self.problem.last
             try:
-                self._least, needs_torque = job.result()
-            except PlanningError:  # where the least peak was asked, the curve ended
-                return self._ended(plans, asked, torque[asked - 1])
-        if needs_torque and not torque[asked - 1]:  # its solves switched the torque rows on
-            self._torque = True  # for every later point, as here they would have: again
-            self._restore(plans[asked - 1], asked)
-            return self._trade_off_points(plans[:asked], limits[asked - 1:], lambda: None,
-                                          False)
-        least = self.worst_peak(self._least) * (1 - _LEAST_MARGIN)
-        # the refusals minimum_time left to this, the failed point's too (refused, it
-        # would not have been tried)
-        for k in range(asked, len(plans) + broke):
-            top = min(self.worst_peak(plans[k - 1]), self.force_limit)
-            if self._asks_least(limits[k - 1], top) and limits[k - 1] < least:
-                return self._ended(plans, k, torque[k - 1])
+                plans.append(self.minimum_time(limit, start=plans[-1], continued=True,
+                                               ask_least=False))
+            except PlanningError:  # the planner as it was before the point not reached
+                self._torque, self.problem.last = torque, last
+                break
+            finally:
+                tick()
         return plans
-
-    def _ended(self, plans: list[Plan], k: int, torque: bool) -> list[Plan]:
-        """The curve up to point ``k`` (its limit refused), the planner as it was then."""
-        self._torque = torque
-        self._restore(plans[k - 1], k)
-        return plans[:k]
-
-    def _restore(self, last: Plan, k: int) -> None:
-        """The latest plan as it was before point ``k``: the previous point's (the
-        fastest stroke's, k = 1, was never kept as the latest)."""
-        if k > 1:
-            self.problem.last = last
 
     def _asks_least(self, limit: float, top: float) -> bool:
         """Whether :meth:`minimum_time` asks :meth:`least_peak` for ``limit`` below a
@@ -346,8 +291,6 @@ def planner_for(cfg: PlantConfig, limits: DriveLimits, contact_speed: float = CO
     planner = ClampPlanner(cfg, limits, contact_speed=contact_speed, intervals=intervals,
                            problem=problem, variants=variants, scales=scales,
                            protection=protection)
-    planner.recipe = (cfg, limits, contact_speed, intervals, variants, scales, protection,
-                      opening)
     return planner
 
 
@@ -372,19 +315,6 @@ def best_plan(cfg: PlantConfig, limits: DriveLimits, contact_speed: float, inter
         planner._bound = bound
     with reporting(progress) if progress is not None else contextlib.nullcontext():
         return planner.best(duration, objective)
-
-
-def least_peak_job(recipe: tuple[object, ...], bound: float, torque: bool,
-                   last: Plan | None, progress: Callable[[], object] | None = None
-                   ) -> tuple[Plan, bool]:
-    """:meth:`ClampPlanner.least_peak` of the planner ``planner_for(*recipe)`` in the state
-    of the one that asks (its lower bound, whether it solves with the torque rows, its
-    latest plan, the warm start of :meth:`ClampPlanner.best`): the same plan it would find
-    itself; and whether the torque rows are on after it. A job for
-    :class:`controllers.background.Background` in :meth:`ClampPlanner.trade_off`."""
-    planner = planner_for(*recipe)  # type: ignore[arg-type]
-    planner._bound, planner._torque, planner.problem.last = bound, torque, last
-    return planner.least_peak(), planner._torque
 
 
 def default_duration(planner: ClampPlanner) -> float:
