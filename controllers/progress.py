@@ -16,10 +16,10 @@ compile lasts; elsewhere (a log, a pipe) a line every :data:`LINE_EVERY` s (8: a
 10 s apart on a busy machine), at a count at most that often, and the last count at the
 end if the lines showed an earlier one. The ETA is the time per solve up to the last count
 (the named waits left out: they are no solves) times the solves left, less what the
-current solve has taken; none before the first solve is done, nor while the current solve
-has run longer than the time per solve. Solves are weighed by their problem's size (a
-robust problem's, with its variant's rows, take half as long again as its nominal twin's:
-:attr:`controllers.stroke_solver.StrokeSolver.solve_weight`).
+current solve has taken; none before the first solve is done, during a named wait, nor
+while the current solve has run longer than the time per solve. Solves are weighed by
+their problem's size (a robust problem's, with its variant's rows, take half as long again
+as its nominal twin's: :attr:`controllers.stroke_solver.StrokeSolver.solve_weight`).
 Closing a progress (:func:`reporting` does it, also on an error) stops its thread, so that
 a command's error, printed after, is the last line of its stderr.
 
@@ -189,12 +189,14 @@ class Progress:
     def eta(self, now: float | None = None) -> float | None:
         """Seconds left: the time per unit of weight up to the last count (named waits
         left out) times the weight of the solves left, less the time the current solve
-        has run. None before a solve is done, and while the current solve has run longer
-        than a solve of the weight left on average takes: then its end is not known (a
-        last solve's ETA showed 0:00 for as long as it ran)."""
+        has run. None before a solve is done, during a named wait (a build, a compile: its
+        length is not known; a cycle's opening stroke, built after 4 of 5 solves, showed
+        0:00 for its 2.7 s), and while the current solve has run longer than a solve of the
+        weight left on average takes: then its end is not known (a last solve's ETA showed
+        0:00 for as long as it ran)."""
         now = self._clock() if now is None else now
         done, total = self._units
-        if done <= 0:  # no solve counted yet
+        if done <= 0 or self._aside_since is not None:  # no solve counted yet, or a wait
             return None
         per_unit = self._counted_work / done
         left = self.total - self.n

@@ -100,6 +100,25 @@ def test_the_eta_is_the_time_per_solve_times_the_solves_left_without_the_named_w
     assert bar.eta() is None
 
 
+def test_no_eta_during_a_named_wait_after_solves():
+    """A cycle's opening stroke is built after the closing stroke's solves: the wait's
+    length is unknown, so is the time left (it said ETA 0:00 for 2.7 s); after it, the
+    time per solve counts the solves only."""
+    clock = Clock()
+    bar = Progress("planning", total=0, file=io.StringIO(), clock=clock, heartbeat=False)
+    bar.expect(2)
+    clock.now += 4.0
+    bar.advance()
+    assert bar.eta() == 4.0
+    bar.doing("building the problem")
+    clock.now += 3.0
+    assert bar.eta() is None and "(building the problem)" in bar.line(clock.now)
+    assert "ETA ?" in bar.line(clock.now)
+    bar.doing(None)
+    clock.now += 1.0  # one second into the last solve
+    assert bar.eta() == 3.0
+
+
 def test_the_eta_weighs_each_solve_by_its_problems_size():
     """A robust plan's solve (weight 2.4: its rows in thousands) took 2.4 s; its nominal
     twin's four solves (1.6 each) are left: 6.4 s, where counting solves alike said 9.6 s
