@@ -17,8 +17,6 @@ from controllers.limits import drive_limits
 from controllers.planner import default_duration, planner_for
 from controllers.plans import plan_config
 
-pytestmark = pytest.mark.alone  # the first run compiles the VM: a minute of g++
-
 
 def test_the_clamp_cam_program_runs_on_pyplcopens_vm_along_the_plan(tmp_path):
     """The PLCopen export of the default plan over a position master, 64 points: the ST
