@@ -285,6 +285,10 @@ def _speed_job(page: Page, rig: ModelRig) -> None:
     assert status == 200, body
     wait_until(lambda: any(e["type"] == "samples" for e in page.events) or page.drain(0.2),
                180, "the run's samples")
+    # the page's message names the run once it moves, not the homing before it (stop 50)
+    notices = [e["message"] for e in page.events if e["type"] == "notice"]
+    assert notices and notices[-1].startswith("running: reciprocating at 40 mm/s, 50 cycles"), \
+        notices
 
 
 @pytest.mark.real_time

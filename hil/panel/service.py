@@ -292,6 +292,9 @@ class RigService:
         self._check()  # a STOP during the activation (homing, handshake)
         rec = RunRecorder(meta, default_run_dir(f"panel-{plant.name}", self.runs))
         self.run_dir = str(rec.dir)
+        # the page's message says what now moves (it said "homing" for the whole run)
+        self._notify(f"running: {source}, {cycles} cycle{'s' if cycles != 1 else ''}, "
+                     f"recorded in {rec.dir}")
         period, previous = setup.period, [None]
 
         def on_sample(sample: Sample) -> None:
