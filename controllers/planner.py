@@ -100,7 +100,7 @@ class ClampPlanner(StrokeSolver):
     _least: Plan | None = None
     #: How far the last minimum-time plan's 1 ms samples rose above the force limit
     #: imposed at its nodes and midpoints (relative): a trade-off's next point imposes its
-    #: limit lower by 1.5 times that from the start (:meth:`minimum_time`).
+    #: limit lower by :data:`_TIGHTEN_BY` times that from the start (:meth:`minimum_time`).
     _between = 0.0
 
     def minimum_time(self, force_limit: float | None = None, *, start: Plan | None = None,

@@ -27,10 +27,9 @@ def _fresh(cfg, limits):
 
 def test_a_trade_off_asks_no_least_peak_and_each_point_is_within_its_limit(monkeypatch):
     """Issue 45: the trade-off's points ask no least peak (it ran in a third process beside
-    the two curves and refused nothing: a point reached is a stroke within its limit). With
-    the least peak's margin at -1 %, which refused the last point when it was asked, the
-    curve still has all three points, each within its limit on the 1 ms samples."""
-    monkeypatch.setattr(planner, "_LEAST_MARGIN", -0.01)
+    the two curves and refused nothing: a point reached is a stroke within its limit). The
+    least peak fails the test if asked; the curve has all three points, each within its
+    limit on the 1 ms samples."""
     monkeypatch.setattr(ClampPlanner, "least_peak", lambda self: pytest.fail("least peak"))
     cfg = plan_config("chang2021")
     fresh = _fresh(cfg, drive_limits(cfg.mechanism))
